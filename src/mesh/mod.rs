@@ -1,0 +1,43 @@
+//! Triangle meshes: the in-memory form every reader produces and every stage consumes.
+
+use glam::DVec3;
+
+/// An indexed triangle mesh in f64. Faces index `positions`; orientation is the
+/// counter-clockwise order of the three corners.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TriMesh {
+    pub positions: Vec<DVec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl TriMesh {
+    pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Self {
+        Self {
+            positions,
+            triangles,
+        }
+    }
+
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn face_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Axis-aligned bounds, or `None` for a mesh without vertices.
+    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        let first = *self.positions.first()?;
+        Some(
+            self.positions
+                .iter()
+                .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
+        )
+    }
+
+    /// Length of the bounding-box diagonal (0 for an empty mesh).
+    pub fn bounds_diagonal(&self) -> f64 {
+        self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length())
+    }
+}

@@ -1,0 +1,1 @@
+//! The pure worker: (mesh, previous fit, config) -> fit.
