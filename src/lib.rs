@@ -6,6 +6,7 @@
 //! worker in `pipeline`.
 
 pub mod bspline;
+pub mod cli;
 pub mod curvature;
 pub mod daemon;
 pub mod fit;
