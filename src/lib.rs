@@ -15,6 +15,7 @@ pub mod mesh;
 pub mod pipeline;
 pub mod remesh;
 pub mod surface;
+pub mod testdata;
 
 pub use glam::DVec3;
 pub use mesh::TriMesh;
