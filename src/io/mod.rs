@@ -105,3 +105,11 @@ pub fn read_mesh_bytes(
     let _ = (bytes, format, opts);
     Err(IoError::new(name, None, "readers not built yet"))
 }
+
+/// Writes a mesh, choosing the format by extension (obj, ply = binary little-endian, glb).
+pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
+    match Format::from_path(path) {
+        Some(Format::Glb) => glb::write_glb(path, mesh, &glb::GlbAttributes::default()),
+        _ => Err(IoError::new(path.display().to_string(), None, "writer not built yet")),
+    }
+}
