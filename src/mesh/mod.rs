@@ -2,6 +2,12 @@
 
 use glam::DVec3;
 
+pub mod detect;
+pub mod inverse;
+pub mod loop_subdiv;
+pub mod stats;
+pub mod topology;
+
 /// An indexed triangle mesh in f64. Faces index `positions`; orientation is the
 /// counter-clockwise order of the three corners.
 #[derive(Clone, Debug, Default, PartialEq)]

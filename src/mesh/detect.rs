@@ -1,0 +1,354 @@
+//! Detection of Loop subdivision connectivity (after Taubin 2002): tag vertices even/odd
+//! from a seed, check consistency, recover the coarse faces. Linear time per level.
+
+use super::topology::{next, Topology, TopologyError, NONE};
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DetectError {
+    #[error("level {level}: {source}")]
+    Topology { level: usize, source: TopologyError },
+    #[error("level {level}: no subdivision connectivity around vertex {vertex}: {reason}")]
+    NotSubdivided { level: usize, vertex: u32, reason: String },
+}
+
+/// One level of recovered structure: a fine mesh seen as the 1-to-4 split of `coarse`.
+#[derive(Debug, Clone)]
+pub struct Level {
+    /// Coarse faces, indices into the coarse vertex list.
+    pub coarse_triangles: Vec<[u32; 3]>,
+    /// Coarse vertex -> fine (even) vertex, in increasing fine index.
+    pub coarse_to_fine: Vec<u32>,
+    /// Fine vertex -> coarse vertex for even vertices, `NONE` for odd ones.
+    pub fine_to_coarse: Vec<u32>,
+    /// Fine vertex -> the two coarse endpoints of its edge (odd vertices only).
+    pub odd_endpoints: Vec<[u32; 2]>,
+    /// Fine face -> (coarse face, barycentric weights of its three corners in that face).
+    pub face_parent: Vec<(u32, [[f64; 3]; 3])>,
+}
+
+const UNKNOWN: u8 = 0;
+const EVEN: u8 = 1;
+const ODD: u8 = 2;
+
+fn fail(level: usize, vertex: u32, reason: impl Into<String>) -> DetectError {
+    DetectError::NotSubdivided {
+        level,
+        vertex,
+        reason: reason.into(),
+    }
+}
+
+/// Tries to read the fine mesh `topo` as one Loop subdivision step; `level` only labels errors.
+pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError> {
+    let nv = topo.vertex_count;
+    let mut label = vec![UNKNOWN; nv];
+    let mut component_done = vec![false; nv];
+    // Vertices are grouped into components by the propagation itself: each unlabelled
+    // vertex starts a new component whose seed candidates are tried in turn.
+    for start in 0..nv as u32 {
+        if component_done[start as usize] || topo.ring(start).is_empty() {
+            continue;
+        }
+        let comp = component_of(topo, start);
+        for &v in &comp {
+            component_done[v as usize] = true;
+        }
+        let candidates = seed_candidates(topo, &comp);
+        let mut last_err = None;
+        let mut ok = false;
+        for seed in candidates {
+            match propagate(topo, &comp, seed, level, &mut label) {
+                Ok(()) => {
+                    ok = true;
+                    break;
+                }
+                Err(e) => {
+                    for &v in &comp {
+                        label[v as usize] = UNKNOWN;
+                    }
+                    last_err = Some(e);
+                }
+            }
+        }
+        if !ok {
+            return Err(last_err.unwrap_or_else(|| fail(level, start, "no seed vertex to start from")));
+        }
+    }
+    // Isolated vertices carry no structure: treat them as even so that they survive.
+    for v in 0..nv {
+        if label[v] == UNKNOWN {
+            label[v] = EVEN;
+        }
+    }
+    let mut fine_to_coarse = vec![NONE; nv];
+    let mut coarse_to_fine = Vec::new();
+    for v in 0..nv {
+        if label[v] == EVEN {
+            fine_to_coarse[v] = coarse_to_fine.len() as u32;
+            coarse_to_fine.push(v as u32);
+        }
+    }
+    let mut odd_endpoints = vec![[NONE, NONE]; nv];
+    for (v, ends) in odd_endpoints.iter_mut().enumerate() {
+        if label[v] != ODD {
+            continue;
+        }
+        let evens: Vec<u32> = topo.ring(v as u32).iter().copied().filter(|&w| label[w as usize] == EVEN).collect();
+        if evens.len() != 2 {
+            return Err(fail(level, v as u32, format!("odd vertex has {} even neighbours, not 2", evens.len())));
+        }
+        *ends = [fine_to_coarse[evens[0] as usize], fine_to_coarse[evens[1] as usize]];
+    }
+    let far = |a: u32, m: u32| -> u32 {
+        let [p, q] = odd_endpoints[m as usize];
+        if p == fine_to_coarse[a as usize] {
+            q
+        } else {
+            p
+        }
+    };
+    let mut coarse_triangles = Vec::new();
+    let mut face_parent = vec![(NONE, [[0.0; 3]; 3]); topo.triangles.len()];
+    for &a in &coarse_to_fine {
+        let ring = topo.ring(a);
+        let hs = topo.ring_halfedges(a);
+        for k in 0..hs.len() {
+            let h = hs[k];
+            if h == NONE {
+                continue;
+            }
+            let m1 = ring[k];
+            let m2 = ring[(k + 1) % ring.len()];
+            let ca = fine_to_coarse[a as usize];
+            let (cb, cc) = (far(a, m1), far(a, m2));
+            if ca > cb || ca > cc {
+                continue;
+            }
+            let d = coarse_triangles.len() as u32;
+            coarse_triangles.push([ca, cb, cc]);
+            // The four children: the corner face at a, the central face across (m1, m2),
+            // and the corner faces across the central face's other two edges.
+            let corner_a = h / 3;
+            let h_mid = next(h); // m1 -> m2 in the corner face
+            let t = topo.twin[h_mid as usize];
+            if t == NONE {
+                return Err(fail(level, m1, "central face of a split triangle is missing"));
+            }
+            let central = t / 3;
+            let bary_of = |v: u32| -> Option<[f64; 3]> {
+                let c = fine_to_coarse[v as usize];
+                if c != NONE {
+                    return [ca, cb, cc].iter().position(|&x| x == c).map(|i| {
+                        let mut b = [0.0; 3];
+                        b[i] = 1.0;
+                        b
+                    });
+                }
+                let [p, q] = odd_endpoints[v as usize];
+                let i = [ca, cb, cc].iter().position(|&x| x == p)?;
+                let j = [ca, cb, cc].iter().position(|&x| x == q)?;
+                let mut b = [0.0; 3];
+                b[i] = 0.5;
+                b[j] = 0.5;
+                Some(b)
+            };
+            let mut children = vec![corner_a, central];
+            for e in 0..3u32 {
+                let tw = topo.twin[(central * 3 + e) as usize];
+                if tw != NONE && tw / 3 != corner_a {
+                    children.push(tw / 3);
+                }
+            }
+            if children.len() != 4 {
+                return Err(fail(level, a, "a coarse face does not split into four fine faces"));
+            }
+            for f in children {
+                let tri = topo.triangles[f as usize];
+                let mut corners = [[0.0; 3]; 3];
+                for (slot, &v) in corners.iter_mut().zip(tri.iter()) {
+                    *slot = bary_of(v).ok_or_else(|| fail(level, v, "fine face leaves its coarse face"))?;
+                }
+                if face_parent[f as usize].0 != NONE {
+                    return Err(fail(level, tri[0], "fine face belongs to two coarse faces"));
+                }
+                face_parent[f as usize] = (d, corners);
+            }
+        }
+    }
+    if coarse_triangles.len() * 4 != topo.triangles.len() {
+        let v = face_parent
+            .iter()
+            .position(|p| p.0 == NONE)
+            .map_or(0, |f| topo.triangles[f][0]);
+        return Err(fail(
+            level,
+            v,
+            format!("{} fine faces do not make {} coarse faces", topo.triangles.len(), coarse_triangles.len()),
+        ));
+    }
+    Ok(Level {
+        coarse_triangles,
+        coarse_to_fine,
+        fine_to_coarse,
+        odd_endpoints,
+        face_parent,
+    })
+}
+
+fn component_of(topo: &Topology, start: u32) -> Vec<u32> {
+    let mut seen = std::collections::HashSet::new();
+    let mut stack = vec![start];
+    seen.insert(start);
+    let mut out = Vec::new();
+    while let Some(v) = stack.pop() {
+        out.push(v);
+        for &w in topo.ring(v) {
+            if seen.insert(w) {
+                stack.push(w);
+            }
+        }
+    }
+    out
+}
+
+/// Odd vertices always have 6 neighbours (4 on the boundary), so any other valence marks
+/// an even vertex. In a fully regular component, one of the three corners of any face is
+/// even unless that face is a central one: trying a vertex and its whole ring suffices.
+fn seed_candidates(topo: &Topology, comp: &[u32]) -> Vec<u32> {
+    if let Some(&v) = comp.iter().find(|&&v| {
+        let n = topo.valence(v);
+        if topo.is_boundary(v) {
+            n != 4
+        } else {
+            n != 6
+        }
+    }) {
+        return vec![v];
+    }
+    let v = comp[0];
+    std::iter::once(v).chain(topo.ring(v).iter().copied()).collect()
+}
+
+fn propagate(topo: &Topology, comp: &[u32], seed: u32, level: usize, label: &mut [u8]) -> Result<(), DetectError> {
+    let mut queue = std::collections::VecDeque::new();
+    label[seed as usize] = EVEN;
+    queue.push_back(seed);
+    while let Some(e) = queue.pop_front() {
+        for &m in topo.ring(e) {
+            match label[m as usize] {
+                EVEN => return Err(fail(level, m, "two even vertices are adjacent")),
+                UNKNOWN => label[m as usize] = ODD,
+                _ => {}
+            }
+            let ring = topo.ring(m);
+            let opposite = if topo.is_boundary(m) {
+                if ring.len() != 4 {
+                    return Err(fail(level, m, format!("boundary odd vertex has {} neighbours, not 4", ring.len())));
+                }
+                if ring[0] == e {
+                    ring[3]
+                } else if ring[3] == e {
+                    ring[0]
+                } else {
+                    return Err(fail(level, m, "even neighbour of a boundary odd vertex is not on the boundary"));
+                }
+            } else {
+                if ring.len() != 6 {
+                    return Err(fail(level, m, format!("interior odd vertex has valence {}, not 6", ring.len())));
+                }
+                let k = ring.iter().position(|&x| x == e).unwrap_or(0);
+                ring[(k + 3) % 6]
+            };
+            match label[opposite as usize] {
+                ODD => return Err(fail(level, opposite, "vertex must be both even and odd")),
+                UNKNOWN => {
+                    label[opposite as usize] = EVEN;
+                    queue.push_back(opposite);
+                }
+                _ => {}
+            }
+        }
+    }
+    if let Some(&v) = comp.iter().find(|&&v| label[v as usize] == UNKNOWN) {
+        return Err(fail(level, v, "vertex not reached by the even/odd tagging"));
+    }
+    Ok(())
+}
+
+/// A hierarchy of `levels.len()` detected levels, finest first.
+#[derive(Debug, Clone)]
+pub struct Hierarchy {
+    pub levels: Vec<Level>,
+}
+
+impl Hierarchy {
+    /// Detects up to `max_levels` levels, stopping at the first failure; the error of that
+    /// failure is returned beside the hierarchy found so far.
+    pub fn detect(fine: &Topology, max_levels: usize) -> (Hierarchy, Option<DetectError>) {
+        let mut levels = Vec::new();
+        let mut current = fine.clone();
+        for level in 1..=max_levels {
+            let lvl = match detect_level(&current, level) {
+                Ok(l) => l,
+                Err(e) => return (Hierarchy { levels }, Some(e)),
+            };
+            let next_topo = match Topology::build(lvl.coarse_to_fine.len(), &lvl.coarse_triangles) {
+                Ok(t) => t,
+                Err(source) => return (Hierarchy { levels }, Some(DetectError::Topology { level, source })),
+            };
+            levels.push(lvl);
+            current = next_topo;
+        }
+        (Hierarchy { levels }, None)
+    }
+
+    pub fn depth(&self) -> usize {
+        self.levels.len()
+    }
+
+    /// Location of every finest vertex on the coarsest mesh: (coarse face, u, v) with
+    /// barycentric weights (u, v, 1 - u - v) for the face's corners 0, 1, 2.
+    pub fn fine_vertex_params(&self, fine: &Topology) -> Vec<(u32, f64, f64)> {
+        let mut out = vec![(NONE, 0.0, 0.0); fine.vertex_count];
+        if self.levels.is_empty() {
+            return out;
+        }
+        for (f, tri) in fine.triangles.iter().enumerate() {
+            // Corner weights of this face in the coarsest face, composing the parents.
+            let (mut face, mut corners) = self.levels[0].face_parent[f];
+            for lvl in &self.levels[1..] {
+                let (pf, pc) = lvl.face_parent[face as usize];
+                let mut composed = [[0.0; 3]; 3];
+                for (c, row) in corners.iter().enumerate() {
+                    for (k, w) in row.iter().enumerate() {
+                        for j in 0..3 {
+                            composed[c][j] += w * pc[k][j];
+                        }
+                    }
+                }
+                face = pf;
+                corners = composed;
+            }
+            for (c, &v) in tri.iter().enumerate() {
+                if out[v as usize].0 == NONE {
+                    out[v as usize] = (face, corners[c][0], corners[c][1]);
+                }
+            }
+        }
+        out
+    }
+
+    /// Fine index of every coarsest vertex.
+    pub fn coarsest_to_fine(&self) -> Vec<u32> {
+        let mut map: Vec<u32> = match self.levels.last() {
+            Some(l) => l.coarse_to_fine.clone(),
+            None => return Vec::new(),
+        };
+        for lvl in self.levels.iter().rev().skip(1) {
+            for m in map.iter_mut() {
+                *m = lvl.coarse_to_fine[*m as usize];
+            }
+        }
+        map
+    }
+}
