@@ -1,6 +1,12 @@
 //! File formats. The only module that touches the filesystem for meshes.
 
 pub mod glb;
+pub mod gltf_reader;
+pub mod obj;
+pub mod off;
+pub mod ply;
+pub mod stl;
+pub mod writers;
 
 use crate::mesh::TriMesh;
 use glam::DVec3;
@@ -87,29 +93,71 @@ pub struct Loaded {
 
 /// Reads any supported mesh file, choosing the format by extension.
 pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError> {
-    let _ = opts;
-    Err(IoError::new(
-        path.display().to_string(),
-        None,
-        "readers not built yet",
-    ))
+    let name = path.display().to_string();
+    let format = Format::from_path(path)
+        .ok_or_else(|| IoError::new(&name, None, "unknown extension (obj, gltf, glb, ply, stl, off)"))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
+    read_with_base(&bytes, format, &name, opts, path.parent())
 }
 
 /// Reads a mesh held in memory (the pipe source); `name` is used in errors.
-pub fn read_mesh_bytes(
+pub fn read_mesh_bytes(bytes: &[u8], format: Format, name: &str, opts: &LoadOptions) -> Result<Loaded, IoError> {
+    read_with_base(bytes, format, name, opts, None)
+}
+
+fn read_with_base(
     bytes: &[u8],
     format: Format,
     name: &str,
     opts: &LoadOptions,
+    base: Option<&Path>,
 ) -> Result<Loaded, IoError> {
-    let _ = (bytes, format, opts);
-    Err(IoError::new(name, None, "readers not built yet"))
+    if bytes.is_empty() {
+        return Err(IoError::new(name, None, "empty file"));
+    }
+    let plain = |mesh: TriMesh| Loaded { mesh, grid: None };
+    let loaded = match format {
+        Format::Ply => ply::read_ply(bytes, name, opts)?,
+        Format::Obj => plain(obj::read_obj(bytes, name)?),
+        Format::Off => plain(off::read_off(bytes, name)?),
+        Format::Stl => plain(stl::read_stl(bytes, name)?),
+        Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base)?),
+    };
+    if loaded.mesh.positions.is_empty() {
+        return Err(IoError::new(name, None, "no vertices"));
+    }
+    Ok(loaded)
+}
+
+/// Merges vertices with bit-identical coordinates (and drops none otherwise).
+pub fn weld_exact(mesh: TriMesh) -> TriMesh {
+    let mut map = std::collections::HashMap::with_capacity(mesh.positions.len());
+    let mut positions = Vec::new();
+    let remap: Vec<u32> = mesh
+        .positions
+        .iter()
+        .map(|p| {
+            let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+            *map.entry(key).or_insert_with(|| {
+                positions.push(*p);
+                (positions.len() - 1) as u32
+            })
+        })
+        .collect();
+    let triangles = mesh
+        .triangles
+        .iter()
+        .map(|t| [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]])
+        .collect();
+    TriMesh::new(positions, triangles)
 }
 
 /// Writes a mesh, choosing the format by extension (obj, ply = binary little-endian, glb).
 pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     match Format::from_path(path) {
         Some(Format::Glb) => glb::write_glb(path, mesh, &glb::GlbAttributes::default()),
-        _ => Err(IoError::new(path.display().to_string(), None, "writer not built yet")),
+        Some(Format::Obj) => writers::write_obj(path, mesh),
+        Some(Format::Ply) => writers::write_ply(path, mesh),
+        _ => Err(IoError::new(path.display().to_string(), None, "can write .obj, .ply or .glb only")),
     }
 }
