@@ -1,3 +1,37 @@
-fn main() -> anyhow::Result<()> {
-    Ok(())
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+use trispline::cli;
+
+/// Scan patches in, smooth triangular surfaces out.
+#[derive(Parser)]
+#[command(name = "trispline", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Counts on the raw input as one JSON object.
+    Inspect(cli::mesh_tools::InspectArgs),
+    /// Forward Loop subdivision.
+    Subdivide(cli::mesh_tools::SubdivideArgs),
+    /// Inverse Loop subdivision (exit 2 without subdivision connectivity).
+    Coarsen(cli::mesh_tools::CoarsenArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Inspect(a) => cli::mesh_tools::inspect(a),
+        Command::Subdivide(a) => cli::mesh_tools::subdivide_cmd(a),
+        Command::Coarsen(a) => cli::mesh_tools::coarsen_cmd(a),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(2)
+        }
+    }
 }

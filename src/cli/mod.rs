@@ -1,1 +1,2 @@
 //! Subcommand implementations; main.rs only dispatches.
+pub mod mesh_tools;

@@ -1,45 +1,84 @@
-//! OBJ through tobj: all groups and objects merged, polygons triangulated, and only the
-//! position indices used, so UV or normal seams never split a vertex.
+//! OBJ reader. Handwritten rather than through tobj: tobj renumbers positions per object in
+//! order of first use, which loses the file's vertex order (the order `coarsen` and
+//! `subdivide` promise to keep) and splits objects that share vertices. Here all groups
+//! and objects share the file's one position list, polygons are fan-triangulated, and only
+//! position indices are used, so UV or normal seams never split a vertex.
 
 use super::IoError;
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
 pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
-    let opts = tobj::LoadOptions {
-        single_index: false,
-        triangulate: true,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let mut reader = std::io::BufReader::new(bytes);
-    let (models, _) = tobj::load_obj_buf(&mut reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed))
-        .map_err(|e| IoError::new(file, None, format!("OBJ parse error: {e}")))?;
-    // tobj gives each model its own position array; models that share positions in the file
-    // are therefore re-indexed into one array.
-    let mut mesh = TriMesh::default();
-    for m in &models {
-        let off = mesh.positions.len() as u32;
-        let p = &m.mesh.positions;
-        if p.len() % 3 != 0 {
-            return Err(IoError::new(file, None, format!("object '{}' has a partial vertex", m.name)));
-        }
-        for c in p.chunks_exact(3) {
-            let v = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-            if !v.is_finite() {
-                return Err(IoError::new(file, Some(format!("object '{}'", m.name)), "non-finite vertex coordinate"));
+    let text = std::str::from_utf8(bytes)
+        .map_err(|e| IoError::new(file, Some(format!("byte {}", e.valid_up_to())), "not UTF-8 text"))?;
+    let err = |n: usize, r: String| IoError::new(file, Some(format!("line {n}")), r);
+    let mut positions: Vec<DVec3> = Vec::new();
+    let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
+    for (n, raw) in text.lines().enumerate() {
+        let n = n + 1;
+        let line = raw.split('#').next().unwrap_or("");
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let mut c = [0.0; 3];
+                for slot in &mut c {
+                    let w = words.next().ok_or_else(|| err(n, "vertex with fewer than 3 coordinates".into()))?;
+                    *slot = w.parse().map_err(|_| err(n, format!("'{w}' is not a number")))?;
+                }
+                let p = DVec3::from_array(c);
+                if !p.is_finite() {
+                    return Err(err(n, "non-finite vertex coordinate".into()));
+                }
+                positions.push(p);
             }
-            mesh.positions.push(v);
-        }
-        let n = (p.len() / 3) as u32;
-        for (f, t) in m.mesh.indices.chunks(3).enumerate() {
-            if t.len() < 3 || t.iter().any(|&i| i >= n) {
-                return Err(IoError::new(file, Some(format!("object '{}' face {f}", m.name)), "vertex index out of range"));
+            Some("f") => {
+                let mut idx = Vec::new();
+                for w in words {
+                    let first = w.split('/').next().unwrap_or("");
+                    let i: i64 = first.parse().map_err(|_| err(n, format!("bad face index '{w}'")))?;
+                    idx.push(i);
+                }
+                if idx.len() < 3 {
+                    return Err(err(n, format!("face with {} vertices", idx.len())));
+                }
+                faces.push((n, idx));
             }
-            mesh.triangles.push([t[0] + off, t[1] + off, t[2] + off]);
+            _ => {}
         }
     }
-    // tobj re-indexes positions per object, so vertices shared by two objects arrive twice;
-    // welding exact duplicates keeps such objects connected. A single object is left as is.
-    Ok(if models.len() > 1 { super::weld_exact(mesh) } else { mesh })
+    // Indices are resolved at the end: negative (relative) indices refer to the vertices
+    // read so far, which the line number lets us recompute.
+    let mut triangles = Vec::with_capacity(faces.len());
+    let nv = positions.len() as i64;
+    let mut seen_vertices_at_line: Vec<(usize, i64)> = Vec::new();
+    if faces.iter().any(|(_, f)| f.iter().any(|&i| i < 0)) {
+        let mut count = 0i64;
+        for (n, raw) in text.lines().enumerate() {
+            if raw.trim_start().starts_with("v ") {
+                count += 1;
+            }
+            seen_vertices_at_line.push((n + 1, count));
+        }
+    }
+    for (n, f) in &faces {
+        let mut resolved = Vec::with_capacity(f.len());
+        for &i in f {
+            let k = if i > 0 {
+                i - 1
+            } else if i < 0 {
+                let so_far = seen_vertices_at_line.get(n - 1).map_or(nv, |x| x.1);
+                so_far + i
+            } else {
+                -1
+            };
+            if k < 0 || k >= nv {
+                return Err(err(*n, format!("vertex index {i} out of range (1..={nv})")));
+            }
+            resolved.push(k as u32);
+        }
+        for j in 1..resolved.len() - 1 {
+            triangles.push([resolved[0], resolved[j], resolved[j + 1]]);
+        }
+    }
+    Ok(TriMesh::new(positions, triangles))
 }
