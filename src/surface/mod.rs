@@ -1,1 +1,58 @@
-//! placeholder module, filled by its owner
+//! Triangular surfaces behind one trait: value, derivatives and sparse basis rows.
+
+pub mod bezier;
+
+use glam::DVec3;
+
+/// A parameter: a domain face and barycentric (u, v) w.r.t. its corners 0 and 1
+/// (w = 1 - u - v belongs to corner 2).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SurfaceParam {
+    pub face: u32,
+    pub u: f64,
+    pub v: f64,
+}
+
+/// Value and partial derivatives with respect to (u, v), w eliminated.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Derivatives {
+    pub position: DVec3,
+    pub du: DVec3,
+    pub dv: DVec3,
+    pub duu: DVec3,
+    pub duv: DVec3,
+    pub dvv: DVec3,
+}
+
+/// Basis rows of value and the five derivatives, sharing one index list.
+#[derive(Clone, Debug, Default)]
+pub struct BasisDerivRows {
+    pub indices: Vec<u32>,
+    /// value, du, dv, duu, duv, dvv per index.
+    pub weights: Vec<[f64; 6]>,
+}
+
+pub trait TriSurface: Send + Sync {
+    fn control_count(&self) -> usize;
+    fn domain_face_count(&self) -> usize;
+    /// The sparse basis row at `p`: (control index, weight), weights >= 0 summing to 1.
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>);
+    fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows);
+    fn evaluate(&self, controls: &[DVec3], p: SurfaceParam) -> Derivatives {
+        let mut rows = BasisDerivRows::default();
+        self.basis_rows_with_derivatives(p, &mut rows);
+        let mut d = Derivatives::default();
+        for (&i, w) in rows.indices.iter().zip(&rows.weights) {
+            let c = controls[i as usize];
+            d.position += c * w[0];
+            d.du += c * w[1];
+            d.dv += c * w[2];
+            d.duu += c * w[3];
+            d.duv += c * w[4];
+            d.dvv += c * w[5];
+        }
+        d
+    }
+    /// Moves a parameter by (du, dv), staying in the domain (clamped at its boundary).
+    fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam;
+}
