@@ -1,1 +1,9 @@
-//! placeholder module, filled by its owner
+//! Surface-independent fitting: collocation matrix, methods, budgets.
+
+pub mod budget;
+pub mod engine;
+pub mod sparse;
+
+pub use budget::{Budget, FitStatus, StepStats};
+pub use engine::{fit, FitError, FitOutcome, FitProblem, Method};
+pub use sparse::{Collocation, Csr};

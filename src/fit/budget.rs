@@ -1,0 +1,101 @@
+//! Error budgets and fit statuses.
+
+use glam::DVec3;
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct Budget {
+    /// Absolute tolerance behind `within_tolerance_pct` (already resolved from a relative one).
+    pub tolerance: f64,
+    pub max_error: Option<f64>,
+    pub mean_error: Option<f64>,
+    pub rms_error: Option<f64>,
+    pub within_tolerance_pct: Option<f64>,
+    pub max_iterations: usize,
+    pub max_time_ms: Option<u64>,
+    /// Stalled when the RMS improves by less than `stall_rel_improvement` (relative) over
+    /// `stall_steps` consecutive steps.
+    pub stall_steps: usize,
+    pub stall_rel_improvement: f64,
+}
+
+impl Default for Budget {
+    fn default() -> Self {
+        Self {
+            tolerance: 0.0,
+            max_error: None,
+            mean_error: None,
+            rms_error: None,
+            within_tolerance_pct: None,
+            max_iterations: 100,
+            max_time_ms: None,
+            stall_steps: 5,
+            stall_rel_improvement: 1e-4,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FitStatus {
+    Met,
+    Capped,
+    Stalled,
+}
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct StepStats {
+    pub k: usize,
+    pub max_error: f64,
+    pub mean_error: f64,
+    pub rms_error: f64,
+    pub within_tolerance_pct: f64,
+    pub elapsed_ms: f64,
+}
+
+impl StepStats {
+    pub fn from_residuals(k: usize, residuals: &[DVec3], tolerance: f64, elapsed_ms: f64) -> Self {
+        let n = residuals.len().max(1) as f64;
+        let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
+        for r in residuals {
+            let d = r.length();
+            max = max.max(d);
+            sum += d;
+            sum2 += d * d;
+            within += usize::from(d <= tolerance);
+        }
+        Self {
+            k,
+            max_error: max,
+            mean_error: sum / n,
+            rms_error: (sum2 / n).sqrt(),
+            within_tolerance_pct: 100.0 * within as f64 / n,
+            elapsed_ms,
+        }
+    }
+}
+
+impl Budget {
+    /// True when at least one target is set and all set targets hold.
+    pub fn met(&self, s: &StepStats) -> bool {
+        let targets = [
+            self.max_error.map(|t| s.max_error <= t),
+            self.mean_error.map(|t| s.mean_error <= t),
+            self.rms_error.map(|t| s.rms_error <= t),
+            self.within_tolerance_pct.map(|t| s.within_tolerance_pct >= t),
+        ];
+        targets.iter().any(Option::is_some) && targets.iter().all(|t| t.unwrap_or(true))
+    }
+
+    pub fn has_targets(&self) -> bool {
+        self.max_error.is_some() || self.mean_error.is_some() || self.rms_error.is_some() || self.within_tolerance_pct.is_some()
+    }
+
+    pub fn stalled(&self, history: &[StepStats]) -> bool {
+        if self.stall_steps == 0 || history.len() <= self.stall_steps {
+            return false;
+        }
+        let last = history[history.len() - 1].rms_error;
+        let before = history[history.len() - 1 - self.stall_steps].rms_error;
+        before - last <= self.stall_rel_improvement * before.max(1e-300)
+    }
+}
