@@ -2,6 +2,7 @@
 
 use glam::DVec3;
 
+pub mod clean;
 pub mod detect;
 pub mod inverse;
 pub mod loop_subdiv;
