@@ -33,31 +33,59 @@ fn main() {
     let levels = 2;
     let degree = fine_n >> levels;
     let points = lattice_points(fine_n);
-    let data: Vec<DVec3> = points.iter().map(|&(i, j)| surface(i as f64 / fine_n as f64, j as f64 / fine_n as f64)).collect();
+    let data: Vec<DVec3> = points
+        .iter()
+        .map(|&(i, j)| surface(i as f64 / fine_n as f64, j as f64 / fine_n as f64))
+        .collect();
     let mesh = TriMesh::new(data.clone(), lattice_triangles(fine_n));
     let t0 = Instant::now();
     let topo = Topology::from_mesh(&mesh).expect("lattice is manifold");
     let (hierarchy, _) = Hierarchy::detect(&topo, levels);
-    assert_eq!(hierarchy.depth(), levels, "lattice must have subdivision connectivity");
-    let initial = coarsen(&mesh, levels, InverseMethod::Exact).expect("subdivided").mesh.positions;
+    assert_eq!(
+        hierarchy.depth(),
+        levels,
+        "lattice must have subdivision connectivity"
+    );
+    let initial = coarsen(&mesh, levels, InverseMethod::Exact)
+        .expect("subdivided")
+        .mesh
+        .positions;
     let r = composed_exact_inverse(&topo, &hierarchy).expect("manifold");
     let bezier = BezierTriangle::new(degree);
     let rows: Vec<Vec<(u32, f64)>> = points
         .iter()
         .map(|&(i, j)| {
             let mut row = Vec::new();
-            let p = SurfaceParam { face: 0, u: i as f64 / fine_n as f64, v: j as f64 / fine_n as f64 };
+            let p = SurfaceParam {
+                face: 0,
+                u: i as f64 / fine_n as f64,
+                v: j as f64 / fine_n as f64,
+            };
             bezier.basis_row(p, &mut row);
             row
         })
         .collect();
-    let col = Collocation::new(Csr::from_rows(bezier.control_count(), rows.iter().map(|r| r.as_slice())));
+    let col = Collocation::new(Csr::from_rows(
+        bezier.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ));
     let setup_ms = t0.elapsed().as_secs_f64() * 1e3;
     let pia_op = |res: &[DVec3]| r.apply(res);
-    let problem = FitProblem { basis: &col, data: &data, smoothing: 0.0, fairness: None, pia_operator: Some(&pia_op) };
+    let problem = FitProblem {
+        basis: &col,
+        data: &data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: Some(&pia_op),
+    };
     println!("data points {} (lattice {fine_n}), inverse levels {levels}, degree {degree}, control points {}", data.len(), initial.len());
     println!("setup (topology, detection, inverse Loop, collocation matrix): {setup_ms:.2} ms");
-    let budget = Budget { tolerance: 0.002, max_iterations: 10, stall_steps: 0, ..Budget::default() };
+    let budget = Budget {
+        tolerance: 0.002,
+        max_iterations: 10,
+        stall_steps: 0,
+        ..Budget::default()
+    };
     for method in [Method::Pia, Method::Lspia, Method::Cg] {
         // Best of 5 for the timing; the table is from the last run (all runs are identical).
         let mut best = f64::MAX;
@@ -72,7 +100,10 @@ fn main() {
         println!("\n{method:?}: 10 steps in {best:.2} ms (best of 5)");
         println!("| k | max | mean | N% (<= 0.002) |\n|---|---|---|---|");
         for s in &out.steps {
-            println!("| {} | {:.6} | {:.6} | {:.3} |", s.k, s.max_error, s.mean_error, s.within_tolerance_pct);
+            println!(
+                "| {} | {:.6} | {:.6} | {:.3} |",
+                s.k, s.max_error, s.mean_error, s.within_tolerance_pct
+            );
         }
     }
 }

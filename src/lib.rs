@@ -1,19 +1,12 @@
 //! trispline: scan patches in, smooth triangular surfaces out.
 //!
 //! Layering (see ARCHITECTURE.md): `io` is the only module that knows file formats;
-//! `mesh`, `surface`, `fit`, `remesh`, `bspline` and `curvature` are pure geometry on
-//! `f64`; `daemon` wires sources, scheduling, state and atomic outputs around the pure
-//! worker in `pipeline`.
+//! `mesh`, `surface` and `fit` are pure geometry on `f64`.
 
-pub mod bspline;
 pub mod cli;
-pub mod curvature;
-pub mod daemon;
 pub mod fit;
 pub mod io;
 pub mod mesh;
-pub mod pipeline;
-pub mod remesh;
 pub mod surface;
 pub mod testdata;
 

@@ -39,7 +39,10 @@ fn collocation(s: &BezierTriangle, ps: &[SurfaceParam]) -> Collocation {
             row
         })
         .collect();
-    Collocation::new(Csr::from_rows(s.control_count(), rows.iter().map(|r| r.as_slice())))
+    Collocation::new(Csr::from_rows(
+        s.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ))
 }
 
 fn known_net(n: usize) -> Vec<DVec3> {
@@ -53,15 +56,25 @@ fn known_net(n: usize) -> Vec<DVec3> {
 }
 
 fn flat_start(n: usize) -> Vec<DVec3> {
-    lattice_points(n).into_iter().map(|(i, j)| DVec3::new(i as f64 / n as f64, j as f64 / n as f64, 0.0)).collect()
+    lattice_points(n)
+        .into_iter()
+        .map(|(i, j)| DVec3::new(i as f64 / n as f64, j as f64 / n as f64, 0.0))
+        .collect()
 }
 
 fn exact_budget(iterations: usize) -> Budget {
-    Budget { max_iterations: iterations, stall_steps: 0, ..Budget::default() }
+    Budget {
+        max_iterations: iterations,
+        stall_steps: 0,
+        ..Budget::default()
+    }
 }
 
 fn max_diff(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (*x - *y).length())
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -73,11 +86,25 @@ fn every_iterative_method_recovers_a_known_net_from_exact_data() {
     let truth = known_net(n);
     let mut data = vec![DVec3::ZERO; ps.len()];
     col.n.mul_vec3(&truth, &mut data);
-    let problem = FitProblem { basis: &col, data: &data, smoothing: 0.0, fairness: None, pia_operator: None };
-    for (method, iters) in [(Method::Cg, 200), (Method::Direct, 1), (Method::Lspia, 20000)] {
+    let problem = FitProblem {
+        basis: &col,
+        data: &data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: None,
+    };
+    for (method, iters) in [
+        (Method::Cg, 200),
+        (Method::Direct, 1),
+        (Method::Lspia, 20000),
+    ] {
         let out = fit(&problem, flat_start(n), method, &exact_budget(iters)).expect("fits");
         let err = max_diff(&out.controls, &truth);
-        assert!(err < 1e-8, "{method:?}: control error {err:e} after {} steps", out.iterations);
+        assert!(
+            err < 1e-8,
+            "{method:?}: control error {err:e} after {} steps",
+            out.iterations
+        );
     }
 }
 
@@ -90,16 +117,28 @@ fn lspia_and_cg_converge_to_the_direct_solution_on_noisy_data() {
     let mut data = vec![DVec3::ZERO; ps.len()];
     col.n.mul_vec3(&known_net(n), &mut data);
     let mut r = rng(5);
-    data.iter_mut().for_each(|p| *p += DVec3::new(r() - 0.5, r() - 0.5, r() - 0.5) * 0.02);
+    data.iter_mut()
+        .for_each(|p| *p += DVec3::new(r() - 0.5, r() - 0.5, r() - 0.5) * 0.02);
     for smoothing in [0.0, 1e-3] {
         let lap = Collocation::new(umbrella_laplacian(lattice_len(n), &lattice_triangles(n)));
-        let problem = FitProblem { basis: &col, data: &data, smoothing, fairness: Some(&lap), pia_operator: None };
-        let direct = fit(&problem, flat_start(n), Method::Direct, &exact_budget(1)).expect("direct").controls;
+        let problem = FitProblem {
+            basis: &col,
+            data: &data,
+            smoothing,
+            fairness: Some(&lap),
+            pia_operator: None,
+        };
+        let direct = fit(&problem, flat_start(n), Method::Direct, &exact_budget(1))
+            .expect("direct")
+            .controls;
         let scale = direct.iter().map(|p| p.length()).fold(0.0, f64::max);
         for (method, iters) in [(Method::Cg, 500), (Method::Lspia, 40000)] {
             let out = fit(&problem, flat_start(n), method, &exact_budget(iters)).expect("fits");
             let rel = max_diff(&out.controls, &direct) / scale;
-            assert!(rel < 1e-6, "{method:?} s={smoothing}: relative distance to direct {rel:e}");
+            assert!(
+                rel < 1e-6,
+                "{method:?} s={smoothing}: relative distance to direct {rel:e}"
+            );
         }
     }
 }
@@ -109,11 +148,23 @@ fn smoothing_keeps_controls_without_data_sane() {
     let n = 8;
     let s = BezierTriangle::new(n);
     // Data only near corner 2 (u, v small): the far corners have no data at all.
-    let ps: Vec<SurfaceParam> = params(3000, 3).into_iter().filter(|p| p.u + p.v < 0.4).collect();
+    let ps: Vec<SurfaceParam> = params(3000, 3)
+        .into_iter()
+        .filter(|p| p.u + p.v < 0.4)
+        .collect();
     let col = collocation(&s, &ps);
-    let data: Vec<DVec3> = ps.iter().map(|p| DVec3::new(p.u, p.v, 0.1 * (p.u * 5.0).sin())).collect();
+    let data: Vec<DVec3> = ps
+        .iter()
+        .map(|p| DVec3::new(p.u, p.v, 0.1 * (p.u * 5.0).sin()))
+        .collect();
     let lap = Collocation::new(umbrella_laplacian(lattice_len(n), &lattice_triangles(n)));
-    let problem = FitProblem { basis: &col, data: &data, smoothing: 1e-4, fairness: Some(&lap), pia_operator: None };
+    let problem = FitProblem {
+        basis: &col,
+        data: &data,
+        smoothing: 1e-4,
+        fairness: Some(&lap),
+        pia_operator: None,
+    };
     let out = fit(&problem, flat_start(n), Method::Cg, &exact_budget(2000)).expect("fits");
     let worst = out.controls.iter().map(|p| p.z.abs()).fold(0.0, f64::max);
     assert!(out.controls.iter().all(|p| p.is_finite()));
@@ -129,18 +180,45 @@ fn budget_statuses() {
     let mut data = vec![DVec3::ZERO; ps.len()];
     col.n.mul_vec3(&known_net(n), &mut data);
     let mut r = rng(9);
-    data.iter_mut().for_each(|p| *p += DVec3::new(0.0, 0.0, r() - 0.5) * 0.01);
-    let problem = FitProblem { basis: &col, data: &data, smoothing: 0.0, fairness: None, pia_operator: None };
+    data.iter_mut()
+        .for_each(|p| *p += DVec3::new(0.0, 0.0, r() - 0.5) * 0.01);
+    let problem = FitProblem {
+        basis: &col,
+        data: &data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: None,
+    };
     // Reachable: noise is +-0.005, so a 0.01 max error is attainable.
-    let met = Budget { tolerance: 0.01, max_error: Some(0.01), max_iterations: 500, ..Budget::default() };
+    let met = Budget {
+        tolerance: 0.01,
+        max_error: Some(0.01),
+        max_iterations: 500,
+        ..Budget::default()
+    };
     let out = fit(&problem, flat_start(n), Method::Cg, &met).expect("fits");
     assert_eq!(out.status, FitStatus::Met);
     assert!(out.steps.last().is_some_and(|s| s.max_error <= 0.01));
     // Capped: one step cannot get there.
-    let capped = Budget { max_iterations: 1, ..met.clone() };
-    assert_eq!(fit(&problem, flat_start(n), Method::Lspia, &capped).expect("fits").status, FitStatus::Capped);
+    let capped = Budget {
+        max_iterations: 1,
+        ..met.clone()
+    };
+    assert_eq!(
+        fit(&problem, flat_start(n), Method::Lspia, &capped)
+            .expect("fits")
+            .status,
+        FitStatus::Capped
+    );
     // Unreachable (below the noise): progress stops, status stalled.
-    let stalled = Budget { tolerance: 1e-6, max_error: Some(1e-6), max_iterations: 100_000, stall_steps: 5, stall_rel_improvement: 1e-6, ..Budget::default() };
+    let stalled = Budget {
+        tolerance: 1e-6,
+        max_error: Some(1e-6),
+        max_iterations: 100_000,
+        stall_steps: 5,
+        stall_rel_improvement: 1e-6,
+        ..Budget::default()
+    };
     let out = fit(&problem, flat_start(n), Method::Cg, &stalled).expect("fits");
     assert_eq!(out.status, FitStatus::Stalled);
     assert!(out.iterations < 100_000);
@@ -154,17 +232,30 @@ fn pia_converges_on_a_square_problem() {
     let s = BezierTriangle::new(n);
     let ps: Vec<SurfaceParam> = lattice_points(n)
         .into_iter()
-        .map(|(i, j)| SurfaceParam { face: 0, u: i as f64 / n as f64, v: j as f64 / n as f64 })
+        .map(|(i, j)| SurfaceParam {
+            face: 0,
+            u: i as f64 / n as f64,
+            v: j as f64 / n as f64,
+        })
         .collect();
     let col = collocation(&s, &ps);
     let truth = known_net(n);
     let mut data = vec![DVec3::ZERO; ps.len()];
     col.n.mul_vec3(&truth, &mut data);
     let identity = |r: &[DVec3]| r.to_vec();
-    let problem = FitProblem { basis: &col, data: &data, smoothing: 0.0, fairness: None, pia_operator: Some(&identity) };
+    let problem = FitProblem {
+        basis: &col,
+        data: &data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: Some(&identity),
+    };
     let out = fit(&problem, data.clone(), Method::Pia, &exact_budget(3000)).expect("fits");
     assert!(max_diff(&out.controls, &truth) < 1e-8);
-    let missing = FitProblem { pia_operator: None, ..problem };
+    let missing = FitProblem {
+        pia_operator: None,
+        ..problem
+    };
     assert!(fit(&missing, data.clone(), Method::Pia, &exact_budget(3)).is_err());
 }
 
@@ -184,5 +275,8 @@ fn power_iteration_estimates_lambda_max() {
     let ata = dense.transpose() * &dense;
     let truth = ata.symmetric_eigen().eigenvalues.max();
     let est = lambda_max(&col, None, 0.0, 40);
-    assert!(est >= truth / 1.01 && est <= truth * 1.0000001, "estimate {est}, true {truth}");
+    assert!(
+        est >= truth / 1.01 && est <= truth * 1.0000001,
+        "estimate {est}, true {truth}"
+    );
 }

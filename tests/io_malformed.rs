@@ -1,10 +1,10 @@
 //! Malformed inputs give errors naming the file, never a panic or a huge allocation.
 
-use trispline::io::{read_mesh_bytes, Format, LoadOptions};
-use trispline::io::writers::{obj_bytes, ply_bytes};
-use trispline::io::glb::{glb_bytes, GlbAttributes};
-use trispline::TriMesh;
 use glam::DVec3;
+use trispline::io::glb::{glb_bytes, GlbAttributes};
+use trispline::io::writers::{obj_bytes, ply_bytes};
+use trispline::io::{read_mesh_bytes, Format, LoadOptions};
+use trispline::TriMesh;
 
 fn sample() -> TriMesh {
     TriMesh::new(
@@ -14,16 +14,23 @@ fn sample() -> TriMesh {
 }
 
 fn must_fail(bytes: &[u8], format: Format, what: &str) {
-    let r = std::panic::catch_unwind(|| read_mesh_bytes(bytes, format, "input.bin", &LoadOptions::default()));
+    let r = std::panic::catch_unwind(|| {
+        read_mesh_bytes(bytes, format, "input.bin", &LoadOptions::default())
+    });
     match r {
         Err(_) => panic!("{what}: reader panicked"),
         Ok(Ok(m)) => panic!("{what}: accepted ({} vertices)", m.mesh.positions.len()),
-        Ok(Err(e)) => assert!(e.to_string().contains("input.bin"), "{what}: error does not name the file: {e}"),
+        Ok(Err(e)) => assert!(
+            e.to_string().contains("input.bin"),
+            "{what}: error does not name the file: {e}"
+        ),
     }
 }
 
 fn must_not_panic(bytes: &[u8], format: Format, what: &str) {
-    let r = std::panic::catch_unwind(|| read_mesh_bytes(bytes, format, "input.bin", &LoadOptions::default()));
+    let r = std::panic::catch_unwind(|| {
+        read_mesh_bytes(bytes, format, "input.bin", &LoadOptions::default())
+    });
     assert!(r.is_ok(), "{what}: reader panicked");
 }
 
@@ -58,14 +65,18 @@ fn valid_samples_read_back() {
         (stl_binary(), Format::Stl),
         (glb_bytes(&m, &GlbAttributes::default()), Format::Glb),
     ] {
-        let r = read_mesh_bytes(&bytes, fmt, "ok", &LoadOptions::default()).unwrap_or_else(|e| panic!("{fmt:?}: {e}"));
+        let r = read_mesh_bytes(&bytes, fmt, "ok", &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{fmt:?}: {e}"));
         assert_eq!(r.mesh.positions.len(), 4, "{fmt:?}");
         assert_eq!(r.mesh.triangles.len(), 2, "{fmt:?}");
     }
     // Full precision round trip for OBJ and PLY.
     let mut precise = m.clone();
     precise.positions[3] = DVec3::new(0.1 + 1e-17, 1.0 / 3.0, std::f64::consts::PI);
-    for (bytes, fmt) in [(ply_bytes(&precise), Format::Ply), (obj_bytes(&precise), Format::Obj)] {
+    for (bytes, fmt) in [
+        (ply_bytes(&precise), Format::Ply),
+        (obj_bytes(&precise), Format::Obj),
+    ] {
         let r = read_mesh_bytes(&bytes, fmt, "ok", &LoadOptions::default()).expect("valid");
         assert_eq!(r.mesh, precise, "{fmt:?}");
     }
@@ -104,17 +115,39 @@ fn bad_contents_are_errors() {
     must_fail(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n", Format::Ply, "index out of range");
     must_fail(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\nnan 0 0\n0 1 0\n", Format::Ply, "NaN");
     must_fail(b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n200 0 1 2\n", Format::Ply, "list longer than file");
-    must_fail(b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 9 2\n", Format::Off, "off index out of range");
-    must_fail(b"OFF\n999999999 2 0\n0 0 0\n", Format::Off, "off huge count");
-    must_fail(b"OFF\n3 1 0\n0 0 0\ninf 0 0\n0 1 0\n3 0 1 2\n", Format::Off, "off inf");
-    must_fail(b"v 0 0 0\nv 1 0 0\nf 1 2 9\n", Format::Obj, "obj index out of range");
+    must_fail(
+        b"OFF\n4 2 0\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n3 1 9 2\n",
+        Format::Off,
+        "off index out of range",
+    );
+    must_fail(
+        b"OFF\n999999999 2 0\n0 0 0\n",
+        Format::Off,
+        "off huge count",
+    );
+    must_fail(
+        b"OFF\n3 1 0\n0 0 0\ninf 0 0\n0 1 0\n3 0 1 2\n",
+        Format::Off,
+        "off inf",
+    );
+    must_fail(
+        b"v 0 0 0\nv 1 0 0\nf 1 2 9\n",
+        Format::Obj,
+        "obj index out of range",
+    );
     let mut stl = stl_binary();
     stl[80..84].copy_from_slice(&u32::MAX.to_le_bytes());
     must_fail(&stl, Format::Stl, "stl huge facet count");
-    must_fail(b"glTF\x02\0\0\0\x10\0\0\0garbage!", Format::Glb, "glb garbage");
+    must_fail(
+        b"glTF\x02\0\0\0\x10\0\0\0garbage!",
+        Format::Glb,
+        "glb garbage",
+    );
     let draco = br#"{"asset":{"version":"2.0"},"extensionsRequired":["KHR_draco_mesh_compression"],"extensionsUsed":["KHR_draco_mesh_compression"]}"#;
     let r = read_mesh_bytes(draco, Format::Gltf, "input.bin", &LoadOptions::default());
-    assert!(r.err().is_some_and(|e| e.to_string().contains("KHR_draco_mesh_compression")));
+    assert!(r
+        .err()
+        .is_some_and(|e| e.to_string().contains("KHR_draco_mesh_compression")));
 }
 
 #[test]
@@ -131,7 +164,13 @@ fn random_garbage_never_panics() {
         let len = (next() % 300) as usize;
         let mut bytes = prefixes[round % prefixes.len()].to_vec();
         bytes.extend((0..len).map(|_| next() as u8));
-        for fmt in [Format::Ply, Format::Off, Format::Stl, Format::Glb, Format::Obj] {
+        for fmt in [
+            Format::Ply,
+            Format::Off,
+            Format::Stl,
+            Format::Glb,
+            Format::Obj,
+        ] {
             must_not_panic(&bytes, fmt, &format!("garbage round {round} as {fmt:?}"));
         }
     }
@@ -141,7 +180,13 @@ fn random_garbage_never_panics() {
 fn ply_variants_read() {
     // Big-endian binary with float coordinates and a tristrip with a restart.
     let mut be = b"ply\nformat binary_big_endian 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n".to_vec();
-    for p in [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0], [2.0, 1.0, 0.0]] {
+    for p in [
+        [0.0f32, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [2.0, 1.0, 0.0],
+    ] {
         for c in p {
             be.extend_from_slice(&c.to_be_bytes());
         }
@@ -173,10 +218,21 @@ fn range_grid_cuts_depth_jumps_and_uses_shorter_diagonals() {
     for i in 0..9 {
         text.push_str(&format!("1 {i}\n"));
     }
-    let r = read_mesh_bytes(text.as_bytes(), Format::Ply, "grid", &LoadOptions::default()).expect("grid");
+    let r = read_mesh_bytes(
+        text.as_bytes(),
+        Format::Ply,
+        "grid",
+        &LoadOptions::default(),
+    )
+    .expect("grid");
     let g = r.grid.expect("grid kept");
     assert_eq!((g.rows, g.cols), (3, 3));
     // Only the two left cells survive (2 triangles each); the first uses diagonal 1-3.
     assert_eq!(r.mesh.triangles.len(), 4);
-    assert!(r.mesh.triangles.iter().take(2).all(|t| t.contains(&1) && t.contains(&3)));
+    assert!(r
+        .mesh
+        .triangles
+        .iter()
+        .take(2)
+        .all(|t| t.contains(&1) && t.contains(&3)));
 }

@@ -7,7 +7,11 @@ use trispline::testdata::shared_data;
 /// (file, vertices, faces) as the data README gives them; faces None where the README has
 /// no face count (the raw range grid is triangulated here).
 const FILES: &[(&str, usize, Option<usize>)] = &[
-    ("range_scans/bun000_meshlab_triangulated.ply", 40245, Some(79312)),
+    (
+        "range_scans/bun000_meshlab_triangulated.ply",
+        40245,
+        Some(79312),
+    ),
     ("range_scans/bun000_tri.ply", 40200, Some(78768)),
     ("range_scans/bun045_tri.ply", 40063, Some(78297)),
     ("range_scans/chin_tri.ply", 37681, Some(72746)),
@@ -26,7 +30,8 @@ const FILES: &[(&str, usize, Option<usize>)] = &[
 fn every_shared_file_loads_with_the_documented_counts() {
     for &(rel, v, f) in FILES {
         let Some(path) = shared_data(rel) else { return };
-        let loaded = read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+        let loaded =
+            read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
         // The README counts referenced vertices: MeshLab's bun000 file carries 11 unused
         // ones (40256 declared), which inspect reports as unreferenced_vertices.
         let stats = mesh_stats(&loaded.mesh, 0);
@@ -45,7 +50,9 @@ fn every_shared_file_loads_with_the_documented_counts() {
 
 #[test]
 fn range_grid_is_read_as_a_grid_and_triangulated() {
-    let Some(path) = shared_data("range_scans/bun000_range_grid.ply") else { return };
+    let Some(path) = shared_data("range_scans/bun000_range_grid.ply") else {
+        return;
+    };
     let loaded = read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     let grid = loaded.grid.expect("range grid");
     assert_eq!((grid.cols, grid.rows), (512, 400));
@@ -60,11 +67,18 @@ fn range_grid_is_read_as_a_grid_and_triangulated() {
 #[test]
 fn inspect_counts_agree_with_the_data_readme() {
     // (file, components, boundary loops, pinch vertices, closed)
-    let expect: &[(&str, usize, Option<usize>, Option<usize>, bool)] = &[
+    type Expected = (&'static str, usize, Option<usize>, Option<usize>, bool);
+    let expect: &[Expected] = &[
         ("range_scans/bun000_tri.ply", 8, Some(15), Some(8), false),
         ("range_scans/bun045_tri.ply", 12, Some(26), Some(24), false),
         ("range_scans/chin_tri.ply", 26, Some(44), Some(34), false),
-        ("range_scans/bun000_meshlab_triangulated.ply", 2, Some(3), Some(4), false),
+        (
+            "range_scans/bun000_meshlab_triangulated.ply",
+            2,
+            Some(3),
+            Some(4),
+            false,
+        ),
         ("models/bun_zipper.ply", 1, Some(5), Some(0), false),
         ("models/decimated-max.obj", 1, Some(0), Some(0), true),
         ("models/fertility.off", 1, Some(0), Some(0), true),
@@ -72,7 +86,9 @@ fn inspect_counts_agree_with_the_data_readme() {
     ];
     for &(rel, comps, loops, pinches, closed) in expect {
         let Some(path) = shared_data(rel) else { return };
-        let mesh = read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh;
+        let mesh = read_mesh_file(&path, &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .mesh;
         let s = mesh_stats(&mesh, 4);
         eprintln!("{rel}: {s:?}");
         assert_eq!(s.components, comps, "{rel}: components");
@@ -85,11 +101,15 @@ fn inspect_counts_agree_with_the_data_readme() {
         assert_eq!(s.closed, closed, "{rel}: closed");
     }
     if let Some(path) = shared_data("models/fertility.off") {
-        let mesh = read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh;
+        let mesh = read_mesh_file(&path, &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .mesh;
         assert_eq!(mesh_stats(&mesh, 2).genus, Some(4));
     }
     if let Some(path) = shared_data("models/bun_zipper_res4.ply") {
-        let mesh = read_mesh_file(&path, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}")).mesh;
+        let mesh = read_mesh_file(&path, &LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{e}"))
+            .mesh;
         let s = mesh_stats(&mesh, 2);
         assert_eq!(s.non_manifold_edges, 70);
         // 40 faces repeat another face's vertex set (9 of them with the same orientation);

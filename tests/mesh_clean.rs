@@ -16,7 +16,13 @@ fn p(x: f64, y: f64, z: f64) -> DVec3 {
 fn pinch_vertex_is_split_into_two_fans() {
     // Two triangles touching only at vertex 0.
     let m = TriMesh::new(
-        vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(-1., 0., 0.), p(-1., -1., 0.)],
+        vec![
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(1., 1., 0.),
+            p(-1., 0., 0.),
+            p(-1., -1., 0.),
+        ],
         vec![[0, 1, 2], [0, 3, 4]],
     );
     assert!(Topology::from_mesh(&m).is_err());
@@ -31,7 +37,13 @@ fn pinch_vertex_is_split_into_two_fans() {
 #[test]
 fn three_faces_on_one_edge_become_manifold() {
     let m = TriMesh::new(
-        vec![p(0., 0., 0.), p(1., 0., 0.), p(0.5, 1., 0.), p(0.5, -1., 0.), p(0.5, 0., 1.)],
+        vec![
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(0.5, 1., 0.),
+            p(0.5, -1., 0.),
+            p(0.5, 0., 1.),
+        ],
         vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]],
     );
     let s = mesh_stats(&m, 0);
@@ -45,7 +57,14 @@ fn three_faces_on_one_edge_become_manifold() {
 #[test]
 fn duplicates_degenerates_and_orientation() {
     let m = TriMesh::new(
-        vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.), p(2., 0., 0.), p(0., 0., 0.)],
+        vec![
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(1., 1., 0.),
+            p(0., 1., 0.),
+            p(2., 0., 0.),
+            p(0., 0., 0.),
+        ],
         // face 1 is flipped relative to face 0; face 2 duplicates face 0 (rotated);
         // face 3 is degenerate (collinear); vertex 5 duplicates vertex 0 exactly.
         vec![[0, 1, 2], [0, 3, 2], [1, 2, 0], [0, 1, 4], [5, 2, 3]],
@@ -81,7 +100,11 @@ fn moebius_strip_is_reported_non_orientable() {
     let mut tris = Vec::new();
     for i in 0..k as u32 {
         let (a, b) = (2 * i, 2 * i + 1);
-        let (c, d) = if i + 1 < k as u32 { (2 * i + 2, 2 * i + 3) } else { (1, 0) };
+        let (c, d) = if i + 1 < k as u32 {
+            (2 * i + 2, 2 * i + 3)
+        } else {
+            (1, 0)
+        };
         tris.push([a, c, b]);
         tris.push([b, c, d]);
     }
@@ -92,14 +115,26 @@ fn moebius_strip_is_reported_non_orientable() {
 #[test]
 fn tolerance_weld_merges_near_vertices() {
     let m = TriMesh::new(
-        vec![p(0., 0., 0.), p(1., 0., 0.), p(0., 1., 0.), p(1e-9, 1., 0.), p(1., 0., 0.), p(1., 1., 0.)],
+        vec![
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(0., 1., 0.),
+            p(1e-9, 1., 0.),
+            p(1., 0., 0.),
+            p(1., 1., 0.),
+        ],
         vec![[0, 1, 2], [3, 4, 5]],
     );
     // Exact welding joins the two copies of (1, 0, 0) only: the faces then touch at that one
     // vertex, a pinch, which is split again (6 vertices).
     let exact = clean(&m, &CleanOptions::default());
     assert_eq!(exact.mesh.positions.len(), 6);
-    let loose = clean(&m, &CleanOptions { weld_tolerance: Some(1e-6) });
+    let loose = clean(
+        &m,
+        &CleanOptions {
+            weld_tolerance: Some(1e-6),
+        },
+    );
     assert_eq!(loose.mesh.positions.len(), 4);
 }
 
@@ -113,13 +148,18 @@ fn real_scans_clean_into_manifold_meshes() {
         "models/bun_zipper_res4.ply",
     ] {
         let Some(path) = shared_data(rel) else { return };
-        let mesh = read_mesh_file(&path, &LoadOptions::default()).expect("loads").mesh;
+        let mesh = read_mesh_file(&path, &LoadOptions::default())
+            .expect("loads")
+            .mesh;
         let c = clean(&mesh, &CleanOptions::default());
         eprintln!("{rel}: {:?}", c.report);
         let s = mesh_stats(&c.mesh, 0);
         assert_eq!(s.non_manifold_edges, 0, "{rel}");
         assert_eq!(s.non_manifold_vertices, 0, "{rel}");
         assert_eq!(s.duplicate_faces, 0, "{rel}");
-        assert!(Topology::from_mesh(&c.mesh).is_ok() || c.report.non_orientable_components > 0, "{rel}");
+        assert!(
+            Topology::from_mesh(&c.mesh).is_ok() || c.report.non_orientable_components > 0,
+            "{rel}"
+        );
     }
 }

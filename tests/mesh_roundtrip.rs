@@ -28,8 +28,24 @@ fn tetrahedron() -> TriMesh {
 }
 
 fn octahedron() -> TriMesh {
-    let p = vec![DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
-    let t = vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+    let p = vec![
+        DVec3::X,
+        -DVec3::X,
+        DVec3::Y,
+        -DVec3::Y,
+        DVec3::Z,
+        -DVec3::Z,
+    ];
+    let t = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
     TriMesh::new(p, t)
 }
 
@@ -76,8 +92,16 @@ fn merged(parts: &[TriMesh]) -> TriMesh {
     let mut m = TriMesh::default();
     for (k, part) in parts.iter().enumerate() {
         let off = m.positions.len() as u32;
-        m.positions.extend(part.positions.iter().map(|p| *p + DVec3::X * 5.0 * k as f64));
-        m.triangles.extend(part.triangles.iter().map(|t| [t[0] + off, t[1] + off, t[2] + off]));
+        m.positions.extend(
+            part.positions
+                .iter()
+                .map(|p| *p + DVec3::X * 5.0 * k as f64),
+        );
+        m.triangles.extend(
+            part.triangles
+                .iter()
+                .map(|t| [t[0] + off, t[1] + off, t[2] + off]),
+        );
     }
     m
 }
@@ -96,14 +120,27 @@ fn cases() -> Vec<(&'static str, TriMesh)> {
         ("bipyramid-5", jittered(bipyramid(5))),
         ("bipyramid-12 (valence 12)", jittered(bipyramid(12))),
         ("open grid with corners", jittered(grid(3))),
-        ("single triangle (three corners)", jittered(TriMesh::new(vec![DVec3::ZERO, DVec3::X, DVec3::Y], vec![[0, 1, 2]]))),
-        ("three components", jittered(merged(&[tetrahedron(), grid(2), bipyramid(7)]))),
+        (
+            "single triangle (three corners)",
+            jittered(TriMesh::new(
+                vec![DVec3::ZERO, DVec3::X, DVec3::Y],
+                vec![[0, 1, 2]],
+            )),
+        ),
+        (
+            "three components",
+            jittered(merged(&[tetrahedron(), grid(2), bipyramid(7)])),
+        ),
     ]
 }
 
 fn max_rel_diff(a: &[DVec3], b: &[DVec3]) -> f64 {
     let scale = a.iter().map(|p| p.length()).fold(1e-300, f64::max);
-    a.iter().zip(b).map(|(p, q)| (*p - *q).length()).fold(0.0, f64::max) / scale
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (*p - *q).length())
+        .fold(0.0, f64::max)
+        / scale
 }
 
 #[test]
@@ -111,14 +148,27 @@ fn coarsen_undoes_subdivide_for_one_to_three_levels_with_both_methods() {
     for (name, mesh) in cases() {
         for levels in 1..=3 {
             let fine = subdivide(&mesh, levels).expect("generated meshes are manifold");
-            assert_eq!(&fine.positions[..mesh.positions.len()], &fine.positions[..mesh.positions.len()]);
+            assert_eq!(
+                &fine.positions[..mesh.positions.len()],
+                &fine.positions[..mesh.positions.len()]
+            );
             for method in [InverseMethod::Exact, InverseMethod::Lsq] {
-                let c = coarsen(&fine, levels, method).unwrap_or_else(|e| panic!("{name} L={levels}: {e}"));
-                assert_eq!(c.mesh.positions.len(), mesh.positions.len(), "{name} L={levels}");
+                let c = coarsen(&fine, levels, method)
+                    .unwrap_or_else(|e| panic!("{name} L={levels}: {e}"));
+                assert_eq!(
+                    c.mesh.positions.len(),
+                    mesh.positions.len(),
+                    "{name} L={levels}"
+                );
                 let err = max_rel_diff(&mesh.positions, &c.mesh.positions);
-                assert!(err < 1e-12, "{name} L={levels} {method:?}: relative error {err:e}");
-                let mut want: Vec<[u32; 3]> = mesh.triangles.iter().map(|t| canonical(*t)).collect();
-                let mut got: Vec<[u32; 3]> = c.mesh.triangles.iter().map(|t| canonical(*t)).collect();
+                assert!(
+                    err < 1e-12,
+                    "{name} L={levels} {method:?}: relative error {err:e}"
+                );
+                let mut want: Vec<[u32; 3]> =
+                    mesh.triangles.iter().map(|t| canonical(*t)).collect();
+                let mut got: Vec<[u32; 3]> =
+                    c.mesh.triangles.iter().map(|t| canonical(*t)).collect();
                 want.sort_unstable();
                 got.sort_unstable();
                 assert_eq!(want, got, "{name} L={levels}: coarse connectivity differs");
@@ -164,7 +214,10 @@ fn coarsest_vertices_keep_their_index_and_sit_at_a_corner_of_their_face() {
         let coarse = &h.levels.last().expect("two levels").coarse_triangles;
         let t = coarse[face as usize];
         let w = 1.0 - u - v;
-        let corner = [u, v, w].iter().position(|&x| x == 1.0).expect("at a corner");
+        let corner = [u, v, w]
+            .iter()
+            .position(|&x| x == 1.0)
+            .expect("at a corner");
         assert_eq!(t[corner], c as u32);
     }
 }
@@ -185,7 +238,9 @@ fn a_flipped_edge_breaks_detection_with_a_reason() {
     tris[f] = [c, a, d];
     tris[g] = [d, b, c];
     let broken = TriMesh::new(fine.positions.clone(), tris);
-    let err = coarsen(&broken, 1, InverseMethod::Exact).err().expect("must fail");
+    let err = coarsen(&broken, 1, InverseMethod::Exact)
+        .err()
+        .expect("must fail");
     let msg = err.to_string();
     assert!(msg.contains("level 1") && msg.contains("vertex"), "{msg}");
 }
@@ -201,7 +256,11 @@ fn lsq_amplifies_noise_less_than_exact() {
     let exact = coarsen(&noisy, 1, InverseMethod::Exact).expect("subdivided");
     let lsq = coarsen(&noisy, 1, InverseMethod::Lsq).expect("subdivided");
     let rms = |c: &TriMesh| {
-        (c.positions.iter().zip(&smooth.positions).map(|(a, b)| (*a - *b).length_squared()).sum::<f64>()
+        (c.positions
+            .iter()
+            .zip(&smooth.positions)
+            .map(|(a, b)| (*a - *b).length_squared())
+            .sum::<f64>()
             / c.positions.len() as f64)
             .sqrt()
     };

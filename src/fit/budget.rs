@@ -81,13 +81,17 @@ impl Budget {
             self.max_error.map(|t| s.max_error <= t),
             self.mean_error.map(|t| s.mean_error <= t),
             self.rms_error.map(|t| s.rms_error <= t),
-            self.within_tolerance_pct.map(|t| s.within_tolerance_pct >= t),
+            self.within_tolerance_pct
+                .map(|t| s.within_tolerance_pct >= t),
         ];
         targets.iter().any(Option::is_some) && targets.iter().all(|t| t.unwrap_or(true))
     }
 
     pub fn has_targets(&self) -> bool {
-        self.max_error.is_some() || self.mean_error.is_some() || self.rms_error.is_some() || self.within_tolerance_pct.is_some()
+        self.max_error.is_some()
+            || self.mean_error.is_some()
+            || self.rms_error.is_some()
+            || self.within_tolerance_pct.is_some()
     }
 
     pub fn stalled(&self, history: &[StepStats]) -> bool {

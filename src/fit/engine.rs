@@ -83,7 +83,9 @@ impl Stacked<'_> {
         if let Some(l) = self.fair() {
             let mut tmp = vec![DVec3::ZERO; out.len()];
             l.nt.mul_vec3(fair_part, &mut tmp);
-            out.iter_mut().zip(&tmp).for_each(|(o, t)| *o += *t * self.root_s);
+            out.iter_mut()
+                .zip(&tmp)
+                .for_each(|(o, t)| *o += *t * self.root_s);
         }
     }
 }
@@ -94,13 +96,22 @@ fn dot3(a: &[DVec3], b: &[DVec3]) -> DVec3 {
 
 /// Largest eigenvalue of A^T A by power iteration from the all-ones vector, which for a
 /// non-negative N has a large component along the Perron vector.
-pub fn lambda_max(basis: &Collocation, fairness: Option<&Collocation>, smoothing: f64, iterations: usize) -> f64 {
+pub fn lambda_max(
+    basis: &Collocation,
+    fairness: Option<&Collocation>,
+    smoothing: f64,
+    iterations: usize,
+) -> f64 {
     let nc = basis.n.ncols;
     let mut x = vec![1.0 / (nc as f64).sqrt(); nc];
     let mut lambda = 0.0;
     let scalar = |m: &Csr, x: &[f64]| -> Vec<f64> {
         (0..m.nrows)
-            .map(|r| (m.row_ptr[r]..m.row_ptr[r + 1]).map(|k| m.values[k] * x[m.col_idx[k] as usize]).sum())
+            .map(|r| {
+                (m.row_ptr[r]..m.row_ptr[r + 1])
+                    .map(|k| m.values[k] * x[m.col_idx[k] as usize])
+                    .sum()
+            })
             .collect()
     };
     for _ in 0..iterations {
@@ -121,7 +132,12 @@ pub fn lambda_max(basis: &Collocation, fairness: Option<&Collocation>, smoothing
     lambda
 }
 
-pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &Budget) -> Result<FitOutcome, FitError> {
+pub fn fit(
+    problem: &FitProblem,
+    initial: Vec<DVec3>,
+    method: Method,
+    budget: &Budget,
+) -> Result<FitOutcome, FitError> {
     let n = &problem.basis.n;
     if problem.data.len() != n.nrows {
         return Err(FitError::Shape(problem.data.len(), n.nrows));
@@ -139,13 +155,26 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
     let mut r_data = vec![DVec3::ZERO; n.nrows];
     let mut r_fair = Vec::new();
     a.apply(&x, &mut r_data, &mut r_fair);
-    r_data.iter_mut().zip(problem.data).for_each(|(r, p)| *r = *p - *r);
+    r_data
+        .iter_mut()
+        .zip(problem.data)
+        .for_each(|(r, p)| *r = *p - *r);
     r_fair.iter_mut().for_each(|v| *v = -*v);
-    let mut steps = vec![StepStats::from_residuals(0, &r_data, budget.tolerance, elapsed())];
+    let mut steps = vec![StepStats::from_residuals(
+        0,
+        &r_data,
+        budget.tolerance,
+        elapsed(),
+    )];
     let time_up = |t: f64| budget.max_time_ms.is_some_and(|m| t >= m as f64);
     let finish = |x: Vec<DVec3>, steps: Vec<StepStats>, status| {
         let iterations = steps.len() - 1;
-        Ok(FitOutcome { controls: x, steps, status, iterations })
+        Ok(FitOutcome {
+            controls: x,
+            steps,
+            status,
+            iterations,
+        })
     };
     if budget.met(&steps[0]) {
         return finish(x, steps, FitStatus::Met);
@@ -154,9 +183,23 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
         let x = direct_solve(problem)?;
         let mut fitted = vec![DVec3::ZERO; n.nrows];
         n.mul_vec3(&x, &mut fitted);
-        let res: Vec<DVec3> = problem.data.iter().zip(&fitted).map(|(p, f)| *p - *f).collect();
-        steps.push(StepStats::from_residuals(1, &res, budget.tolerance, elapsed()));
-        let status = if budget.met(&steps[1]) || !budget.has_targets() { FitStatus::Met } else { FitStatus::Stalled };
+        let res: Vec<DVec3> = problem
+            .data
+            .iter()
+            .zip(&fitted)
+            .map(|(p, f)| *p - *f)
+            .collect();
+        steps.push(StepStats::from_residuals(
+            1,
+            &res,
+            budget.tolerance,
+            elapsed(),
+        ));
+        let status = if budget.met(&steps[1]) || !budget.has_targets() {
+            FitStatus::Met
+        } else {
+            FitStatus::Stalled
+        };
         return finish(x, steps, status);
     }
     if method == Method::Pia && problem.pia_operator.is_none() {
@@ -183,18 +226,29 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
                 let delta = dot3(&q_data, &q_data) + dot3(&q_fair, &q_fair);
                 let alpha = DVec3::select(delta.cmpgt(DVec3::ZERO), gamma / delta, DVec3::ZERO);
                 x.iter_mut().zip(&dir).for_each(|(xi, d)| *xi += alpha * *d);
-                r_data.iter_mut().zip(&q_data).for_each(|(r, q)| *r -= alpha * *q);
-                r_fair.iter_mut().zip(&q_fair).for_each(|(r, q)| *r -= alpha * *q);
+                r_data
+                    .iter_mut()
+                    .zip(&q_data)
+                    .for_each(|(r, q)| *r -= alpha * *q);
+                r_fair
+                    .iter_mut()
+                    .zip(&q_fair)
+                    .for_each(|(r, q)| *r -= alpha * *q);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 let gamma_new = dot3(&grad, &grad);
                 let beta = DVec3::select(gamma.cmpgt(DVec3::ZERO), gamma_new / gamma, DVec3::ZERO);
-                dir.iter_mut().zip(&grad).for_each(|(d, g)| *d = *g + beta * *d);
+                dir.iter_mut()
+                    .zip(&grad)
+                    .for_each(|(d, g)| *d = *g + beta * *d);
                 gamma = gamma_new;
             }
             Method::Lspia => {
                 x.iter_mut().zip(&grad).for_each(|(xi, g)| *xi += *g * mu);
                 a.apply(&x, &mut r_data, &mut r_fair);
-                r_data.iter_mut().zip(problem.data).for_each(|(r, p)| *r = *p - *r);
+                r_data
+                    .iter_mut()
+                    .zip(problem.data)
+                    .for_each(|(r, p)| *r = *p - *r);
                 r_fair.iter_mut().for_each(|v| *v = -*v);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 gamma = dot3(&grad, &grad);
@@ -204,7 +258,10 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
                 let delta = op(&r_data);
                 x.iter_mut().zip(&delta).for_each(|(xi, d)| *xi += *d);
                 n.mul_vec3(&x, &mut r_data);
-                r_data.iter_mut().zip(problem.data).for_each(|(r, p)| *r = *p - *r);
+                r_data
+                    .iter_mut()
+                    .zip(problem.data)
+                    .for_each(|(r, p)| *r = *p - *r);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 gamma = dot3(&grad, &grad);
             }
@@ -218,7 +275,11 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
             return finish(x, steps, FitStatus::Met);
         }
         if converged {
-            let status = if budget.has_targets() { FitStatus::Stalled } else { FitStatus::Met };
+            let status = if budget.has_targets() {
+                FitStatus::Stalled
+            } else {
+                FitStatus::Met
+            };
             return finish(x, steps, status);
         }
         if budget.has_targets() && budget.stalled(&steps) {
@@ -228,7 +289,11 @@ pub fn fit(problem: &FitProblem, initial: Vec<DVec3>, method: Method, budget: &B
             return finish(x, steps, FitStatus::Capped);
         }
     }
-    let status = if budget.has_targets() { FitStatus::Capped } else { FitStatus::Met };
+    let status = if budget.has_targets() {
+        FitStatus::Capped
+    } else {
+        FitStatus::Met
+    };
     finish(x, steps, status)
 }
 
@@ -240,7 +305,9 @@ fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
     let n = &problem.basis.n;
     let nc = n.ncols;
     if nc > DIRECT_MAX_CONTROLS {
-        return Err(FitError::Direct(format!("{nc} control points; the dense solve takes at most {DIRECT_MAX_CONTROLS}")));
+        return Err(FitError::Direct(format!(
+            "{nc} control points; the dense solve takes at most {DIRECT_MAX_CONTROLS}"
+        )));
     }
     let mut m = nalgebra::DMatrix::<f64>::zeros(nc, nc);
     let mut rhs = nalgebra::DMatrix::<f64>::zeros(nc, 3);
@@ -266,10 +333,14 @@ fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
         accumulate(&l.n, problem.smoothing, None);
     }
     let chol = nalgebra::Cholesky::new(m).ok_or_else(|| {
-        FitError::Direct("normal matrix is singular: control points without data; add smoothing".into())
+        FitError::Direct(
+            "normal matrix is singular: control points without data; add smoothing".into(),
+        )
     })?;
     let sol = chol.solve(&rhs);
-    Ok((0..nc).map(|i| DVec3::new(sol[(i, 0)], sol[(i, 1)], sol[(i, 2)])).collect())
+    Ok((0..nc)
+        .map(|i| DVec3::new(sol[(i, 0)], sol[(i, 1)], sol[(i, 2)]))
+        .collect())
 }
 
 /// Umbrella Laplacian of a control net: row i is `P_i - mean(neighbours)`.
@@ -292,7 +363,9 @@ pub fn umbrella_laplacian(control_count: usize, faces: &[[u32; 3]]) -> Csr {
                 return Vec::new();
             }
             let w = 1.0 / nb.len() as f64;
-            std::iter::once((i as u32, 1.0)).chain(nb.iter().map(|&j| (j, -w))).collect()
+            std::iter::once((i as u32, 1.0))
+                .chain(nb.iter().map(|&j| (j, -w)))
+                .collect()
         })
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))

@@ -76,7 +76,9 @@ impl Csr {
     /// y = A x.
     pub fn mul_vec3(&self, x: &[DVec3], y: &mut [DVec3]) {
         if self.nrows >= PARALLEL_ROWS {
-            y.par_iter_mut().enumerate().for_each(|(r, out)| *out = self.row_dot(r, x));
+            y.par_iter_mut()
+                .enumerate()
+                .for_each(|(r, out)| *out = self.row_dot(r, x));
         } else {
             for (r, out) in y.iter_mut().enumerate() {
                 *out = self.row_dot(r, x);

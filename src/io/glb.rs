@@ -23,7 +23,7 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
     let mut views = Vec::new();
     let mut accessors = Vec::new();
     let mut push_view = |bin: &mut Vec<u8>, data: &[u8], target: u32| -> usize {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let offset = bin.len();
@@ -89,7 +89,7 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
         accessors.push(vec3_accessor(v, line, true));
         primitives.push(json!({"attributes": {"POSITION": accessors.len() - 1}, "mode": 3}));
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let doc = json!({
@@ -103,7 +103,7 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
         "accessors": accessors,
     });
     let mut json_bytes = serde_json::to_vec(&doc).unwrap_or_default();
-    while json_bytes.len() % 4 != 0 {
+    while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();

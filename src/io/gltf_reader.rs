@@ -5,7 +5,11 @@ use crate::mesh::TriMesh;
 use glam::{DMat4, DVec3};
 use std::path::Path;
 
-const COMPRESSED: [&str; 3] = ["KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression"];
+const COMPRESSED: [&str; 3] = [
+    "KHR_draco_mesh_compression",
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
+];
 
 /// `base` is the folder for external buffers of a .gltf file (None for in-memory input).
 pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
@@ -13,19 +17,31 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|x| e(format!("glTF parse error: {x}")))?;
     for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
         if COMPRESSED.contains(&ext) {
-            return Err(e(format!("compressed meshes ({ext}) are not supported; export without compression")));
+            return Err(e(format!(
+                "compressed meshes ({ext}) are not supported; export without compression"
+            )));
         }
     }
     let mut buffers = Vec::new();
     for b in gltf.buffers() {
         let data = match b.source() {
-            gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| e("GLB has no binary chunk".into()))?,
+            gltf::buffer::Source::Bin => gltf
+                .blob
+                .clone()
+                .ok_or_else(|| e("GLB has no binary chunk".into()))?,
             gltf::buffer::Source::Uri(uri) => {
                 if let Some(rest) = uri.strip_prefix("data:") {
-                    let b64 = rest.split_once(";base64,").map(|x| x.1).ok_or_else(|| e("unsupported data URI".into()))?;
+                    let b64 = rest
+                        .split_once(";base64,")
+                        .map(|x| x.1)
+                        .ok_or_else(|| e("unsupported data URI".into()))?;
                     decode_base64(b64).ok_or_else(|| e("bad base64 in data URI".into()))?
                 } else {
-                    let dir = base.ok_or_else(|| e(format!("external buffer '{uri}' cannot be resolved for streamed input")))?;
+                    let dir = base.ok_or_else(|| {
+                        e(format!(
+                            "external buffer '{uri}' cannot be resolved for streamed input"
+                        ))
+                    })?;
                     if uri.contains("..") || uri.starts_with('/') {
                         return Err(e(format!("buffer URI '{uri}' leaves the file's folder")));
                     }
@@ -34,7 +50,12 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
             }
         };
         if data.len() < b.length() {
-            return Err(e(format!("buffer {} is {} bytes, declared {}", b.index(), data.len(), b.length())));
+            return Err(e(format!(
+                "buffer {} is {} bytes, declared {}",
+                b.index(),
+                data.len(),
+                b.length()
+            )));
         }
         buffers.push(data);
     }
@@ -62,14 +83,24 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
             for prim in gm.primitives() {
                 use gltf::mesh::Mode;
                 let mode = prim.mode();
-                if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+                if !matches!(
+                    mode,
+                    Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+                ) {
                     continue;
                 }
                 let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
                 let pos: Vec<DVec3> = reader
                     .read_positions()
-                    .ok_or_else(|| e(format!("mesh '{}' primitive without positions", gm.name().unwrap_or(""))))?
-                    .map(|p| world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)))
+                    .ok_or_else(|| {
+                        e(format!(
+                            "mesh '{}' primitive without positions",
+                            gm.name().unwrap_or("")
+                        ))
+                    })?
+                    .map(|p| {
+                        world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                    })
                     .collect();
                 if pos.iter().any(|p| !p.is_finite()) {
                     return Err(e("non-finite vertex coordinate".into()));
@@ -123,7 +154,10 @@ fn decode_base64(s: &str) -> Option<Vec<u8>> {
             _ => return None,
         })
     };
-    let clean: Vec<u8> = s.bytes().filter(|&c| c != b'=' && !c.is_ascii_whitespace()).collect();
+    let clean: Vec<u8> = s
+        .bytes()
+        .filter(|&c| c != b'=' && !c.is_ascii_whitespace())
+        .collect();
     let mut out = Vec::with_capacity(clean.len() * 3 / 4);
     for chunk in clean.chunks(4) {
         let mut acc = 0u32;

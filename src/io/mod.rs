@@ -94,14 +94,24 @@ pub struct Loaded {
 /// Reads any supported mesh file, choosing the format by extension.
 pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError> {
     let name = path.display().to_string();
-    let format = Format::from_path(path)
-        .ok_or_else(|| IoError::new(&name, None, "unknown extension (obj, gltf, glb, ply, stl, off)"))?;
+    let format = Format::from_path(path).ok_or_else(|| {
+        IoError::new(
+            &name,
+            None,
+            "unknown extension (obj, gltf, glb, ply, stl, off)",
+        )
+    })?;
     let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
     read_with_base(&bytes, format, &name, opts, path.parent())
 }
 
 /// Reads a mesh held in memory (the pipe source); `name` is used in errors.
-pub fn read_mesh_bytes(bytes: &[u8], format: Format, name: &str, opts: &LoadOptions) -> Result<Loaded, IoError> {
+pub fn read_mesh_bytes(
+    bytes: &[u8],
+    format: Format,
+    name: &str,
+    opts: &LoadOptions,
+) -> Result<Loaded, IoError> {
     read_with_base(bytes, format, name, opts, None)
 }
 
@@ -147,7 +157,13 @@ pub fn weld_exact(mesh: TriMesh) -> TriMesh {
     let triangles = mesh
         .triangles
         .iter()
-        .map(|t| [remap[t[0] as usize], remap[t[1] as usize], remap[t[2] as usize]])
+        .map(|t| {
+            [
+                remap[t[0] as usize],
+                remap[t[1] as usize],
+                remap[t[2] as usize],
+            ]
+        })
         .collect();
     TriMesh::new(positions, triangles)
 }
@@ -158,6 +174,10 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
         Some(Format::Glb) => glb::write_glb(path, mesh, &glb::GlbAttributes::default()),
         Some(Format::Obj) => writers::write_obj(path, mesh),
         Some(Format::Ply) => writers::write_ply(path, mesh),
-        _ => Err(IoError::new(path.display().to_string(), None, "can write .obj, .ply or .glb only")),
+        _ => Err(IoError::new(
+            path.display().to_string(),
+            None,
+            "can write .obj, .ply or .glb only",
+        )),
     }
 }

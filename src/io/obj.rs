@@ -9,8 +9,13 @@ use crate::mesh::TriMesh;
 use glam::DVec3;
 
 pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
-    let text = std::str::from_utf8(bytes)
-        .map_err(|e| IoError::new(file, Some(format!("byte {}", e.valid_up_to())), "not UTF-8 text"))?;
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        IoError::new(
+            file,
+            Some(format!("byte {}", e.valid_up_to())),
+            "not UTF-8 text",
+        )
+    })?;
     let err = |n: usize, r: String| IoError::new(file, Some(format!("line {n}")), r);
     let mut positions: Vec<DVec3> = Vec::new();
     let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
@@ -22,8 +27,12 @@ pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
             Some("v") => {
                 let mut c = [0.0; 3];
                 for slot in &mut c {
-                    let w = words.next().ok_or_else(|| err(n, "vertex with fewer than 3 coordinates".into()))?;
-                    *slot = w.parse().map_err(|_| err(n, format!("'{w}' is not a number")))?;
+                    let w = words
+                        .next()
+                        .ok_or_else(|| err(n, "vertex with fewer than 3 coordinates".into()))?;
+                    *slot = w
+                        .parse()
+                        .map_err(|_| err(n, format!("'{w}' is not a number")))?;
                 }
                 let p = DVec3::from_array(c);
                 if !p.is_finite() {
@@ -35,7 +44,9 @@ pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
                 let mut idx = Vec::new();
                 for w in words {
                     let first = w.split('/').next().unwrap_or("");
-                    let i: i64 = first.parse().map_err(|_| err(n, format!("bad face index '{w}'")))?;
+                    let i: i64 = first
+                        .parse()
+                        .map_err(|_| err(n, format!("bad face index '{w}'")))?;
                     idx.push(i);
                 }
                 if idx.len() < 3 {

@@ -7,15 +7,22 @@ use crate::mesh::TriMesh;
 use glam::DVec3;
 
 pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
-    let text = std::str::from_utf8(bytes)
-        .map_err(|e| IoError::new(file, Some(format!("byte {}", e.valid_up_to())), "not UTF-8 text"))?;
+    let text = std::str::from_utf8(bytes).map_err(|e| {
+        IoError::new(
+            file,
+            Some(format!("byte {}", e.valid_up_to())),
+            "not UTF-8 text",
+        )
+    })?;
     let err = |line: usize, r: String| IoError::new(file, Some(format!("line {line}")), r);
     let mut lines = text
         .lines()
         .enumerate()
         .map(|(n, l)| (n + 1, l.split('#').next().unwrap_or("").trim()))
         .filter(|(_, l)| !l.is_empty());
-    let (line, first) = lines.next().ok_or_else(|| IoError::new(file, None, "empty file"))?;
+    let (line, first) = lines
+        .next()
+        .ok_or_else(|| IoError::new(file, None, "empty file"))?;
     let mut words = first.split_whitespace();
     let magic = words.next().unwrap_or("");
     if !matches!(magic, "OFF" | "COFF" | "NOFF" | "CNOFF" | "NCOFF") {
@@ -23,25 +30,42 @@ pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     }
     let rest: Vec<&str> = words.collect();
     let (count_line, counts): (usize, Vec<&str>) = if rest.is_empty() {
-        let (n, l) = lines.next().ok_or_else(|| IoError::new(file, None, "no counts line"))?;
+        let (n, l) = lines
+            .next()
+            .ok_or_else(|| IoError::new(file, None, "no counts line"))?;
         (n, l.split_whitespace().collect())
     } else {
         (line, rest)
     };
     let count = |k: usize, what: &str| -> Result<usize, IoError> {
-        let t = counts.get(k).ok_or_else(|| err(count_line, format!("missing {what} count")))?;
-        let v: usize = t.parse().map_err(|_| err(count_line, format!("bad {what} count '{t}'")))?;
+        let t = counts
+            .get(k)
+            .ok_or_else(|| err(count_line, format!("missing {what} count")))?;
+        let v: usize = t
+            .parse()
+            .map_err(|_| err(count_line, format!("bad {what} count '{t}'")))?;
         // Every entry needs at least a few bytes: refuse counts the file cannot hold.
         if v > bytes.len() / 2 {
-            return Err(err(count_line, format!("{what} count {v} exceeds what a {}-byte file can hold", bytes.len())));
+            return Err(err(
+                count_line,
+                format!(
+                    "{what} count {v} exceeds what a {}-byte file can hold",
+                    bytes.len()
+                ),
+            ));
         }
         Ok(v)
     };
     let (nv, nf) = (count(0, "vertex")?, count(1, "face")?);
-    let num = |n: usize, t: &str| -> Result<f64, IoError> { t.parse::<f64>().map_err(|_| err(n, format!("'{t}' is not a number"))) };
+    let num = |n: usize, t: &str| -> Result<f64, IoError> {
+        t.parse::<f64>()
+            .map_err(|_| err(n, format!("'{t}' is not a number")))
+    };
     let mut positions = Vec::with_capacity(nv);
     for v in 0..nv {
-        let (n, l) = lines.next().ok_or_else(|| IoError::new(file, None, format!("file ends at vertex {v} of {nv}")))?;
+        let (n, l) = lines
+            .next()
+            .ok_or_else(|| IoError::new(file, None, format!("file ends at vertex {v} of {nv}")))?;
         let w: Vec<&str> = l.split_whitespace().take(3).collect();
         if w.len() < 3 {
             return Err(err(n, format!("vertex {v} has fewer than 3 coordinates")));
@@ -55,7 +79,9 @@ pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     let mut triangles = Vec::with_capacity(nf);
     let mut idx = Vec::new();
     for f in 0..nf {
-        let (n, l) = lines.next().ok_or_else(|| IoError::new(file, None, format!("file ends at face {f} of {nf}")))?;
+        let (n, l) = lines
+            .next()
+            .ok_or_else(|| IoError::new(file, None, format!("file ends at face {f} of {nf}")))?;
         let mut w = l.split_whitespace();
         let k: usize = w
             .next()
@@ -63,10 +89,17 @@ pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
             .ok_or_else(|| err(n, format!("face {f}: bad vertex count")))?;
         idx.clear();
         for _ in 0..k {
-            let t = w.next().ok_or_else(|| err(n, format!("face {f}: fewer than {k} indices")))?;
-            let i: usize = t.parse().map_err(|_| err(n, format!("face {f}: bad index '{t}'")))?;
+            let t = w
+                .next()
+                .ok_or_else(|| err(n, format!("face {f}: fewer than {k} indices")))?;
+            let i: usize = t
+                .parse()
+                .map_err(|_| err(n, format!("face {f}: bad index '{t}'")))?;
             if i >= nv {
-                return Err(err(n, format!("face {f}: vertex index {i} out of range (0..{nv})")));
+                return Err(err(
+                    n,
+                    format!("face {f}: vertex index {i} out of range (0..{nv})"),
+                ));
             }
             idx.push(i as u32);
         }

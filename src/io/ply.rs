@@ -72,8 +72,15 @@ struct Header {
 }
 
 fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
-    let err = |line: usize, reason: String| IoError::new(file, Some(format!("line {line}")), reason);
-    let end = find(bytes, b"end_header").ok_or_else(|| IoError::new(file, None, "no end_header: not a PLY file or truncated header"))?;
+    let err =
+        |line: usize, reason: String| IoError::new(file, Some(format!("line {line}")), reason);
+    let end = find(bytes, b"end_header").ok_or_else(|| {
+        IoError::new(
+            file,
+            None,
+            "no end_header: not a PLY file or truncated header",
+        )
+    })?;
     let mut body_offset = end + b"end_header".len();
     // The header ends with "\n" or "\r\n".
     if bytes.get(body_offset) == Some(&b'\r') {
@@ -82,7 +89,8 @@ fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
     if bytes.get(body_offset) == Some(&b'\n') {
         body_offset += 1;
     }
-    let text = std::str::from_utf8(&bytes[..end]).map_err(|_| IoError::new(file, None, "header is not text"))?;
+    let text = std::str::from_utf8(&bytes[..end])
+        .map_err(|_| IoError::new(file, None, "header is not text"))?;
     let mut lines = text.lines();
     if lines.next().map(str::trim) != Some("ply") {
         return Err(err(1, "missing 'ply' magic".into()));
@@ -115,17 +123,27 @@ fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
                 }
             }
             ["element", name, count] => {
-                let count = count.parse().map_err(|_| err(n, format!("bad element count '{count}'")))?;
-                elements.push(Element { name: name.to_string(), count, props: Vec::new() });
+                let count = count
+                    .parse()
+                    .map_err(|_| err(n, format!("bad element count '{count}'")))?;
+                elements.push(Element {
+                    name: name.to_string(),
+                    count,
+                    props: Vec::new(),
+                });
             }
             ["property", "list", ct, it, name] => {
-                let e = elements.last_mut().ok_or_else(|| err(n, "property before any element".into()))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err(n, "property before any element".into()))?;
                 let ct = Scalar::parse(ct).ok_or_else(|| err(n, format!("unknown type '{ct}'")))?;
                 let it = Scalar::parse(it).ok_or_else(|| err(n, format!("unknown type '{it}'")))?;
                 e.props.push(Property::List(name.to_string(), ct, it));
             }
             ["property", ty, name] => {
-                let e = elements.last_mut().ok_or_else(|| err(n, "property before any element".into()))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err(n, "property before any element".into()))?;
                 let ty = Scalar::parse(ty).ok_or_else(|| err(n, format!("unknown type '{ty}'")))?;
                 e.props.push(Property::Scalar(name.to_string(), ty));
             }
@@ -133,7 +151,14 @@ fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
         }
     }
     let encoding = encoding.ok_or_else(|| IoError::new(file, None, "header has no format line"))?;
-    Ok(Header { encoding, elements, num_cols, num_rows, body_offset, header_lines: n + 1 })
+    Ok(Header {
+        encoding,
+        elements,
+        num_cols,
+        num_rows,
+        body_offset,
+        header_lines: n + 1,
+    })
 }
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
@@ -184,12 +209,17 @@ impl Body<'_> {
                 if start == self.pos {
                     return Err(self.error("unexpected end of file"));
                 }
-                let tok = std::str::from_utf8(&self.bytes[start..self.pos]).map_err(|_| self.error("non-text number"))?;
-                tok.parse::<f64>().map_err(|_| self.error(format!("'{tok}' is not a number")))
+                let tok = std::str::from_utf8(&self.bytes[start..self.pos])
+                    .map_err(|_| self.error("non-text number"))?;
+                tok.parse::<f64>()
+                    .map_err(|_| self.error(format!("'{tok}' is not a number")))
             }
             enc => {
                 let n = ty.size();
-                let b = self.bytes.get(self.pos..self.pos + n).ok_or_else(|| self.error("unexpected end of file"))?;
+                let b = self
+                    .bytes
+                    .get(self.pos..self.pos + n)
+                    .ok_or_else(|| self.error("unexpected end of file"))?;
                 let mut a = [0u8; 8];
                 a[..n].copy_from_slice(b);
                 if enc == Encoding::Big {
@@ -250,7 +280,11 @@ pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, 
         }
         match e.name.as_str() {
             "vertex" => {
-                let idx = |n: &str| e.props.iter().position(|p| matches!(p, Property::Scalar(s, _) if s == n));
+                let idx = |n: &str| {
+                    e.props
+                        .iter()
+                        .position(|p| matches!(p, Property::Scalar(s, _) if s == n))
+                };
                 let (ix, iy, iz) = match (idx("x"), idx("y"), idx("z")) {
                     (Some(x), Some(y), Some(z)) => (x, y, z),
                     _ => return Err(body.error("vertex element lacks x, y or z")),
@@ -307,26 +341,44 @@ pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, 
                         if x >= 0.0 && x.fract() == 0.0 && (x as usize) < positions.len() {
                             Ok(x as u32)
                         } else {
-                            Err(body.error(format!("{} {item}: vertex index {x} out of range (0..{})", e.name, positions.len())))
+                            Err(body.error(format!(
+                                "{} {item}: vertex index {x} out of range (0..{})",
+                                e.name,
+                                positions.len()
+                            )))
                         }
                     };
                     match e.name.as_str() {
                         "face" => {
                             if list.len() < 3 {
-                                return Err(body.error(format!("face {item} has {} vertices", list.len())));
+                                return Err(
+                                    body.error(format!("face {item} has {} vertices", list.len()))
+                                );
                             }
                             let first = check(list[0], &body)?;
                             for w in 1..list.len() - 1 {
-                                triangles.push([first, check(list[w], &body)?, check(list[w + 1], &body)?]);
+                                triangles.push([
+                                    first,
+                                    check(list[w], &body)?,
+                                    check(list[w + 1], &body)?,
+                                ]);
                             }
                         }
                         "tristrips" => {
                             for run in list.split(|&x| x < 0.0) {
                                 for w in 0..run.len().saturating_sub(2) {
-                                    let (a, b, c) = (check(run[w], &body)?, check(run[w + 1], &body)?, check(run[w + 2], &body)?);
+                                    let (a, b, c) = (
+                                        check(run[w], &body)?,
+                                        check(run[w + 1], &body)?,
+                                        check(run[w + 2], &body)?,
+                                    );
                                     // Strips alternate winding; degenerate joins are dropped.
                                     if a != b && b != c && a != c {
-                                        triangles.push(if w % 2 == 0 { [a, b, c] } else { [b, a, c] });
+                                        triangles.push(if w % 2 == 0 {
+                                            [a, b, c]
+                                        } else {
+                                            [b, a, c]
+                                        });
                                     }
                                 }
                             }
@@ -370,18 +422,31 @@ pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, 
                     return Err(IoError::new(
                         file,
                         None,
-                        format!("range_grid has {} cells but obj_info num_cols x num_rows does not match", cells.len()),
+                        format!(
+                        "range_grid has {} cells but obj_info num_cols x num_rows does not match",
+                        cells.len()
+                    ),
                     ))
                 }
             };
-            let points: Vec<Option<DVec3>> = cells.iter().map(|c| c.map(|i| positions[i as usize])).collect();
+            let points: Vec<Option<DVec3>> = cells
+                .iter()
+                .map(|c| c.map(|i| positions[i as usize]))
+                .collect();
             let grid = RangeGrid { rows, cols, points };
-            triangles.extend(triangulate_range_grid(&grid, &cells, opts.range_grid_max_edge_factor));
+            triangles.extend(triangulate_range_grid(
+                &grid,
+                &cells,
+                opts.range_grid_max_edge_factor,
+            ));
             Some(grid)
         }
         None => None,
     };
-    Ok(Loaded { mesh: TriMesh::new(positions, triangles), grid })
+    Ok(Loaded {
+        mesh: TriMesh::new(positions, triangles),
+        grid,
+    })
 }
 
 fn read_count(body: &mut Body, ty: Scalar) -> Result<usize, IoError> {
@@ -400,7 +465,11 @@ fn read_count(body: &mut Body, ty: Scalar) -> Result<usize, IoError> {
 /// Triangulates a range image: each full 2x2 cell is split on its shorter diagonal, a cell
 /// with three points gives one triangle, and triangles with an edge longer than
 /// `max_edge_factor` times the median grid spacing (depth jumps) are dropped.
-pub fn triangulate_range_grid(grid: &RangeGrid, cells: &[Option<u32>], max_edge_factor: f64) -> Vec<[u32; 3]> {
+pub fn triangulate_range_grid(
+    grid: &RangeGrid,
+    cells: &[Option<u32>],
+    max_edge_factor: f64,
+) -> Vec<[u32; 3]> {
     let at = |r: usize, c: usize| cells[r * grid.cols + c];
     let pos = |r: usize, c: usize| grid.points[r * grid.cols + c];
     let mut spacing = Vec::new();
@@ -428,10 +497,18 @@ pub fn triangulate_range_grid(grid: &RangeGrid, cells: &[Option<u32>], max_edge_
     let max_edge = median * max_edge_factor;
     let mut tris = Vec::new();
     let mut push = |a: (usize, usize), b: (usize, usize), c: (usize, usize)| {
-        if let (Some(ia), Some(ib), Some(ic), Some(pa), Some(pb), Some(pc)) =
-            (at(a.0, a.1), at(b.0, b.1), at(c.0, c.1), pos(a.0, a.1), pos(b.0, b.1), pos(c.0, c.1))
-        {
-            if (pa - pb).length() <= max_edge && (pb - pc).length() <= max_edge && (pc - pa).length() <= max_edge {
+        if let (Some(ia), Some(ib), Some(ic), Some(pa), Some(pb), Some(pc)) = (
+            at(a.0, a.1),
+            at(b.0, b.1),
+            at(c.0, c.1),
+            pos(a.0, a.1),
+            pos(b.0, b.1),
+            pos(c.0, c.1),
+        ) {
+            if (pa - pb).length() <= max_edge
+                && (pb - pc).length() <= max_edge
+                && (pc - pa).length() <= max_edge
+            {
                 tris.push([ia, ib, ic]);
             }
         }
@@ -440,11 +517,18 @@ pub fn triangulate_range_grid(grid: &RangeGrid, cells: &[Option<u32>], max_edge_
         for c in 0..grid.cols.saturating_sub(1) {
             // Corners counter-clockwise in (col, row): a=(r,c) b=(r,c+1) d=(r+1,c+1) e=(r+1,c).
             let (a, b, d, e) = ((r, c), (r, c + 1), (r + 1, c + 1), (r + 1, c));
-            let present = [a, b, d, e].iter().filter(|&&(r, c)| at(r, c).is_some()).count();
+            let present = [a, b, d, e]
+                .iter()
+                .filter(|&&(r, c)| at(r, c).is_some())
+                .count();
             match present {
                 4 => {
-                    let diag_ad = (pos(a.0, a.1).unwrap_or_default() - pos(d.0, d.1).unwrap_or_default()).length();
-                    let diag_be = (pos(b.0, b.1).unwrap_or_default() - pos(e.0, e.1).unwrap_or_default()).length();
+                    let diag_ad = (pos(a.0, a.1).unwrap_or_default()
+                        - pos(d.0, d.1).unwrap_or_default())
+                    .length();
+                    let diag_be = (pos(b.0, b.1).unwrap_or_default()
+                        - pos(e.0, e.1).unwrap_or_default())
+                    .length();
                     if diag_ad <= diag_be {
                         push(a, b, d);
                         push(a, d, e);
@@ -455,7 +539,11 @@ pub fn triangulate_range_grid(grid: &RangeGrid, cells: &[Option<u32>], max_edge_
                 }
                 3 => {
                     let ring = [a, b, d, e];
-                    let corners: Vec<(usize, usize)> = ring.iter().copied().filter(|&(r, c)| at(r, c).is_some()).collect();
+                    let corners: Vec<(usize, usize)> = ring
+                        .iter()
+                        .copied()
+                        .filter(|&(r, c)| at(r, c).is_some())
+                        .collect();
                     push(corners[0], corners[1], corners[2]);
                 }
                 _ => {}

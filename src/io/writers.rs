@@ -41,7 +41,8 @@ pub fn ply_bytes(mesh: &TriMesh) -> Vec<u8> {
 }
 
 fn write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    std::fs::write(path, bytes).map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
+    std::fs::write(path, bytes)
+        .map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
 }
 
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {

@@ -72,8 +72,11 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
             edge_faces.entry((a.min(b), a.max(b))).or_default().push(f);
         }
     }
-    let mut split_edges: Vec<((u32, u32), Vec<usize>)> =
-        edge_faces.iter().filter(|(_, f)| f.len() > 2).map(|(e, f)| (*e, f.clone())).collect();
+    let mut split_edges: Vec<((u32, u32), Vec<usize>)> = edge_faces
+        .iter()
+        .filter(|(_, f)| f.len() > 2)
+        .map(|(e, f)| (*e, f.clone()))
+        .collect();
     split_edges.sort_unstable();
     report.non_manifold_edges_split = split_edges.len();
     for ((a, b), fs) in split_edges {
@@ -121,7 +124,8 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
         }
     }
     let kept_inputs: std::collections::HashSet<u32> = original_vertex.iter().copied().collect();
-    report.unreferenced_vertices_removed = (nv - report.welded_vertices).saturating_sub(kept_inputs.len());
+    report.unreferenced_vertices_removed =
+        (nv - report.welded_vertices).saturating_sub(kept_inputs.len());
     Cleaned {
         mesh: TriMesh::new(positions, faces),
         original_vertex,
@@ -138,7 +142,11 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
             positions
                 .iter()
                 .enumerate()
-                .map(|(i, p)| *first.entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]).or_insert(i as u32))
+                .map(|(i, p)| {
+                    *first
+                        .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+                        .or_insert(i as u32)
+                })
                 .collect()
         }
         Some(tol) => {
@@ -182,7 +190,8 @@ fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
             edge_faces.entry((a.min(b), a.max(b))).or_default().push(f);
         }
     }
-    let has_directed = |t: &[u32; 3], a: u32, b: u32| (0..3).any(|k| t[k] == a && t[(k + 1) % 3] == b);
+    let has_directed =
+        |t: &[u32; 3], a: u32, b: u32| (0..3).any(|k| t[k] == a && t[(k + 1) % 3] == b);
     let mut state = vec![0u8; faces.len()]; // 0 unvisited, 1 visited
     let mut flipped = 0;
     for seed in 0..faces.len() {
@@ -196,7 +205,9 @@ fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
             let t = faces[f];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                let Some(nbrs) = edge_faces.get(&(a.min(b), a.max(b))) else { continue };
+                let Some(nbrs) = edge_faces.get(&(a.min(b), a.max(b))) else {
+                    continue;
+                };
                 if nbrs.len() != 2 {
                     continue;
                 }
@@ -222,7 +233,11 @@ fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
 }
 
 /// Gives every fan of faces around a vertex after the first its own copy of the vertex.
-fn split_pinches(faces: &mut [[u32; 3]], positions: &mut Vec<DVec3>, origin: &mut Vec<u32>) -> usize {
+fn split_pinches(
+    faces: &mut [[u32; 3]],
+    positions: &mut Vec<DVec3>,
+    origin: &mut Vec<u32>,
+) -> usize {
     let nv = positions.len();
     let mut incident: Vec<Vec<usize>> = vec![Vec::new(); nv];
     for (f, t) in faces.iter().enumerate() {
@@ -275,7 +290,9 @@ fn split_pinches(faces: &mut [[u32; 3]], positions: &mut Vec<DVec3>, origin: &mu
                     if let Some(c) = edge_count.get_mut(&(v.min(other), v.max(other))) {
                         *c -= 1;
                     }
-                    *edge_count.entry((copy.min(other), copy.max(other))).or_insert(0) += 1;
+                    *edge_count
+                        .entry((copy.min(other), copy.max(other)))
+                        .or_insert(0) += 1;
                 }
             }
             for w in faces[fs[i]].iter_mut() {

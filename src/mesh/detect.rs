@@ -8,7 +8,11 @@ pub enum DetectError {
     #[error("level {level}: {source}")]
     Topology { level: usize, source: TopologyError },
     #[error("level {level}: no subdivision connectivity around vertex {vertex}: {reason}")]
-    NotSubdivided { level: usize, vertex: u32, reason: String },
+    NotSubdivided {
+        level: usize,
+        vertex: u32,
+        reason: String,
+    },
 }
 
 /// One level of recovered structure: a fine mesh seen as the 1-to-4 split of `coarse`.
@@ -49,10 +53,7 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
         if component_done[start as usize] || topo.ring(start).is_empty() {
             continue;
         }
-        let comp = component_of(topo, start);
-        for &v in &comp {
-            component_done[v as usize] = true;
-        }
+        let comp = component_of(topo, start, &mut component_done);
         let candidates = seed_candidates(topo, &comp);
         let mut last_err = None;
         let mut ok = false;
@@ -71,13 +72,15 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             }
         }
         if !ok {
-            return Err(last_err.unwrap_or_else(|| fail(level, start, "no seed vertex to start from")));
+            return Err(
+                last_err.unwrap_or_else(|| fail(level, start, "no seed vertex to start from"))
+            );
         }
     }
     // Isolated vertices carry no structure: treat them as even so that they survive.
-    for v in 0..nv {
-        if label[v] == UNKNOWN {
-            label[v] = EVEN;
+    for l in label.iter_mut() {
+        if *l == UNKNOWN {
+            *l = EVEN;
         }
     }
     let mut fine_to_coarse = vec![NONE; nv];
@@ -93,11 +96,27 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
         if label[v] != ODD {
             continue;
         }
-        let evens: Vec<u32> = topo.ring(v as u32).iter().copied().filter(|&w| label[w as usize] == EVEN).collect();
-        if evens.len() != 2 {
-            return Err(fail(level, v as u32, format!("odd vertex has {} even neighbours, not 2", evens.len())));
+        let mut evens = [NONE; 2];
+        let mut count = 0;
+        for &w in topo.ring(v as u32) {
+            if label[w as usize] == EVEN {
+                if count < 2 {
+                    evens[count] = w;
+                }
+                count += 1;
+            }
         }
-        *ends = [fine_to_coarse[evens[0] as usize], fine_to_coarse[evens[1] as usize]];
+        if count != 2 {
+            return Err(fail(
+                level,
+                v as u32,
+                format!("odd vertex has {count} even neighbours, not 2"),
+            ));
+        }
+        *ends = [
+            fine_to_coarse[evens[0] as usize],
+            fine_to_coarse[evens[1] as usize],
+        ];
     }
     let far = |a: u32, m: u32| -> u32 {
         let [p, q] = odd_endpoints[m as usize];
@@ -132,7 +151,11 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             let h_mid = next(h); // m1 -> m2 in the corner face
             let t = topo.twin[h_mid as usize];
             if t == NONE {
-                return Err(fail(level, m1, "central face of a split triangle is missing"));
+                return Err(fail(
+                    level,
+                    m1,
+                    "central face of a split triangle is missing",
+                ));
             }
             let central = t / 3;
             let bary_of = |v: u32| -> Option<[f64; 3]> {
@@ -152,21 +175,28 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
                 b[j] = 0.5;
                 Some(b)
             };
-            let mut children = vec![corner_a, central];
+            let mut children = [corner_a, central, NONE, NONE];
+            let mut count = 2;
             for e in 0..3u32 {
                 let tw = topo.twin[(central * 3 + e) as usize];
-                if tw != NONE && tw / 3 != corner_a {
-                    children.push(tw / 3);
+                if tw != NONE && tw / 3 != corner_a && count < 4 {
+                    children[count] = tw / 3;
+                    count += 1;
                 }
             }
-            if children.len() != 4 {
-                return Err(fail(level, a, "a coarse face does not split into four fine faces"));
+            if count != 4 {
+                return Err(fail(
+                    level,
+                    a,
+                    "a coarse face does not split into four fine faces",
+                ));
             }
             for f in children {
                 let tri = topo.triangles[f as usize];
                 let mut corners = [[0.0; 3]; 3];
                 for (slot, &v) in corners.iter_mut().zip(tri.iter()) {
-                    *slot = bary_of(v).ok_or_else(|| fail(level, v, "fine face leaves its coarse face"))?;
+                    *slot = bary_of(v)
+                        .ok_or_else(|| fail(level, v, "fine face leaves its coarse face"))?;
                 }
                 if face_parent[f as usize].0 != NONE {
                     return Err(fail(level, tri[0], "fine face belongs to two coarse faces"));
@@ -183,7 +213,11 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
         return Err(fail(
             level,
             v,
-            format!("{} fine faces do not make {} coarse faces", topo.triangles.len(), coarse_triangles.len()),
+            format!(
+                "{} fine faces do not make {} coarse faces",
+                topo.triangles.len(),
+                coarse_triangles.len()
+            ),
         ));
     }
     Ok(Level {
@@ -195,15 +229,16 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
     })
 }
 
-fn component_of(topo: &Topology, start: u32) -> Vec<u32> {
-    let mut seen = std::collections::HashSet::new();
+/// Vertices of the component of `start`, marking them in `seen`.
+fn component_of(topo: &Topology, start: u32, seen: &mut [bool]) -> Vec<u32> {
     let mut stack = vec![start];
-    seen.insert(start);
+    seen[start as usize] = true;
     let mut out = Vec::new();
     while let Some(v) = stack.pop() {
         out.push(v);
         for &w in topo.ring(v) {
-            if seen.insert(w) {
+            if !seen[w as usize] {
+                seen[w as usize] = true;
                 stack.push(w);
             }
         }
@@ -226,10 +261,18 @@ fn seed_candidates(topo: &Topology, comp: &[u32]) -> Vec<u32> {
         return vec![v];
     }
     let v = comp[0];
-    std::iter::once(v).chain(topo.ring(v).iter().copied()).collect()
+    std::iter::once(v)
+        .chain(topo.ring(v).iter().copied())
+        .collect()
 }
 
-fn propagate(topo: &Topology, comp: &[u32], seed: u32, level: usize, label: &mut [u8]) -> Result<(), DetectError> {
+fn propagate(
+    topo: &Topology,
+    comp: &[u32],
+    seed: u32,
+    level: usize,
+    label: &mut [u8],
+) -> Result<(), DetectError> {
     let mut queue = std::collections::VecDeque::new();
     label[seed as usize] = EVEN;
     queue.push_back(seed);
@@ -243,18 +286,30 @@ fn propagate(topo: &Topology, comp: &[u32], seed: u32, level: usize, label: &mut
             let ring = topo.ring(m);
             let opposite = if topo.is_boundary(m) {
                 if ring.len() != 4 {
-                    return Err(fail(level, m, format!("boundary odd vertex has {} neighbours, not 4", ring.len())));
+                    return Err(fail(
+                        level,
+                        m,
+                        format!("boundary odd vertex has {} neighbours, not 4", ring.len()),
+                    ));
                 }
                 if ring[0] == e {
                     ring[3]
                 } else if ring[3] == e {
                     ring[0]
                 } else {
-                    return Err(fail(level, m, "even neighbour of a boundary odd vertex is not on the boundary"));
+                    return Err(fail(
+                        level,
+                        m,
+                        "even neighbour of a boundary odd vertex is not on the boundary",
+                    ));
                 }
             } else {
                 if ring.len() != 6 {
-                    return Err(fail(level, m, format!("interior odd vertex has valence {}, not 6", ring.len())));
+                    return Err(fail(
+                        level,
+                        m,
+                        format!("interior odd vertex has valence {}, not 6", ring.len()),
+                    ));
                 }
                 let k = ring.iter().position(|&x| x == e).unwrap_or(0);
                 ring[(k + 3) % 6]
@@ -294,7 +349,12 @@ impl Hierarchy {
             };
             let next_topo = match Topology::build(lvl.coarse_to_fine.len(), &lvl.coarse_triangles) {
                 Ok(t) => t,
-                Err(source) => return (Hierarchy { levels }, Some(DetectError::Topology { level, source })),
+                Err(source) => {
+                    return (
+                        Hierarchy { levels },
+                        Some(DetectError::Topology { level, source }),
+                    )
+                }
             };
             levels.push(lvl);
             current = next_topo;

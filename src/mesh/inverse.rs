@@ -28,8 +28,14 @@ impl std::str::FromStr for InverseMethod {
 
 #[derive(Debug, thiserror::Error)]
 pub enum InverseError {
-    #[error("input has no Loop subdivision connectivity at depth {wanted} (found {found}): {reason}")]
-    NotSubdivided { wanted: usize, found: usize, reason: String },
+    #[error(
+        "input has no Loop subdivision connectivity at depth {wanted} (found {found}): {reason}"
+    )]
+    NotSubdivided {
+        wanted: usize,
+        found: usize,
+        reason: String,
+    },
     #[error(transparent)]
     Topology(#[from] TopologyError),
 }
@@ -71,7 +77,10 @@ pub fn exact_inverse_operator(fine: &Topology, level: &Level) -> SparseOperator 
 }
 
 /// The one-level subdivision operator of the coarse mesh with rows in fine vertex order.
-fn subdivision_in_fine_order(level: &Level, fine_count: usize) -> Result<SparseOperator, TopologyError> {
+fn subdivision_in_fine_order(
+    level: &Level,
+    fine_count: usize,
+) -> Result<SparseOperator, TopologyError> {
     let coarse_topo = Topology::build(level.coarse_to_fine.len(), &level.coarse_triangles)?;
     let step = loop_step(&coarse_topo);
     let nc = level.coarse_to_fine.len();
@@ -109,28 +118,38 @@ fn subdivision_in_fine_order(level: &Level, fine_count: usize) -> Result<SparseO
 
 /// Least-squares coarse positions: minimise |S C - F|^2 by conjugate gradients on the
 /// normal equations, started from the exact inverse (which is already optimal on exact data).
-fn lsq_level(level: &Level, fine_positions: &[DVec3], start: Vec<DVec3>) -> Result<Vec<DVec3>, TopologyError> {
+fn lsq_level(
+    level: &Level,
+    fine_positions: &[DVec3],
+    start: Vec<DVec3>,
+) -> Result<Vec<DVec3>, TopologyError> {
     let s = subdivision_in_fine_order(level, fine_positions.len())?;
     let nc = start.len();
     let apply_s = |c: &[DVec3]| s.apply(c);
     let apply_st = |r: &[DVec3]| {
         let mut out = vec![DVec3::ZERO; nc];
-        for i in 0..s.rows() {
+        for (i, ri) in r.iter().enumerate().take(s.rows()) {
             let (cols, w) = s.row(i);
             for (&j, &w) in cols.iter().zip(w) {
-                out[j as usize] += r[i] * w;
+                out[j as usize] += *ri * w;
             }
         }
         out
     };
     let mut x = start;
     let sx = apply_s(&x);
-    let resid: Vec<DVec3> = fine_positions.iter().zip(&sx).map(|(f, s)| *f - *s).collect();
+    let resid: Vec<DVec3> = fine_positions
+        .iter()
+        .zip(&sx)
+        .map(|(f, s)| *f - *s)
+        .collect();
     let mut r = apply_st(&resid);
     let mut p = r.clone();
     let dot = |a: &[DVec3], b: &[DVec3]| -> DVec3 { a.iter().zip(b).map(|(x, y)| *x * *y).sum() };
     let mut rr = dot(&r, &r);
-    let rhs_scale = dot(&apply_st(fine_positions), &apply_st(fine_positions)).max_element().max(1e-300);
+    let rhs_scale = dot(&apply_st(fine_positions), &apply_st(fine_positions))
+        .max_element()
+        .max(1e-300);
     for _ in 0..500 {
         if rr.max_element() <= 1e-28 * rhs_scale {
             break;
@@ -160,7 +179,11 @@ pub struct Coarsened {
 }
 
 /// Inverse Loop `levels` times. Coarse vertices come in the order of the even vertices.
-pub fn coarsen(mesh: &TriMesh, levels: usize, method: InverseMethod) -> Result<Coarsened, InverseError> {
+pub fn coarsen(
+    mesh: &TriMesh,
+    levels: usize,
+    method: InverseMethod,
+) -> Result<Coarsened, InverseError> {
     let fine_topo = Topology::from_mesh(mesh)?;
     let (hierarchy, err) = Hierarchy::detect(&fine_topo, levels);
     if hierarchy.depth() < levels {
@@ -191,7 +214,10 @@ pub fn coarsen(mesh: &TriMesh, levels: usize, method: InverseMethod) -> Result<C
 }
 
 /// `R^L`: the composed exact inverse from the finest vertices to the coarsest, as one operator.
-pub fn composed_exact_inverse(fine: &Topology, hierarchy: &Hierarchy) -> Result<SparseOperator, TopologyError> {
+pub fn composed_exact_inverse(
+    fine: &Topology,
+    hierarchy: &Hierarchy,
+) -> Result<SparseOperator, TopologyError> {
     let mut composed: Option<SparseOperator> = None;
     let mut topo = fine.clone();
     for level in &hierarchy.levels {

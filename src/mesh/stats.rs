@@ -63,7 +63,10 @@ pub fn mesh_stats(mesh: &TriMesh, max_depth: usize) -> MeshStats {
     for (f, t) in proper.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            edge_faces.entry((a.min(b), a.max(b))).or_default().push(f as u32);
+            edge_faces
+                .entry((a.min(b), a.max(b)))
+                .or_default()
+                .push(f as u32);
         }
     }
     let non_manifold_edges = edge_faces.values().filter(|f| f.len() > 2).count();
@@ -141,8 +144,9 @@ pub fn mesh_stats(mesh: &TriMesh, max_depth: usize) -> MeshStats {
     let referenced = incident.iter().filter(|f| !f.is_empty()).count();
     let euler_characteristic = referenced as i64 - edge_faces.len() as i64 + proper.len() as i64;
     let closed = boundary.is_empty() && non_manifold_edges == 0 && !proper.is_empty();
-    let genus = (closed && components == 1 && non_manifold_vertices == 0 && euler_characteristic % 2 == 0)
-        .then(|| (2 - euler_characteristic) / 2);
+    let genus =
+        (closed && components == 1 && non_manifold_vertices == 0 && euler_characteristic % 2 == 0)
+            .then(|| (2 - euler_characteristic) / 2);
     let (subdivision_depth, subdivision_note) = match Topology::build(nv, &mesh.triangles) {
         Ok(topo) => {
             let (h, err) = Hierarchy::detect(&topo, max_depth);
@@ -175,7 +179,9 @@ pub struct UnionFind {
 
 impl UnionFind {
     pub fn new(n: usize) -> Self {
-        Self { parent: (0..n).collect() }
+        Self {
+            parent: (0..n).collect(),
+        }
     }
     pub fn find(&mut self, mut x: usize) -> usize {
         while self.parent[x] != x {

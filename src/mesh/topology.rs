@@ -44,7 +44,7 @@ pub fn next(h: u32) -> u32 {
 }
 #[inline]
 pub fn prev(h: u32) -> u32 {
-    if h % 3 == 0 {
+    if h.is_multiple_of(3) {
         h + 2
     } else {
         h - 1
@@ -59,7 +59,11 @@ impl Topology {
     pub fn build(vertex_count: usize, triangles: &[[u32; 3]]) -> Result<Topology, TopologyError> {
         let nh = triangles.len() * 3;
         for (f, t) in triangles.iter().enumerate() {
-            if t.iter().any(|&v| v as usize >= vertex_count) || t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+            if t.iter().any(|&v| v as usize >= vertex_count)
+                || t[0] == t[1]
+                || t[1] == t[2]
+                || t[0] == t[2]
+            {
                 return Err(TopologyError::BadFace { face: f });
             }
         }
@@ -80,11 +84,15 @@ impl Topology {
             out[fill[s] as usize] = h as u32;
             fill[s] += 1;
         }
-        let outgoing = |v: u32| &out[out_start[v as usize] as usize..out_start[v as usize + 1] as usize];
+        let outgoing =
+            |v: u32| &out[out_start[v as usize] as usize..out_start[v as usize + 1] as usize];
         let mut twin = vec![NONE; nh];
-        for h in 0..nh {
+        for (h, twin_h) in twin.iter_mut().enumerate() {
             let (a, b) = (src(h), dst(h));
-            let same = outgoing(a).iter().filter(|&&g| dst(g as usize) == b).count();
+            let same = outgoing(a)
+                .iter()
+                .filter(|&&g| dst(g as usize) == b)
+                .count();
             let mut opposite = outgoing(b).iter().filter(|&&g| dst(g as usize) == a);
             let first = opposite.next();
             let more = opposite.next().is_some();
@@ -96,7 +104,7 @@ impl Topology {
                 });
             }
             if let Some(&g) = first {
-                twin[h] = g;
+                *twin_h = g;
             }
         }
         // Ordered rings: rotate counter-clockwise with h -> twin(prev(h)).
@@ -114,10 +122,17 @@ impl Topology {
                 continue;
             }
             // A boundary vertex starts at the outgoing edge with no face on its right.
-            let starts: Vec<u32> = outs.iter().copied().filter(|&h| twin[h as usize] == NONE).collect();
+            let starts: Vec<u32> = outs
+                .iter()
+                .copied()
+                .filter(|&h| twin[h as usize] == NONE)
+                .collect();
             let is_boundary = !starts.is_empty();
             if starts.len() > 1 {
-                return Err(TopologyError::PinchVertex { vertex: v, fans: starts.len() });
+                return Err(TopologyError::PinchVertex {
+                    vertex: v,
+                    fans: starts.len(),
+                });
             }
             let start = if is_boundary { starts[0] } else { outs[0] };
             let mut h = start;
@@ -167,7 +182,8 @@ impl Topology {
     /// Number of neighbours (edges) of `v`.
     #[inline]
     pub fn ring_halfedges(&self, v: u32) -> &[u32] {
-        &self.ring_halfedge[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize]
+        &self.ring_halfedge
+            [self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize]
     }
 
     #[inline]

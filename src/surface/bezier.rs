@@ -24,7 +24,9 @@ pub fn lattice_len(n: usize) -> usize {
 
 /// (i, j) of every lattice index, in index order.
 pub fn lattice_points(n: usize) -> Vec<(usize, usize)> {
-    (0..=n).flat_map(|j| (0..=n - j).map(move |i| (i, j))).collect()
+    (0..=n)
+        .flat_map(|j| (0..=n - j).map(move |i| (i, j)))
+        .collect()
 }
 
 /// The lattice's triangles, counter-clockwise in (u, v): per cell an "up" triangle
@@ -128,7 +130,8 @@ impl TriSurface for BezierTriangle {
                     let q = n - 2;
                     (
                         n2 * (get(q, i - 2, j) - 2.0 * get(q, i - 1, j) + get(q, i, j)),
-                        n2 * (get(q, i - 1, j - 1) - get(q, i - 1, j) - get(q, i, j - 1) + get(q, i, j)),
+                        n2 * (get(q, i - 1, j - 1) - get(q, i - 1, j) - get(q, i, j - 1)
+                            + get(q, i, j)),
                         n2 * (get(q, i, j - 2) - 2.0 * get(q, i, j - 1) + get(q, i, j)),
                     )
                 } else {
@@ -164,8 +167,9 @@ pub fn de_casteljau(n: usize, controls: &[DVec3], u: f64, v: f64) -> DVec3 {
         let mut next = vec![DVec3::ZERO; lattice_len(r - 1)];
         for j in 0..r {
             for i in 0..r - j {
-                next[lattice_index(r - 1, i, j)] =
-                    pts[lattice_index(r, i + 1, j)] * u + pts[lattice_index(r, i, j + 1)] * v + pts[lattice_index(r, i, j)] * w;
+                next[lattice_index(r - 1, i, j)] = pts[lattice_index(r, i + 1, j)] * u
+                    + pts[lattice_index(r, i, j + 1)] * v
+                    + pts[lattice_index(r, i, j)] * w;
             }
         }
         pts = next;
@@ -182,7 +186,11 @@ mod tests {
             .into_iter()
             .map(|(i, j)| {
                 let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
-                DVec3::new(x, y, (3.0 * x).sin() * (2.0 * y).cos() + 0.1 * ((i * 7 + j * 13) % 5) as f64)
+                DVec3::new(
+                    x,
+                    y,
+                    (3.0 * x).sin() * (2.0 * y).cos() + 0.1 * ((i * 7 + j * 13) % 5) as f64,
+                )
             })
             .collect()
     }
@@ -204,10 +212,19 @@ mod tests {
         for n in [1, 4, 12, 24, 40] {
             let c = controls(n);
             let s = BezierTriangle::new(n);
-            for &(u, v) in &[(0.2, 0.3), (0.0, 0.0), (1.0, 0.0), (0.05, 0.9), (1.0 / 3.0, 1.0 / 3.0)] {
+            for &(u, v) in &[
+                (0.2, 0.3),
+                (0.0, 0.0),
+                (1.0, 0.0),
+                (0.05, 0.9),
+                (1.0 / 3.0, 1.0 / 3.0),
+            ] {
                 let a = s.evaluate(&c, SurfaceParam { face: 0, u, v }).position;
                 let b = de_casteljau(n, &c, u, v);
-                assert!((a - b).length() <= 1e-12 * b.length().max(1.0), "n={n} ({u},{v}): {a} vs {b}");
+                assert!(
+                    (a - b).length() <= 1e-12 * b.length().max(1.0),
+                    "n={n} ({u},{v}): {a} vs {b}"
+                );
             }
         }
     }
@@ -217,7 +234,11 @@ mod tests {
         let n = 9;
         let c = controls(n);
         let s = BezierTriangle::new(n);
-        let p = SurfaceParam { face: 0, u: 0.27, v: 0.41 };
+        let p = SurfaceParam {
+            face: 0,
+            u: 0.27,
+            v: 0.41,
+        };
         let mut row = Vec::new();
         s.basis_row(p, &mut row);
         let sum: f64 = row.iter().map(|r| r.1).sum();
@@ -230,7 +251,13 @@ mod tests {
         let fd_uu = (at(p.u + h, p.v).du - at(p.u - h, p.v).du) / (2.0 * h);
         let fd_uv = (at(p.u, p.v + h).du - at(p.u, p.v - h).du) / (2.0 * h);
         let fd_vv = (at(p.u, p.v + h).dv - at(p.u, p.v - h).dv) / (2.0 * h);
-        for (a, b) in [(d.du, fd_u), (d.dv, fd_v), (d.duu, fd_uu), (d.duv, fd_uv), (d.dvv, fd_vv)] {
+        for (a, b) in [
+            (d.du, fd_u),
+            (d.dv, fd_v),
+            (d.duu, fd_uu),
+            (d.duv, fd_uv),
+            (d.dvv, fd_vv),
+        ] {
             assert!((a - b).length() < 1e-5 * b.length().max(1.0), "{a} vs {b}");
         }
     }

@@ -1,1 +1,0 @@
-//! The pure worker: (mesh, previous fit, config) -> fit.
