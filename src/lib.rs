@@ -7,6 +7,7 @@ pub mod cli;
 pub mod fit;
 pub mod io;
 pub mod mesh;
+pub mod pipeline;
 pub mod surface;
 pub mod testdata;
 

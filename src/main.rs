@@ -18,6 +18,8 @@ enum Command {
     Subdivide(cli::mesh_tools::SubdivideArgs),
     /// Inverse Loop subdivision (exit 2 without subdivision connectivity).
     Coarsen(cli::mesh_tools::CoarsenArgs),
+    /// Fit a triangular surface to a mesh with subdivision connectivity.
+    Fit(cli::fit::FitArgs),
 }
 
 fn main() -> ExitCode {
@@ -26,6 +28,7 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cli::mesh_tools::inspect(a),
         Command::Subdivide(a) => cli::mesh_tools::subdivide_cmd(a),
         Command::Coarsen(a) => cli::mesh_tools::coarsen_cmd(a),
+        Command::Fit(a) => cli::fit::run(a),
     };
     match result {
         Ok(code) => code,

@@ -1,2 +1,3 @@
 //! Subcommand implementations; main.rs only dispatches.
+pub mod fit;
 pub mod mesh_tools;

@@ -1,0 +1,181 @@
+//! The worker: a mesh with Loop subdivision connectivity in, a fitted surface out.
+//! Pure: no file IO; the CLI writes what it returns.
+
+pub mod geometric;
+pub mod lattice;
+
+use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
+use crate::mesh::detect::Hierarchy;
+use crate::mesh::inverse::{coarsen, composed_exact_inverse, InverseError, InverseMethod};
+use crate::mesh::topology::Topology;
+use crate::surface::bezier::{lattice_points, BezierTriangle};
+use crate::surface::{SurfaceParam, TriSurface};
+use crate::TriMesh;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum SurfaceKind {
+    Bezier,
+    Loop,
+}
+
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    pub surface: SurfaceKind,
+    pub levels: usize,
+    pub method: Method,
+    pub inverse: InverseMethod,
+    pub budget: Budget,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error("{0}")]
+    NoSubdivision(String),
+    #[error(transparent)]
+    NotALattice(#[from] lattice::NotALattice),
+    #[error("{0}")]
+    Unsupported(String),
+    #[error(transparent)]
+    Fit(#[from] FitError),
+}
+
+#[derive(Clone, Debug)]
+pub struct PatchFit {
+    pub surface: SurfaceKind,
+    pub degree: usize,
+    /// Control points in lattice order (`surface::bezier::lattice_index`).
+    pub controls: Vec<DVec3>,
+    pub data: Vec<DVec3>,
+    pub params: Vec<SurfaceParam>,
+    pub outcome: FitOutcome,
+    pub geometric_errors: Vec<f64>,
+    pub warm_start: bool,
+    pub prepare_ms: f64,
+    pub fit_ms: f64,
+}
+
+impl PatchFit {
+    pub fn geometric_max(&self) -> f64 {
+        self.geometric_errors.iter().cloned().fold(0.0, f64::max)
+    }
+    pub fn geometric_rms(&self) -> f64 {
+        let n = self.geometric_errors.len().max(1) as f64;
+        (self.geometric_errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt()
+    }
+}
+
+/// Fits a mesh that has Loop subdivision connectivity at depth `levels`. `previous` is a
+/// previous fit's control net: used as the starting net when its size matches.
+pub fn fit_subdivided(
+    mesh: &TriMesh,
+    opts: &FitOptions,
+    previous: Option<&[DVec3]>,
+) -> Result<PatchFit, PipelineError> {
+    if opts.surface == SurfaceKind::Loop {
+        return Err(PipelineError::Unsupported(
+            "the Loop limit surface is not built yet; use --surface bezier".into(),
+        ));
+    }
+    let t0 = Instant::now();
+    let topo = Topology::from_mesh(mesh)
+        .map_err(|e| PipelineError::NoSubdivision(format!("not a manifold mesh: {e}")))?;
+    let (hierarchy, why) = Hierarchy::detect(&topo, opts.levels);
+    if hierarchy.depth() < opts.levels {
+        return Err(PipelineError::NoSubdivision(format!(
+            "no Loop subdivision connectivity at depth {} (found {}): {}; remeshing of arbitrary scans is not built yet",
+            opts.levels,
+            hierarchy.depth(),
+            why.map_or_else(String::new, |e| e.to_string())
+        )));
+    }
+    let coarse = coarsen(mesh, opts.levels, opts.inverse).map_err(|e| match e {
+        InverseError::NotSubdivided { .. } | InverseError::Topology(_) => {
+            PipelineError::NoSubdivision(e.to_string())
+        }
+    })?;
+    let (n, index) =
+        lattice::lattice_coordinates(coarse.mesh.positions.len(), &coarse.mesh.triangles)?;
+    let coords = lattice_points(n);
+    let mut initial = vec![DVec3::ZERO; coords.len()];
+    for (v, &idx) in index.iter().enumerate() {
+        initial[idx] = coarse.mesh.positions[v];
+    }
+    // Each fine vertex: (coarse face, barycentric) -> global lattice (u, v).
+    let coarse_faces = &coarse.mesh.triangles;
+    let params: Vec<SurfaceParam> = hierarchy
+        .fine_vertex_params(&topo)
+        .into_iter()
+        .map(|(f, u, v)| {
+            let t = coarse_faces.get(f as usize).copied().unwrap_or([0, 0, 0]);
+            let w = 1.0 - u - v;
+            let c = |k: usize| coords[index[t[k] as usize]];
+            let gu = (u * c(0).0 as f64 + v * c(1).0 as f64 + w * c(2).0 as f64) / n as f64;
+            let gv = (u * c(0).1 as f64 + v * c(1).1 as f64 + w * c(2).1 as f64) / n as f64;
+            SurfaceParam {
+                face: 0,
+                u: gu,
+                v: gv,
+            }
+        })
+        .collect();
+    let surface = BezierTriangle::new(n);
+    let rows: Vec<Vec<(u32, f64)>> = params
+        .par_iter()
+        .map(|p| {
+            let mut row = Vec::new();
+            surface.basis_row(*p, &mut row);
+            row
+        })
+        .collect();
+    let basis = Collocation::new(Csr::from_rows(
+        surface.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ));
+    let r = composed_exact_inverse(&topo, &hierarchy)
+        .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?;
+    let pia = |res: &[DVec3]| {
+        let coarse_order = r.apply(res);
+        let mut out = vec![DVec3::ZERO; coarse_order.len()];
+        for (v, d) in coarse_order.into_iter().enumerate() {
+            out[index[v]] = d;
+        }
+        out
+    };
+    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let warm = previous.filter(|p| p.len() == initial.len());
+    let start = warm.map_or(initial, |p| p.to_vec());
+    let problem = FitProblem {
+        basis: &basis,
+        data: &mesh.positions,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: Some(&pia),
+    };
+    let t1 = Instant::now();
+    let outcome = fit(&problem, start, opts.method, &opts.budget)?;
+    let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let geometric_errors: Vec<f64> = mesh
+        .positions
+        .par_iter()
+        .zip(params.par_iter())
+        .map(|(p, u)| geometric::foot_point(&surface, &outcome.controls, *p, *u).1)
+        .collect();
+    Ok(PatchFit {
+        surface: opts.surface,
+        degree: n,
+        controls: outcome.controls.clone(),
+        data: mesh.positions.clone(),
+        params,
+        outcome,
+        geometric_errors,
+        warm_start: warm.is_some(),
+        prepare_ms,
+        fit_ms,
+    })
+}

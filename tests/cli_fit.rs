@@ -1,0 +1,130 @@
+//! `trispline fit` as a process: outputs, report fields, refusals with exit status 2.
+
+use glam::DVec3;
+use std::path::Path;
+use std::process::Command;
+use trispline::io::writers::write_obj;
+use trispline::surface::bezier::{lattice_points, lattice_triangles};
+use trispline::TriMesh;
+
+fn lattice_patch(n: usize) -> TriMesh {
+    TriMesh::new(
+        lattice_points(n)
+            .into_iter()
+            .map(|(i, j)| {
+                let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                DVec3::new(
+                    u + v / 2.0,
+                    v * 0.866,
+                    0.1 * (3.0 * u).sin() * (2.0 * v).cos(),
+                )
+            })
+            .collect(),
+        lattice_triangles(n),
+    )
+}
+
+fn trispline(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_trispline"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(p).expect("exists")).expect("json")
+}
+
+#[test]
+fn fits_a_lattice_patch_and_writes_all_outputs() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let input = dir.path().join("patch.obj");
+    write_obj(&input, &lattice_patch(32)).expect("write");
+    let out = dir.path().join("out");
+    let o = trispline(&[
+        "fit",
+        input.to_str().unwrap_or_default(),
+        "--surface",
+        "bezier",
+        "--levels",
+        "2",
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = read_json(&out.join("report.json"));
+    assert_eq!(report["data_points"], 561);
+    assert_eq!(report["control_points"], 45);
+    assert_eq!(report["degree"], 8);
+    assert_eq!(report["status"], "met");
+    let fin = &report["final"];
+    let tol = report["tolerance"].as_f64().expect("tolerance");
+    assert!(fin["max_error"].as_f64().expect("max") <= tol);
+    assert!(
+        fin["geometric_max_error"].as_f64().expect("geo")
+            <= fin["max_error"].as_f64().expect("max") + 1e-12
+    );
+    assert_eq!(report["iterations"][0]["k"], 0);
+    let surface = read_json(&out.join("surface.json"));
+    assert_eq!(surface["schema"], "trispline.surface/1");
+    assert_eq!(
+        surface["control_points"].as_array().map(|a| a.len()),
+        Some(45)
+    );
+    let glb = std::fs::read(out.join("surface.glb")).expect("glb");
+    let (doc, _, _) = gltf::import_slice(&glb).expect("valid glb");
+    let prim = doc
+        .meshes()
+        .next()
+        .and_then(|m| m.primitives().next())
+        .expect("primitive");
+    assert!(prim.get(&gltf::Semantic::Colors(0)).is_some());
+}
+
+#[test]
+fn refuses_unsupported_inputs_with_status_2() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("out");
+    // A jittered irregular patch has no subdivision connectivity.
+    let irregular = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    let o = trispline(&[
+        "fit",
+        irregular.to_str().unwrap_or_default(),
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("subdivision connectivity"));
+    // The Loop surface is refused with its reason.
+    let input = dir.path().join("patch.obj");
+    write_obj(&input, &lattice_patch(16)).expect("write");
+    let o = trispline(&[
+        "fit",
+        input.to_str().unwrap_or_default(),
+        "--surface",
+        "loop",
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    // A subdivided closed mesh has connectivity but no single-triangle lattice: Bezier refuses.
+    let tet = TriMesh::new(
+        vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
+        vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+    );
+    let fine = trispline::mesh::loop_subdiv::subdivide(&tet, 2).expect("manifold");
+    write_obj(&input, &fine).expect("write");
+    let o = trispline(&[
+        "fit",
+        input.to_str().unwrap_or_default(),
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("lattice"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!out.join("surface.json").exists());
+}
