@@ -8,6 +8,7 @@ pub mod fit;
 pub mod io;
 pub mod mesh;
 pub mod pipeline;
+pub mod remesh;
 pub mod surface;
 pub mod testdata;
 

@@ -85,16 +85,41 @@ fn fits_a_lattice_patch_and_writes_all_outputs() {
 fn refuses_unsupported_inputs_with_status_2() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("out");
-    // A jittered irregular patch has no subdivision connectivity.
-    let irregular = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    // A closed octahedron has no subdivision connectivity and is no disk to remesh.
+    let oct = TriMesh::new(
+        vec![
+            DVec3::X,
+            -DVec3::X,
+            DVec3::Y,
+            -DVec3::Y,
+            DVec3::Z,
+            -DVec3::Z,
+        ],
+        vec![
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
+        ],
+    );
+    let closed = dir.path().join("closed.obj");
+    write_obj(&closed, &oct).expect("write");
     let o = trispline(&[
         "fit",
-        irregular.to_str().unwrap_or_default(),
+        closed.to_str().unwrap_or_default(),
         "--out",
         out.to_str().unwrap_or_default(),
     ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("subdivision connectivity"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("subdivision connectivity") && err.contains("not disk-like"),
+        "{err}"
+    );
     // The Loop surface is refused with its reason.
     let input = dir.path().join("patch.obj");
     write_obj(&input, &lattice_patch(16)).expect("write");

@@ -5,6 +5,7 @@ use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::{read_mesh_file, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::geometric::error_colour;
+use crate::pipeline::scan::{fit_scan, ScanOptions};
 use crate::pipeline::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::surface::bezier::{lattice_points, lattice_triangles, BezierTriangle};
 use crate::surface::{SurfaceParam, TriSurface};
@@ -45,6 +46,12 @@ pub struct FitArgs {
     pub within_tolerance_pct: Option<f64>,
     #[arg(long)]
     pub max_time_ms: Option<u64>,
+    /// Scans without subdivision connectivity: control-net segments per side (Bezier degree).
+    #[arg(long, default_value_t = 16)]
+    pub lattice: usize,
+    /// Scans: fairness weight relative to the data.
+    #[arg(long, default_value_t = 1e-5)]
+    pub smoothing: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = 128)]
     pub tessellation: usize,
@@ -77,29 +84,65 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         inverse: args.inverse,
         budget: budget.clone(),
     };
+    let refuse = |e: &dyn std::fmt::Display| {
+        eprintln!("{}: cannot fit: {e}", args.input.display());
+        Ok(ExitCode::from(2))
+    };
+    let mut scan_info = None;
     let fitted = match fit_subdivided(&mesh, &opts, None) {
         Ok(f) => f,
+        Err(PipelineError::NoSubdivision(why)) if args.surface == SurfaceKind::Bezier => {
+            // No subdivision connectivity: remesh the scan onto a lattice.
+            let scan = ScanOptions {
+                lattice: args.lattice,
+                smoothing: args.smoothing,
+            };
+            match fit_scan(&mesh, &opts, &scan, None) {
+                Ok(s) => {
+                    let f = s.fit.clone();
+                    scan_info = Some(s);
+                    f
+                }
+                Err(e) => return refuse(&format!("{e} (and no subdivision connectivity: {why})")),
+            }
+        }
         Err(
             e @ (PipelineError::NoSubdivision(_)
             | PipelineError::NotALattice(_)
             | PipelineError::Unsupported(_)),
         ) => {
-            eprintln!("{}: cannot fit: {e}", args.input.display());
-            return Ok(ExitCode::from(2));
+            return refuse(&e);
         }
         Err(e) => return Err(e).context(format!("{}: fit failed", args.input.display())),
     };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    let glb = tessellated_glb(&fitted, args.tessellation.max(1), tolerance);
+    let trim = scan_info.as_ref().map(|s| s.prepared.trim.as_slice());
+    let glb = tessellated_glb(&fitted, args.tessellation.max(1), tolerance, trim);
     write_atomic(&args.out.join("surface.glb"), &glb)?;
-    let report = report_json(args, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);
+    let mut report = report_json(args, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);
+    if let Some(s) = &scan_info {
+        report["remeshed"] = json!(true);
+        report["components"] = json!(s.components);
+        report["kept_vertices"] = json!(s.kept_vertices);
+        report["holes_filled"] = json!(s.prepared.holes);
+        report["flipped_triangles"] = json!(s.prepared.flipped_triangles);
+        report["resample_segments"] = json!(s.prepared.segments);
+        report["parameterization_ms"] = json!(s.prepared.parameterization_ms);
+        report["resample_ms"] = json!(s.prepared.resample_ms);
+    }
     write_atomic(
         &args.out.join("report.json"),
         &serde_json::to_vec_pretty(&report)?,
     )?;
     // surface.json last: its presence marks a complete set.
-    let surface = surface_json(&fitted, &report);
+    let mut surface = surface_json(&fitted, &report);
+    if let Some(s) = &scan_info {
+        surface["trim"] = json!({
+            "space": "barycentric (u, v) of the domain triangle",
+            "outer": s.prepared.trim.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
+        });
+    }
     write_atomic(
         &args.out.join("surface.json"),
         &serde_json::to_vec_pretty(&surface)?,
@@ -155,7 +198,12 @@ fn report_json(args: &FitArgs, f: &PatchFit, budget: &Budget, wall_ms: f64) -> s
 /// The patch sampled on a regular sub-lattice, in the input's own coordinates, coloured by
 /// the distance to the nearest data point's residual: each tessellation vertex takes the
 /// fit error of the data point whose parameter is nearest (blue exact .. red 2x tolerance).
-fn tessellated_glb(f: &PatchFit, segments: usize, tolerance: f64) -> Vec<u8> {
+fn tessellated_glb(
+    f: &PatchFit,
+    segments: usize,
+    tolerance: f64,
+    trim: Option<&[(f64, f64)]>,
+) -> Vec<u8> {
     let surface = BezierTriangle::new(f.degree);
     let pts = lattice_points(segments);
     let params: Vec<SurfaceParam> = pts
@@ -216,7 +264,22 @@ fn tessellated_glb(f: &PatchFit, segments: usize, tolerance: f64) -> Vec<u8> {
             error_colour(best.1, tolerance)
         })
         .collect();
-    let mesh = TriMesh::new(positions, lattice_triangles(segments));
+    // Trimmed: keep the triangles whose centroid lies inside the scanned region.
+    let triangles: Vec<[u32; 3]> = lattice_triangles(segments)
+        .into_iter()
+        .filter(|t| {
+            trim.is_none_or(|poly| {
+                let c = t.iter().fold((0.0, 0.0), |acc, &i| {
+                    (
+                        acc.0 + params[i as usize].u / 3.0,
+                        acc.1 + params[i as usize].v / 3.0,
+                    )
+                });
+                inside(poly, c)
+            })
+        })
+        .collect();
+    let mesh = TriMesh::new(positions, triangles);
     glb_bytes(
         &mesh,
         &GlbAttributes {
@@ -225,6 +288,18 @@ fn tessellated_glb(f: &PatchFit, segments: usize, tolerance: f64) -> Vec<u8> {
             polylines: &[],
         },
     )
+}
+
+/// Even-odd point-in-polygon test.
+fn inside(poly: &[(f64, f64)], p: (f64, f64)) -> bool {
+    let mut c = false;
+    for k in 0..poly.len() {
+        let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+        if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1) {
+            c = !c;
+        }
+    }
+    c
 }
 
 /// Temp file in the same folder, fsync, rename, fsync the folder.

@@ -3,6 +3,7 @@
 
 pub mod geometric;
 pub mod lattice;
+pub mod scan;
 
 use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
 use crate::mesh::detect::Hierarchy;
@@ -88,7 +89,7 @@ pub fn fit_subdivided(
     let (hierarchy, why) = Hierarchy::detect(&topo, opts.levels);
     if hierarchy.depth() < opts.levels {
         return Err(PipelineError::NoSubdivision(format!(
-            "no Loop subdivision connectivity at depth {} (found {}): {}; remeshing of arbitrary scans is not built yet",
+            "no Loop subdivision connectivity at depth {} (found {}): {}",
             opts.levels,
             hierarchy.depth(),
             why.map_or_else(String::new, |e| e.to_string())

@@ -1,0 +1,161 @@
+//! Scans without subdivision connectivity: clean, keep the largest component, parameterize
+//! onto the domain triangle, resample on a lattice of `lattice * 2^levels` segments,
+//! inverse-subdivide it for the initial net, then fit the ORIGINAL scan points.
+
+use super::{geometric, FitOptions, PatchFit, PipelineError};
+use crate::fit::engine::umbrella_laplacian;
+use crate::fit::{fit, Collocation, Csr, FitProblem};
+use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::inverse::coarsen;
+use crate::mesh::stats::UnionFind;
+use crate::remesh::param::{prepare, PreparedPatch};
+use crate::surface::bezier::{lattice_triangles, BezierTriangle};
+use crate::surface::{SurfaceParam, TriSurface};
+use crate::TriMesh;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::time::Instant;
+
+#[derive(Clone, Debug)]
+pub struct ScanOptions {
+    /// Control-net segments per side (the Bezier degree).
+    pub lattice: usize,
+    /// Fairness weight relative to the data: s = smoothing * data points / control points.
+    pub smoothing: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct ScanFit {
+    pub fit: PatchFit,
+    pub prepared: PreparedPatch,
+    pub components: usize,
+    pub kept_vertices: usize,
+}
+
+/// The largest edge-connected component of a cleaned mesh, compacted.
+pub fn largest_component(mesh: &TriMesh) -> (TriMesh, usize) {
+    let mut uf = UnionFind::new(mesh.triangles.len());
+    let mut edge_face: HashMap<(u32, u32), usize> = HashMap::new();
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if let Some(&g) = edge_face.get(&(a.min(b), a.max(b))) {
+                uf.union(f, g);
+            } else {
+                edge_face.insert((a.min(b), a.max(b)), f);
+            }
+        }
+    }
+    let mut size: HashMap<usize, usize> = HashMap::new();
+    for f in 0..mesh.triangles.len() {
+        *size.entry(uf.find(f)).or_insert(0) += 1;
+    }
+    let components = size.len();
+    let Some((&root, _)) = size.iter().max_by_key(|(r, s)| (**s, usize::MAX - **r)) else {
+        return (TriMesh::default(), 0);
+    };
+    let mut map = vec![u32::MAX; mesh.positions.len()];
+    let mut out = TriMesh::default();
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        if uf.find(f) != root {
+            continue;
+        }
+        let mut nt = [0u32; 3];
+        for (k, &v) in t.iter().enumerate() {
+            if map[v as usize] == u32::MAX {
+                map[v as usize] = out.positions.len() as u32;
+                out.positions.push(mesh.positions[v as usize]);
+            }
+            nt[k] = map[v as usize];
+        }
+        out.triangles.push(nt);
+    }
+    (out, components)
+}
+
+pub fn fit_scan(
+    mesh: &TriMesh,
+    opts: &FitOptions,
+    scan: &ScanOptions,
+    previous: Option<&[DVec3]>,
+) -> Result<ScanFit, PipelineError> {
+    let t0 = Instant::now();
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let (part, components) = largest_component(&cleaned.mesh);
+    if part.triangles.is_empty() {
+        return Err(PipelineError::Unsupported(
+            "no faces left after cleaning".into(),
+        ));
+    }
+    let n0 = scan.lattice.max(1);
+    let segments = n0 << opts.levels;
+    let prepared =
+        prepare(&part, segments).map_err(|e| PipelineError::Unsupported(e.to_string()))?;
+    let lattice_mesh = TriMesh::new(prepared.lattice.clone(), lattice_triangles(segments));
+    // The lattice has subdivision connectivity by construction; its even vertices come in
+    // lattice order, so the coarse net is already in Bezier lattice order.
+    let initial = coarsen(&lattice_mesh, opts.levels, opts.inverse)
+        .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?
+        .mesh
+        .positions;
+    let surface = BezierTriangle::new(n0);
+    let params: Vec<SurfaceParam> = prepared
+        .uv
+        .iter()
+        .map(|&(u, v)| SurfaceParam { face: 0, u, v })
+        .collect();
+    let rows: Vec<Vec<(u32, f64)>> = params
+        .par_iter()
+        .map(|p| {
+            let mut row = Vec::new();
+            surface.basis_row(*p, &mut row);
+            row
+        })
+        .collect();
+    let basis = Collocation::new(Csr::from_rows(
+        surface.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ));
+    let fairness = Collocation::new(umbrella_laplacian(
+        surface.control_count(),
+        &lattice_triangles(n0),
+    ));
+    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let smoothing = scan.smoothing * part.positions.len() as f64 / surface.control_count() as f64;
+    let problem = FitProblem {
+        basis: &basis,
+        data: &part.positions,
+        smoothing,
+        fairness: Some(&fairness),
+        pia_operator: None,
+    };
+    let warm = previous.filter(|p| p.len() == initial.len());
+    let start = warm.map_or(initial, |p| p.to_vec());
+    let t1 = Instant::now();
+    let outcome = fit(&problem, start, opts.method, &opts.budget)?;
+    let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let geometric_errors: Vec<f64> = part
+        .positions
+        .par_iter()
+        .zip(params.par_iter())
+        .map(|(p, u)| geometric::foot_point(&surface, &outcome.controls, *p, *u).1)
+        .collect();
+    Ok(ScanFit {
+        fit: PatchFit {
+            surface: opts.surface,
+            degree: n0,
+            controls: outcome.controls.clone(),
+            data: part.positions.clone(),
+            params,
+            outcome,
+            geometric_errors,
+            warm_start: warm.is_some(),
+            prepare_ms,
+            fit_ms,
+        },
+        kept_vertices: part.positions.len(),
+        prepared,
+        components,
+    })
+}

@@ -1,0 +1,133 @@
+//! From an arbitrary disk-like scan component to a regular triangular lattice with Loop
+//! subdivision connectivity: hole filling (virtual faces, never data), Floater mean-value
+//! parameterization onto a triangle, and resampling at the lattice points.
+
+pub mod param;
+
+use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::TriMesh;
+use glam::{DVec2, DVec3};
+
+#[derive(Debug, thiserror::Error)]
+pub enum RemeshError {
+    #[error("not a manifold mesh: {0}")]
+    NotManifold(String),
+    #[error("not disk-like: {0}")]
+    NotDisk(String),
+    #[error("parameterization failed: {0}")]
+    Parameterization(String),
+}
+
+/// Boundary loops as ordered vertex lists, walking boundary half-edges (face on the left).
+pub fn boundary_loops(topo: &Topology) -> Vec<Vec<u32>> {
+    let tri = &topo.triangles;
+    let mut next_on_boundary = vec![NONE; topo.vertex_count];
+    for (h, &t) in topo.twin.iter().enumerate() {
+        if t == NONE {
+            let (a, b) = (tri[h / 3][h % 3], tri[h / 3][(h + 1) % 3]);
+            next_on_boundary[a as usize] = b;
+        }
+    }
+    let mut seen = vec![false; topo.vertex_count];
+    let mut loops = Vec::new();
+    for start in 0..topo.vertex_count {
+        if next_on_boundary[start] == NONE || seen[start] {
+            continue;
+        }
+        let mut l = Vec::new();
+        let mut v = start as u32;
+        while !seen[v as usize] && v != NONE {
+            seen[v as usize] = true;
+            l.push(v);
+            v = next_on_boundary[v as usize];
+        }
+        loops.push(l);
+    }
+    loops
+}
+
+fn loop_length(positions: &[DVec3], l: &[u32]) -> f64 {
+    (0..l.len())
+        .map(|k| (positions[l[k] as usize] - positions[l[(k + 1) % l.len()] as usize]).length())
+        .sum()
+}
+
+/// A disk-like patch ready for parameterization: the input plus virtual hole fans.
+#[derive(Clone, Debug)]
+pub struct FilledPatch {
+    pub mesh: TriMesh,
+    /// Vertices at index >= `real_vertices` are virtual hole centres.
+    pub real_vertices: usize,
+    pub outer: Vec<u32>,
+    pub holes: usize,
+}
+
+/// Picks the longest boundary loop as the outer boundary and closes every other loop with a
+/// fan around a virtual centre vertex.
+pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
+    let topo = Topology::from_mesh(mesh).map_err(|e| RemeshError::NotManifold(e.to_string()))?;
+    let mut loops = boundary_loops(&topo);
+    if loops.is_empty() {
+        return Err(RemeshError::NotDisk("closed surface (no boundary)".into()));
+    }
+    loops.sort_by(|a, b| {
+        loop_length(&mesh.positions, b).total_cmp(&loop_length(&mesh.positions, a))
+    });
+    let outer = loops[0].clone();
+    let mut filled = mesh.clone();
+    for hole in &loops[1..] {
+        let c = hole
+            .iter()
+            .map(|&v| mesh.positions[v as usize])
+            .sum::<DVec3>()
+            / hole.len() as f64;
+        let centre = filled.positions.len() as u32;
+        filled.positions.push(c);
+        // The boundary runs with the face on its left; the fan closes it the other way.
+        for k in 0..hole.len() {
+            let (a, b) = (hole[k], hole[(k + 1) % hole.len()]);
+            filled.triangles.push([b, a, centre]);
+        }
+    }
+    let v = filled.positions.len() as i64;
+    let e = {
+        let t =
+            Topology::from_mesh(&filled).map_err(|e| RemeshError::NotManifold(e.to_string()))?;
+        t.edge_count() as i64
+    };
+    let chi = v - e + filled.triangles.len() as i64;
+    if chi != 1 {
+        return Err(RemeshError::NotDisk(format!(
+            "Euler characteristic {chi} after filling {} holes (a disk has 1; genus {})",
+            loops.len() - 1,
+            (1 - chi) / 2
+        )));
+    }
+    Ok(FilledPatch {
+        mesh: filled,
+        real_vertices: mesh.positions.len(),
+        outer,
+        holes: loops.len() - 1,
+    })
+}
+
+/// Corners of the domain triangle in the plane (equilateral, side 1). Barycentric
+/// coordinates w.r.t. these are the surface parameters (u, v, w).
+pub const DOMAIN: [DVec2; 3] = [
+    DVec2::new(1.0, 0.0),
+    DVec2::new(0.5, 0.866_025_403_784_438_6),
+    DVec2::new(0.0, 0.0),
+];
+
+/// Barycentric (u, v) of a planar point w.r.t. `DOMAIN` (u for corner 0, v for corner 1).
+pub fn to_barycentric(p: DVec2) -> (f64, f64) {
+    let [a, b, c] = DOMAIN;
+    let det = (a - c).perp_dot(b - c);
+    let u = (p - c).perp_dot(b - c) / det;
+    let v = (a - c).perp_dot(p - c) / det;
+    (u, v)
+}
+
+pub fn from_barycentric(u: f64, v: f64) -> DVec2 {
+    DOMAIN[0] * u + DOMAIN[1] * v + DOMAIN[2] * (1.0 - u - v)
+}

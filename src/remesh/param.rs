@@ -1,0 +1,316 @@
+//! Floater's mean-value parameterization with the outer boundary on the domain triangle
+//! (convex, so the map is bijective), and resampling on the regular lattice.
+
+use super::{fill_holes, from_barycentric, to_barycentric, FilledPatch, RemeshError, DOMAIN};
+use crate::mesh::TriMesh;
+use crate::surface::bezier::lattice_points;
+use glam::{DVec2, DVec3};
+use std::time::Instant;
+
+#[derive(Clone, Debug)]
+pub struct PreparedPatch {
+    /// Barycentric (u, v) of every real input vertex on the domain triangle.
+    pub uv: Vec<(f64, f64)>,
+    /// Lattice of `segments` per side, in lattice order, sampled on the patch.
+    pub lattice: Vec<DVec3>,
+    pub segments: usize,
+    pub holes: usize,
+    /// Triangles with negative area in the domain (zero-area ones along a straight domain
+    /// side, where three boundary vertices are collinear by construction, are not counted).
+    pub flipped_triangles: usize,
+    /// Outer boundary in (u, v), ordered: the trim of the scanned region.
+    pub trim: Vec<(f64, f64)>,
+    pub parameterization_ms: f64,
+    pub resample_ms: f64,
+}
+
+/// Parameterizes a clean, manifold, disk-like component and samples it on a lattice of
+/// `segments` per side.
+pub fn prepare(mesh: &TriMesh, segments: usize) -> Result<PreparedPatch, RemeshError> {
+    let t0 = Instant::now();
+    let patch = fill_holes(mesh)?;
+    let plane = mean_value_map(&patch)?;
+    let flipped = patch
+        .mesh
+        .triangles
+        .iter()
+        .filter(|t| {
+            let (a, b, c) = (
+                plane[t[0] as usize],
+                plane[t[1] as usize],
+                plane[t[2] as usize],
+            );
+            (b - a).perp_dot(c - a) < 0.0
+        })
+        .count();
+    let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let locator = Locator::new(&patch.mesh.triangles, &plane);
+    let lattice = lattice_points(segments)
+        .into_iter()
+        .map(|(i, j)| {
+            let q = from_barycentric(i as f64 / segments as f64, j as f64 / segments as f64);
+            let (f, b) = locator.locate(q);
+            let t = patch.mesh.triangles[f];
+            patch.mesh.positions[t[0] as usize] * b[0]
+                + patch.mesh.positions[t[1] as usize] * b[1]
+                + patch.mesh.positions[t[2] as usize] * b[2]
+        })
+        .collect();
+    let resample_ms = t1.elapsed().as_secs_f64() * 1e3;
+    Ok(PreparedPatch {
+        uv: plane[..patch.real_vertices]
+            .iter()
+            .map(|p| to_barycentric(*p))
+            .collect(),
+        lattice,
+        segments,
+        holes: patch.holes,
+        flipped_triangles: flipped,
+        trim: patch
+            .outer
+            .iter()
+            .map(|&v| to_barycentric(plane[v as usize]))
+            .collect(),
+        parameterization_ms,
+        resample_ms,
+    })
+}
+
+/// Outer boundary on the triangle by arc length (corner 0 at the boundary vertex farthest
+/// from the boundary's centroid, corners 1 and 2 a third and two thirds of the way round),
+/// interior by mean-value weights, solved with BiCGSTAB.
+fn mean_value_map(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshError> {
+    let pos = &patch.mesh.positions;
+    let n = pos.len();
+    let outer = &patch.outer;
+    let centroid = outer.iter().map(|&v| pos[v as usize]).sum::<DVec3>() / outer.len() as f64;
+    let start = (0..outer.len())
+        .max_by(|&a, &b| {
+            (pos[outer[a] as usize] - centroid)
+                .length()
+                .total_cmp(&(pos[outer[b] as usize] - centroid).length())
+        })
+        .unwrap_or(0);
+    let ring: Vec<u32> = (0..outer.len())
+        .map(|k| outer[(start + k) % outer.len()])
+        .collect();
+    let mut arc = vec![0.0; ring.len() + 1];
+    for k in 0..ring.len() {
+        arc[k + 1] =
+            arc[k] + (pos[ring[(k + 1) % ring.len()] as usize] - pos[ring[k] as usize]).length();
+    }
+    let total = arc[ring.len()].max(1e-300);
+    let mut plane = vec![DVec2::ZERO; n];
+    let mut fixed = vec![false; n];
+    for (k, &v) in ring.iter().enumerate() {
+        let s = 3.0 * arc[k] / total;
+        let side = (s.floor() as usize).min(2);
+        let f = s - side as f64;
+        plane[v as usize] = DOMAIN[side] * (1.0 - f) + DOMAIN[(side + 1) % 3] * f;
+        fixed[v as usize] = true;
+    }
+    // Mean-value weights: w_ij = (tan(a1/2) + tan(a2/2)) / |x_i - x_j|, angles at i.
+    let mut weights: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+    for t in &patch.mesh.triangles {
+        for k in 0..3 {
+            let (i, j, l) = (t[k] as usize, t[(k + 1) % 3], t[(k + 2) % 3]);
+            if fixed[i] {
+                continue;
+            }
+            let (ej, el) = (pos[j as usize] - pos[i], pos[l as usize] - pos[i]);
+            let (lj, ll) = (ej.length().max(1e-300), el.length().max(1e-300));
+            let angle = (ej.dot(el) / (lj * ll)).clamp(-1.0, 1.0).acos();
+            let th = (angle / 2.0).tan();
+            weights[i].push((j, th / lj));
+            weights[i].push((l, th / ll));
+        }
+    }
+    // Unknowns: the free vertices, numbered densely.
+    let free: Vec<usize> = (0..n).filter(|&v| !fixed[v]).collect();
+    let mut slot = vec![usize::MAX; n];
+    for (k, &v) in free.iter().enumerate() {
+        slot[v] = k;
+    }
+    let mut rows: Vec<Vec<(usize, f64)>> = Vec::with_capacity(free.len());
+    let mut rhs = vec![DVec2::ZERO; free.len()];
+    for (k, &v) in free.iter().enumerate() {
+        let total: f64 = weights[v].iter().map(|w| w.1).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return Err(RemeshError::Parameterization(format!(
+                "vertex {v} has no usable neighbours"
+            )));
+        }
+        let mut row = Vec::with_capacity(weights[v].len());
+        for &(j, w) in &weights[v] {
+            let lambda = w / total;
+            if fixed[j as usize] {
+                rhs[k] += plane[j as usize] * lambda;
+            } else {
+                row.push((slot[j as usize], lambda));
+            }
+        }
+        rows.push(row);
+    }
+    let x = bicgstab(&rows, &rhs, 1e-12, 5000).map_err(RemeshError::Parameterization)?;
+    for (k, &v) in free.iter().enumerate() {
+        plane[v] = x[k];
+    }
+    Ok(plane)
+}
+
+/// Solves (I - W) x = b for the mean-value system, both coordinates at once with
+/// component-wise scalars.
+fn bicgstab(
+    rows: &[Vec<(usize, f64)>],
+    b: &[DVec2],
+    tol: f64,
+    max_iter: usize,
+) -> Result<Vec<DVec2>, String> {
+    let apply = |x: &[DVec2]| -> Vec<DVec2> {
+        rows.iter()
+            .enumerate()
+            .map(|(i, row)| x[i] - row.iter().map(|&(j, w)| x[j] * w).sum::<DVec2>())
+            .collect()
+    };
+    let dot = |a: &[DVec2], b: &[DVec2]| -> DVec2 { a.iter().zip(b).map(|(x, y)| *x * *y).sum() };
+    let mut x = b.to_vec();
+    let ax = apply(&x);
+    let mut r: Vec<DVec2> = b.iter().zip(&ax).map(|(b, a)| *b - *a).collect();
+    let r0 = r.clone();
+    let bnorm = dot(b, b).max_element().sqrt().max(1e-300);
+    let (mut rho, mut alpha, mut omega) = (DVec2::ONE, DVec2::ONE, DVec2::ONE);
+    let mut v = vec![DVec2::ZERO; b.len()];
+    let mut p = vec![DVec2::ZERO; b.len()];
+    let safe = |num: DVec2, den: DVec2| {
+        DVec2::new(
+            if den.x != 0.0 { num.x / den.x } else { 0.0 },
+            if den.y != 0.0 { num.y / den.y } else { 0.0 },
+        )
+    };
+    for _ in 0..max_iter {
+        if dot(&r, &r).max_element().sqrt() <= tol * bnorm {
+            return Ok(x);
+        }
+        let rho_new = dot(&r0, &r);
+        let beta = safe(rho_new, rho) * safe(alpha, omega);
+        rho = rho_new;
+        for i in 0..p.len() {
+            p[i] = r[i] + beta * (p[i] - omega * v[i]);
+        }
+        v = apply(&p);
+        alpha = safe(rho, dot(&r0, &v));
+        let s: Vec<DVec2> = r.iter().zip(&v).map(|(r, v)| *r - alpha * *v).collect();
+        let t = apply(&s);
+        omega = safe(dot(&t, &s), dot(&t, &t));
+        for i in 0..x.len() {
+            x[i] += alpha * p[i] + omega * s[i];
+            r[i] = s[i] - omega * t[i];
+        }
+    }
+    if dot(&r, &r).max_element().sqrt() <= 1e-8 * bnorm {
+        Ok(x)
+    } else {
+        Err("BiCGSTAB did not converge".into())
+    }
+}
+
+/// Point location in the planar triangulation through a uniform grid of buckets.
+struct Locator<'a> {
+    tris: &'a [[u32; 3]],
+    plane: &'a [DVec2],
+    lo: DVec2,
+    cell: f64,
+    dim: usize,
+    buckets: Vec<Vec<u32>>,
+}
+
+impl<'a> Locator<'a> {
+    fn new(tris: &'a [[u32; 3]], plane: &'a [DVec2]) -> Self {
+        let lo = DVec2::new(-1e-9, -1e-9);
+        let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
+        let cell = 1.0 / dim as f64 + 1e-12;
+        let mut buckets = vec![Vec::new(); dim * dim];
+        for (f, t) in tris.iter().enumerate() {
+            let ps = [
+                plane[t[0] as usize],
+                plane[t[1] as usize],
+                plane[t[2] as usize],
+            ];
+            let mn = ps[0].min(ps[1]).min(ps[2]);
+            let mx = ps[0].max(ps[1]).max(ps[2]);
+            let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
+            let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    buckets[y * dim + x].push(f as u32);
+                }
+            }
+        }
+        Self {
+            tris,
+            plane,
+            lo,
+            cell,
+            dim,
+            buckets,
+        }
+    }
+
+    fn cell_of(lo: DVec2, cell: f64, dim: usize, p: DVec2) -> (usize, usize) {
+        let q = (p - lo) / cell;
+        (
+            (q.x.max(0.0) as usize).min(dim - 1),
+            (q.y.max(0.0) as usize).min(dim - 1),
+        )
+    }
+
+    fn bary(&self, f: u32, q: DVec2) -> [f64; 3] {
+        let t = self.tris[f as usize];
+        let (a, b, c) = (
+            self.plane[t[0] as usize],
+            self.plane[t[1] as usize],
+            self.plane[t[2] as usize],
+        );
+        let det = (b - a).perp_dot(c - a);
+        if det == 0.0 {
+            return [-1.0, -1.0, -1.0];
+        }
+        let l1 = (q - a).perp_dot(c - a) / det;
+        let l2 = (b - a).perp_dot(q - a) / det;
+        [1.0 - l1 - l2, l1, l2]
+    }
+
+    /// The containing triangle and barycentric weights; on the boundary or in a numerical
+    /// gap, the nearby triangle whose weights are least negative, clamped.
+    fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {
+        let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
+        let mut best = (f64::MIN, 0usize, [1.0, 0.0, 0.0]);
+        for r in 0..self.dim {
+            for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
+                for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
+                    for &f in &self.buckets[y * self.dim + x] {
+                        let b = self.bary(f, q);
+                        let worst = b[0].min(b[1]).min(b[2]);
+                        if worst > best.0 {
+                            best = (worst, f as usize, b);
+                        }
+                    }
+                }
+            }
+            if best.0 >= -1e-12 || (best.0 > f64::MIN && r >= 1) {
+                break;
+            }
+        }
+        let b = best.2.map(|x| x.max(0.0));
+        let s = b[0] + b[1] + b[2];
+        (
+            best.1,
+            if s > 0.0 {
+                b.map(|x| x / s)
+            } else {
+                [1.0 / 3.0; 3]
+            },
+        )
+    }
+}

@@ -1,0 +1,70 @@
+//! `trispline fit` on scans without subdivision connectivity: remeshed onto a lattice and
+//! fitted; closed and higher-genus meshes refused with the reason.
+
+use std::path::Path;
+use std::process::Command;
+use trispline::testdata::shared_data;
+
+fn trispline(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_trispline"))
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+#[test]
+fn an_irregular_patch_is_remeshed_and_fitted_with_a_trim() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("out");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    let o = trispline(&[
+        "fit",
+        input.to_str().unwrap_or_default(),
+        "--lattice",
+        "12",
+        "--iterations",
+        "200",
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["remeshed"], true);
+    assert_eq!(report["control_points"], 91);
+    assert_eq!(
+        report["data_points"], 1254,
+        "every scan vertex is a data point; no virtual ones"
+    );
+    // The dome spans 2.83 units; a degree-12 patch follows it to well under 1 %.
+    let rms = report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("rms");
+    assert!(rms < 0.01, "geometric rms {rms}");
+    let surface: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("surface.json")).expect("surface"))
+            .expect("json");
+    assert!(surface["trim"]["outer"]
+        .as_array()
+        .is_some_and(|a| a.len() > 10));
+}
+
+#[test]
+fn closed_and_higher_genus_meshes_are_refused() {
+    for rel in ["models/decimated-max.obj", "models/fertility.off"] {
+        let Some(path) = shared_data(rel) else { return };
+        let dir = tempfile::tempdir().expect("tmp");
+        let out = dir.path().join("out");
+        let o = trispline(&[
+            "fit",
+            path.to_str().unwrap_or_default(),
+            "--out",
+            out.to_str().unwrap_or_default(),
+        ]);
+        assert_eq!(o.status.code(), Some(2), "{rel}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("not disk-like"), "{rel}: {err}");
+        assert!(!out.join("surface.json").exists());
+    }
+}
