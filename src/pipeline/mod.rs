@@ -4,6 +4,7 @@
 pub mod geometric;
 pub mod lattice;
 pub mod scan;
+pub mod worker;
 
 use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
 use crate::mesh::detect::Hierarchy;
