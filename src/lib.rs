@@ -4,6 +4,7 @@
 //! `mesh`, `surface` and `fit` are pure geometry on `f64`.
 
 pub mod cli;
+pub mod daemon;
 pub mod fit;
 pub mod io;
 pub mod mesh;

@@ -20,6 +20,8 @@ enum Command {
     Coarsen(cli::mesh_tools::CoarsenArgs),
     /// Fit a triangular surface to a mesh with subdivision connectivity.
     Fit(cli::fit::FitArgs),
+    /// The daemon: watch a folder, fit every patch that arrives.
+    Watch(cli::watch::WatchArgs),
 }
 
 fn main() -> ExitCode {
@@ -29,6 +31,7 @@ fn main() -> ExitCode {
         Command::Subdivide(a) => cli::mesh_tools::subdivide_cmd(a),
         Command::Coarsen(a) => cli::mesh_tools::coarsen_cmd(a),
         Command::Fit(a) => cli::fit::run(a),
+        Command::Watch(a) => cli::watch::run_watch(a),
     };
     match result {
         Ok(code) => code,

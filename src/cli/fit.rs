@@ -1,13 +1,13 @@
 //! `trispline fit`: one patch in, `surface.json`, `surface.glb` and `report.json` out.
 
 use crate::fit::Method;
-use crate::io::{read_mesh_file, LoadOptions};
+use crate::io::{read_mesh_file, write_atomic, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::worker::{run_patch, WorkerConfig};
 use crate::pipeline::{PipelineError, SurfaceKind};
 use anyhow::Context;
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
@@ -96,20 +96,4 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         &serde_json::to_vec_pretty(&out.surface)?,
     )?;
     Ok(ExitCode::SUCCESS)
-}
-
-/// Temp file in the same folder, fsync, rename, fsync the folder.
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use std::io::Write;
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("temp file in {}", dir.display()))?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path)
-        .with_context(|| format!("renaming into {}", path.display()))?;
-    if let Ok(d) = std::fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
 }

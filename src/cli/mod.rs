@@ -1,3 +1,4 @@
 //! Subcommand implementations; main.rs only dispatches.
 pub mod fit;
 pub mod mesh_tools;
+pub mod watch;

@@ -181,3 +181,27 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
         )),
     }
 }
+
+/// Writes through a temp file in the same folder: write, fsync, rename, fsync the folder,
+/// so that readers see the old complete file or the new complete one, never a partial one.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    use std::io::Write;
+    let name = path.display().to_string();
+    let err = |e: &dyn std::fmt::Display| IoError::new(&name, None, e.to_string());
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".trispline-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map_err(|e| err(&e))?;
+    tmp.write_all(bytes).map_err(|e| err(&e))?;
+    tmp.as_file().sync_all().map_err(|e| err(&e))?;
+    tmp.persist(path).map_err(|e| err(&e.error))?;
+    if let Ok(d) = std::fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}

@@ -1,0 +1,220 @@
+//! The daemon as a process: --once over a folder with versions and a corrupt file, restart
+//! skipping unchanged inputs, warm start of a new version, config errors, SIGTERM.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const FAST_CONFIG: &str = r#"
+[fit]
+surface = "bezier"
+levels = 1
+method = "cg"
+inverse = "exact"
+max_iterations = 30
+tolerance_rel = 1e-3
+lattice = 8
+smoothing = 1e-5
+tessellation = 16
+
+[daemon]
+settle_ms = 0
+poll_interval_ms = 50
+max_file_bytes = 10000000
+max_vertices = 1000000
+"#;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_trispline"))
+}
+
+fn events(out: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(out.join("events.ndjson"))
+        .unwrap_or_default()
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("event lines are JSON"))
+        .collect()
+}
+
+fn fitted_events(out: &Path) -> usize {
+    events(out)
+        .iter()
+        .filter(|e| matches!(e["status"].as_str(), Some("met" | "capped" | "stalled")))
+        .count()
+}
+
+fn sample(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples/patches")
+        .join(name)
+}
+
+#[test]
+fn once_fits_versions_quarantines_and_warm_starts() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (inbox, out, cfg) = (
+        tmp.path().join("in"),
+        tmp.path().join("out"),
+        tmp.path().join("fast.toml"),
+    );
+    std::fs::create_dir_all(&inbox).expect("mkdir");
+    std::fs::write(&cfg, FAST_CONFIG).expect("config");
+    std::fs::copy(sample("dome.obj"), inbox.join("dome@1.obj")).expect("copy");
+    std::fs::copy(sample("dome.obj"), inbox.join("dome@2.obj")).expect("copy");
+    std::fs::copy(sample("ripple.off"), inbox.join("ripple.off")).expect("copy");
+    std::fs::write(
+        inbox.join("broken.ply"),
+        b"ply\nformat ascii 1.0\nelement vertex 99\n",
+    )
+    .expect("write");
+    std::fs::write(inbox.join(".hidden.obj"), b"v 0 0 0\n").expect("write");
+    std::fs::write(inbox.join("upload.obj.part"), b"v 0 0 0\n").expect("write");
+    let run = || {
+        bin()
+            .args([
+                "watch",
+                inbox.to_str().unwrap_or_default(),
+                "--out",
+                out.to_str().unwrap_or_default(),
+                "--config",
+                cfg.to_str().unwrap_or_default(),
+                "--once",
+            ])
+            .output()
+            .expect("runs")
+    };
+    let o = run();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for patch in ["dome", "ripple"] {
+        let s: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(out.join(patch).join("surface.json")).expect("surface"),
+        )
+        .expect("json");
+        assert_eq!(s["schema"], "trispline.surface/1");
+        assert!(out.join(patch).join("surface.glb").exists());
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("dome/report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(
+        report["version"], "dome@2.obj",
+        "the newest version is fitted"
+    );
+    assert_eq!(report["warm_start"], false);
+    let ev = events(&out);
+    assert!(ev.iter().any(|e| e["status"] == "superseded"
+        && e["input"]
+            .as_str()
+            .is_some_and(|i| i.ends_with("dome@1.obj"))));
+    assert!(ev
+        .iter()
+        .any(|e| e["status"] == "rejected" && e["patch"] == "broken"));
+    assert!(
+        out.join("quarantine/broken.ply").exists()
+            && out.join("quarantine/broken.ply.error.json").exists()
+    );
+    assert!(!inbox.join("broken.ply").exists());
+    assert!(
+        inbox.join("dome@1.obj").exists(),
+        "superseded inputs are never deleted"
+    );
+    assert_eq!(fitted_events(&out), 2);
+    // Restart: unchanged inputs are skipped by content hash.
+    let o = run();
+    assert!(o.status.success());
+    assert_eq!(
+        fitted_events(&out),
+        2,
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // A new version of a known patch starts from the previous control net.
+    let mut text = std::fs::read_to_string(sample("dome.obj")).expect("read");
+    text.push_str("# version 3\n");
+    std::fs::write(inbox.join("dome@3.obj"), text).expect("write");
+    let o = run();
+    assert!(o.status.success());
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("dome/report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["version"], "dome@3.obj");
+    assert_eq!(report["warm_start"], true);
+}
+
+#[test]
+fn config_errors_name_the_key_and_exit_2() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let cfg = tmp.path().join("bad.toml");
+    std::fs::write(&cfg, FAST_CONFIG.replace("lattice = 8", "latice = 8")).expect("write");
+    let o = bin()
+        .args([
+            "watch",
+            ".",
+            "--out",
+            "x",
+            "--config",
+            cfg.to_str().unwrap_or_default(),
+            "--check-config",
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("latice") && err.contains("line"), "{err}");
+    let o = bin()
+        .args(["watch", ".", "--out", "x", "--print-config"])
+        .output()
+        .expect("runs");
+    assert!(o.status.success() && String::from_utf8_lossy(&o.stdout).contains("[fit]"));
+}
+
+#[test]
+fn sigterm_stops_the_daemon_gracefully() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (inbox, out, cfg) = (
+        tmp.path().join("in"),
+        tmp.path().join("out"),
+        tmp.path().join("fast.toml"),
+    );
+    std::fs::create_dir_all(&inbox).expect("mkdir");
+    std::fs::write(&cfg, FAST_CONFIG).expect("config");
+    let mut child = bin()
+        .args([
+            "watch",
+            inbox.to_str().unwrap_or_default(),
+            "--out",
+            out.to_str().unwrap_or_default(),
+            "--config",
+            cfg.to_str().unwrap_or_default(),
+        ])
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawns");
+    // A file dropped while it runs is fitted.
+    std::fs::copy(sample("saddle@0001.ply"), inbox.join("saddle@0001.ply")).expect("copy");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !out.join("saddle/surface.json").exists() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(out.join("saddle/surface.json").exists());
+    let pid = child.id().to_string();
+    Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .expect("kill");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(s) = child.try_wait().expect("wait") {
+            break Some(s);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "exit status {status:?}"
+    );
+}
