@@ -139,8 +139,7 @@ mod tests {
     fn unknown_key_is_named_with_line_and_column() {
         let text = DEFAULT_CONFIG.replace("lattice = 16", "latice = 16");
         let e = DaemonConfig::parse(&text, "my.toml")
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(
             e.contains("my.toml") && e.contains("latice") && e.contains("line"),
@@ -152,8 +151,7 @@ mod tests {
     fn out_of_range_value_is_refused() {
         let text = DEFAULT_CONFIG.replace("levels = 2", "levels = 9");
         let e = DaemonConfig::parse(&text, "my.toml")
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
         assert!(e.contains("fit.levels"), "{e}");
     }
