@@ -120,7 +120,7 @@ fn refuses_unsupported_inputs_with_status_2() {
         err.contains("subdivision connectivity") && err.contains("not disk-like"),
         "{err}"
     );
-    // The Loop surface is refused with its reason.
+    // The Loop surface of the input's own net is not built: the lattice is remeshed instead.
     let input = dir.path().join("patch.obj");
     write_obj(&input, &lattice_patch(16)).expect("write");
     let o = trispline(&[
@@ -128,10 +128,21 @@ fn refuses_unsupported_inputs_with_status_2() {
         input.to_str().unwrap_or_default(),
         "--surface",
         "loop",
+        "--lattice",
+        "6",
         "--out",
         out.to_str().unwrap_or_default(),
     ]);
-    assert_eq!(o.status.code(), Some(2));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["remeshed"], true);
+    assert_eq!(
+        report["control_points"], 55,
+        "(6 + 3 + 1)(6 + 3 + 2) / 2 control points"
+    );
+    std::fs::remove_dir_all(&out).expect("clean");
     // A subdivided closed mesh has connectivity but no single-triangle lattice: Bezier refuses.
     let tet = TriMesh::new(
         vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],

@@ -81,7 +81,7 @@ pub fn fit_subdivided(
 ) -> Result<PatchFit, PipelineError> {
     if opts.surface == SurfaceKind::Loop {
         return Err(PipelineError::Unsupported(
-            "the Loop limit surface is not built yet; use --surface bezier".into(),
+            "the exact Loop surface of an input's own coarse net (extraordinary vertices, Loop boundary rules) is not built yet; the input is remeshed onto a regular lattice instead".into(),
         ));
     }
     let t0 = Instant::now();

@@ -2,6 +2,7 @@
 //! onto the domain triangle, resample on a lattice of `lattice * 2^levels` segments,
 //! inverse-subdivide it for the initial net, then fit the ORIGINAL scan points.
 
+use super::SurfaceKind;
 use super::{geometric, FitOptions, PatchFit, PipelineError};
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::{fit, Collocation, Csr, FitProblem};
@@ -9,7 +10,8 @@ use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::coarsen;
 use crate::mesh::stats::UnionFind;
 use crate::remesh::param::{prepare, PreparedPatch};
-use crate::surface::bezier::{lattice_triangles, BezierTriangle};
+use crate::surface::bezier::{lattice_index, lattice_points, lattice_triangles, BezierTriangle};
+use crate::surface::box_spline::LatticeSpline;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
@@ -95,11 +97,12 @@ pub fn fit_scan(
     let lattice_mesh = TriMesh::new(prepared.lattice.clone(), lattice_triangles(segments));
     // The lattice has subdivision connectivity by construction; its even vertices come in
     // lattice order, so the coarse net is already in Bezier lattice order.
-    let initial = coarsen(&lattice_mesh, opts.levels, opts.inverse)
+    let coarse = coarsen(&lattice_mesh, opts.levels, opts.inverse)
         .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?
         .mesh
         .positions;
-    let surface = BezierTriangle::new(n0);
+    let (surface, initial, net_triangles) = surface_and_net(opts.surface, n0, coarse);
+    let surface = surface.as_ref();
     let params: Vec<SurfaceParam> = prepared
         .uv
         .iter()
@@ -117,10 +120,7 @@ pub fn fit_scan(
         surface.control_count(),
         rows.iter().map(|r| r.as_slice()),
     ));
-    let fairness = Collocation::new(umbrella_laplacian(
-        surface.control_count(),
-        &lattice_triangles(n0),
-    ));
+    let fairness = Collocation::new(umbrella_laplacian(surface.control_count(), &net_triangles));
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
     let smoothing = scan.smoothing * part.positions.len() as f64 / surface.control_count() as f64;
     let problem = FitProblem {
@@ -139,7 +139,7 @@ pub fn fit_scan(
         .positions
         .par_iter()
         .zip(params.par_iter())
-        .map(|(p, u)| geometric::foot_point(&surface, &outcome.controls, *p, *u).1)
+        .map(|(p, u)| geometric::foot_point(surface, &outcome.controls, *p, *u).1)
         .collect();
     Ok(ScanFit {
         fit: PatchFit {
@@ -158,4 +158,54 @@ pub fn fit_scan(
         prepared,
         components,
     })
+}
+
+/// The surface over the domain lattice of `n0` segments and its initial control net from
+/// the inverse-subdivided resampled lattice (`coarse`, lattice order). The Loop surface
+/// (box spline over the lattice) has one more ring of control points outside the domain;
+/// they start at their nearest domain lattice point and the fairness term shapes them.
+/// The surface of a kind over a domain lattice of `n0` segments.
+pub fn surface_for(kind: SurfaceKind, n0: usize) -> Box<dyn TriSurface> {
+    match kind {
+        SurfaceKind::Bezier => Box::new(BezierTriangle::new(n0)),
+        SurfaceKind::Loop => Box::new(LatticeSpline::new(n0)),
+    }
+}
+
+pub fn surface_and_net(
+    kind: SurfaceKind,
+    n0: usize,
+    coarse: Vec<DVec3>,
+) -> (Box<dyn TriSurface>, Vec<DVec3>, Vec<[u32; 3]>) {
+    match kind {
+        SurfaceKind::Bezier => (
+            Box::new(BezierTriangle::new(n0)),
+            coarse,
+            lattice_triangles(n0),
+        ),
+        SurfaceKind::Loop => {
+            let s = LatticeSpline::new(n0);
+            let m = s.control_segments();
+            let n = n0 as i64;
+            let net = lattice_points(m)
+                .into_iter()
+                .map(|(a, b)| {
+                    let (mut i, mut j) = (a as i64 - 1, b as i64 - 1);
+                    i = i.clamp(0, n);
+                    j = j.clamp(0, n);
+                    if i + j > n {
+                        let over = i + j - n;
+                        let take_i = over.min(i);
+                        i -= take_i;
+                        j -= over - take_i;
+                    }
+                    coarse
+                        .get(lattice_index(n0, i as usize, j as usize))
+                        .copied()
+                        .unwrap_or_default()
+                })
+                .collect();
+            (Box::new(s), net, lattice_triangles(m))
+        }
+    }
 }

@@ -7,8 +7,8 @@ use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepStats};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::mesh::inverse::InverseMethod;
-use crate::surface::bezier::{lattice_points, lattice_triangles, BezierTriangle};
-use crate::surface::{SurfaceParam, TriSurface};
+use crate::surface::bezier::{lattice_points, lattice_triangles};
+use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -106,7 +106,7 @@ pub fn run_patch(
     let mut scan_info = None;
     let fitted = match fit_subdivided(mesh, &opts, previous) {
         Ok(f) => f,
-        Err(PipelineError::NoSubdivision(why)) if cfg.surface == SurfaceKind::Bezier => {
+        Err(PipelineError::NoSubdivision(why) | PipelineError::Unsupported(why)) => {
             // No subdivision connectivity: remesh the scan onto a lattice.
             let scan = ScanOptions {
                 lattice: cfg.lattice,
@@ -151,16 +151,31 @@ pub fn run_patch(
 }
 
 fn surface_json(f: &PatchFit, report: &serde_json::Value) -> serde_json::Value {
-    json!({
-        "schema": "trispline.surface/1",
-        "kind": "bezier",
-        "degree": f.degree,
-        "domain": "reference triangle: barycentric (u, v, w = 1 - u - v)",
-        "lattice_ordering": "control point P_{i,j,k} (i + j + k = degree) has weight degree!/(i! j! k!) u^i v^j w^k and sits at index j*(degree+1) - j*(j-1)/2 + i",
-        "control_points": f.controls.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
-        "fit": report["final"].clone(),
-        "status": report["status"].clone(),
-    })
+    let controls = f
+        .controls
+        .iter()
+        .map(|p| [p.x, p.y, p.z])
+        .collect::<Vec<_>>();
+    let mut v = match f.surface {
+        SurfaceKind::Bezier => json!({
+            "kind": "bezier",
+            "degree": f.degree,
+            "lattice_ordering": "control point P_{i,j,k} (i + j + k = degree) has weight degree!/(i! j! k!) u^i v^j w^k and sits at index j*(degree+1) - j*(j-1)/2 + i",
+        }),
+        SurfaceKind::Loop => json!({
+            "kind": "loop",
+            "domain_segments": f.degree,
+            "control_lattice_segments": f.degree + 3,
+            "lattice_ordering": "the domain triangle is divided into a lattice of n = domain_segments; control point (i, j), i, j >= -1, i + j <= n + 1, sits at index b*(m+1) - b*(b-1)/2 + a with a = i + 1, b = j + 1, m = n + 3",
+            "basis": "Loop limit surface of the regular control lattice: on every domain triangle the quartic three-direction box spline of its 12 surrounding control points",
+        }),
+    };
+    v["schema"] = json!("trispline.surface/1");
+    v["domain"] = json!("reference triangle: barycentric (u, v, w = 1 - u - v)");
+    v["control_points"] = json!(controls);
+    v["fit"] = report["final"].clone();
+    v["status"] = report["status"].clone();
+    v
 }
 
 fn step_json(s: &StepStats) -> serde_json::Value {
@@ -208,7 +223,7 @@ fn tessellated_glb(
     tolerance: f64,
     trim: Option<&[(f64, f64)]>,
 ) -> Vec<u8> {
-    let surface = BezierTriangle::new(f.degree);
+    let surface = super::scan::surface_for(f.surface, f.degree);
     let pts = lattice_points(segments);
     let params: Vec<SurfaceParam> = pts
         .iter()

@@ -1,6 +1,7 @@
 //! Triangular surfaces behind one trait: value, derivatives and sparse basis rows.
 
 pub mod bezier;
+pub mod box_spline;
 
 use glam::DVec3;
 

@@ -1,0 +1,379 @@
+//! The Loop limit surface of a regular triangular lattice control net: the quartic
+//! three-direction box spline. Each domain triangle's patch depends on 12 control points.
+//!
+//! The 15 Bezier ordinates of a patch as combinations of its 12 control points are not
+//! typed in from a table: they are derived once from Loop subdivision itself (two levels of
+//! subdivision of a regular lattice, the limit-position mask at the 15 points of the
+//! quarter lattice of one face, then quartic interpolation). The tests check the result
+//! against limit masks at points it was not derived from.
+//!
+//! Control net: a lattice of `n + 3` segments whose origin is shifted by (-1, -1), so that
+//! every triangle of the domain lattice (n segments, parameter (u, v) = (x / n, y / n)) has
+//! its full 12-point neighbourhood; the outer ring of control points has no data of its own.
+
+use super::bezier::{lattice_index, lattice_len, lattice_points, BezierTriangle};
+use super::{BasisDerivRows, SurfaceParam, TriSurface};
+use crate::mesh::detect::Hierarchy;
+use crate::mesh::loop_subdiv::loop_step;
+use crate::mesh::topology::Topology;
+use std::sync::OnceLock;
+
+/// Offsets of the 12 control points of the up triangle (0,0),(1,0),(0,1).
+pub const STENCIL: [(i64, i64); 12] = [
+    (0, 0),
+    (1, 0),
+    (0, 1),
+    (-1, 1),
+    (-1, 0),
+    (0, -1),
+    (1, -1),
+    (2, 0),
+    (1, 1),
+    (2, -1),
+    (0, 2),
+    (-1, 2),
+];
+
+/// 15 x 12: Bezier ordinate (lattice order of degree 4) from the 12 stencil points.
+fn bezier_from_stencil() -> &'static [[f64; 12]; 15] {
+    static MATRIX: OnceLock<[[f64; 12]; 15]> = OnceLock::new();
+    MATRIX.get_or_init(derive_matrix)
+}
+
+fn derive_matrix() -> [[f64; 12]; 15] {
+    // A regular planar lattice large enough that the face at (4, 3) and everything within
+    // two rings of it stay regular through two subdivisions.
+    let n = 10;
+    let pts = lattice_points(n);
+    let tris = super::bezier::lattice_triangles(n);
+    let topo = match Topology::build(pts.len(), &tris) {
+        Ok(t) => t,
+        Err(_) => return [[0.0; 12]; 15],
+    };
+    let s1 = loop_step(&topo);
+    let topo1 = Topology::build(s1.operator.rows(), &s1.triangles).unwrap_or_else(|_| topo.clone());
+    let s2 = loop_step(&topo1);
+    let topo2 =
+        Topology::build(s2.operator.rows(), &s2.triangles).unwrap_or_else(|_| topo1.clone());
+    // Where each fine vertex sits: its coarse face and barycentric weights.
+    let (h, _) = Hierarchy::detect(&topo2, 2);
+    let params = h.fine_vertex_params(&topo2);
+    let coarse_tris = h
+        .levels
+        .last()
+        .map(|l| l.coarse_triangles.clone())
+        .unwrap_or_default();
+    let coarse_map = h.coarsest_to_fine();
+    // Lattice coordinates of every fine vertex.
+    let coord_of_fine = |v: usize| -> (f64, f64) {
+        let (f, u, w1) = params[v];
+        let t = coarse_tris[f as usize];
+        let c = |k: usize| {
+            let (i, j) = pts[coarse_map[t[k] as usize] as usize];
+            (i as f64, j as f64)
+        };
+        let w = 1.0 - u - w1;
+        let (a, b, cc) = (c(0), c(1), c(2));
+        (u * a.0 + w1 * b.0 + w * cc.0, u * a.1 + w1 * b.1 + w * cc.1)
+    };
+    let (fi, fj) = (4i64, 3i64);
+    let mut targets = Vec::new();
+    for (a, b) in lattice_points(4) {
+        let want = (fi as f64 + a as f64 / 4.0, fj as f64 + b as f64 / 4.0);
+        let found = (0..params.len()).find(|&v| {
+            let c = coord_of_fine(v);
+            (c.0 - want.0).abs() < 1e-9 && (c.1 - want.1).abs() < 1e-9
+        });
+        targets.push(found.unwrap_or(0));
+    }
+    let bern = BezierTriangle::new(4);
+    let mut bmat = nalgebra::DMatrix::<f64>::zeros(15, 15);
+    for (r, (a, b)) in lattice_points(4).into_iter().enumerate() {
+        let mut row = Vec::new();
+        bern.basis_row(
+            SurfaceParam {
+                face: 0,
+                u: a as f64 / 4.0,
+                v: b as f64 / 4.0,
+            },
+            &mut row,
+        );
+        for (c, w) in row {
+            bmat[(r, c as usize)] = w;
+        }
+    }
+    let Some(inv) = bmat.try_inverse() else {
+        return [[0.0; 12]; 15];
+    };
+    let mut out = [[0.0; 12]; 15];
+    for (k, (di, dj)) in STENCIL.iter().enumerate() {
+        let mut field = vec![0.0; pts.len()];
+        let idx = lattice_index(n, (fi + di) as usize, (fj + dj) as usize);
+        field[idx] = 1.0;
+        let apply = |op: &crate::mesh::loop_subdiv::SparseOperator, x: &[f64]| -> Vec<f64> {
+            (0..op.rows())
+                .map(|i| {
+                    let (c, w) = op.row(i);
+                    c.iter().zip(w).map(|(&j, &w)| x[j as usize] * w).sum()
+                })
+                .collect()
+        };
+        let fine = apply(&s2.operator, &apply(&s1.operator, &field));
+        // Regular interior limit mask: chi = 1/12.
+        let values: Vec<f64> = targets
+            .iter()
+            .map(|&v| {
+                let ring = topo2.ring(v as u32);
+                0.5 * fine[v] + ring.iter().map(|&w| fine[w as usize]).sum::<f64>() / 12.0
+            })
+            .collect();
+        let coeffs = &inv * nalgebra::DVector::from_vec(values);
+        for (r, row) in out.iter_mut().enumerate() {
+            row[k] = coeffs[r];
+        }
+    }
+    out
+}
+
+#[derive(Clone, Debug)]
+pub struct LatticeSpline {
+    /// Domain lattice segments per side.
+    pub n: usize,
+}
+
+impl LatticeSpline {
+    pub fn new(n: usize) -> Self {
+        Self { n: n.max(1) }
+    }
+
+    /// Segments of the control lattice (one extra ring on every side).
+    pub fn control_segments(&self) -> usize {
+        self.n + 3
+    }
+
+    /// Control index of domain-lattice coordinates (i, j), i, j >= -1, i + j <= n + 1.
+    pub fn control_index(&self, i: i64, j: i64) -> usize {
+        lattice_index(self.control_segments(), (i + 1) as usize, (j + 1) as usize)
+    }
+
+    /// The patch containing p: its 12 control indices, local (u, v), and whether it is a
+    /// down triangle (local coordinates and first derivatives flip sign).
+    fn locate(&self, p: SurfaceParam) -> ([usize; 12], f64, f64, bool) {
+        let n = self.n as f64;
+        let x = (p.u * n).clamp(0.0, n);
+        let y = (p.v * n).clamp(0.0, n - x);
+        let mut i = (x.floor() as i64).clamp(0, self.n as i64 - 1);
+        let j = (y.floor() as i64).clamp(0, self.n as i64 - 1 - i);
+        let mut fx = x - i as f64;
+        let fy = y - j as f64;
+        // Points on the far edge of a cell row may round into a missing cell.
+        if i + j > self.n as i64 - 1 {
+            let over = i + j - (self.n as i64 - 1);
+            i -= over;
+            fx += over as f64;
+        }
+        let down = fx + fy > 1.0 && i + j < self.n as i64 - 1;
+        let mut ids = [0usize; 12];
+        if down {
+            for (k, (di, dj)) in STENCIL.iter().enumerate() {
+                ids[k] = self.control_index(i + 1 - di, j + 1 - dj);
+            }
+            (ids, 1.0 - fx, 1.0 - fy, true)
+        } else {
+            for (k, (di, dj)) in STENCIL.iter().enumerate() {
+                ids[k] = self.control_index(i + di, j + dj);
+            }
+            (ids, fx, fy, false)
+        }
+    }
+}
+
+impl TriSurface for LatticeSpline {
+    fn control_count(&self) -> usize {
+        lattice_len(self.control_segments())
+    }
+
+    fn domain_face_count(&self) -> usize {
+        self.n * self.n
+    }
+
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        let mut rows = BasisDerivRows::default();
+        self.basis_rows_with_derivatives(p, &mut rows);
+        out.clear();
+        out.extend(
+            rows.indices
+                .iter()
+                .zip(&rows.weights)
+                .map(|(&i, w)| (i, w[0])),
+        );
+    }
+
+    fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
+        let (ids, lu, lv, down) = self.locate(p);
+        let m = bezier_from_stencil();
+        let mut bern = BasisDerivRows::default();
+        BezierTriangle::new(4).basis_rows_with_derivatives(
+            SurfaceParam {
+                face: 0,
+                u: lu,
+                v: lv,
+            },
+            &mut bern,
+        );
+        let n = self.n as f64;
+        let (s1, s2) = if down { (-n, n * n) } else { (n, n * n) };
+        out.indices.clear();
+        out.weights.clear();
+        for (k, &id) in ids.iter().enumerate() {
+            let mut w = [0.0; 6];
+            for (r, bw) in bern.weights.iter().enumerate() {
+                let c = m[r][k];
+                w[0] += c * bw[0];
+                w[1] += c * bw[1] * s1;
+                w[2] += c * bw[2] * s1;
+                w[3] += c * bw[3] * s2;
+                w[4] += c * bw[4] * s2;
+                w[5] += c * bw[5] * s2;
+            }
+            out.indices.push(id as u32);
+            out.weights.push(w);
+        }
+    }
+
+    fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
+        BezierTriangle::new(1).step(p, du, dv)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+
+    #[test]
+    fn equals_loop_limit_masks_at_points_it_was_not_derived_from() {
+        // Control net = a lattice mesh with bumpy heights; subdivide it three times and
+        // compare the limit mask at interior fine vertices with the spline there.
+        let n = 4;
+        let s = LatticeSpline::new(n);
+        let m = s.control_segments();
+        let controls: Vec<DVec3> = lattice_points(m)
+            .into_iter()
+            .map(|(a, b)| DVec3::new(a as f64, b as f64, ((a * 7 + b * 13) % 5) as f64 * 0.1))
+            .collect();
+        let mesh =
+            crate::TriMesh::new(controls.clone(), super::super::bezier::lattice_triangles(m));
+        let fine = crate::mesh::loop_subdiv::subdivide(&mesh, 3).expect("manifold");
+        let topo = Topology::from_mesh(&fine).expect("manifold");
+        let mut checked = 0;
+        for v in 0..fine.positions.len() as u32 {
+            let ring = topo.ring(v);
+            if topo.is_boundary(v) || ring.len() != 6 {
+                continue;
+            }
+            // Loop keeps linear functions of the lattice: x, y of the fine vertex are its
+            // lattice coordinates. The limit of x, y is x, y again on a regular lattice.
+            let p = fine.positions[v as usize];
+            let (x, y) = (p.x - 1.0, p.y - 1.0);
+            if x < 0.0 || y < 0.0 || x + y > n as f64 {
+                continue;
+            }
+            let limit = fine.positions[v as usize] * 0.5
+                + ring
+                    .iter()
+                    .map(|&w| fine.positions[w as usize])
+                    .sum::<DVec3>()
+                    / 12.0;
+            let e = s.evaluate(
+                &controls,
+                SurfaceParam {
+                    face: 0,
+                    u: x / n as f64,
+                    v: y / n as f64,
+                },
+            );
+            assert!(
+                (e.position - limit).length() < 1e-12,
+                "at ({x}, {y}): {} vs {}",
+                e.position,
+                limit
+            );
+            checked += 1;
+        }
+        assert!(checked > 100, "only {checked} points checked");
+    }
+
+    #[test]
+    fn basis_is_a_partition_of_unity_and_non_negative() {
+        let s = LatticeSpline::new(6);
+        for &(u, v) in &[
+            (0.1, 0.2),
+            (0.5, 0.3),
+            (0.0, 0.0),
+            (0.33, 0.66),
+            (0.9, 0.05),
+        ] {
+            let mut row = Vec::new();
+            s.basis_row(SurfaceParam { face: 0, u, v }, &mut row);
+            let sum: f64 = row.iter().map(|r| r.1).sum();
+            assert!((sum - 1.0).abs() < 1e-12, "({u},{v}): sum {sum}");
+            assert!(row.iter().all(|r| r.1 > -1e-12), "({u},{v}): {row:?}");
+        }
+    }
+
+    #[test]
+    fn reproduces_linear_functions_and_is_continuous() {
+        let s = LatticeSpline::new(5);
+        let m = s.control_segments();
+        // Control points on a plane: the surface is that plane, with (u, v) mapped exactly.
+        let controls: Vec<DVec3> = lattice_points(m)
+            .into_iter()
+            .map(|(a, b)| {
+                let (x, y) = ((a as f64 - 1.0) / 5.0, (b as f64 - 1.0) / 5.0);
+                DVec3::new(x, y, 0.3 * x - 0.2 * y)
+            })
+            .collect();
+        let p = s.evaluate(
+            &controls,
+            SurfaceParam {
+                face: 0,
+                u: 0.37,
+                v: 0.21,
+            },
+        );
+        assert!((p.position - DVec3::new(0.37, 0.21, 0.3 * 0.37 - 0.2 * 0.21)).length() < 1e-12);
+        assert!(
+            (p.du - DVec3::new(1.0, 0.0, 0.3)).length() < 1e-10,
+            "{}",
+            p.du
+        );
+        // Continuity across a cell edge with curved data.
+        let bumpy: Vec<DVec3> = controls
+            .iter()
+            .enumerate()
+            .map(|(k, c)| *c + DVec3::Z * ((k * 37 % 11) as f64 * 0.01))
+            .collect();
+        for &(u, v) in &[(0.4, 0.1), (0.2, 0.2), (0.6, 0.2)] {
+            let e = 1e-9;
+            let a = s.evaluate(
+                &bumpy,
+                SurfaceParam {
+                    face: 0,
+                    u: u - e,
+                    v,
+                },
+            );
+            let b = s.evaluate(
+                &bumpy,
+                SurfaceParam {
+                    face: 0,
+                    u: u + e,
+                    v,
+                },
+            );
+            assert!((a.position - b.position).length() < 1e-7);
+            assert!((a.du - b.du).length() < 1e-5, "{} vs {}", a.du, b.du);
+        }
+    }
+}
