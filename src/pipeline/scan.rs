@@ -9,7 +9,7 @@ use crate::fit::{fit, Collocation, Csr, FitProblem};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::coarsen;
 use crate::mesh::stats::UnionFind;
-use crate::remesh::param::{prepare, PreparedPatch};
+use crate::remesh::param::{prepare, DomainShape, PreparedPatch};
 use crate::surface::bezier::{lattice_index, lattice_points, lattice_triangles, BezierTriangle};
 use crate::surface::box_spline::LatticeSpline;
 use crate::surface::{SurfaceParam, TriSurface};
@@ -92,8 +92,12 @@ pub fn fit_scan(
     }
     let n0 = scan.lattice.max(1);
     let segments = n0 << opts.levels;
+    let shape = match opts.surface {
+        SurfaceKind::Bezier => DomainShape::Triangle,
+        SurfaceKind::Loop => DomainShape::Disk,
+    };
     let prepared =
-        prepare(&part, segments).map_err(|e| PipelineError::Unsupported(e.to_string()))?;
+        prepare(&part, segments, shape).map_err(|e| PipelineError::Unsupported(e.to_string()))?;
     let lattice_mesh = TriMesh::new(prepared.lattice.clone(), lattice_triangles(segments));
     // The lattice has subdivision connectivity by construction; its even vertices come in
     // lattice order, so the coarse net is already in Bezier lattice order.

@@ -26,10 +26,23 @@ pub struct PreparedPatch {
 
 /// Parameterizes a clean, manifold, disk-like component and samples it on a lattice of
 /// `segments` per side.
-pub fn prepare(mesh: &TriMesh, segments: usize) -> Result<PreparedPatch, RemeshError> {
+/// Where the outer boundary goes: onto the domain triangle itself (a Bezier patch has no
+/// control points outside it), or onto the circle inscribed in it (less distortion at the
+/// corners; the lattice spline's control points outside the disk follow the fairness term).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DomainShape {
+    Triangle,
+    Disk,
+}
+
+pub fn prepare(
+    mesh: &TriMesh,
+    segments: usize,
+    shape: DomainShape,
+) -> Result<PreparedPatch, RemeshError> {
     let t0 = Instant::now();
     let patch = fill_holes(mesh)?;
-    let plane = mean_value_map(&patch)?;
+    let plane = mean_value_map(&patch, shape)?;
     let flipped = patch
         .mesh
         .triangles
@@ -80,7 +93,7 @@ pub fn prepare(mesh: &TriMesh, segments: usize) -> Result<PreparedPatch, RemeshE
 /// Outer boundary on the triangle by arc length (corner 0 at the boundary vertex farthest
 /// from the boundary's centroid, corners 1 and 2 a third and two thirds of the way round),
 /// interior by mean-value weights, solved with BiCGSTAB.
-fn mean_value_map(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshError> {
+fn mean_value_map(patch: &FilledPatch, shape: DomainShape) -> Result<Vec<DVec2>, RemeshError> {
     let pos = &patch.mesh.positions;
     let n = pos.len();
     let outer = &patch.outer;
@@ -105,9 +118,21 @@ fn mean_value_map(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshError> {
     let mut fixed = vec![false; n];
     for (k, &v) in ring.iter().enumerate() {
         let s = 3.0 * arc[k] / total;
-        let side = (s.floor() as usize).min(2);
-        let f = s - side as f64;
-        plane[v as usize] = DOMAIN[side] * (1.0 - f) + DOMAIN[(side + 1) % 3] * f;
+        plane[v as usize] = match shape {
+            DomainShape::Triangle => {
+                let side = (s.floor() as usize).min(2);
+                let f = s - side as f64;
+                DOMAIN[side] * (1.0 - f) + DOMAIN[(side + 1) % 3] * f
+            }
+            DomainShape::Disk => {
+                // Incircle of the equilateral domain, shrunk a little so that the data
+                // keeps clear of the lattice's outer triangles.
+                let centre = (DOMAIN[0] + DOMAIN[1] + DOMAIN[2]) / 3.0;
+                let radius = 0.95 * 3f64.sqrt() / 6.0;
+                let angle = std::f64::consts::TAU * arc[k] / total;
+                centre + DVec2::new(angle.cos(), angle.sin()) * radius
+            }
+        };
         fixed[v as usize] = true;
     }
     // Mean-value weights: w_ij = (tan(a1/2) + tan(a2/2)) / |x_i - x_j|, angles at i.
