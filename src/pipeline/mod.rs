@@ -127,18 +127,7 @@ pub fn fit_subdivided(
         })
         .collect();
     let surface = BezierTriangle::new(n);
-    let rows: Vec<Vec<(u32, f64)>> = params
-        .par_iter()
-        .map(|p| {
-            let mut row = Vec::new();
-            surface.basis_row(*p, &mut row);
-            row
-        })
-        .collect();
-    let basis = Collocation::new(Csr::from_rows(
-        surface.control_count(),
-        rows.iter().map(|r| r.as_slice()),
-    ));
+    let basis = collocation(&surface, &params);
     let r = composed_exact_inverse(&topo, &hierarchy)
         .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?;
     let pia = |res: &[DVec3]| {
@@ -162,12 +151,7 @@ pub fn fit_subdivided(
     let t1 = Instant::now();
     let outcome = fit(&problem, start, opts.method, &opts.budget)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let geometric_errors: Vec<f64> = mesh
-        .positions
-        .par_iter()
-        .zip(params.par_iter())
-        .map(|(p, u)| geometric::foot_point(&surface, &outcome.controls, *p, *u).1)
-        .collect();
+    let geometric_errors = geometric_errors(&surface, &outcome.controls, &mesh.positions, &params);
     Ok(PatchFit {
         surface: opts.surface,
         degree: n,
@@ -180,4 +164,33 @@ pub fn fit_subdivided(
         prepare_ms,
         fit_ms,
     })
+}
+
+/// The collocation matrix of `params` on `surface`, rows built in parallel.
+pub fn collocation(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Collocation {
+    let rows: Vec<Vec<(u32, f64)>> = params
+        .par_iter()
+        .map(|p| {
+            let mut row = Vec::new();
+            surface.basis_row(*p, &mut row);
+            row
+        })
+        .collect();
+    Collocation::new(Csr::from_rows(
+        surface.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ))
+}
+
+/// Distance of every data point to its foot point, Newton started at its parameter.
+pub fn geometric_errors(
+    surface: &dyn TriSurface,
+    controls: &[DVec3],
+    data: &[DVec3],
+    params: &[SurfaceParam],
+) -> Vec<f64> {
+    data.par_iter()
+        .zip(params.par_iter())
+        .map(|(p, u)| geometric::foot_point(surface, controls, *p, *u).1)
+        .collect()
 }

@@ -3,9 +3,9 @@
 //! inverse-subdivide it for the initial net, then fit the ORIGINAL scan points.
 
 use super::SurfaceKind;
-use super::{geometric, FitOptions, PatchFit, PipelineError};
+use super::{collocation, geometric_errors, FitOptions, PatchFit, PipelineError};
 use crate::fit::engine::umbrella_laplacian;
-use crate::fit::{fit, Collocation, Csr, FitProblem};
+use crate::fit::{fit, Collocation, FitProblem};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::coarsen;
 use crate::mesh::stats::UnionFind;
@@ -15,7 +15,6 @@ use crate::surface::box_spline::LatticeSpline;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
-use rayon::prelude::*;
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -112,18 +111,7 @@ pub fn fit_scan(
         .iter()
         .map(|&(u, v)| SurfaceParam { face: 0, u, v })
         .collect();
-    let rows: Vec<Vec<(u32, f64)>> = params
-        .par_iter()
-        .map(|p| {
-            let mut row = Vec::new();
-            surface.basis_row(*p, &mut row);
-            row
-        })
-        .collect();
-    let basis = Collocation::new(Csr::from_rows(
-        surface.control_count(),
-        rows.iter().map(|r| r.as_slice()),
-    ));
+    let basis = collocation(surface, &params);
     let fairness = Collocation::new(umbrella_laplacian(surface.control_count(), &net_triangles));
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
     let smoothing = scan.smoothing * part.positions.len() as f64 / surface.control_count() as f64;
@@ -139,12 +127,7 @@ pub fn fit_scan(
     let t1 = Instant::now();
     let outcome = fit(&problem, start, opts.method, &opts.budget)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let geometric_errors: Vec<f64> = part
-        .positions
-        .par_iter()
-        .zip(params.par_iter())
-        .map(|(p, u)| geometric::foot_point(surface, &outcome.controls, *p, *u).1)
-        .collect();
+    let geometric_errors = geometric_errors(surface, &outcome.controls, &part.positions, &params);
     Ok(ScanFit {
         fit: PatchFit {
             surface: opts.surface,
