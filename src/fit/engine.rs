@@ -78,6 +78,16 @@ impl Stacked<'_> {
             fair_part.iter_mut().for_each(|v| *v *= self.root_s);
         }
     }
+    /// Residuals of the stacked system at x: data part p - N x, fairness part -sqrt(s) L x.
+    fn residuals(&self, x: &[DVec3], data_part: &mut [DVec3], fair_part: &mut Vec<DVec3>) {
+        self.apply(x, data_part, fair_part);
+        data_part
+            .iter_mut()
+            .zip(self.p.data)
+            .for_each(|(r, p)| *r = *p - *r);
+        fair_part.iter_mut().for_each(|v| *v = -*v);
+    }
+
     fn apply_t(&self, data_part: &[DVec3], fair_part: &[DVec3], out: &mut [DVec3]) {
         self.p.basis.nt.mul_vec3(data_part, out);
         if let Some(l) = self.fair() {
@@ -154,12 +164,7 @@ pub fn fit(
     let mut x = initial;
     let mut r_data = vec![DVec3::ZERO; n.nrows];
     let mut r_fair = Vec::new();
-    a.apply(&x, &mut r_data, &mut r_fair);
-    r_data
-        .iter_mut()
-        .zip(problem.data)
-        .for_each(|(r, p)| *r = *p - *r);
-    r_fair.iter_mut().for_each(|v| *v = -*v);
+    a.residuals(&x, &mut r_data, &mut r_fair);
     let mut steps = vec![StepStats::from_residuals(
         0,
         &r_data,
@@ -244,12 +249,7 @@ pub fn fit(
             }
             Method::Lspia => {
                 x.iter_mut().zip(&grad).for_each(|(xi, g)| *xi += *g * mu);
-                a.apply(&x, &mut r_data, &mut r_fair);
-                r_data
-                    .iter_mut()
-                    .zip(problem.data)
-                    .for_each(|(r, p)| *r = *p - *r);
-                r_fair.iter_mut().for_each(|v| *v = -*v);
+                a.residuals(&x, &mut r_data, &mut r_fair);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 gamma = dot3(&grad, &grad);
             }
@@ -257,11 +257,7 @@ pub fn fit(
                 let op = problem.pia_operator.ok_or(FitError::NoPiaOperator)?;
                 let delta = op(&r_data);
                 x.iter_mut().zip(&delta).for_each(|(xi, d)| *xi += *d);
-                n.mul_vec3(&x, &mut r_data);
-                r_data
-                    .iter_mut()
-                    .zip(problem.data)
-                    .for_each(|(r, p)| *r = *p - *r);
+                a.residuals(&x, &mut r_data, &mut r_fair);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 gamma = dot3(&grad, &grad);
             }
