@@ -190,8 +190,19 @@ fn sigterm_stops_the_daemon_gracefully() {
         .stderr(Stdio::null())
         .spawn()
         .expect("spawns");
-    // A file dropped while it runs is fitted.
-    std::fs::copy(sample("saddle@0001.ply"), inbox.join("saddle@0001.ply")).expect("copy");
+    // A file dropped while it runs is fitted: written under a .part name (ignored), then
+    // renamed into place, as uploaders do. (With settle_ms = 0 a file copied in place could
+    // be read while still empty.)
+    std::fs::copy(
+        sample("saddle@0001.ply"),
+        inbox.join("saddle@0001.ply.part"),
+    )
+    .expect("copy");
+    std::fs::rename(
+        inbox.join("saddle@0001.ply.part"),
+        inbox.join("saddle@0001.ply"),
+    )
+    .expect("rename");
     let deadline = Instant::now() + Duration::from_secs(60);
     while !out.join("saddle/surface.json").exists() && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(50));
