@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
-use trispline::pipeline::worker::{run_patch, PatchOutputs, WorkerConfig};
+use trispline::pipeline::worker::{run_patch, PatchOutputs, WarmStart, WorkerConfig};
 use trispline::{DVec3, TriMesh};
 
 fn second_version(mesh: &TriMesh) -> TriMesh {
@@ -66,13 +66,13 @@ fn main() {
         mean_error: Some(best * 1.02),
         ..base
     };
-    let run = |warm: Option<&[DVec3]>| {
+    let run = |warm: Option<&WarmStart>| {
         let t = Instant::now();
         let out = run_patch(&v2, warm, &budget).expect("version 2 fits");
         (t.elapsed().as_secs_f64() * 1e3, out)
     };
     let (cold_ms, cold) = run(None);
-    let (warm_ms, warm) = run(Some(&first.controls));
+    let (warm_ms, warm) = run(Some(&first.warm));
     let steps = |o: &PatchOutputs| o.report["iterations"].as_array().map_or(0, |a| a.len() - 1);
     println!(
         "version 1: {} data points; version 2: {} data points",

@@ -227,7 +227,7 @@ fn process(
         Ok(l) => l.mesh,
         Err(e) => return reject(quarantine, &opts.out_dir, path, id, &e.to_string(), summary),
     };
-    let warm = previous.as_ref().map(|p| p.controls.as_slice());
+    let warm = previous.as_ref().map(|p| &p.warm);
     let cfg = opts.config.fit.clone();
     let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         run_patch(&mesh, warm, &cfg)
@@ -282,7 +282,7 @@ fn process(
     let state = PatchState {
         version: version.clone(),
         input_hash: hash,
-        controls: out.controls.clone(),
+        warm: out.warm.clone(),
     };
     if let Err(e) = store.save(id, &state) {
         tracing::warn!(error = %e, "cannot save warm-start state");

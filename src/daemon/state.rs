@@ -1,14 +1,14 @@
 //! Per-patch state for warm starts, one JSON file per patch, written atomically.
 
 use crate::io::write_atomic;
-use glam::DVec3;
+use crate::pipeline::worker::WarmStart;
 use std::path::PathBuf;
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct PatchState {
     pub version: String,
     pub input_hash: u64,
-    pub controls: Vec<DVec3>,
+    pub warm: WarmStart,
 }
 
 pub struct StateStore {

@@ -63,9 +63,19 @@ pub struct PatchOutputs {
     pub surface: serde_json::Value,
     pub report: serde_json::Value,
     pub glb: Vec<u8>,
-    /// The fitted control net: the warm start of the next version of the patch.
-    pub controls: Vec<DVec3>,
+    /// What the next version of the patch starts from; callers store it opaquely.
+    pub warm: WarmStart,
     pub status: FitStatus,
+}
+
+/// What a fit leaves for the next version of the same patch. Stored whole by the daemon's
+/// state store (serde), so new fields must carry `#[serde(default)]`.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct WarmStart {
+    pub surface: SurfaceKind,
+    /// Bezier degree or Loop domain segments: with `surface`, the control-net structure.
+    pub degree: usize,
+    pub controls: Vec<DVec3>,
 }
 
 /// The error budget with the tolerance resolved against the mesh's size; with no target set
@@ -91,7 +101,7 @@ pub fn resolve_budget(cfg: &WorkerConfig, mesh: &TriMesh) -> Budget {
 
 pub fn run_patch(
     mesh: &TriMesh,
-    previous: Option<&[DVec3]>,
+    previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
 ) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
@@ -104,7 +114,9 @@ pub fn run_patch(
         budget: budget.clone(),
     };
     let mut scan_info = None;
-    let fitted = match fit_subdivided(mesh, &opts, previous) {
+    let previous = previous.filter(|w| w.surface == cfg.surface);
+    let prev_controls = previous.map(|w| w.controls.as_slice());
+    let fitted = match fit_subdivided(mesh, &opts, prev_controls) {
         Ok(f) => f,
         Err(PipelineError::NoSubdivision(why) | PipelineError::Unsupported(why)) => {
             // No subdivision connectivity: remesh the scan onto a lattice.
@@ -112,7 +124,7 @@ pub fn run_patch(
                 lattice: cfg.lattice,
                 smoothing: cfg.smoothing,
             };
-            let s = fit_scan(mesh, &opts, &scan, previous).map_err(|e| {
+            let s = fit_scan(mesh, &opts, &scan, prev_controls).map_err(|e| {
                 PipelineError::Unsupported(format!("{e} (and no subdivision connectivity: {why})"))
             })?;
             let f = s.fit.clone();
@@ -145,7 +157,11 @@ pub fn run_patch(
         surface,
         report,
         glb,
-        controls: fitted.controls.clone(),
+        warm: WarmStart {
+            surface: fitted.surface,
+            degree: fitted.degree,
+            controls: fitted.controls.clone(),
+        },
         status: fitted.outcome.status,
     })
 }
