@@ -39,9 +39,17 @@ pub struct FitArgs {
     pub within_tolerance_pct: Option<f64>,
     #[arg(long)]
     pub max_time_ms: Option<u64>,
-    /// Scans without subdivision connectivity: control-net segments per side (Bezier degree).
-    #[arg(long, default_value_t = 16)]
-    pub lattice: usize,
+    /// Scans without subdivision connectivity, `bezier`: control-net segments per side (the
+    /// degree); `loop`: grid cells across the patch's longer side (default: chosen for
+    /// --target-controls-pct).
+    #[arg(long)]
+    pub lattice: Option<usize>,
+    /// Scans, `loop`: control points as a percentage of the data points.
+    #[arg(long, default_value_t = 4.0)]
+    pub target_controls_pct: f64,
+    /// Scans: rounds of parameter correction (data parameters moved to foot points).
+    #[arg(long, default_value_t = 2)]
+    pub corrections: usize,
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = 1e-5)]
     pub smoothing: f64,
@@ -66,7 +74,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         mean_error: args.mean_error,
         within_tolerance_pct: args.within_tolerance_pct,
         max_time_ms: args.max_time_ms,
-        lattice: args.lattice,
+        lattice: args.lattice.unwrap_or(16),
+        grid_segments: args.lattice.filter(|_| args.surface == SurfaceKind::Loop),
+        target_controls_pct: args.target_controls_pct,
+        correction_rounds: args.corrections,
         smoothing: args.smoothing,
         tessellation: args.tessellation,
     };

@@ -1,8 +1,10 @@
 //! The worker: a mesh with Loop subdivision connectivity in, a fitted surface out.
 //! Pure: no file IO; the CLI writes what it returns.
 
+pub mod domain;
 pub mod geometric;
 pub mod lattice;
+pub mod output;
 pub mod scan;
 pub mod worker;
 
@@ -50,8 +52,10 @@ pub enum PipelineError {
 #[derive(Clone, Debug)]
 pub struct PatchFit {
     pub surface: SurfaceKind,
+    /// Bezier degree (0 for a Loop grid).
     pub degree: usize,
-    /// Control points in lattice order (`surface::bezier::lattice_index`).
+    pub model: scan::SurfaceModel,
+    /// Control points in the model's order (lattice order for Bezier).
     pub controls: Vec<DVec3>,
     pub data: Vec<DVec3>,
     pub params: Vec<SurfaceParam>,
@@ -155,6 +159,7 @@ pub fn fit_subdivided(
     Ok(PatchFit {
         surface: opts.surface,
         degree: n,
+        model: scan::SurfaceModel::Bezier(surface.clone()),
         controls: outcome.controls.clone(),
         data: mesh.positions.clone(),
         params,

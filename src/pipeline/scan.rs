@@ -1,37 +1,108 @@
-//! Scans without subdivision connectivity: clean, keep the largest component, parameterize
-//! onto the domain triangle, resample on a lattice of `lattice * 2^levels` segments,
-//! inverse-subdivide it for the initial net, then fit the ORIGINAL scan points.
+//! Scans without subdivision connectivity: clean, keep the largest component, close holes
+//! with virtual fans, map the patch to the plane (`remesh::planar`), build the domain
+//! (`domain`), resample and inverse-subdivide for the initial net, then fit the ORIGINAL
+//! scan points with a fairness term and a few rounds of parameter correction.
 
-use super::SurfaceKind;
-use super::{collocation, geometric_errors, FitOptions, PatchFit, PipelineError};
+use super::domain::{
+    barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
+    spacing_for_target, GridFrame, InitialNet,
+};
+use super::{collocation, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::engine::umbrella_laplacian;
-use crate::fit::{fit, Collocation, FitProblem};
+use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem};
 use crate::mesh::clean::{clean, CleanOptions};
-use crate::mesh::inverse::coarsen;
 use crate::mesh::stats::UnionFind;
-use crate::remesh::param::{prepare, DomainShape, PreparedPatch};
-use crate::surface::bezier::{lattice_index, lattice_points, lattice_triangles, BezierTriangle};
-use crate::surface::box_spline::LatticeSpline;
+use crate::remesh::fill_holes;
+use crate::remesh::planar::{planar_map, MapMethod, PlaneFrame};
+use crate::surface::bezier::{lattice_triangles, BezierTriangle};
+use crate::surface::grid_spline::GridSpline;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
 pub struct ScanOptions {
-    /// Control-net segments per side (the Bezier degree).
+    /// Bezier: the degree (control-net segments per side).
     pub lattice: usize,
+    /// Loop: grid cells across the longer side of the patch; when absent the spacing is
+    /// chosen for `target_controls_pct`.
+    pub grid_segments: Option<usize>,
+    /// Loop: control points as a percentage of the data points.
+    pub target_controls_pct: f64,
     /// Fairness weight relative to the data: s = smoothing * data points / control points.
     pub smoothing: f64,
+    /// Rounds of parameter correction (data parameters moved to their foot points).
+    pub correction_rounds: usize,
+}
+
+/// The surface model a fit lives on; `PatchFit` carries it for evaluation downstream.
+#[derive(Clone, Debug)]
+pub enum SurfaceModel {
+    Bezier(BezierTriangle),
+    Grid(GridSpline),
+}
+
+impl SurfaceModel {
+    pub fn as_surface(&self) -> &dyn TriSurface {
+        match self {
+            SurfaceModel::Bezier(b) => b,
+            SurfaceModel::Grid(g) => g,
+        }
+    }
+}
+
+/// Where the parameters live, kept for warm starts and written to surface.json.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Domain {
+    /// Barycentric coordinates of the plane triangle `corners` (corner 0 carries u,
+    /// corner 1 carries v).
+    Triangle { corners: [DVec2; 3] },
+    /// Grid coordinates of the grid of this spacing anchored at the frame's origin.
+    Grid { spacing: f64 },
+}
+
+impl Domain {
+    pub fn param(&self, p: DVec2) -> (f64, f64) {
+        match self {
+            Domain::Triangle { corners } => barycentric(corners, p),
+            Domain::Grid { spacing } => GridFrame { spacing: *spacing }.to_grid(p),
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
 pub struct ScanFit {
     pub fit: PatchFit,
-    pub prepared: PreparedPatch,
     pub components: usize,
     pub kept_vertices: usize,
+    pub holes: usize,
+    pub frame: PlaneFrame,
+    pub domain: Domain,
+    pub map_method: MapMethod,
+    pub folds_projected: usize,
+    pub initial: InitialNet,
+    /// Outer boundary of the data in parameter coordinates, ordered: the trim.
+    pub trim: Vec<(f64, f64)>,
+    /// Geometric RMS after the first fit and after each correction round.
+    pub correction_rms: Vec<f64>,
+    pub parameterization_ms: f64,
+    pub resample_ms: f64,
+    /// Control points reused from the previous version (warm start).
+    pub reused_controls: usize,
+}
+
+/// What a previous version of the same patch leaves for this one.
+#[derive(Clone, Debug, Default)]
+pub struct ScanWarm<'a> {
+    pub frame: Option<PlaneFrame>,
+    pub domain: Option<&'a Domain>,
+    pub controls: &'a [DVec3],
+    /// Grid coordinates of `controls` (Loop grid).
+    pub coords: &'a [(i64, i64)],
 }
 
 /// The largest edge-connected component of a cleaned mesh, compacted.
@@ -79,7 +150,7 @@ pub fn fit_scan(
     mesh: &TriMesh,
     opts: &FitOptions,
     scan: &ScanOptions,
-    previous: Option<&[DVec3]>,
+    warm: Option<&ScanWarm>,
 ) -> Result<ScanFit, PipelineError> {
     let t0 = Instant::now();
     let cleaned = clean(mesh, &CleanOptions::default());
@@ -89,110 +160,218 @@ pub fn fit_scan(
             "no faces left after cleaning".into(),
         ));
     }
-    let n0 = scan.lattice.max(1);
-    let segments = n0 << opts.levels;
-    let shape = match opts.surface {
-        SurfaceKind::Bezier => DomainShape::Triangle,
-        SurfaceKind::Loop => DomainShape::Disk,
+    let unsupported = |e: crate::remesh::RemeshError| PipelineError::Unsupported(e.to_string());
+    let patch = fill_holes(&part).map_err(unsupported)?;
+    let frame = match warm.and_then(|w| w.frame) {
+        Some(f) => f,
+        None => PlaneFrame::fit(&part)
+            .ok_or_else(|| PipelineError::Unsupported("degenerate patch: no mean normal".into()))?,
     };
-    let prepared =
-        prepare(&part, segments, shape).map_err(|e| PipelineError::Unsupported(e.to_string()))?;
-    let lattice_mesh = TriMesh::new(prepared.lattice.clone(), lattice_triangles(segments));
-    // The lattice has subdivision connectivity by construction; its even vertices come in
-    // lattice order, so the coarse net is already in Bezier lattice order.
-    let coarse = coarsen(&lattice_mesh, opts.levels, opts.inverse)
-        .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?
-        .mesh
-        .positions;
-    let (surface, initial, net_triangles) = surface_and_net(opts.surface, n0, coarse);
-    let surface = surface.as_ref();
-    let params: Vec<SurfaceParam> = prepared
-        .uv
-        .iter()
-        .map(|&(u, v)| SurfaceParam { face: 0, u, v })
-        .collect();
-    let basis = collocation(surface, &params);
-    let fairness = Collocation::new(umbrella_laplacian(surface.control_count(), &net_triangles));
-    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let smoothing = scan.smoothing * part.positions.len() as f64 / surface.control_count() as f64;
-    let problem = FitProblem {
-        basis: &basis,
-        data: &part.positions,
-        smoothing,
-        fairness: Some(&fairness),
-        pia_operator: None,
-    };
-    let warm = previous.filter(|p| p.len() == initial.len());
-    let start = warm.map_or(initial, |p| p.to_vec());
+    let map = planar_map(&patch, &frame).map_err(unsupported)?;
+    let plane = &map.plane;
+    let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
+
     let t1 = Instant::now();
-    let outcome = fit(&problem, start, opts.method, &opts.budget)?;
-    let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let geometric_errors = geometric_errors(surface, &outcome.controls, &part.positions, &params);
+    let real = patch.real_vertices;
+    let data = &part.positions;
+    let (model, domain, initial, fairness_tris) = match opts.surface {
+        SurfaceKind::Bezier => {
+            let n0 = scan.lattice.max(1);
+            let corners = match warm.and_then(|w| w.domain) {
+                Some(Domain::Triangle { corners })
+                    if plane.iter().all(|p| {
+                        let (u, v) = barycentric(corners, *p);
+                        u >= 0.0 && v >= 0.0 && u + v <= 1.0
+                    }) =>
+                {
+                    *corners
+                }
+                _ => enclosing_triangle(plane, 0.01),
+            };
+            let initial =
+                bezier_initial_net(&map.mesh, plane, &corners, n0, opts.levels, opts.inverse);
+            (
+                SurfaceModel::Bezier(BezierTriangle::new(n0)),
+                Domain::Triangle { corners },
+                initial,
+                lattice_triangles(n0),
+            )
+        }
+        SurfaceKind::Loop => {
+            let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
+                (_, Some(n)) => {
+                    let (lo, hi) = plane.iter().fold(
+                        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
+                        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+                    );
+                    (hi - lo).max_element().max(1e-300) / n.max(1) as f64
+                }
+                (Some(Domain::Grid { spacing }), None) => *spacing,
+                _ => {
+                    let target = (scan.target_controls_pct / 100.0 * real as f64).round();
+                    spacing_for_target(plane, &map.mesh.triangles, target as usize)
+                }
+            };
+            let gf = GridFrame { spacing };
+            let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
+            let initial = grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse);
+            let tris = grid.net_triangles();
+            (
+                SurfaceModel::Grid(grid),
+                Domain::Grid { spacing },
+                initial,
+                tris,
+            )
+        }
+    };
+    let resample_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let surface = model.as_surface();
+
+    // Warm start: the previous control at the same place of the same domain.
+    let mut start = initial.controls.clone();
+    let mut reused = 0;
+    if let Some(w) = warm.filter(|w| w.domain == Some(&domain)) {
+        match &model {
+            SurfaceModel::Bezier(_) if w.controls.len() == start.len() => {
+                start = w.controls.to_vec();
+                reused = start.len();
+            }
+            SurfaceModel::Grid(grid) if w.coords.len() == w.controls.len() => {
+                for (&(i, j), &p) in w.coords.iter().zip(w.controls) {
+                    if let Some(k) = grid.control_at(i, j) {
+                        start[k as usize] = p;
+                        reused += 1;
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    let mut params: Vec<SurfaceParam> = plane[..real]
+        .iter()
+        .map(|p| {
+            let (u, v) = domain.param(*p);
+            SurfaceParam { face: 0, u, v }
+        })
+        .collect();
+    let fairness = Collocation::new(umbrella_laplacian(surface.control_count(), &fairness_tris));
+    let smoothing = scan.smoothing * data.len() as f64 / surface.control_count().max(1) as f64;
+    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+    let t2 = Instant::now();
+    let mut outcome = run_fit(surface, &params, data, &fairness, smoothing, start, opts)?;
+    let mut steps = outcome.steps.clone();
+    let mut errors = foot_points(surface, &outcome.controls, data, &mut params);
+    let mut correction_rms = vec![rms(&errors)];
+    for _ in 0..scan.correction_rounds {
+        let next = run_fit(
+            surface,
+            &params,
+            data,
+            &fairness,
+            smoothing,
+            outcome.controls.clone(),
+            opts,
+        )?;
+        let mut trial = params.clone();
+        let e = foot_points(surface, &next.controls, data, &mut trial);
+        // A round that does not lower the geometric error is dropped.
+        if rms(&e) >= rms(&errors) {
+            break;
+        }
+        let offset = steps.last().map_or(0, |s| s.k);
+        steps.extend(next.steps.iter().skip(1).map(|s| {
+            let mut s = s.clone();
+            s.k += offset;
+            s
+        }));
+        outcome = next;
+        params = trial;
+        errors = e;
+        correction_rms.push(rms(&errors));
+    }
+    outcome.steps = steps;
+    outcome.iterations = outcome.steps.len().saturating_sub(1);
+    let fit_ms = t2.elapsed().as_secs_f64() * 1e3;
+
+    let trim = patch
+        .outer
+        .iter()
+        .map(|&v| domain.param(plane[v as usize]))
+        .collect();
+    let degree = match &model {
+        SurfaceModel::Bezier(b) => b.degree,
+        SurfaceModel::Grid(_) => 0,
+    };
     Ok(ScanFit {
         fit: PatchFit {
             surface: opts.surface,
-            degree: n0,
+            degree,
+            model,
             controls: outcome.controls.clone(),
-            data: part.positions.clone(),
+            data: data.clone(),
             params,
             outcome,
-            geometric_errors,
-            warm_start: warm.is_some(),
+            geometric_errors: errors,
+            warm_start: reused > 0,
             prepare_ms,
             fit_ms,
         },
-        kept_vertices: part.positions.len(),
-        prepared,
         components,
+        kept_vertices: real,
+        holes: patch.holes,
+        frame,
+        domain,
+        map_method: map.method,
+        folds_projected: map.folds_projected,
+        initial,
+        trim,
+        correction_rms,
+        parameterization_ms,
+        resample_ms,
+        reused_controls: reused,
     })
 }
 
-/// The surface over the domain lattice of `n0` segments and its initial control net from
-/// the inverse-subdivided resampled lattice (`coarse`, lattice order). The Loop surface
-/// (box spline over the lattice) has one more ring of control points outside the domain;
-/// they start at their nearest domain lattice point and the fairness term shapes them.
-/// The surface of a kind over a domain lattice of `n0` segments.
-pub fn surface_for(kind: SurfaceKind, n0: usize) -> Box<dyn TriSurface> {
-    match kind {
-        SurfaceKind::Bezier => Box::new(BezierTriangle::new(n0)),
-        SurfaceKind::Loop => Box::new(LatticeSpline::new(n0)),
-    }
+fn run_fit(
+    surface: &dyn TriSurface,
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    fairness: &Collocation,
+    smoothing: f64,
+    start: Vec<DVec3>,
+    opts: &FitOptions,
+) -> Result<FitOutcome, PipelineError> {
+    let basis = collocation(surface, params);
+    let problem = FitProblem {
+        basis: &basis,
+        data,
+        smoothing,
+        fairness: Some(fairness),
+        pia_operator: None,
+    };
+    let budget: &Budget = &opts.budget;
+    Ok(fit(&problem, start, opts.method, budget)?)
 }
 
-pub fn surface_and_net(
-    kind: SurfaceKind,
-    n0: usize,
-    coarse: Vec<DVec3>,
-) -> (Box<dyn TriSurface>, Vec<DVec3>, Vec<[u32; 3]>) {
-    match kind {
-        SurfaceKind::Bezier => (
-            Box::new(BezierTriangle::new(n0)),
-            coarse,
-            lattice_triangles(n0),
-        ),
-        SurfaceKind::Loop => {
-            let s = LatticeSpline::new(n0);
-            let m = s.control_segments();
-            let n = n0 as i64;
-            let net = lattice_points(m)
-                .into_iter()
-                .map(|(a, b)| {
-                    let (mut i, mut j) = (a as i64 - 1, b as i64 - 1);
-                    i = i.clamp(0, n);
-                    j = j.clamp(0, n);
-                    if i + j > n {
-                        let over = i + j - n;
-                        let take_i = over.min(i);
-                        i -= take_i;
-                        j -= over - take_i;
-                    }
-                    coarse
-                        .get(lattice_index(n0, i as usize, j as usize))
-                        .copied()
-                        .unwrap_or_default()
-                })
-                .collect();
-            (Box::new(s), net, lattice_triangles(m))
-        }
-    }
+/// Moves every parameter to its foot point and returns the distances.
+fn foot_points(
+    surface: &dyn TriSurface,
+    controls: &[DVec3],
+    data: &[DVec3],
+    params: &mut [SurfaceParam],
+) -> Vec<f64> {
+    data.par_iter()
+        .zip(params.par_iter_mut())
+        .map(|(p, u)| {
+            let (foot, d) = geometric::foot_point(surface, controls, *p, *u);
+            *u = foot;
+            d
+        })
+        .collect()
+}
+
+fn rms(e: &[f64]) -> f64 {
+    (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt()
 }

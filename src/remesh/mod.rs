@@ -3,6 +3,7 @@
 //! parameterization onto a triangle, and resampling at the lattice points.
 
 pub mod param;
+pub mod planar;
 
 use crate::mesh::topology::{Topology, NONE};
 use crate::mesh::TriMesh;
@@ -60,6 +61,10 @@ pub struct FilledPatch {
     pub real_vertices: usize,
     pub outer: Vec<u32>,
     pub holes: usize,
+    /// Triangles at index >= `real_triangles` are the virtual fans.
+    pub real_triangles: usize,
+    /// The loops the fans close, each as `boundary_loops` returns it.
+    pub hole_loops: Vec<Vec<u32>>,
 }
 
 /// Picks the longest boundary loop as the outer boundary and closes every other loop with a
@@ -108,6 +113,8 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
         real_vertices: mesh.positions.len(),
         outer,
         holes: loops.len() - 1,
+        real_triangles: mesh.triangles.len(),
+        hole_loops: loops[1..].to_vec(),
     })
 }
 

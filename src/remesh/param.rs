@@ -93,7 +93,10 @@ pub fn prepare(
 /// Outer boundary on the triangle by arc length (corner 0 at the boundary vertex farthest
 /// from the boundary's centroid, corners 1 and 2 a third and two thirds of the way round),
 /// interior by mean-value weights, solved with BiCGSTAB.
-fn mean_value_map(patch: &FilledPatch, shape: DomainShape) -> Result<Vec<DVec2>, RemeshError> {
+pub(crate) fn mean_value_map(
+    patch: &FilledPatch,
+    shape: DomainShape,
+) -> Result<Vec<DVec2>, RemeshError> {
     let pos = &patch.mesh.positions;
     let n = pos.len();
     let outer = &patch.outer;
@@ -241,7 +244,7 @@ fn bicgstab(
 }
 
 /// Point location in the planar triangulation through a uniform grid of buckets.
-struct Locator<'a> {
+pub struct Locator<'a> {
     tris: &'a [[u32; 3]],
     plane: &'a [DVec2],
     lo: DVec2,
@@ -251,10 +254,21 @@ struct Locator<'a> {
 }
 
 impl<'a> Locator<'a> {
-    fn new(tris: &'a [[u32; 3]], plane: &'a [DVec2]) -> Self {
-        let lo = DVec2::new(-1e-9, -1e-9);
+    pub fn new(tris: &'a [[u32; 3]], plane: &'a [DVec2]) -> Self {
+        let (mut lo, mut hi) = (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN));
+        for t in tris {
+            for &v in t {
+                lo = lo.min(plane[v as usize]);
+                hi = hi.max(plane[v as usize]);
+            }
+        }
+        if lo.x > hi.x {
+            (lo, hi) = (DVec2::ZERO, DVec2::ONE);
+        }
+        let extent = (hi - lo).max_element().max(1e-300);
+        lo -= DVec2::splat(extent * 1e-9);
         let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
-        let cell = 1.0 / dim as f64 + 1e-12;
+        let cell = extent * (1.0 + 2e-9) / dim as f64;
         let mut buckets = vec![Vec::new(); dim * dim];
         for (f, t) in tris.iter().enumerate() {
             let ps = [
@@ -308,12 +322,16 @@ impl<'a> Locator<'a> {
 
     /// The containing triangle and barycentric weights; on the boundary or in a numerical
     /// gap, the nearby triangle whose weights are least negative, clamped.
-    fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {
+    pub fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
         let mut best = (f64::MIN, 0usize, [1.0, 0.0, 0.0]);
         for r in 0..self.dim {
             for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
                 for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
+                    // Inner cells were searched at smaller r.
+                    if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
+                        continue;
+                    }
                     for &f in &self.buckets[y * self.dim + x] {
                         let b = self.bary(f, q);
                         let worst = b[0].min(b[1]).min(b[2]);

@@ -135,6 +135,82 @@ fn derive_matrix() -> [[f64; 12]; 15] {
     out
 }
 
+/// Value and (u, v) derivative weights of the 12 stencil points at local coordinates
+/// (lu, lv) of an up triangle, or of a down triangle reflected onto one (its first
+/// derivatives change sign). `scale` is the number of lattice cells per unit parameter.
+pub fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 12] {
+    let m = bezier_from_stencil();
+    let bern = quartic_bernstein(lu, lv);
+    let (s1, s2) = if down {
+        (-scale, scale * scale)
+    } else {
+        (scale, scale * scale)
+    };
+    let mut out = [[0.0; 6]; 12];
+    for (k, w) in out.iter_mut().enumerate() {
+        for (r, bw) in bern.iter().enumerate() {
+            let c = m[r][k];
+            w[0] += c * bw[0];
+            w[1] += c * bw[1] * s1;
+            w[2] += c * bw[2] * s1;
+            w[3] += c * bw[3] * s2;
+            w[4] += c * bw[4] * s2;
+            w[5] += c * bw[5] * s2;
+        }
+    }
+    out
+}
+
+/// The 15 quartic Bernstein polynomials u^i v^j w^k 4!/(i! j! k!) in lattice order, with
+/// their (u, v) derivatives (w = 1 - u - v): value, du, dv, duu, duv, dvv. Closed form
+/// without allocation: this runs for every data point at every foot-point step.
+fn quartic_bernstein(u: f64, v: f64) -> [[f64; 6]; 15] {
+    let w = 1.0 - u - v;
+    let pow = |x: f64| [1.0, x, x * x, x * x * x, x * x * x * x];
+    let (pu, pv, pw) = (pow(u), pow(v), pow(w));
+    // x^e and its first and second derivatives in x.
+    let term = |p: &[f64; 5], e: usize| -> [f64; 3] {
+        let e_f = e as f64;
+        [
+            p[e],
+            if e >= 1 { e_f * p[e - 1] } else { 0.0 },
+            if e >= 2 {
+                e_f * (e_f - 1.0) * p[e - 2]
+            } else {
+                0.0
+            },
+        ]
+    };
+    const FACT: [f64; 5] = [1.0, 1.0, 2.0, 6.0, 24.0];
+    let mut out = [[0.0; 6]; 15];
+    for (idx, (i, j)) in lattice_points(4).into_iter().enumerate() {
+        {
+            let k = 4 - i - j;
+            let c = 24.0 / (FACT[i] * FACT[j] * FACT[k]);
+            let (a, b, d) = (term(&pu, i), term(&pv, j), term(&pw, k));
+            // Partials in the independent (u, v, w), then the chain rule with w = 1 - u - v.
+            let f_u = a[1] * b[0] * d[0];
+            let f_v = a[0] * b[1] * d[0];
+            let f_w = a[0] * b[0] * d[1];
+            let f_uu = a[2] * b[0] * d[0];
+            let f_vv = a[0] * b[2] * d[0];
+            let f_ww = a[0] * b[0] * d[2];
+            let f_uv = a[1] * b[1] * d[0];
+            let f_uw = a[1] * b[0] * d[1];
+            let f_vw = a[0] * b[1] * d[1];
+            out[idx] = [
+                c * a[0] * b[0] * d[0],
+                c * (f_u - f_w),
+                c * (f_v - f_w),
+                c * (f_uu - 2.0 * f_uw + f_ww),
+                c * (f_uv - f_uw - f_vw + f_ww),
+                c * (f_vv - 2.0 * f_vw + f_ww),
+            ];
+        }
+    }
+    out
+}
+
 #[derive(Clone, Debug)]
 pub struct LatticeSpline {
     /// Domain lattice segments per side.
@@ -211,34 +287,11 @@ impl TriSurface for LatticeSpline {
 
     fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
         let (ids, lu, lv, down) = self.locate(p);
-        let m = bezier_from_stencil();
-        let mut bern = BasisDerivRows::default();
-        BezierTriangle::new(4).basis_rows_with_derivatives(
-            SurfaceParam {
-                face: 0,
-                u: lu,
-                v: lv,
-            },
-            &mut bern,
-        );
-        let n = self.n as f64;
-        let (s1, s2) = if down { (-n, n * n) } else { (n, n * n) };
+        let w = stencil_weights(lu, lv, down, self.n as f64);
         out.indices.clear();
         out.weights.clear();
-        for (k, &id) in ids.iter().enumerate() {
-            let mut w = [0.0; 6];
-            for (r, bw) in bern.weights.iter().enumerate() {
-                let c = m[r][k];
-                w[0] += c * bw[0];
-                w[1] += c * bw[1] * s1;
-                w[2] += c * bw[2] * s1;
-                w[3] += c * bw[3] * s2;
-                w[4] += c * bw[4] * s2;
-                w[5] += c * bw[5] * s2;
-            }
-            out.indices.push(id as u32);
-            out.weights.push(w);
-        }
+        out.indices.extend(ids.iter().map(|&i| i as u32));
+        out.weights.extend_from_slice(&w);
     }
 
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
@@ -302,6 +355,24 @@ mod tests {
             checked += 1;
         }
         assert!(checked > 100, "only {checked} points checked");
+    }
+
+    #[test]
+    fn closed_form_quartic_bernstein_matches_the_general_evaluator() {
+        for &(u, v) in &[(0.1, 0.2), (0.7, 0.05), (0.0, 0.0), (0.3, 0.7)] {
+            let mut rows = BasisDerivRows::default();
+            BezierTriangle::new(4)
+                .basis_rows_with_derivatives(SurfaceParam { face: 0, u, v }, &mut rows);
+            let closed = quartic_bernstein(u, v);
+            for (r, &i) in rows.indices.iter().enumerate() {
+                for (d, (a, b)) in rows.weights[r].iter().zip(closed[i as usize]).enumerate() {
+                    assert!(
+                        (a - b).abs() < 1e-12,
+                        "({u},{v}) basis {i} derivative {d}: {a} vs {b}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

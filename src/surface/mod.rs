@@ -2,6 +2,7 @@
 
 pub mod bezier;
 pub mod box_spline;
+pub mod grid_spline;
 
 use glam::DVec3;
 

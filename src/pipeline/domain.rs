@@ -1,0 +1,335 @@
+//! Parameter domains of remeshed scans, built on the planar map of the patch:
+//! - `bezier`: the smallest equilateral triangle around the map (barycentric parameters);
+//! - `loop`: the cells of a regular three-direction grid that the patch covers (grid
+//!   coordinates, see `surface::grid_spline`), with the spacing chosen for a target number
+//!   of control points.
+//!
+//! Both resample the patch on a lattice with Loop subdivision connectivity by construction
+//! and inverse-subdivide it for the initial control net.
+
+use crate::mesh::inverse::{coarsen, InverseMethod};
+use crate::remesh::param::Locator;
+use crate::surface::bezier::{lattice_points, lattice_triangles};
+use crate::surface::grid_spline::{Cell, GridSpline};
+use crate::surface::TriSurface;
+use crate::TriMesh;
+use glam::{DVec2, DVec3};
+use std::collections::{HashMap, VecDeque};
+
+const SQRT3_2: f64 = 0.866_025_403_784_438_6;
+
+/// The plane <-> grid-coordinate map of a grid of spacing `spacing`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct GridFrame {
+    pub spacing: f64,
+}
+
+impl GridFrame {
+    pub fn to_grid(&self, p: DVec2) -> (f64, f64) {
+        let y = p.y / (self.spacing * SQRT3_2);
+        (p.x / self.spacing - 0.5 * y, y)
+    }
+
+    pub fn to_plane(&self, x: f64, y: f64) -> DVec2 {
+        DVec2::new(self.spacing * (x + 0.5 * y), self.spacing * SQRT3_2 * y)
+    }
+}
+
+/// Every cell whose parallelogram meets a triangle's bounding box (in grid coordinates).
+/// Conservative: a cell the patch only grazes is kept, never one it covers dropped.
+pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> Vec<Cell> {
+    let mut seen: HashMap<(i64, i64), ()> = HashMap::new();
+    for t in tris {
+        let g = t.map(|v| frame.to_grid(plane[v as usize]));
+        let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
+        let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
+        let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
+        let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
+        for j in y0..=y1 {
+            for i in x0..=x1 {
+                seen.insert((i, j), ());
+            }
+        }
+    }
+    seen.into_keys()
+        .flat_map(|(i, j)| [(i, j, false), (i, j, true)])
+        .collect()
+}
+
+/// The spacing whose covered cells carry about `target` control points (never more when a
+/// smaller count exists): a few secant steps on spacing ~ 1 / sqrt(count).
+pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> f64 {
+    let area: f64 = tris
+        .iter()
+        .map(|t| {
+            let (a, b, c) = (
+                plane[t[0] as usize],
+                plane[t[1] as usize],
+                plane[t[2] as usize],
+            );
+            0.5 * (b - a).perp_dot(c - a).abs()
+        })
+        .sum();
+    let target = target.max(16) as f64;
+    // One control point per rhombus of area sqrt(3)/2 h^2.
+    let mut h = (area / (SQRT3_2 * target)).sqrt().max(1e-12);
+    let mut best: Option<(f64, usize)> = None;
+    for _ in 0..6 {
+        let count = GridSpline::new(covered_cells(&GridFrame { spacing: h }, plane, tris))
+            .control_count()
+            .max(1);
+        if count as f64 <= target && best.is_none_or(|(_, c)| count > c) {
+            best = Some((h, count));
+        }
+        if (count as f64 - target).abs() <= 0.02 * target && count as f64 <= target {
+            break;
+        }
+        h *= (count as f64 / target).sqrt() * if count as f64 > target { 1.01 } else { 1.0 };
+    }
+    best.map_or(h, |(h, _)| h)
+}
+
+/// The smallest equilateral triangle (over orientations in 1-degree steps) containing all
+/// points, grown by `margin` of its size, corners counter-clockwise.
+pub fn enclosing_triangle(points: &[DVec2], margin: f64) -> [DVec2; 3] {
+    let mut best = (f64::MAX, [DVec2::ZERO; 3]);
+    for step in 0..120 {
+        let theta = (step as f64).to_radians();
+        let normals: [DVec2; 3] = [0.0, 1.0, 2.0].map(|k: f64| {
+            let a = theta + k * std::f64::consts::TAU / 3.0;
+            DVec2::new(a.cos(), a.sin())
+        });
+        let support: [f64; 3] =
+            normals.map(|n| points.iter().map(|p| p.dot(n)).fold(f64::MIN, f64::max));
+        let size: f64 = support.iter().sum();
+        if size < best.0 {
+            let grow = margin * size / 3.0;
+            let corner = |a: usize, b: usize| {
+                // Intersection of n_a . p = s_a and n_b . p = s_b.
+                let (na, nb) = (normals[a], normals[b]);
+                let (sa, sb) = (support[a] + grow, support[b] + grow);
+                let det = na.perp_dot(nb);
+                DVec2::new(sa * nb.y - sb * na.y, na.x * sb - nb.x * sa) / det
+            };
+            let c = [corner(0, 1), corner(1, 2), corner(2, 0)];
+            let ccw = (c[1] - c[0]).perp_dot(c[2] - c[0]) > 0.0;
+            best = (size, if ccw { c } else { [c[0], c[2], c[1]] });
+        }
+    }
+    best.1
+}
+
+/// Barycentric (u, v) w.r.t. corners 0 and 1 of `tri`.
+pub fn barycentric(tri: &[DVec2; 3], p: DVec2) -> (f64, f64) {
+    let [a, b, c] = *tri;
+    let det = (a - c).perp_dot(b - c);
+    ((p - c).perp_dot(b - c) / det, (a - c).perp_dot(p - c) / det)
+}
+
+/// The patch position at a plane point: inside the map, the interpolated surface; outside,
+/// its nearest boundary triangle's clamped point (a flat continuation, never extrapolated).
+fn sample(mesh: &TriMesh, locator: &Locator, q: DVec2) -> DVec3 {
+    let (f, b) = locator.locate(q);
+    let t = mesh.triangles[f];
+    mesh.positions[t[0] as usize] * b[0]
+        + mesh.positions[t[1] as usize] * b[1]
+        + mesh.positions[t[2] as usize] * b[2]
+}
+
+/// How the initial net came about, for the report.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct InitialNet {
+    pub controls: Vec<DVec3>,
+    pub resample_points: usize,
+    /// "exact" or "lsq" inverse Loop, or why the net was sampled directly instead.
+    pub inverse: String,
+}
+
+/// Bezier: sample the lattice of `n0 * 2^levels` segments over `tri` and inverse-subdivide.
+pub fn bezier_initial_net(
+    mesh: &TriMesh,
+    plane: &[DVec2],
+    tri: &[DVec2; 3],
+    n0: usize,
+    levels: usize,
+    method: InverseMethod,
+) -> InitialNet {
+    let locator = Locator::new(&mesh.triangles, plane);
+    let segments = n0 << levels;
+    let at = |i: usize, j: usize, n: usize| {
+        let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+        tri[0] * u + tri[1] * v + tri[2] * (1.0 - u - v)
+    };
+    let lattice: Vec<DVec3> = lattice_points(segments)
+        .into_iter()
+        .map(|(i, j)| sample(mesh, &locator, at(i, j, segments)))
+        .collect();
+    let resample_points = lattice.len();
+    let fine = TriMesh::new(lattice, lattice_triangles(segments));
+    match coarsen(&fine, levels, method) {
+        // The lattice's even vertices come in lattice order: so does the coarse net.
+        Ok(c) if c.mesh.positions.len() == lattice_points(n0).len() => InitialNet {
+            controls: c.mesh.positions,
+            resample_points,
+            inverse: format!("{method:?}").to_lowercase(),
+        },
+        other => InitialNet {
+            controls: lattice_points(n0)
+                .into_iter()
+                .map(|(i, j)| sample(mesh, &locator, at(i, j, n0)))
+                .collect(),
+            resample_points,
+            inverse: format!(
+                "sampled directly ({})",
+                other
+                    .err()
+                    .map_or("unexpected net size".into(), |e| e.to_string())
+            ),
+        },
+    }
+}
+
+/// Loop grid: sample the cells' lattice refined `levels` times, inverse-subdivide it, and
+/// give the outer ring of control points (no cell of their own) their nearest net value.
+pub fn grid_initial_net(
+    mesh: &TriMesh,
+    plane: &[DVec2],
+    frame: &GridFrame,
+    grid: &GridSpline,
+    levels: usize,
+    method: InverseMethod,
+) -> InitialNet {
+    let locator = Locator::new(&mesh.triangles, plane);
+    let f = 1i64 << levels;
+    let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
+    let mut coords: Vec<(i64, i64)> = Vec::new();
+    let mut id = |c: (i64, i64), coords: &mut Vec<(i64, i64)>| {
+        *ids.entry(c).or_insert_with(|| {
+            coords.push(c);
+            coords.len() as u32 - 1
+        })
+    };
+    let sub = lattice_triangles(f as usize);
+    let local = lattice_points(f as usize);
+    let mut triangles = Vec::with_capacity(grid.cells().len() * sub.len());
+    for &(i, j, down) in grid.cells() {
+        // A down cell is the up lattice turned by 180 degrees about its centre.
+        let global = |(a, b): (usize, usize)| {
+            if down {
+                (f * (i + 1) - a as i64, f * (j + 1) - b as i64)
+            } else {
+                (f * i + a as i64, f * j + b as i64)
+            }
+        };
+        let cell_ids: Vec<u32> = local.iter().map(|&p| id(global(p), &mut coords)).collect();
+        for t in &sub {
+            triangles.push(t.map(|k| cell_ids[k as usize]));
+        }
+    }
+    let positions: Vec<DVec3> = coords
+        .iter()
+        .map(|&(a, b)| {
+            let q = frame.to_plane(a as f64 / f as f64, b as f64 / f as f64);
+            sample(mesh, &locator, q)
+        })
+        .collect();
+    let resample_points = positions.len();
+    let mut net: Vec<Option<DVec3>> = vec![None; grid.control_count()];
+    let fine = TriMesh::new(positions, triangles);
+    let inverse = match coarsen(&fine, levels, method) {
+        Ok(c) => {
+            let map = c.hierarchy.coarsest_to_fine();
+            let mut ok = map.len() == c.mesh.positions.len();
+            for (k, &fv) in map.iter().enumerate() {
+                let (a, b) = coords.get(fv as usize).copied().unwrap_or((1, 1));
+                match (
+                    a.rem_euclid(f),
+                    b.rem_euclid(f),
+                    grid.control_at(a / f, b / f),
+                ) {
+                    (0, 0, Some(ctl)) if ok => net[ctl as usize] = Some(c.mesh.positions[k]),
+                    _ => ok = false,
+                }
+            }
+            if ok || levels == 0 {
+                format!("{method:?}").to_lowercase()
+            } else {
+                net.iter_mut().for_each(|n| *n = None);
+                "sampled directly (the detected hierarchy is not the grid's)".into()
+            }
+        }
+        Err(e) => format!("sampled directly ({e})"),
+    };
+    if net.iter().all(Option::is_none) {
+        for (k, &(a, b)) in coords.iter().enumerate() {
+            if a.rem_euclid(f) == 0 && b.rem_euclid(f) == 0 {
+                if let Some(ctl) = grid.control_at(a / f, b / f) {
+                    net[ctl as usize] = Some(fine.positions[k]);
+                }
+            }
+        }
+    }
+    InitialNet {
+        controls: fill_nearest(grid, net),
+        resample_points,
+        inverse,
+    }
+}
+
+/// Breadth-first over grid neighbours from every known control point.
+fn fill_nearest(grid: &GridSpline, mut net: Vec<Option<DVec3>>) -> Vec<DVec3> {
+    let coords = grid.control_coords();
+    let mut queue: VecDeque<usize> = (0..net.len()).filter(|&k| net[k].is_some()).collect();
+    while let Some(k) = queue.pop_front() {
+        let (i, j) = coords[k];
+        for (di, dj) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)] {
+            if let Some(n) = grid.control_at(i + di, j + dj) {
+                if net[n as usize].is_none() {
+                    net[n as usize] = net[k];
+                    queue.push_back(n as usize);
+                }
+            }
+        }
+    }
+    net.into_iter().map(Option::unwrap_or_default).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_frame_round_trips_and_puts_vertices_on_an_equilateral_grid() {
+        let g = GridFrame { spacing: 0.3 };
+        let p = DVec2::new(1.7, -0.4);
+        let (x, y) = g.to_grid(p);
+        assert!((g.to_plane(x, y) - p).length() < 1e-12);
+        let (a, b, c) = (
+            g.to_plane(0.0, 0.0),
+            g.to_plane(1.0, 0.0),
+            g.to_plane(0.0, 1.0),
+        );
+        for d in [(b - a).length(), (c - a).length(), (c - b).length()] {
+            assert!((d - 0.3).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn enclosing_triangle_contains_every_point() {
+        let pts: Vec<DVec2> = (0..200)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                DVec2::new(t.cos() * (1.0 + 0.3 * (3.0 * t).sin()), 0.6 * t.sin())
+            })
+            .collect();
+        let tri = enclosing_triangle(&pts, 0.01);
+        for p in &pts {
+            let (u, v) = barycentric(&tri, *p);
+            assert!(u > 0.0 && v > 0.0 && u + v < 1.0, "{p} -> ({u}, {v})");
+        }
+        // Equilateral and counter-clockwise.
+        let s = [0, 1, 2].map(|k| (tri[(k + 1) % 3] - tri[k]).length());
+        assert!((s[0] - s[1]).abs() < 1e-9 && (s[1] - s[2]).abs() < 1e-9);
+        assert!((tri[1] - tri[0]).perp_dot(tri[2] - tri[0]) > 0.0);
+    }
+}

@@ -1,0 +1,357 @@
+//! What a fit turns into: the surface.json value, the tessellation (trimmed to the scanned
+//! region) and its error colours. Bytes and values only; callers write them.
+
+use super::geometric::error_colour;
+use super::scan::{ScanFit, SurfaceModel};
+use super::PatchFit;
+use crate::io::glb::{glb_bytes, GlbAttributes};
+use crate::surface::bezier::{lattice_points, lattice_triangles};
+use crate::surface::grid_spline::{Cell, GridSpline};
+use crate::surface::SurfaceParam;
+use crate::TriMesh;
+use glam::DVec3;
+use serde_json::json;
+use std::collections::HashMap;
+
+pub fn surface_json(
+    f: &PatchFit,
+    scan: Option<&ScanFit>,
+    report: &serde_json::Value,
+) -> serde_json::Value {
+    let controls = f
+        .controls
+        .iter()
+        .map(|p| [p.x, p.y, p.z])
+        .collect::<Vec<_>>();
+    let mut v = match &f.model {
+        SurfaceModel::Bezier(b) => json!({
+            "kind": "bezier",
+            "degree": b.degree,
+            "domain": "reference triangle: barycentric (u, v, w = 1 - u - v)",
+            "lattice_ordering": "control point P_{i,j,k} (i + j + k = degree) has weight degree!/(i! j! k!) u^i v^j w^k and sits at index j*(degree+1) - j*(j-1)/2 + i",
+        }),
+        SurfaceModel::Grid(g) => json!({
+            "kind": "loop",
+            "layout": "grid",
+            "domain": "grid coordinates (x, y) of the regular three-direction grid; grid vertex (i, j) is at x = i, y = j",
+            "basis": "on every cell the quartic three-direction box spline of its 12 surrounding control points (the Loop limit surface of the regular control net); cell [i, j, 0] is the up triangle (i,j),(i+1,j),(i,j+1), [i, j, 1] the down triangle (i+1,j),(i+1,j+1),(i,j+1)",
+            "cells": g.cells().iter().map(|&(i, j, d)| [i, j, i64::from(d)]).collect::<Vec<_>>(),
+            "control_coords": g.control_coords().iter().map(|&(i, j)| [i, j]).collect::<Vec<_>>(),
+        }),
+    };
+    v["schema"] = json!("trispline.surface/1");
+    v["control_points"] = json!(controls);
+    if let Some(s) = scan {
+        v["parameter_frame"] = json!({
+            "about": "the plane the scan was mapped to: plane point (s, t) = ((p - origin) . e1, (p - origin) . e2); triangle domains give corners in (s, t), grid domains the spacing (grid vertex (i, j) at s = spacing (i + j / 2), t = spacing j sqrt(3) / 2)",
+            "origin": s.frame.origin.to_array(),
+            "e1": s.frame.e1.to_array(),
+            "e2": s.frame.e2.to_array(),
+            "domain": s.domain,
+            "map": s.map_method,
+        });
+        v["trim"] = json!({
+            "space": "the surface's own parameters (barycentric (u, v) for bezier, grid (x, y) for loop)",
+            "outer": s.trim.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
+        });
+    }
+    v["fit"] = report["final"].clone();
+    v["status"] = report["status"].clone();
+    v
+}
+
+/// Even-odd point-in-polygon with the edges bucketed by y, for many queries.
+pub struct TrimTest {
+    poly: Vec<(f64, f64)>,
+    y0: f64,
+    dy: f64,
+    buckets: Vec<Vec<u32>>,
+}
+
+impl TrimTest {
+    pub fn new(poly: &[(f64, f64)]) -> Self {
+        let (y0, y1) = poly
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
+        let nb = (poly.len() / 4).clamp(1, 4096);
+        let dy = ((y1 - y0) / nb as f64).max(1e-300);
+        let mut buckets = vec![Vec::new(); nb];
+        for k in 0..poly.len() {
+            let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+            let lo = (((a.1.min(b.1) - y0) / dy) as usize).min(nb - 1);
+            let hi = (((a.1.max(b.1) - y0) / dy) as usize).min(nb - 1);
+            for bucket in &mut buckets[lo..=hi] {
+                bucket.push(k as u32);
+            }
+        }
+        Self {
+            poly: poly.to_vec(),
+            y0,
+            dy,
+            buckets,
+        }
+    }
+
+    pub fn inside(&self, p: (f64, f64)) -> bool {
+        if self.poly.len() < 3 || !p.1.is_finite() {
+            return false;
+        }
+        let b = (p.1 - self.y0) / self.dy;
+        if b < 0.0 || b >= self.buckets.len() as f64 + 1.0 {
+            return false;
+        }
+        let mut c = false;
+        for &k in &self.buckets[(b as usize).min(self.buckets.len() - 1)] {
+            let k = k as usize;
+            let (a, b) = (self.poly[k], self.poly[(k + 1) % self.poly.len()]);
+            if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1) {
+                c = !c;
+            }
+        }
+        c
+    }
+}
+
+/// A tessellation of the fitted surface: parameters, points, normals, triangles (trimmed
+/// to the scanned region when a trim is given).
+pub struct Tessellation {
+    pub params: Vec<SurfaceParam>,
+    pub positions: Vec<DVec3>,
+    pub normals: Vec<DVec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// `segments`: per side of the Bezier triangle; for a grid, the total budget spread over
+/// the cells, at least 4 per cell side (a quartic cell flattened into 4 x 4 keeps the
+/// chordal error far below scan noise at scan-like curvatures).
+pub fn tessellate(f: &PatchFit, segments: usize, trim: Option<&[(f64, f64)]>) -> Tessellation {
+    let (params, triangles) = match &f.model {
+        SurfaceModel::Bezier(_) => {
+            let n = segments.max(1);
+            let params = lattice_points(n)
+                .into_iter()
+                .map(|(i, j)| SurfaceParam {
+                    face: 0,
+                    u: i as f64 / n as f64,
+                    v: j as f64 / n as f64,
+                })
+                .collect();
+            (params, lattice_triangles(n))
+        }
+        SurfaceModel::Grid(g) => grid_tessellation(g, segments),
+    };
+    let surface = f.model.as_surface();
+    let evals: Vec<_> = params
+        .iter()
+        .map(|p| surface.evaluate(&f.controls, *p))
+        .collect();
+    let trim_test = trim.map(TrimTest::new);
+    let triangles = triangles
+        .into_iter()
+        .filter(|t| {
+            trim_test.as_ref().is_none_or(|tt| {
+                let c = t.iter().fold((0.0, 0.0), |acc, &i| {
+                    (
+                        acc.0 + params[i as usize].u / 3.0,
+                        acc.1 + params[i as usize].v / 3.0,
+                    )
+                });
+                tt.inside(c)
+            })
+        })
+        .collect();
+    Tessellation {
+        positions: evals.iter().map(|d| d.position).collect(),
+        normals: evals
+            .iter()
+            .map(|d| d.du.cross(d.dv).normalize_or_zero())
+            .collect(),
+        params,
+        triangles,
+    }
+}
+
+fn grid_tessellation(g: &GridSpline, segments: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+    let cells = g.cells().len().max(1);
+    let k = ((segments as f64 / (cells as f64).sqrt()).ceil() as i64).clamp(4, 32);
+    let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
+    let mut params = Vec::new();
+    let mut triangles = Vec::new();
+    let local = lattice_points(k as usize);
+    let sub = lattice_triangles(k as usize);
+    for &(i, j, down) in g.cells() {
+        let cell: Cell = (i, j, down);
+        let vid: Vec<u32> = local
+            .iter()
+            .map(|&(a, b)| {
+                let key = if cell.2 {
+                    (k * (i + 1) - a as i64, k * (j + 1) - b as i64)
+                } else {
+                    (k * i + a as i64, k * j + b as i64)
+                };
+                *ids.entry(key).or_insert_with(|| {
+                    params.push(SurfaceParam {
+                        face: 0,
+                        u: key.0 as f64 / k as f64,
+                        v: key.1 as f64 / k as f64,
+                    });
+                    params.len() as u32 - 1
+                })
+            })
+            .collect();
+        triangles.extend(sub.iter().map(|t| t.map(|x| vid[x as usize])));
+    }
+    (params, triangles)
+}
+
+/// The GLB of a tessellation, each vertex coloured by the geometric error of the data point
+/// whose parameter is nearest (blue exact .. red twice the tolerance).
+pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec<u8> {
+    let nearest = NearestParam::new(&f.params);
+    let colors: Vec<[f32; 4]> = tess
+        .params
+        .iter()
+        .map(|p| {
+            let e = nearest
+                .nearest(p.u, p.v)
+                .map_or(0.0, |k| f.geometric_errors[k]);
+            error_colour(e, tolerance)
+        })
+        .collect();
+    // Only the vertices the trimmed triangles use go into the file.
+    let mut remap = vec![u32::MAX; tess.positions.len()];
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut cols = Vec::new();
+    let triangles: Vec<[u32; 3]> = tess
+        .triangles
+        .iter()
+        .map(|t| {
+            t.map(|v| {
+                let v = v as usize;
+                if remap[v] == u32::MAX {
+                    remap[v] = positions.len() as u32;
+                    positions.push(tess.positions[v]);
+                    normals.push(tess.normals[v]);
+                    cols.push(colors[v]);
+                }
+                remap[v]
+            })
+        })
+        .collect();
+    let mesh = TriMesh::new(positions, triangles);
+    glb_bytes(
+        &mesh,
+        &GlbAttributes {
+            normals: Some(&normals),
+            colors: Some(&cols),
+            polylines: &[],
+        },
+    )
+}
+
+/// Nearest data parameter through a uniform bucket grid over the parameters' bounding box.
+struct NearestParam<'a> {
+    params: &'a [SurfaceParam],
+    lo: (f64, f64),
+    cell: f64,
+    dim: usize,
+    buckets: Vec<Vec<u32>>,
+}
+
+impl<'a> NearestParam<'a> {
+    fn new(params: &'a [SurfaceParam]) -> Self {
+        let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+        for p in params {
+            lo = (lo.0.min(p.u), lo.1.min(p.v));
+            hi = (hi.0.max(p.u), hi.1.max(p.v));
+        }
+        let dim = ((params.len() as f64).sqrt() as usize / 2).clamp(1, 1024);
+        let cell = ((hi.0 - lo.0).max(hi.1 - lo.1) / dim as f64).max(1e-300);
+        let mut buckets = vec![Vec::new(); dim * dim];
+        let mut s = Self {
+            params,
+            lo,
+            cell,
+            dim,
+            buckets: Vec::new(),
+        };
+        for (k, p) in params.iter().enumerate() {
+            let (x, y) = s.cell_of(p.u, p.v);
+            buckets[y * dim + x].push(k as u32);
+        }
+        s.buckets = buckets;
+        s
+    }
+
+    fn cell_of(&self, u: f64, v: f64) -> (usize, usize) {
+        let x = ((u - self.lo.0) / self.cell).max(0.0) as usize;
+        let y = ((v - self.lo.1) / self.cell).max(0.0) as usize;
+        (x.min(self.dim - 1), y.min(self.dim - 1))
+    }
+
+    fn nearest(&self, u: f64, v: f64) -> Option<usize> {
+        let (cx, cy) = self.cell_of(u, v);
+        let mut best: Option<(f64, usize)> = None;
+        for r in 0..self.dim {
+            for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
+                for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
+                    if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
+                        continue;
+                    }
+                    for &k in &self.buckets[y * self.dim + x] {
+                        let p = self.params[k as usize];
+                        let d = (p.u - u).powi(2) + (p.v - v).powi(2);
+                        if best.is_none_or(|b| d < b.0) {
+                            best = Some((d, k as usize));
+                        }
+                    }
+                }
+            }
+            // One more ring after the first hit: a nearer point can sit in the next ring.
+            if let Some((d, _)) = best {
+                if (r as f64 * self.cell).powi(2) >= d {
+                    break;
+                }
+            }
+        }
+        best.map(|b| b.1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn trim_test_agrees_with_a_plain_even_odd_test() {
+        let poly: Vec<(f64, f64)> = (0..300)
+            .map(|k| {
+                let t = k as f64 / 300.0 * std::f64::consts::TAU;
+                let r = 1.0 + 0.4 * (5.0 * t).sin();
+                (r * t.cos(), r * t.sin())
+            })
+            .collect();
+        let tt = TrimTest::new(&poly);
+        let plain = |p: (f64, f64)| {
+            let mut c = false;
+            for k in 0..poly.len() {
+                let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+                if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1)
+                {
+                    c = !c;
+                }
+            }
+            c
+        };
+        let mut inside = 0;
+        for i in 0..60 {
+            for j in 0..60 {
+                let p = (-1.5 + i as f64 * 0.05, -1.5 + j as f64 * 0.05);
+                assert_eq!(tt.inside(p), plain(p), "{p:?}");
+                inside += usize::from(plain(p));
+            }
+        }
+        assert!(inside > 500);
+    }
+}

@@ -1,0 +1,230 @@
+//! Low-distortion planar maps of scan patches.
+//!
+//! A range scan is a height field seen from the scanner, so its projection onto the plane
+//! across the mean normal is nearly isometric and, where no triangle folds over, a
+//! bijection. That projection is tried first. Folded triangles (overhangs, grazing
+//! silhouettes, < 1 % of the triangles) are left out of the mapped mesh, which only serves
+//! point location; their vertices keep their projected parameters as data, which needs no
+//! injectivity. Holes are closed by ear clipping in the plane. A patch with more folds is no
+//! height field: it falls back to Floater's mean-value map with the boundary on a circle,
+//! provably bijective, and verified to have no triangle of non-positive area.
+
+use super::param::{mean_value_map, DomainShape};
+use super::{FilledPatch, RemeshError};
+use crate::mesh::TriMesh;
+use glam::{DVec2, DVec3};
+
+/// An orthonormal frame of the parameter plane, in the input's coordinates. Kept in the
+/// warm-start state so that a new version of a patch is projected the same way.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PlaneFrame {
+    pub origin: DVec3,
+    pub e1: DVec3,
+    pub e2: DVec3,
+}
+
+impl PlaneFrame {
+    /// Normal = the area-weighted mean of the face normals (for a range scan, close to the
+    /// viewing direction); e1 = the principal axis of the vertices within the plane, so the
+    /// frame does not spin with small changes of the data.
+    pub fn fit(mesh: &TriMesh) -> Option<Self> {
+        let p = &mesh.positions;
+        let normal: DVec3 = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let (a, b, c) = (p[t[0] as usize], p[t[1] as usize], p[t[2] as usize]);
+                (b - a).cross(c - a)
+            })
+            .sum();
+        let n = normal.try_normalize()?;
+        if p.is_empty() {
+            return None;
+        }
+        let origin = p.iter().copied().sum::<DVec3>() / p.len() as f64;
+        let a = n.any_orthonormal_vector();
+        let b = n.cross(a);
+        // 2x2 covariance in (a, b); its major eigenvector is e1.
+        let (mut saa, mut sab, mut sbb) = (0.0, 0.0, 0.0);
+        for q in p {
+            let d = *q - origin;
+            let (x, y) = (d.dot(a), d.dot(b));
+            saa += x * x;
+            sab += x * y;
+            sbb += y * y;
+        }
+        let angle = 0.5 * (2.0 * sab).atan2(saa - sbb);
+        let e1 = a * angle.cos() + b * angle.sin();
+        let e2 = n.cross(e1);
+        Some(Self { origin, e1, e2 })
+    }
+
+    pub fn project(&self, p: DVec3) -> DVec2 {
+        let d = p - self.origin;
+        DVec2::new(d.dot(self.e1), d.dot(self.e2))
+    }
+
+    pub fn normal(&self) -> DVec3 {
+        self.e1.cross(self.e2)
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MapMethod {
+    /// Orthogonal projection (folded triangles, if any, left out of the mapped mesh).
+    Projection,
+    /// Mean-value map with the boundary on a circle (scaled to the patch's size).
+    MeanValueDisk,
+}
+
+#[derive(Clone, Debug)]
+pub struct PlanarMap {
+    /// The filled patch as mapped: the projection closes holes by ear clipping in the plane
+    /// (no fold by construction) where the fans of `fill_holes` would fold; virtual
+    /// vertices left unused stay in place, unreferenced.
+    pub mesh: TriMesh,
+    /// Plane position of every vertex of `mesh` (real, then virtual).
+    pub plane: Vec<DVec2>,
+    pub method: MapMethod,
+    /// Folded triangles of the projection (left out of `mesh` when the projection is used).
+    pub folds_projected: usize,
+}
+
+/// Triangles with non-positive signed area in the map.
+pub fn folded_triangles(tris: &[[u32; 3]], plane: &[DVec2]) -> Vec<usize> {
+    tris.iter()
+        .enumerate()
+        .filter(|(_, t)| {
+            let (a, b, c) = (
+                plane[t[0] as usize],
+                plane[t[1] as usize],
+                plane[t[2] as usize],
+            );
+            (b - a).perp_dot(c - a) <= 0.0
+        })
+        .map(|(f, _)| f)
+        .collect()
+}
+
+/// Above this share of folded triangles the patch is no height field over the plane.
+const MAX_FOLD_FRACTION: f64 = 0.01;
+
+pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, RemeshError> {
+    let plane: Vec<DVec2> = patch
+        .mesh
+        .positions
+        .iter()
+        .map(|&p| frame.project(p))
+        .collect();
+    let mut mesh = patch.mesh.clone();
+    mesh.triangles.truncate(patch.real_triangles);
+    for hole in &patch.hole_loops {
+        let mut poly: Vec<u32> = hole.clone();
+        let area: f64 = (0..poly.len())
+            .map(|k| plane[poly[k] as usize].perp_dot(plane[poly[(k + 1) % poly.len()] as usize]))
+            .sum();
+        if area < 0.0 {
+            poly.reverse();
+        }
+        match ear_clip(&poly, &plane) {
+            Some(tris) => mesh.triangles.extend(tris),
+            None => {
+                let fan = patch.mesh.triangles[patch.real_triangles..]
+                    .iter()
+                    .filter(|t| hole.contains(&t[0]) && hole.contains(&t[1]));
+                mesh.triangles.extend(fan);
+            }
+        }
+    }
+    let folds = folded_triangles(&mesh.triangles, &plane);
+    let folds_projected = folds.len();
+    if (folds.len() as f64) <= MAX_FOLD_FRACTION * mesh.triangles.len() as f64 {
+        // A few folds at grazing silhouettes: leave them out of the mapped mesh (they only
+        // serve point location); their vertices keep their projected parameters as data.
+        let mut drop = vec![false; mesh.triangles.len()];
+        for f in folds {
+            drop[f] = true;
+        }
+        let mut k = 0;
+        mesh.triangles.retain(|_| {
+            k += 1;
+            !drop[k - 1]
+        });
+        return Ok(PlanarMap {
+            mesh,
+            plane,
+            method: MapMethod::Projection,
+            folds_projected,
+        });
+    }
+    // Not a height field over any plane: the provably bijective map.
+    let mut disk = mean_value_map(patch, DomainShape::Disk)?;
+    // Scale to the patch's size so grid spacings stay in the input's units.
+    let length_3d: f64 = ring_length(patch.outer.iter().map(|&v| mesh.positions[v as usize]));
+    let length_2d: f64 = ring_length(patch.outer.iter().map(|&v| disk[v as usize].extend(0.0)));
+    let s = if length_2d > 0.0 {
+        length_3d / length_2d
+    } else {
+        1.0
+    };
+    for p in &mut disk {
+        *p *= s;
+    }
+    let left = folded_triangles(&patch.mesh.triangles, &disk);
+    if !left.is_empty() {
+        return Err(RemeshError::Parameterization(format!(
+            "{} folded triangles remain after the mean-value map (degenerate input triangles?)",
+            left.len()
+        )));
+    }
+    Ok(PlanarMap {
+        mesh: patch.mesh.clone(),
+        plane: disk,
+        method: MapMethod::MeanValueDisk,
+        folds_projected,
+    })
+}
+
+fn ring_length(points: impl Iterator<Item = DVec3>) -> f64 {
+    let pts: Vec<DVec3> = points.collect();
+    (0..pts.len())
+        .map(|k| (pts[(k + 1) % pts.len()] - pts[k]).length())
+        .sum()
+}
+
+/// Ear clipping of a simple counter-clockwise polygon; `None` when no ear is left (the
+/// polygon is not simple in the plane).
+fn ear_clip(poly: &[u32], plane: &[DVec2]) -> Option<Vec<[u32; 3]>> {
+    let mut ring: Vec<u32> = poly.to_vec();
+    let mut out = Vec::with_capacity(poly.len().saturating_sub(2));
+    let at = |v: u32| plane[v as usize];
+    let cross = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - a);
+    while ring.len() > 3 {
+        let n = ring.len();
+        let ear = (0..n).find(|&k| {
+            let (a, b, c) = (ring[(k + n - 1) % n], ring[k], ring[(k + 1) % n]);
+            let (pa, pb, pc) = (at(a), at(b), at(c));
+            if cross(pa, pb, pc) <= 0.0 {
+                return false;
+            }
+            ring.iter().all(|&v| {
+                if v == a || v == b || v == c {
+                    return true;
+                }
+                let p = at(v);
+                !(cross(pa, pb, p) >= 0.0 && cross(pb, pc, p) >= 0.0 && cross(pc, pa, p) >= 0.0)
+            })
+        })?;
+        let (a, b, c) = (ring[(ear + n - 1) % n], ring[ear], ring[(ear + 1) % n]);
+        out.push([a, b, c]);
+        ring.remove(ear);
+    }
+    if ring.len() == 3 {
+        if cross(at(ring[0]), at(ring[1]), at(ring[2])) <= 0.0 {
+            return None;
+        }
+        out.push([ring[0], ring[1], ring[2]]);
+    }
+    Some(out)
+}

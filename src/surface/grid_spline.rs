@@ -1,0 +1,306 @@
+//! The Loop limit surface of a regular control net over any set of cells of the
+//! three-direction grid: on every cell the quartic box spline of its 12 surrounding
+//! control points (the same patches as `box_spline::LatticeSpline`, without its
+//! triangular outline). Scans use it so that control points exist only where the data is.
+//!
+//! Parameters are grid coordinates (x, y): grid vertex (i, j) sits at x = i, y = j, and the
+//! plane point of (x, y) is `x a1 + y a2` with a1 = (1, 0), a2 = (1/2, sqrt(3)/2) times the
+//! grid spacing. Cell (i, j) "up" is (i,j),(i+1,j),(i,j+1); "down" is (i+1,j),(i+1,j+1),(i,j+1).
+
+use super::box_spline::{stencil_weights, STENCIL};
+use super::{BasisDerivRows, SurfaceParam, TriSurface};
+
+/// A grid cell: lower-left vertex (i, j) and whether it is the down triangle.
+pub type Cell = (i64, i64, bool);
+
+#[derive(Clone, Debug)]
+pub struct GridSpline {
+    i0: i64,
+    j0: i64,
+    width: usize,
+    height: usize,
+    /// Control index of every grid vertex in the bounding box, `u32::MAX` where none.
+    index: Vec<u32>,
+    coords: Vec<(i64, i64)>,
+    cells: Vec<Cell>,
+}
+
+/// The 12 control vertices a cell's patch depends on, in `STENCIL` order.
+pub fn cell_stencil((i, j, down): Cell) -> [(i64, i64); 12] {
+    STENCIL.map(|(di, dj)| {
+        if down {
+            (i + 1 - di, j + 1 - dj)
+        } else {
+            (i + di, j + dj)
+        }
+    })
+}
+
+/// The cell containing grid point (x, y) and the local coordinates of its up-triangle form.
+pub fn cell_at(x: f64, y: f64) -> (Cell, f64, f64) {
+    let (i, j) = (x.floor(), y.floor());
+    let (fx, fy) = (x - i, y - j);
+    let (i, j) = (i as i64, j as i64);
+    if fx + fy > 1.0 {
+        ((i, j, true), 1.0 - fx, 1.0 - fy)
+    } else {
+        ((i, j, false), fx, fy)
+    }
+}
+
+impl GridSpline {
+    /// The spline over `cells` (duplicates ignored); its controls are the union of the
+    /// cells' stencils, numbered row by row (j, then i) so the order does not depend on
+    /// the order of `cells`.
+    pub fn new(cells: impl IntoIterator<Item = Cell>) -> Self {
+        let mut cells: Vec<Cell> = cells.into_iter().collect();
+        cells.sort_unstable_by_key(|&(i, j, d)| (j, i, d));
+        cells.dedup();
+        let mut lo = (i64::MAX, i64::MAX);
+        let mut hi = (i64::MIN, i64::MIN);
+        for &c in &cells {
+            for (a, b) in cell_stencil(c) {
+                lo = (lo.0.min(a), lo.1.min(b));
+                hi = (hi.0.max(a), hi.1.max(b));
+            }
+        }
+        if cells.is_empty() {
+            lo = (0, 0);
+            hi = (-1, -1);
+        }
+        let width = (hi.0 - lo.0 + 1).max(0) as usize;
+        let height = (hi.1 - lo.1 + 1).max(0) as usize;
+        let mut used = vec![false; width * height];
+        for &c in &cells {
+            for (a, b) in cell_stencil(c) {
+                used[(b - lo.1) as usize * width + (a - lo.0) as usize] = true;
+            }
+        }
+        let mut index = vec![u32::MAX; width * height];
+        let mut coords = Vec::new();
+        for (k, _) in used.iter().enumerate().filter(|(_, u)| **u) {
+            index[k] = coords.len() as u32;
+            coords.push((lo.0 + (k % width) as i64, lo.1 + (k / width) as i64));
+        }
+        Self {
+            i0: lo.0,
+            j0: lo.1,
+            width,
+            height,
+            index,
+            coords,
+            cells,
+        }
+    }
+
+    pub fn cells(&self) -> &[Cell] {
+        &self.cells
+    }
+
+    /// Grid coordinates of every control point, in control order.
+    pub fn control_coords(&self) -> &[(i64, i64)] {
+        &self.coords
+    }
+
+    pub fn control_at(&self, i: i64, j: i64) -> Option<u32> {
+        let (a, b) = (i - self.i0, j - self.j0);
+        if a < 0 || b < 0 || a as usize >= self.width || b as usize >= self.height {
+            return None;
+        }
+        let k = self.index[b as usize * self.width + a as usize];
+        (k != u32::MAX).then_some(k)
+    }
+
+    /// Whether the surface is defined at (x, y): every stencil point of its cell exists.
+    pub fn covers(&self, x: f64, y: f64) -> bool {
+        if !(x.is_finite() && y.is_finite()) {
+            return false;
+        }
+        let (cell, _, _) = cell_at(x, y);
+        cell_stencil(cell)
+            .iter()
+            .all(|&(a, b)| self.control_at(a, b).is_some())
+    }
+
+    /// Grid triangles whose three corners are all control points: the net the fairness
+    /// term smooths.
+    pub fn net_triangles(&self) -> Vec<[u32; 3]> {
+        let mut out = Vec::new();
+        for &(i, j) in &self.coords {
+            let ids = [
+                self.control_at(i, j),
+                self.control_at(i + 1, j),
+                self.control_at(i, j + 1),
+                self.control_at(i + 1, j + 1),
+            ];
+            if let (Some(a), Some(b), Some(c)) = (ids[0], ids[1], ids[2]) {
+                out.push([a, b, c]);
+            }
+            if let (Some(b), Some(d), Some(c)) = (ids[1], ids[3], ids[2]) {
+                out.push([b, d, c]);
+            }
+        }
+        out
+    }
+}
+
+impl TriSurface for GridSpline {
+    fn control_count(&self) -> usize {
+        self.coords.len()
+    }
+
+    fn domain_face_count(&self) -> usize {
+        self.cells.len()
+    }
+
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        let mut rows = BasisDerivRows::default();
+        self.basis_rows_with_derivatives(p, &mut rows);
+        out.clear();
+        out.extend(
+            rows.indices
+                .iter()
+                .zip(&rows.weights)
+                .map(|(&i, w)| (i, w[0])),
+        );
+    }
+
+    /// Outside the covered cells a stencil point may be missing: its weight is dropped
+    /// (callers keep parameters inside with `covers` and `step`, so this only guards
+    /// against a panic).
+    fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
+        let (cell, lu, lv) = cell_at(p.u, p.v);
+        let w = stencil_weights(lu, lv, cell.2, 1.0);
+        out.indices.clear();
+        out.weights.clear();
+        for (k, (a, b)) in cell_stencil(cell).into_iter().enumerate() {
+            if let Some(id) = self.control_at(a, b) {
+                out.indices.push(id);
+                out.weights.push(w[k]);
+            }
+        }
+    }
+
+    /// Moves by (du, dv) as far as the covered cells allow (bisection on the step length).
+    fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
+        let at = |t: f64| SurfaceParam {
+            face: p.face,
+            u: p.u + du * t,
+            v: p.v + dv * t,
+        };
+        if self.covers(p.u + du, p.v + dv) {
+            return at(1.0);
+        }
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..20 {
+            let mid = 0.5 * (lo + hi);
+            let q = at(mid);
+            if self.covers(q.u, q.v) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        at(lo)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::surface::bezier::lattice_points;
+    use crate::surface::box_spline::LatticeSpline;
+    use glam::DVec3;
+
+    /// On the cells of a triangular lattice the grid spline is the lattice spline.
+    #[test]
+    fn equals_the_lattice_spline_on_its_cells() {
+        let n = 5usize;
+        let lattice = LatticeSpline::new(n);
+        let mut cells = Vec::new();
+        for j in 0..n as i64 {
+            for i in 0..n as i64 - j {
+                cells.push((i, j, false));
+                if i + j + 2 <= n as i64 {
+                    cells.push((i, j, true));
+                }
+            }
+        }
+        let grid = GridSpline::new(cells);
+        assert_eq!(grid.control_count(), lattice.control_count() - 3);
+        let height = |i: i64, j: i64| ((i * 7 + j * 13).rem_euclid(5)) as f64 * 0.1;
+        let lattice_controls: Vec<DVec3> = lattice_points(lattice.control_segments())
+            .into_iter()
+            .map(|(a, b)| {
+                let (i, j) = (a as i64 - 1, b as i64 - 1);
+                DVec3::new(i as f64, j as f64, height(i, j))
+            })
+            .collect();
+        let grid_controls: Vec<DVec3> = grid
+            .control_coords()
+            .iter()
+            .map(|&(i, j)| DVec3::new(i as f64, j as f64, height(i, j)))
+            .collect();
+        for &(x, y) in &[(0.2, 0.3), (1.7, 2.1), (3.1, 0.4), (0.05, 4.9), (2.5, 1.5)] {
+            let a = lattice.evaluate(
+                &lattice_controls,
+                SurfaceParam {
+                    face: 0,
+                    u: x / n as f64,
+                    v: y / n as f64,
+                },
+            );
+            let b = grid.evaluate(
+                &grid_controls,
+                SurfaceParam {
+                    face: 0,
+                    u: x,
+                    v: y,
+                },
+            );
+            assert!((a.position - b.position).length() < 1e-12, "({x},{y})");
+            assert!((a.du / n as f64 - b.du).length() < 1e-10, "du at ({x},{y})");
+            assert!(
+                (a.dvv / (n * n) as f64 - b.dvv).length() < 1e-9,
+                "dvv at ({x},{y})"
+            );
+        }
+    }
+
+    #[test]
+    fn steps_stay_on_covered_cells() {
+        let grid = GridSpline::new([(0, 0, false), (0, 0, true), (1, 0, false)]);
+        let p = SurfaceParam {
+            face: 0,
+            u: 0.4,
+            v: 0.3,
+        };
+        assert!(grid.covers(p.u, p.v));
+        let q = grid.step(p, 10.0, 0.0);
+        assert!(grid.covers(q.u, q.v) && q.u > 1.5 && q.u < 3.0, "{q:?}");
+        assert!(!grid.covers(-5.0, 0.5));
+        assert!(!grid.covers(f64::NAN, 0.5));
+    }
+
+    #[test]
+    fn reproduces_planes_with_exact_derivatives() {
+        let grid = GridSpline::new((0..4).flat_map(|i| [(i, 0, false), (i, 0, true)]));
+        let controls: Vec<DVec3> = grid
+            .control_coords()
+            .iter()
+            .map(|&(i, j)| DVec3::new(i as f64, j as f64, 0.5 * i as f64 - 0.25 * j as f64))
+            .collect();
+        let e = grid.evaluate(
+            &controls,
+            SurfaceParam {
+                face: 0,
+                u: 2.3,
+                v: 0.6,
+            },
+        );
+        assert!((e.position - DVec3::new(2.3, 0.6, 0.5 * 2.3 - 0.25 * 0.6)).length() < 1e-12);
+        assert!((e.du - DVec3::new(1.0, 0.0, 0.5)).length() < 1e-12);
+        assert!((e.dv - DVec3::new(0.0, 1.0, -0.25)).length() < 1e-12);
+        assert!(e.duu.length() < 1e-10 && e.duv.length() < 1e-10);
+    }
+}
