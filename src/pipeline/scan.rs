@@ -164,7 +164,7 @@ pub fn fit_scan(
     let patch = fill_holes(&part).map_err(unsupported)?;
     let frame = match warm.and_then(|w| w.frame) {
         Some(f) => f,
-        None => PlaneFrame::fit(&part)
+        None => PlaneFrame::fit_least_folds(&part)
             .ok_or_else(|| PipelineError::Unsupported("degenerate patch: no mean normal".into()))?,
     };
     let map = planar_map(&patch, &frame).map_err(unsupported)?;

@@ -59,6 +59,70 @@ impl PlaneFrame {
         Some(Self { origin, e1, e2 })
     }
 
+    /// A frame whose normal folds the fewest triangles over: range scans are height fields
+    /// along the scanner's line of sight, which can be tens of degrees off the mean normal.
+    /// Searched on cones around the mean normal (up to 45 degrees, then refined around the
+    /// best); ties go to the direction nearest the mean normal.
+    pub fn fit_least_folds(mesh: &TriMesh) -> Option<Self> {
+        let base = Self::fit(mesh)?;
+        let n0 = base.normal();
+        let folds = |n: DVec3, limit: usize| -> usize {
+            let mut count = 0;
+            for t in &mesh.triangles {
+                let (a, b, c) = (
+                    mesh.positions[t[0] as usize],
+                    mesh.positions[t[1] as usize],
+                    mesh.positions[t[2] as usize],
+                );
+                if (b - a).cross(c - a).dot(n) <= 0.0 {
+                    count += 1;
+                    if count > limit {
+                        break;
+                    }
+                }
+            }
+            count
+        };
+        let tilt = |axis: DVec3, tilt_deg: f64, azimuth_deg: f64| -> DVec3 {
+            let a = axis.any_orthonormal_vector();
+            let b = axis.cross(a);
+            let (t, z) = (tilt_deg.to_radians(), azimuth_deg.to_radians());
+            (axis * t.cos() + (a * z.cos() + b * z.sin()) * t.sin()).normalize()
+        };
+        let mut best = (folds(n0, usize::MAX), n0);
+        let consider = |n: DVec3, best: &mut (usize, DVec3)| {
+            if best.0 == 0 {
+                return;
+            }
+            let f = folds(n, best.0);
+            if f < best.0 {
+                *best = (f, n);
+            }
+        };
+        for tilt_deg in [8.0, 16.0, 24.0, 32.0, 40.0] {
+            for k in 0..12 {
+                consider(tilt(n0, tilt_deg, k as f64 * 30.0), &mut best);
+            }
+        }
+        let coarse = best.1;
+        for tilt_deg in [2.0, 4.0, 6.0] {
+            for k in 0..8 {
+                consider(tilt(coarse, tilt_deg, k as f64 * 45.0), &mut best);
+            }
+        }
+        let n = best.1;
+        if n == n0 {
+            return Some(base);
+        }
+        // Keep e1 as close to the base frame's principal axis as the new plane allows.
+        let e1 = (base.e1 - n * base.e1.dot(n)).try_normalize()?;
+        Some(Self {
+            origin: base.origin,
+            e1,
+            e2: n.cross(e1),
+        })
+    }
+
     pub fn project(&self, p: DVec3) -> DVec2 {
         let d = p - self.origin;
         DVec2::new(d.dot(self.e1), d.dot(self.e2))

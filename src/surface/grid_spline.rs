@@ -8,7 +8,8 @@
 //! grid spacing. Cell (i, j) "up" is (i,j),(i+1,j),(i,j+1); "down" is (i+1,j),(i+1,j+1),(i,j+1).
 
 use super::box_spline::{stencil_weights, STENCIL};
-use super::{BasisDerivRows, SurfaceParam, TriSurface};
+use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
+use glam::DVec3;
 
 /// A grid cell: lower-left vertex (i, j) and whether it is the down triangle.
 pub type Cell = (i64, i64, bool);
@@ -181,6 +182,28 @@ impl TriSurface for GridSpline {
         }
     }
 
+    /// Without the row buffers of the default: foot-point searches call this millions of
+    /// times.
+    fn evaluate(&self, controls: &[DVec3], p: SurfaceParam) -> Derivatives {
+        let (cell, lu, lv) = cell_at(p.u, p.v);
+        let w = stencil_weights(lu, lv, cell.2, 1.0);
+        let mut d = Derivatives::default();
+        for (k, (a, b)) in cell_stencil(cell).into_iter().enumerate() {
+            if let Some(&c) = self
+                .control_at(a, b)
+                .and_then(|id| controls.get(id as usize))
+            {
+                d.position += c * w[k][0];
+                d.du += c * w[k][1];
+                d.dv += c * w[k][2];
+                d.duu += c * w[k][3];
+                d.duv += c * w[k][4];
+                d.dvv += c * w[k][5];
+            }
+        }
+        d
+    }
+
     /// Moves by (du, dv) as far as the covered cells allow (bisection on the step length).
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
         let at = |t: f64| SurfaceParam {
@@ -210,7 +233,6 @@ mod tests {
     use super::*;
     use crate::surface::bezier::lattice_points;
     use crate::surface::box_spline::LatticeSpline;
-    use glam::DVec3;
 
     /// On the cells of a triangular lattice the grid spline is the lattice spline.
     #[test]
