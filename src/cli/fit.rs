@@ -45,11 +45,15 @@ pub struct FitArgs {
     #[arg(long)]
     pub lattice: Option<usize>,
     /// Scans, `loop`: control points as a percentage of the data points.
-    #[arg(long, default_value_t = 4.0)]
+    #[arg(long, default_value_t = 5.0)]
     pub target_controls_pct: f64,
     /// Scans: rounds of parameter correction (data parameters moved to foot points).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 4)]
     pub corrections: usize,
+    /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
+    /// or `parameters` (point-to-point again).
+    #[arg(long, value_enum, default_value = "distance")]
+    pub correction: crate::pipeline::scan::Correction,
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = 1e-5)]
     pub smoothing: f64,
@@ -78,6 +82,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         grid_segments: args.lattice.filter(|_| args.surface == SurfaceKind::Loop),
         target_controls_pct: args.target_controls_pct,
         correction_rounds: args.corrections,
+        correction: args.correction,
         smoothing: args.smoothing,
         tessellation: args.tessellation,
     };

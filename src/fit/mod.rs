@@ -1,6 +1,7 @@
 //! Surface-independent fitting: collocation matrix, methods, budgets.
 
 pub mod budget;
+pub mod distance;
 pub mod engine;
 pub mod sparse;
 

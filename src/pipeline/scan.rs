@@ -8,8 +8,9 @@ use super::domain::{
     spacing_for_target, GridFrame, InitialNet,
 };
 use super::{collocation, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind};
+use crate::fit::distance::{solve_distance, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian;
-use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem};
+use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::stats::UnionFind;
 use crate::remesh::fill_holes;
@@ -34,9 +35,25 @@ pub struct ScanOptions {
     pub target_controls_pct: f64,
     /// Fairness weight relative to the data: s = smoothing * data points / control points.
     pub smoothing: f64,
-    /// Rounds of parameter correction (data parameters moved to their foot points).
+    /// Rounds of correction after the first fit (data parameters moved to their foot points).
     pub correction_rounds: usize,
+    pub correction: Correction,
 }
+
+/// What a correction round refits after moving the parameters to the foot points.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Correction {
+    /// Point-to-point least squares again (classic parameter correction).
+    Parameters,
+    /// Squared-distance minimisation (point-to-plane with a tangential share).
+    Distance,
+}
+
+/// Share of the point-to-point term in distance rounds.
+const DISTANCE_TANGENTIAL: f64 = 0.02;
 
 /// The surface model a fit lives on; `PatchFit` carries it for evaluation downstream.
 #[derive(Clone, Debug)]
@@ -265,28 +282,64 @@ pub fn fit_scan(
     let mut errors = foot_points(surface, &outcome.controls, data, &mut params);
     let mut correction_rms = vec![rms(&errors)];
     for _ in 0..scan.correction_rounds {
-        let next = run_fit(
-            surface,
-            &params,
-            data,
-            &fairness,
-            smoothing,
-            outcome.controls.clone(),
-            opts,
-        )?;
+        let (controls, cg_steps) = match scan.correction {
+            Correction::Parameters => {
+                let next = run_fit(
+                    surface,
+                    &params,
+                    data,
+                    &fairness,
+                    smoothing,
+                    outcome.controls.clone(),
+                    opts,
+                )?;
+                let n = next.steps.len().saturating_sub(1);
+                (next.controls, n)
+            }
+            Correction::Distance => {
+                let normals: Vec<DVec3> = params
+                    .par_iter()
+                    .map(|p| {
+                        let d = surface.evaluate(&outcome.controls, *p);
+                        d.du.cross(d.dv).normalize_or_zero()
+                    })
+                    .collect();
+                let basis = collocation(surface, &params);
+                let problem = DistanceProblem {
+                    basis: &basis,
+                    data,
+                    normals: &normals,
+                    tangential: DISTANCE_TANGENTIAL,
+                    fairness: Some(&fairness),
+                    smoothing,
+                };
+                solve_distance(
+                    &problem,
+                    outcome.controls.clone(),
+                    opts.budget.max_iterations,
+                    1e-6,
+                )
+            }
+        };
         let mut trial = params.clone();
-        let e = foot_points(surface, &next.controls, data, &mut trial);
+        let e = foot_points(surface, &controls, data, &mut trial);
         // A round that does not lower the geometric error is dropped.
         if rms(&e) >= rms(&errors) {
             break;
         }
-        let offset = steps.last().map_or(0, |s| s.k);
-        steps.extend(next.steps.iter().skip(1).map(|s| {
-            let mut s = s.clone();
-            s.k += offset;
-            s
-        }));
-        outcome = next;
+        let residuals: Vec<DVec3> = data
+            .par_iter()
+            .zip(trial.par_iter())
+            .map(|(p, u)| *p - surface.evaluate(&controls, *u).position)
+            .collect();
+        let k = steps.last().map_or(0, |s| s.k) + cg_steps.max(1);
+        steps.push(StepStats::from_residuals(
+            k,
+            &residuals,
+            opts.budget.tolerance,
+            t2.elapsed().as_secs_f64() * 1e3,
+        ));
+        outcome.controls = controls;
         params = trial;
         errors = e;
         correction_rms.push(rms(&errors));

@@ -2,7 +2,7 @@
 //! bytes and JSON values. The CLI and the daemon write them; nothing here touches files.
 
 use super::output::{surface_json, tessellate, tessellated_glb};
-use super::scan::{fit_scan, Domain, ScanOptions, ScanWarm, SurfaceModel};
+use super::scan::{fit_scan, Correction, Domain, ScanOptions, ScanWarm, SurfaceModel};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepStats};
 use crate::mesh::inverse::InverseMethod;
@@ -40,6 +40,9 @@ pub struct WorkerConfig {
     /// Scans: rounds of parameter correction (foot points) after the first fit.
     #[serde(default = "default_correction_rounds")]
     pub correction_rounds: usize,
+    /// Scans: what a correction round refits.
+    #[serde(default = "default_correction")]
+    pub correction: Correction,
     /// Scans: fairness weight relative to the data.
     pub smoothing: f64,
     /// Tessellation segments per side in the GLB.
@@ -47,11 +50,15 @@ pub struct WorkerConfig {
 }
 
 fn default_target_controls_pct() -> f64 {
-    4.0
+    5.0
 }
 
 fn default_correction_rounds() -> usize {
-    2
+    4
+}
+
+fn default_correction() -> Correction {
+    Correction::Distance
 }
 
 impl Default for WorkerConfig {
@@ -72,6 +79,7 @@ impl Default for WorkerConfig {
             grid_segments: None,
             target_controls_pct: default_target_controls_pct(),
             correction_rounds: default_correction_rounds(),
+            correction: default_correction(),
             smoothing: 1e-5,
             tessellation: 128,
         }
@@ -154,6 +162,7 @@ pub fn run_patch(
                 target_controls_pct: cfg.target_controls_pct,
                 smoothing: cfg.smoothing,
                 correction_rounds: cfg.correction_rounds,
+                correction: cfg.correction,
             };
             let warm = previous.map(|w| ScanWarm {
                 frame: w.frame,
