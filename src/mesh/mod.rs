@@ -3,6 +3,7 @@
 use glam::DVec3;
 
 pub mod clean;
+pub mod distance;
 pub mod detect;
 pub mod inverse;
 pub mod loop_subdiv;

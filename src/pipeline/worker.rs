@@ -2,7 +2,7 @@
 //! bytes and JSON values. The CLI and the daemon write them; nothing here touches files.
 
 use super::output::{surface_json, tessellate, tessellated_glb};
-use super::scan::{fit_scan, Correction, Domain, ScanOptions, ScanWarm, SurfaceModel};
+use super::scan::{fit_scan, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepStats};
 use crate::mesh::inverse::InverseMethod;
@@ -135,12 +135,20 @@ pub fn resolve_budget(cfg: &WorkerConfig, mesh: &TriMesh) -> Budget {
     budget
 }
 
-pub fn run_patch(
+/// A fit before it is turned into outputs.
+pub struct FittedPatch {
+    pub fit: PatchFit,
+    /// Remeshed scans: the preparation and domain.
+    pub scan: Option<ScanFit>,
+    pub budget: Budget,
+}
+
+/// The fit alone: subdivision connectivity when the input has it, else the scan path.
+pub fn fit_patch(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
-) -> Result<PatchOutputs, PipelineError> {
-    let wall = Instant::now();
+) -> Result<FittedPatch, PipelineError> {
     let budget = resolve_budget(cfg, mesh);
     let opts = FitOptions {
         surface: cfg.surface,
@@ -179,6 +187,24 @@ pub fn run_patch(
         }
         Err(e) => return Err(e),
     };
+    Ok(FittedPatch {
+        fit: fitted,
+        scan: scan_info,
+        budget,
+    })
+}
+
+pub fn run_patch(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Result<PatchOutputs, PipelineError> {
+    let wall = Instant::now();
+    let FittedPatch {
+        fit: fitted,
+        scan: scan_info,
+        budget,
+    } = fit_patch(mesh, previous, cfg)?;
     let trim = scan_info.as_ref().map(|s| s.trim.as_slice());
     let tess = tessellate(&fitted, cfg.tessellation.max(1), trim);
     let glb = tessellated_glb(&fitted, &tess, budget.tolerance);

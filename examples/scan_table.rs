@@ -1,0 +1,153 @@
+//! The real-scan acceptance table: every Stanford range scan and the camel head, fitted with
+//! the default settings for `bezier` and `loop`, from file to written outputs, cold.
+//!
+//! Prints per file and surface: data points, control points (and their share of the data),
+//! geometric max / RMS error, status, the time of each stage (read, prepare = clean + map +
+//! domain + resample, fit, outputs = tessellation + GLB + JSON written atomically) and the
+//! one-sided distance from the trimmed tessellation to the data mesh (max and 99.9th
+//! percentile: over a hole the nearest data is the hole's rim, so the maximum there is
+//! about the hole's radius even for a perfect fill). Then the meshes that must be refused.
+//!
+//!     cargo run --release --example scan_table [-- DATA_DIR]
+
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
+use trispline::mesh::distance::MeshDistance;
+use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb};
+use trispline::pipeline::worker::{fit_patch, WorkerConfig};
+use trispline::pipeline::SurfaceKind;
+
+fn main() {
+    let root = std::env::args()
+        .nth(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let files = [
+        "range_scans/bun000_tri.ply",
+        "range_scans/bun045_tri.ply",
+        "range_scans/chin_tri.ply",
+        "range_scans/bun000_meshlab_triangulated.ply",
+        "range_scans/bun000_range_grid.ply",
+        "models/camelhead.off",
+        "models/bun_zipper.ply",
+    ];
+    let out = std::env::temp_dir().join(format!("trispline-scan-table-{}", std::process::id()));
+    println!(
+        "| file | surface | data pts | ctrl (% data) | geo max | geo rms | status | read ms | prepare ms | fit ms | outputs ms | total ms | tess->data max | p99.9 | map |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for rel in files {
+        let path = root.join(rel);
+        if !path.exists() {
+            println!("| {rel} | missing | | | | | | | | | | | | | |");
+            continue;
+        }
+        for surface in [SurfaceKind::Bezier, SurfaceKind::Loop] {
+            row(&path, rel, surface, &out);
+        }
+    }
+    for rel in ["models/decimated-max.obj", "models/fertility.off"] {
+        let path = root.join(rel);
+        let Ok(loaded) = read_mesh_file(&path, &LoadOptions::default()) else {
+            println!("{rel}: unreadable");
+            continue;
+        };
+        match fit_patch(&loaded.mesh, None, &WorkerConfig::default()) {
+            Ok(_) => println!("{rel}: FITTED (expected a refusal)"),
+            Err(e) => println!("{rel}: refused: {e}"),
+        }
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
+    let unit = if rel.starts_with("range_scans") || rel.contains("bun_zipper") {
+        (1e6, "um")
+    } else {
+        (1.0, "")
+    };
+    let t0 = Instant::now();
+    let Ok(loaded) = read_mesh_file(path, &LoadOptions::default()) else {
+        println!("| {rel} | unreadable |");
+        return;
+    };
+    let read_ms = ms(t0);
+    let cfg = WorkerConfig {
+        surface,
+        ..WorkerConfig::default()
+    };
+    let t1 = Instant::now();
+    let fitted = match fit_patch(&loaded.mesh, None, &cfg) {
+        Ok(f) => f,
+        Err(e) => {
+            println!("| {rel} | {surface:?} | refused: {e} |");
+            return;
+        }
+    };
+    let fit_total = ms(t1);
+    let t2 = Instant::now();
+    let f = &fitted.fit;
+    let trim = fitted.scan.as_ref().map(|s| s.trim.as_slice());
+    let tess = tessellate(f, cfg.tessellation, trim);
+    let glb = tessellated_glb(f, &tess, fitted.budget.tolerance);
+    let report = serde_json::json!({"final": {}, "status": f.outcome.status});
+    let surface_value = surface_json(f, fitted.scan.as_ref(), &report);
+    let dir = out.join(format!("{}-{surface:?}", rel.replace('/', "_")));
+    let written = std::fs::create_dir_all(&dir).is_ok()
+        && write_atomic(&dir.join("surface.glb"), &glb).is_ok()
+        && write_atomic(
+            &dir.join("surface.json"),
+            &serde_json::to_vec(&surface_value).unwrap_or_default(),
+        )
+        .is_ok();
+    let outputs_ms = ms(t2);
+    let total_ms = ms(t0);
+    // One-sided: trimmed tessellation vertices to the data mesh.
+    let data = &loaded.mesh;
+    let md = MeshDistance::new(data);
+    let mut used = vec![false; tess.positions.len()];
+    for t in &tess.triangles {
+        for &v in t {
+            used[v as usize] = true;
+        }
+    }
+    let mut dist: Vec<f64> = tess
+        .positions
+        .par_iter()
+        .zip(used.par_iter())
+        .filter(|(_, u)| **u)
+        .filter_map(|(p, _)| md.distance(*p))
+        .collect();
+    dist.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        dist.get(((dist.len().max(1) - 1) as f64 * q) as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let (prepare_ms, fit_ms) = (f.prepare_ms, f.fit_ms);
+    let map = fitted
+        .scan
+        .as_ref()
+        .map_or("subdivision".to_string(), |s| {
+            format!("{:?}, {} folds", s.map_method, s.folds_projected)
+        });
+    println!(
+        "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.0} {u} | {:.1} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.0} {u} | {:.0} {u} | {map} |",
+        f.data.len(),
+        f.controls.len(),
+        100.0 * f.controls.len() as f64 / f.data.len().max(1) as f64,
+        f.geometric_max() * unit.0,
+        f.geometric_rms() * unit.0,
+        f.outcome.status,
+        if written { "" } else { " (write failed)" },
+        pct(1.0) * unit.0,
+        pct(0.999) * unit.0,
+        u = unit.1,
+    );
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

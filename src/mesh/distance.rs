@@ -1,0 +1,168 @@
+//! Unsigned distance from points to a triangle mesh: closest point on each nearby triangle,
+//! triangles bucketed in a uniform grid by their bounding boxes. Used to measure how far a
+//! fitted surface strays from the data (one-sided, surface to data).
+
+use super::TriMesh;
+use glam::DVec3;
+use std::collections::HashMap;
+
+pub struct MeshDistance<'a> {
+    mesh: &'a TriMesh,
+    cell: f64,
+    buckets: HashMap<(i64, i64, i64), Vec<u32>>,
+}
+
+impl<'a> MeshDistance<'a> {
+    pub fn new(mesh: &'a TriMesh) -> Self {
+        let p = &mesh.positions;
+        let mean_edge = mesh
+            .triangles
+            .iter()
+            .map(|t| (p[t[0] as usize] - p[t[1] as usize]).length())
+            .sum::<f64>()
+            / mesh.triangles.len().max(1) as f64;
+        let cell = (2.0 * mean_edge).max(1e-12);
+        let mut buckets: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            let pts = t.map(|v| p[v as usize]);
+            let lo = pts[0].min(pts[1]).min(pts[2]);
+            let hi = pts[0].max(pts[1]).max(pts[2]);
+            let (a, b) = (Self::key(cell, lo), Self::key(cell, hi));
+            for x in a.0..=b.0 {
+                for y in a.1..=b.1 {
+                    for z in a.2..=b.2 {
+                        buckets.entry((x, y, z)).or_default().push(f as u32);
+                    }
+                }
+            }
+        }
+        Self {
+            mesh,
+            cell,
+            buckets,
+        }
+    }
+
+    fn key(cell: f64, p: DVec3) -> (i64, i64, i64) {
+        let q = (p / cell).floor();
+        (q.x as i64, q.y as i64, q.z as i64)
+    }
+
+    /// Distance to the nearest triangle, or `None` for an empty mesh or non-finite point.
+    pub fn distance(&self, q: DVec3) -> Option<f64> {
+        if self.mesh.triangles.is_empty() || !q.is_finite() {
+            return None;
+        }
+        let c = Self::key(self.cell, q);
+        let mut best = f64::MAX;
+        // Shell r holds every triangle within r cells; once the best distance is inside
+        // the searched radius no farther shell can beat it.
+        for r in 0i64.. {
+            for x in c.0 - r..=c.0 + r {
+                for y in c.1 - r..=c.1 + r {
+                    for z in c.2 - r..=c.2 + r {
+                        let on_shell = (x - c.0).abs().max((y - c.1).abs()).max((z - c.2).abs());
+                        if on_shell != r {
+                            continue;
+                        }
+                        for &f in self.buckets.get(&(x, y, z)).map_or(&[][..], |v| v) {
+                            let t = self.mesh.triangles[f as usize];
+                            let p = &self.mesh.positions;
+                            let d = (closest_on_triangle(
+                                q,
+                                p[t[0] as usize],
+                                p[t[1] as usize],
+                                p[t[2] as usize],
+                            ) - q)
+                                .length();
+                            best = best.min(d);
+                        }
+                    }
+                }
+            }
+            if best <= r as f64 * self.cell || r > 10_000 {
+                break;
+            }
+        }
+        (best < f64::MAX).then_some(best)
+    }
+}
+
+/// Closest point of triangle abc to p (Voronoi regions of vertices, edges, face).
+pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = va + vb + vc;
+    if denom == 0.0 {
+        return a;
+    }
+    a + ab * (vb / denom) + ac * (vc / denom)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances_to_a_grid_match_brute_force() {
+        let n = 12;
+        let mut positions = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
+                positions.push(DVec3::new(x, y, 0.2 * (3.0 * x).sin() * y));
+            }
+        }
+        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+        let mut triangles = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let mesh = TriMesh::new(positions, triangles);
+        let md = MeshDistance::new(&mesh);
+        for k in 0..200 {
+            let t = k as f64 * 0.37;
+            let q = DVec3::new(1.4 * t.sin(), 1.3 * (0.7 * t).cos(), 0.5 * (1.3 * t).sin());
+            let brute = mesh
+                .triangles
+                .iter()
+                .map(|t| {
+                    let p = &mesh.positions;
+                    (closest_on_triangle(q, p[t[0] as usize], p[t[1] as usize], p[t[2] as usize])
+                        - q)
+                        .length()
+                })
+                .fold(f64::MAX, f64::min);
+            let got = md.distance(q).expect("non-empty");
+            assert!((got - brute).abs() < 1e-12, "{q}: {got} vs {brute}");
+        }
+    }
+}
