@@ -338,3 +338,137 @@ fn bad_inputs_are_errors_not_panics() {
     )
     .is_err());
 }
+
+mod scattered {
+    use super::*;
+    use trispline::bspline::scattered::{
+        adaptive_scattered, fit_scattered, planar_parameters, ScatteredOptions, ScatteredSolver,
+    };
+    use trispline::bspline::BSplineError;
+
+    /// Deterministic scattered samples of a tilted wavy sheet.
+    fn cloud(n: usize, hole: bool) -> Vec<DVec3> {
+        let mut s = 12345u64;
+        let mut rnd = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut out = Vec::new();
+        while out.len() < n {
+            let (x, y) = (rnd() * 3.0, rnd() * 2.0);
+            if hole && (x - 1.5).hypot(y - 1.0) < 0.5 {
+                continue;
+            }
+            let z = 0.2 * (2.0 * x).sin() * y.cos();
+            out.push(DVec3::new(x, 0.3 * x + y, z + 0.1 * y));
+        }
+        out
+    }
+
+    fn opts(counts: (usize, usize), smoothing: f64, solver: ScatteredSolver) -> ScatteredOptions {
+        ScatteredOptions {
+            counts,
+            degrees: (3, 3),
+            smoothing,
+            solver,
+            parameter_correction: 0,
+        }
+    }
+
+    #[test]
+    fn direct_scattered_fit_matches_a_dense_reference() {
+        let pts = cloud(400, false);
+        let params = planar_parameters(&pts);
+        assert!(params
+            .iter()
+            .all(|&(u, v)| (0.0..=1.0).contains(&u) && (0.0..=1.0).contains(&v)));
+        let o = opts((6, 5), 0.0, ScatteredSolver::Direct);
+        let fit = fit_scattered(&pts, &params, &o).expect("fit");
+        let s = &fit.surface;
+        let n = 30;
+        let mut a = DMatrix::zeros(pts.len(), n);
+        for (k, &(u, v)) in params.iter().enumerate() {
+            let (ru, rv) = (s.row_u(u, 0), s.row_v(v, 0));
+            for x in 0..=3 {
+                for y in 0..=3 {
+                    a[(k, (ru.first(3) + x) * 5 + rv.first(3) + y)] = ru.d[0][x] * rv.d[0][y];
+                }
+            }
+        }
+        let svd = a.svd(true, true);
+        for d in 0..3 {
+            let b = DVector::from_iterator(pts.len(), pts.iter().map(|q| q[d]));
+            let x = svd.solve(&b, 1e-14).expect("svd");
+            for i in 0..n {
+                assert!((s.controls()[i][d] - x[i]).abs() < 1e-8, "{i} {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn lspia_approaches_the_direct_solution() {
+        let pts = cloud(600, false);
+        let params = planar_parameters(&pts);
+        let direct =
+            fit_scattered(&pts, &params, &opts((5, 5), 0.0, ScatteredSolver::Direct)).expect("fit");
+        let few = fit_scattered(
+            &pts,
+            &params,
+            &opts((5, 5), 0.0, ScatteredSolver::Lspia { iterations: 20 }),
+        )
+        .expect("fit");
+        let many = fit_scattered(
+            &pts,
+            &params,
+            &opts((5, 5), 0.0, ScatteredSolver::Lspia { iterations: 5000 }),
+        )
+        .expect("fit");
+        assert!(many.stats.rms_error < few.stats.rms_error);
+        assert!(
+            many.stats.rms_error < direct.stats.rms_error * 1.05,
+            "{} vs {}",
+            many.stats.rms_error,
+            direct.stats.rms_error
+        );
+        assert!(direct.stats.rms_error <= many.stats.rms_error + 1e-12);
+    }
+
+    #[test]
+    fn smoothing_bridges_a_hole_that_plain_least_squares_cannot() {
+        let pts = cloud(500, true);
+        let params = planar_parameters(&pts);
+        let plain = fit_scattered(&pts, &params, &opts((14, 14), 0.0, ScatteredSolver::Direct));
+        assert!(
+            matches!(plain, Err(BSplineError::RankDeficient(_))),
+            "{plain:?}"
+        );
+        let smooth = fit_scattered(
+            &pts,
+            &params,
+            &opts((14, 14), 1e-4, ScatteredSolver::Direct),
+        )
+        .expect("fit");
+        assert!(smooth.stats.max_error < 0.02, "{}", smooth.stats.max_error);
+        // The patch over the hole stays near the sheet (no wild oscillation).
+        let (u, v) = params[0];
+        assert!(smooth.surface.point(u, v).is_finite());
+    }
+
+    #[test]
+    fn adaptive_scattered_and_parameter_correction() {
+        let pts = cloud(1500, false);
+        let params = planar_parameters(&pts);
+        let mut o = opts((20, 20), 0.0, ScatteredSolver::Direct);
+        let fit = adaptive_scattered(&pts, &params, &o, 1e-3).expect("fit");
+        assert!(fit.stats.max_error <= 1e-3, "{}", fit.stats.max_error);
+        let (cu, cv) = fit.surface.counts();
+        assert!(cu * cv < 200, "{cu}x{cv}");
+        o.counts = (8, 8);
+        let base = fit_scattered(&pts, &params, &o).expect("fit");
+        o.parameter_correction = 2;
+        let corrected = fit_scattered(&pts, &params, &o).expect("fit");
+        assert!(corrected.stats.rms_error < base.stats.rms_error);
+    }
+}

@@ -8,6 +8,7 @@ pub mod basis;
 pub mod curve;
 pub mod fit;
 pub mod lsq;
+pub mod scattered;
 pub mod surface;
 
 pub use basis::ParamMethod;
