@@ -143,6 +143,29 @@ impl BSplineSurface {
         out
     }
 
+    /// A triangulation of the surface at (segments_u + 1) x (segments_v + 1) uniformly
+    /// spaced parameters, with unit normals (zero where the surface is singular).
+    pub fn tessellate(&self, segments_u: usize, segments_v: usize) -> (crate::TriMesh, Vec<DVec3>) {
+        let (nu, nv) = (segments_u.max(1), segments_v.max(1));
+        let ((u0, u1), (v0, v1)) = self.domain();
+        let us: Vec<f64> = (0..=nu)
+            .map(|k| u0 + (u1 - u0) * k as f64 / nu as f64)
+            .collect();
+        let vs: Vec<f64> = (0..=nv)
+            .map(|k| v0 + (v1 - v0) * k as f64 / nv as f64)
+            .collect();
+        let d = self.derivatives_on_grid(&us, &vs);
+        let positions = d.iter().map(|x| x.position).collect();
+        let normals = d
+            .iter()
+            .map(|x| x.du.cross(x.dv).try_normalize().unwrap_or(DVec3::ZERO))
+            .collect();
+        (
+            crate::TriMesh::new(positions, grid_triangles(nu + 1, nv + 1)),
+            normals,
+        )
+    }
+
     /// The closest surface point to `x` by Newton's method on the squared distance, started
     /// at `start` and kept inside the domain. Returns the parameters and the distance.
     pub fn closest_point(&self, x: DVec3, start: (f64, f64)) -> ((f64, f64), f64) {
@@ -191,6 +214,20 @@ impl BSplineSurface {
         }
         best
     }
+}
+
+/// Two counter-clockwise (in (u, v)) triangles per cell of a rows x cols vertex grid,
+/// row-major vertices, split along the (r, c)-(r + 1, c + 1) diagonal.
+pub fn grid_triangles(rows: usize, cols: usize) -> Vec<[u32; 3]> {
+    let id = |r: usize, c: usize| (r * cols + c) as u32;
+    let mut t = Vec::with_capacity(2 * rows.saturating_sub(1) * cols.saturating_sub(1));
+    for r in 0..rows.saturating_sub(1) {
+        for c in 0..cols.saturating_sub(1) {
+            t.push([id(r, c), id(r + 1, c), id(r + 1, c + 1)]);
+            t.push([id(r, c), id(r + 1, c + 1), id(r, c + 1)]);
+        }
+    }
+    t
 }
 
 #[cfg(test)]

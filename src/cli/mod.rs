@@ -1,4 +1,5 @@
 //! Subcommand implementations; main.rs only dispatches.
+pub mod bspline_fit;
 pub mod fit;
 pub mod mesh_tools;
 pub mod watch;
