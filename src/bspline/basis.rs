@@ -157,8 +157,8 @@ pub fn basis_row(knots: &[f64], count: usize, p: usize, t: f64, nd: usize) -> Ba
     }
     // Multiply through by p!/(p-k)!.
     let mut f = p as f64;
-    for k in 1..=nd {
-        for v in d[k].iter_mut().take(p + 1) {
+    for (k, row) in d.iter_mut().enumerate().take(nd + 1).skip(1) {
+        for v in row.iter_mut().take(p + 1) {
             *v *= f;
         }
         f *= (p - k) as f64;

@@ -414,7 +414,7 @@ pub fn adaptive_scattered(
                 tries.push((ku.clone(), k, (cu, cv + 1)));
             }
         }
-        let mut next: Option<(ScatteredFit, Vec<f64>, Vec<f64>, (usize, usize))> = None;
+        let mut next: Option<Candidate> = None;
         for (a, b, counts) in tries {
             let mut oo = o;
             oo.counts = counts;
@@ -436,6 +436,9 @@ pub fn adaptive_scattered(
     }
     Ok(best)
 }
+
+/// A trial of the adaptive loop: its fit, knots in u and v, control counts.
+type Candidate = (ScatteredFit, Vec<f64>, Vec<f64>, (usize, usize));
 
 /// The knot vector with the span holding `t` split at the median data parameter inside it,
 /// if that leaves every basis function some data.
