@@ -5,6 +5,7 @@
 
 pub mod bspline;
 pub mod cli;
+pub mod curvature;
 pub mod daemon;
 pub mod fit;
 pub mod io;
