@@ -24,6 +24,8 @@ enum Command {
     Watch(cli::watch::WatchArgs),
     /// Fit a tensor-product B-spline surface to grid or scattered points (JSON, IGES, GLB).
     BsplineFit(cli::bspline_fit::BsplineFitArgs),
+    /// Curvature, convex/concave/saddle regions and their boundaries of a surface.json.
+    Curvature(cli::curvature::CurvatureArgs),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +37,7 @@ fn main() -> ExitCode {
         Command::Fit(a) => cli::fit::run(a),
         Command::Watch(a) => cli::watch::run_watch(a),
         Command::BsplineFit(a) => cli::bspline_fit::run(a),
+        Command::Curvature(a) => cli::curvature::run(a),
     };
     match result {
         Ok(code) => code,

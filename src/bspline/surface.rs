@@ -132,14 +132,42 @@ impl BSplineSurface {
         if vs.is_empty() {
             return out;
         }
+        let (p, q, nv) = (self.degree_u, self.degree_v, self.count_v);
         out.par_chunks_mut(vs.len())
             .zip(us.par_iter())
-            .for_each(|(chunk, &u)| {
-                let ru = self.row_u(u, 2);
-                for (o, rv) in chunk.iter_mut().zip(&rows_v) {
-                    *o = self.combine(&ru, rv, true);
-                }
-            });
+            .for_each_init(
+                || vec![[DVec3::ZERO; 3]; nv],
+                |curve, (chunk, &u)| {
+                    // Contract along u once per grid row: the row is then a curve in v
+                    // (value, d/du, d2/du2 control polygons), leaving q + 1 terms per point.
+                    let ru = self.row_u(u, 2);
+                    let fu = ru.first(p);
+                    for (j, c) in curve.iter_mut().enumerate() {
+                        *c = [DVec3::ZERO; 3];
+                        for a in 0..=p {
+                            let x = self.controls[(fu + a) * nv + j];
+                            c[0] += x * ru.d[0][a];
+                            c[1] += x * ru.d[1][a];
+                            c[2] += x * ru.d[2][a];
+                        }
+                    }
+                    for (o, rv) in chunk.iter_mut().zip(&rows_v) {
+                        let fv = rv.first(q);
+                        let mut d = Derivatives::default();
+                        for b in 0..=q {
+                            let c = &curve[fv + b];
+                            let (n0, n1, n2) = (rv.d[0][b], rv.d[1][b], rv.d[2][b]);
+                            d.position += c[0] * n0;
+                            d.dv += c[0] * n1;
+                            d.dvv += c[0] * n2;
+                            d.du += c[1] * n0;
+                            d.duv += c[1] * n1;
+                            d.duu += c[2] * n0;
+                        }
+                        *o = d;
+                    }
+                },
+            );
         out
     }
 

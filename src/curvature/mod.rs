@@ -102,7 +102,7 @@ pub struct Curvature {
 pub fn curvature(d: &Derivatives) -> Option<Curvature> {
     let (e, f, g) = (d.du.dot(d.du), d.du.dot(d.dv), d.dv.dot(d.dv));
     let w = e * g - f * f;
-    if !(w > 1e-24 * e * g) || !w.is_finite() {
+    if !w.is_finite() || w <= 1e-24 * e * g {
         return None;
     }
     let normal = d.du.cross(d.dv) / w.sqrt();

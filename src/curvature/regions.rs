@@ -12,7 +12,39 @@
 use super::{classify, curvature, Curvature, DerivativeSurface, Domain, RegionKind, ZeroTolerance};
 use crate::surface::bezier::{lattice_index, lattice_points, lattice_triangles};
 use glam::DVec3;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Multiply-rotate hashing of small integer keys (the Firefox/rustc scheme): the keys are
+/// ours, not an attacker's, and SipHash would dominate boundary tracing.
+#[derive(Default)]
+struct FxHasher(u64);
+
+impl Hasher for FxHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u8(&mut self, x: u8) {
+        self.write_u64(u64::from(x));
+    }
+    fn write_u32(&mut self, x: u32) {
+        self.write_u64(u64::from(x));
+    }
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
+    }
+}
+
+type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
+type FastSet<K> = HashSet<K, BuildHasherDefault<FxHasher>>;
 
 /// Sample parameters, their triangles (counter-clockwise in (u, v)) and the domain
 /// boundary as a counter-clockwise vertex loop.
@@ -74,37 +106,31 @@ impl Lattice {
         }
     }
 
-    /// Vertex adjacency (CSR) from the triangles' edges.
+    /// Vertex adjacency (CSR) from the triangles' edges. Interior edges are listed twice
+    /// (once from each triangle): harmless for connectivity, and it spares a sort.
     fn adjacency(&self) -> (Vec<u32>, Vec<u32>) {
         let n = self.params.len();
-        let mut deg = vec![0u32; n + 1];
-        let mut pairs = Vec::with_capacity(self.triangles.len() * 3);
+        let mut offs = vec![0u32; n + 1];
         for t in &self.triangles {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                // Each undirected edge once: interior edges appear in both orientations,
-                // boundary edges only counter-clockwise, so keep a < b plus boundary b < a.
-                pairs.push((a.min(b), a.max(b)));
+            for &v in t {
+                offs[v as usize + 1] += 2;
             }
         }
-        pairs.sort_unstable();
-        pairs.dedup();
-        for &(a, b) in &pairs {
-            deg[a as usize + 1] += 1;
-            deg[b as usize + 1] += 1;
-        }
         for i in 0..n {
-            deg[i + 1] += deg[i];
+            offs[i + 1] += offs[i];
         }
-        let mut fill = deg.clone();
-        let mut nbr = vec![0u32; pairs.len() * 2];
-        for &(a, b) in &pairs {
-            nbr[fill[a as usize] as usize] = b;
-            fill[a as usize] += 1;
-            nbr[fill[b as usize] as usize] = a;
-            fill[b as usize] += 1;
+        let mut fill = offs.clone();
+        let mut nbr = vec![0u32; offs[n] as usize];
+        for t in &self.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k] as usize, t[(k + 1) % 3]);
+                let c = t[(k + 2) % 3];
+                nbr[fill[a] as usize] = b;
+                nbr[fill[a] as usize + 1] = c;
+                fill[a] += 2;
+            }
         }
-        (deg, nbr)
+        (offs, nbr)
     }
 }
 
@@ -152,6 +178,16 @@ pub struct Analysis {
     pub region: Vec<u32>,
     pub regions: Vec<Region>,
     pub tolerance: ZeroTolerance,
+    /// Milliseconds spent sampling (derivatives and curvature), labelling (classification,
+    /// components, small-region merging) and tracing boundaries.
+    pub timings_ms: Timings,
+}
+
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Timings {
+    pub sampling: f64,
+    pub labelling: f64,
+    pub tracing: f64,
 }
 
 impl Analysis {
@@ -163,6 +199,8 @@ impl Analysis {
 
 /// Samples the surface, classifies, labels regions and traces their boundaries.
 pub fn analyze(surface: &dyn DerivativeSurface, o: &AnalysisOptions) -> Analysis {
+    let clock = std::time::Instant::now();
+    let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
     let lattice = Lattice::for_domain(surface.domain(), o.grid);
     let derivs = match (surface.domain(), lattice.shape) {
         (Domain::Rectangle { .. }, (rows, cols)) => {
@@ -173,13 +211,18 @@ pub fn analyze(surface: &dyn DerivativeSurface, o: &AnalysisOptions) -> Analysis
         (Domain::Triangle, _) => surface.derivatives_at(&lattice.params),
     };
     let positions: Vec<DVec3> = derivs.iter().map(|d| d.position).collect();
-    let curv: Vec<Option<Curvature>> = derivs.iter().map(curvature).collect();
+    let curv: Vec<Option<Curvature>> = {
+        use rayon::prelude::*;
+        derivs.par_iter().map(curvature).collect()
+    };
     let (lo, hi) = positions
         .iter()
         .fold((DVec3::MAX, DVec3::MIN), |(lo, hi), p| {
             (lo.min(*p), hi.max(*p))
         });
     let tolerance = ZeroTolerance::relative(o.zero_eps, (hi - lo).length());
+    let sampling = ms(clock);
+    let clock = std::time::Instant::now();
     let (offs, nbr) = lattice.adjacency();
     let neighbours = |v: usize| &nbr[offs[v] as usize..offs[v + 1] as usize];
 
@@ -201,8 +244,16 @@ pub fn analyze(surface: &dyn DerivativeSurface, o: &AnalysisOptions) -> Analysis
         }
         region = label(&kinds, &neighbours);
     }
+    let labelling = ms(clock);
+    let clock = std::time::Instant::now();
     let regions = trace(surface, &lattice, &positions, &kinds, &region);
+    let timings_ms = Timings {
+        sampling,
+        labelling,
+        tracing: ms(clock),
+    };
     Analysis {
+        timings_ms,
         lattice,
         positions,
         curvature: curv,
@@ -267,13 +318,14 @@ fn merge_small<'a>(
         return false;
     }
     let mut size = vec![0usize; count];
-    for &r in region {
+    let mut kind_of = vec![RegionKind::Convex; count];
+    for (v, &r) in region.iter().enumerate() {
         size[r as usize] += 1;
+        kind_of[r as usize] = kinds[v];
     }
-    // Shared edge counts of each small region with each neighbouring region.
-    let mut shared: HashMap<(u32, u32), usize> = HashMap::new();
-    for v in 0..region.len() {
-        let r = region[v];
+    // Shared lattice edges of each small region with each neighbouring region.
+    let mut shared: FastMap<(u32, u32), usize> = FastMap::default();
+    for (v, &r) in region.iter().enumerate() {
         if size[r as usize] >= min {
             continue;
         }
@@ -284,45 +336,37 @@ fn merge_small<'a>(
             }
         }
     }
-    let mut target: HashMap<u32, (usize, usize, u32)> = HashMap::new();
+    // Per small region: most shared edges, then the larger neighbour, then the lower id.
+    let mut target: Vec<Option<(usize, usize, std::cmp::Reverse<u32>)>> = vec![None; count];
     for (&(r, q), &n) in &shared {
-        // Most shared edges, then the larger neighbour, then the lower id (deterministic).
-        let key = (n, size[q as usize], u32::MAX - q);
-        let e = target.entry(r).or_insert((0, 0, 0));
-        if key > (e.0, e.1, u32::MAX - e.2) || e.0 == 0 {
-            *e = (n, size[q as usize], q);
+        let key = (n, size[q as usize], std::cmp::Reverse(q));
+        let t = &mut target[r as usize];
+        if t.is_none_or(|t| key > t) {
+            *t = Some(key);
         }
     }
     // Smallest regions first; a region merged this round does not also absorb others.
-    let mut small: Vec<u32> = target.keys().copied().collect();
+    let mut small: Vec<u32> = (0..count as u32)
+        .filter(|&r| target[r as usize].is_some())
+        .collect();
     small.sort_by_key(|&r| (size[r as usize], r));
-    let mut new_kind: HashMap<u32, RegionKind> = HashMap::new();
-    let first_of: HashMap<u32, usize> = {
-        let mut m = HashMap::new();
-        for (v, &r) in region.iter().enumerate() {
-            m.entry(r).or_insert(v);
-        }
-        m
-    };
-    let mut changed_regions = std::collections::HashSet::new();
+    let mut new_kind: Vec<Option<RegionKind>> = vec![None; count];
     for r in small {
-        let q = target[&r].2;
-        if changed_regions.contains(&q) {
+        let Some((_, _, std::cmp::Reverse(q))) = target[r as usize] else {
             continue;
+        };
+        if new_kind[q as usize].is_none() {
+            new_kind[r as usize] = Some(kind_of[q as usize]);
         }
-        let k = kinds[first_of[&q]];
-        new_kind.insert(r, k);
-        changed_regions.insert(r);
     }
-    if new_kind.is_empty() {
-        return false;
-    }
+    let mut changed = false;
     for (v, &r) in region.iter().enumerate() {
-        if let Some(&k) = new_kind.get(&r) {
+        if let Some(k) = new_kind[r as usize] {
+            changed |= kinds[v] != k;
             kinds[v] = k;
         }
     }
-    true
+    changed
 }
 
 /// A point of a boundary loop: a lattice vertex (on the domain boundary), the midpoint of a
@@ -353,7 +397,7 @@ fn trace(
         kind_of[r as usize] = kinds[v];
     }
     // Directed boundary segments, keyed by (region, start) -> end.
-    let mut next: HashMap<(u32, Node), Node> = HashMap::new();
+    let mut next: FastMap<(u32, Node), Node> = FastMap::default();
     for (ti, t) in lattice.triangles.iter().enumerate() {
         let l = [
             region[t[0] as usize],
@@ -393,7 +437,7 @@ fn trace(
     // Follow the segments into loops, starting from the smallest key for determinism.
     let mut starts: Vec<(u32, Node)> = next.keys().copied().collect();
     starts.sort_by_key(|&(r, n)| (r, node_order(n)));
-    let mut used: std::collections::HashSet<(u32, Node)> = Default::default();
+    let mut used: FastSet<(u32, Node)> = FastSet::default();
     let mut loops: Vec<Vec<Vec<Node>>> = vec![Vec::new(); count];
     for s in starts {
         if used.contains(&s) {
