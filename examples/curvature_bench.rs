@@ -7,7 +7,7 @@ use std::time::Instant;
 use trispline::bspline::basis::ParamMethod;
 use trispline::bspline::fit::{fit_grid, interpolate_grid, Grid, GridMethod};
 use trispline::curvature::regions::{analyze, AnalysisOptions};
-use trispline::curvature::{DerivativeSurface, RegionKind, Triangular};
+use trispline::curvature::{BezierPatch, DerivativeSurface, RegionKind, Triangular};
 use trispline::surface::bezier::{lattice_points, BezierTriangle};
 use trispline::DVec3;
 
@@ -114,6 +114,13 @@ fn main() {
     }
     let t = bezier_triangle(16);
     for g in [41, 201] {
-        bench("triangular Bezier degree 16", &t, g);
+        bench("triangular Bezier degree 16 (basis rows)", &t, g);
+    }
+    let fast = BezierPatch {
+        degree: 16,
+        controls: t.controls.clone(),
+    };
+    for g in [41, 201] {
+        bench("triangular Bezier degree 16 (de Casteljau)", &fast, g);
     }
 }

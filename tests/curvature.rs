@@ -7,7 +7,8 @@ use trispline::bspline::fit::{interpolate_grid, Grid};
 use trispline::bspline::BSplineSurface;
 use trispline::curvature::regions::{analyze, AnalysisOptions};
 use trispline::curvature::{
-    classify, curvature, DerivativeSurface, Domain, RegionKind, Triangular, ZeroTolerance,
+    classify, curvature, BezierPatch, DerivativeSurface, Domain, RegionKind, Triangular,
+    ZeroTolerance,
 };
 use trispline::surface::bezier::{lattice_points, BezierTriangle};
 use trispline::surface::Derivatives;
@@ -227,6 +228,58 @@ fn triangular_bezier_through_the_same_interface() {
     );
     assert_eq!(t.count(RegionKind::Saddle), 1);
     assert_eq!(t.regions.len(), 1);
+}
+
+#[test]
+fn de_casteljau_patch_equals_the_basis_row_evaluation() {
+    for n in [1, 2, 3, 7, 16] {
+        let controls: Vec<DVec3> = lattice_points(n)
+            .into_iter()
+            .map(|(i, j)| {
+                let (x, y) = (i as f64 / n as f64, j as f64 / n as f64);
+                DVec3::new(
+                    x + 0.05 * y,
+                    y,
+                    (4.0 * x).sin() * (3.0 * y).cos() + ((i * 7 + j * 3) % 5) as f64 * 0.03,
+                )
+            })
+            .collect();
+        let fast = BezierPatch {
+            degree: n,
+            controls: controls.clone(),
+        };
+        let slow = Triangular {
+            surface: BezierTriangle::new(n),
+            controls,
+        };
+        let params = [
+            (0.2, 0.3),
+            (0.0, 0.0),
+            (1.0, 0.0),
+            (0.0, 1.0),
+            (0.05, 0.9),
+            (1.0 / 3.0, 1.0 / 3.0),
+        ];
+        let many = fast.derivatives_at(&params);
+        for (&(u, v), m) in params.iter().zip(&many) {
+            let (a, b) = (fast.derivatives(u, v), slow.derivatives(u, v));
+            let scale = 1.0 + (n * n) as f64;
+            for (x, y) in [
+                (a.position, b.position),
+                (a.du, b.du),
+                (a.dv, b.dv),
+                (a.duu, b.duu),
+                (a.duv, b.duv),
+                (a.dvv, b.dvv),
+                (m.dvv, b.dvv),
+            ] {
+                assert!(
+                    (x - y).length() < 1e-11 * scale,
+                    "n={n} ({u},{v}): {x} vs {y}"
+                );
+            }
+        }
+    }
 }
 
 fn counts(a: &trispline::curvature::regions::Analysis) -> (usize, usize, usize) {

@@ -3,13 +3,12 @@
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
-use crate::curvature::{DerivativeSurface, RegionKind, Triangular};
+use crate::curvature::{BezierPatch, DerivativeSurface, RegionKind, Triangular};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::polylines::obj_polylines_bytes;
 use crate::io::surface_json::{read_surface_json, SurfaceDescription};
 use crate::io::write_atomic;
-use crate::surface::bezier::BezierTriangle;
 use crate::surface::box_spline::LatticeSpline;
 use crate::TriMesh;
 use anyhow::{bail, Context};
@@ -90,13 +89,9 @@ fn diverging(values: &[f64]) -> Vec<[f32; 4]> {
 fn load(args: &CurvatureArgs) -> anyhow::Result<(Box<dyn DerivativeSurface>, &'static str)> {
     Ok(match read_surface_json(&args.surface)? {
         SurfaceDescription::BSpline(s) => (Box::new(s) as Box<dyn DerivativeSurface>, "bspline"),
-        SurfaceDescription::Bezier { degree, controls } => (
-            Box::new(Triangular {
-                surface: BezierTriangle::new(degree),
-                controls,
-            }),
-            "bezier",
-        ),
+        SurfaceDescription::Bezier { degree, controls } => {
+            (Box::new(BezierPatch { degree, controls }), "bezier")
+        }
         SurfaceDescription::Loop {
             domain_segments,
             controls,

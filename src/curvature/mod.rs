@@ -79,6 +79,76 @@ impl<S: TriSurface> DerivativeSurface for Triangular<S> {
     }
 }
 
+/// A triangular Bezier patch evaluated by de Casteljau on its control points (one reused
+/// buffer per thread): the same surface as `Triangular<BezierTriangle>` without building
+/// basis rows, which dominates sampling at high degree.
+pub struct BezierPatch {
+    pub degree: usize,
+    pub controls: Vec<DVec3>,
+}
+
+impl BezierPatch {
+    fn eval_with(&self, buf: &mut Vec<DVec3>, u: f64, v: f64) -> Derivatives {
+        use crate::surface::bezier::lattice_index;
+        let n = self.degree;
+        let w = 1.0 - u - v;
+        buf.clear();
+        buf.extend_from_slice(&self.controls);
+        // Reduce to degree 2 in place: level r - 1 overwrites level r (index order allows it:
+        // (i, j) of level r - 1 reads (i, j), (i + 1, j), (i, j + 1) of level r, all at or
+        // after its own index in level r's numbering, which is not yet overwritten).
+        for r in (3..=n).rev() {
+            for j in 0..r {
+                for i in 0..r - j {
+                    let x = buf[lattice_index(r, i + 1, j)] * u
+                        + buf[lattice_index(r, i, j + 1)] * v
+                        + buf[lattice_index(r, i, j)] * w;
+                    buf[lattice_index(r - 1, i, j)] = x;
+                }
+            }
+        }
+        if n == 1 {
+            let (p100, p010, p001) = (buf[1], buf[2], buf[0]);
+            return Derivatives {
+                position: p100 * u + p010 * v + p001 * w,
+                du: p100 - p001,
+                dv: p010 - p001,
+                ..Default::default()
+            };
+        }
+        let at = |i: usize, j: usize| buf[lattice_index(2, i, j)];
+        let (p200, p020, p002) = (at(2, 0), at(0, 2), at(0, 0));
+        let (p110, p101, p011) = (at(1, 1), at(1, 0), at(0, 1));
+        let q100 = p200 * u + p110 * v + p101 * w;
+        let q010 = p110 * u + p020 * v + p011 * w;
+        let q001 = p101 * u + p011 * v + p002 * w;
+        let (a, b) = (n as f64, (n * (n - 1)) as f64);
+        Derivatives {
+            position: q100 * u + q010 * v + q001 * w,
+            du: (q100 - q001) * a,
+            dv: (q010 - q001) * a,
+            duu: (p200 - p101 * 2.0 + p002) * b,
+            duv: (p110 - p101 - p011 + p002) * b,
+            dvv: (p020 - p011 * 2.0 + p002) * b,
+        }
+    }
+}
+
+impl DerivativeSurface for BezierPatch {
+    fn domain(&self) -> Domain {
+        Domain::Triangle
+    }
+    fn derivatives(&self, u: f64, v: f64) -> Derivatives {
+        self.eval_with(&mut Vec::new(), u, v)
+    }
+    fn derivatives_at(&self, params: &[(f64, f64)]) -> Vec<Derivatives> {
+        params
+            .par_iter()
+            .map_init(Vec::new, |buf, &(u, v)| self.eval_with(buf, u, v))
+            .collect()
+    }
+}
+
 /// Differential geometry at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Curvature {
