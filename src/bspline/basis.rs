@@ -36,11 +36,12 @@ pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSpli
     if count < p + 1 {
         return Err(BSplineError::TooFewControls { count, degree: p });
     }
-    if knots.len() != count + p + 1 {
+    if count.checked_add(p + 1) != Some(knots.len()) {
         return Err(BSplineError::Knots(format!(
-            "{} knots for {count} control points of degree {p} (need {})",
+            "{} knots for {count} control points of degree {p} (need {} + {})",
             knots.len(),
-            count + p + 1
+            count,
+            p + 1
         )));
     }
     if knots.iter().any(|k| !k.is_finite()) || knots.windows(2).any(|w| w[1] < w[0]) {

@@ -29,10 +29,10 @@ impl BSplineSurface {
     ) -> Result<Self, BSplineError> {
         validate_knots(&knots_u, count_u, degree_u)?;
         validate_knots(&knots_v, count_v, degree_v)?;
-        if controls.len() != count_u * count_v {
+        if count_u.checked_mul(count_v) != Some(controls.len()) {
             return Err(BSplineError::ControlCount {
                 got: controls.len(),
-                expected: count_u * count_v,
+                expected: count_u.saturating_mul(count_v),
             });
         }
         if let Some(i) = controls.iter().position(|c| !c.is_finite()) {

@@ -153,6 +153,14 @@ pub fn run(args: &BsplineFitArgs) -> anyhow::Result<ExitCode> {
         Param::Chord => ParamMethod::ChordLength,
         Param::Centripetal => ParamMethod::Centripetal,
     };
+    // Sizes that would only exhaust memory are refused up front.
+    let (cu, cv) = args.control;
+    if cu > 4096 || cv > 4096 || cu * cv > 1 << 20 {
+        bail!("--control {cu}x{cv}: at most 4096 a side and 2^20 in all");
+    }
+    if !(1..=4096).contains(&args.tessellation) {
+        bail!("--tessellation must be in 1..=4096");
+    }
     if let Some(t) = args.tolerance {
         if !(t > 0.0 && t.is_finite()) {
             bail!("--tolerance must be a positive number");

@@ -175,14 +175,19 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
             let (p, q) = (uint(&v, "degree_u", name)?, uint(&v, "degree_v", name)?);
             let grid = reals(&v, "control_grid", name)?;
             let (nu, nv) = match grid[..] {
-                [a, b] if a >= 1.0 && b >= 1.0 && a.fract() == 0.0 && b.fract() == 0.0 => {
+                [a, b]
+                    if (1.0..=1e7).contains(&a)
+                        && (1.0..=1e7).contains(&b)
+                        && a.fract() == 0.0
+                        && b.fract() == 0.0 =>
+                {
                     (a as usize, b as usize)
                 }
                 _ => {
                     return Err(IoError::new(
                         name,
                         Some("key control_grid".into()),
-                        "not [count_u, count_v]",
+                        "not [count_u, count_v] with counts in 1..=10^7",
                     ))
                 }
             };
@@ -235,6 +240,14 @@ mod tests {
     fn malformed_files_name_the_problem() {
         let cases = [
             (r#"{"schema":"x","kind":"bezier"}"#, "schema"),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":2,"degree_v":2,"control_grid":[1e300,3],"knots_u":[],"knots_v":[],"control_points":[]}"#,
+                "control_grid",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":18446744073709551615,"degree_v":2,"control_grid":[3,3],"knots_u":[0,0,0,1,1,1],"knots_v":[0,0,0,1,1,1],"control_points":[]}"#,
+                "degree",
+            ),
             (r#"{"schema":"trispline.surface/1","kind":"torus"}"#, "kind"),
             (
                 r#"{"schema":"trispline.surface/1","kind":"bezier","degree":2,"control_points":[[0,0,0]]}"#,
