@@ -473,33 +473,45 @@ fn trace(
             }
         }
     };
+    // Every loop point is on the surface: lattice vertices are sampled already, the rest
+    // (each shared by two loops) is evaluated once, in parallel.
+    let mut extra: Vec<Node> = loops
+        .iter()
+        .flatten()
+        .flatten()
+        .copied()
+        .filter(|n| !matches!(n, Node::Vertex(_)))
+        .collect();
+    extra.sort_unstable_by_key(|&n| node_order(n));
+    extra.dedup();
+    let extra_params: Vec<(f64, f64)> = extra.iter().map(|&n| param(n)).collect();
+    let extra_pos: Vec<DVec3> = surface
+        .derivatives_at(&extra_params)
+        .into_iter()
+        .map(|d| d.position)
+        .collect();
+    let position = |n: Node| match n {
+        Node::Vertex(v) => positions[v as usize],
+        other => {
+            let k = extra
+                .binary_search_by_key(&node_order(other), |&m| node_order(m))
+                .unwrap_or(0);
+            extra_pos[k]
+        }
+    };
     (0..count)
-        .map(|r| {
-            let param_loops: Vec<Vec<(f64, f64)>> = loops[r]
+        .map(|r| Region {
+            id: r as u32,
+            kind: kind_of[r],
+            samples: size[r],
+            loops: loops[r]
+                .iter()
+                .map(|l| l.iter().map(|&n| position(n)).collect())
+                .collect(),
+            param_loops: loops[r]
                 .iter()
                 .map(|l| l.iter().map(|&n| param(n)).collect())
-                .collect();
-            let loops3 = loops[r]
-                .iter()
-                .map(|l| {
-                    l.iter()
-                        .map(|&n| match n {
-                            Node::Vertex(v) => positions[v as usize],
-                            other => {
-                                let (u, v) = param(other);
-                                surface.derivatives(u, v).position
-                            }
-                        })
-                        .collect()
-                })
-                .collect();
-            Region {
-                id: r as u32,
-                kind: kind_of[r],
-                samples: size[r],
-                loops: loops3,
-                param_loops,
-            }
+                .collect(),
         })
         .collect()
 }
