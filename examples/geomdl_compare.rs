@@ -240,6 +240,11 @@ fn report(label: &str, pts: &[DVec3]) {
 
 fn main() {
     println!("errors in mm; time per fit (median); ours includes computing its errors");
+    println!("param: |S(u_k, v_k) - D_k| at the grid's averaged chord-length parameters (the data");
+    println!("parameters of both grid fits; not the corrected ones of the last trispline row);");
+    println!(
+        "geometric: distance to the Newton foot point started there (same routine for every net)"
+    );
     report("synthetic", &synthetic());
     match bunny_window() {
         Some((pts, (r, c))) => report(

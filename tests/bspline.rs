@@ -472,3 +472,34 @@ mod scattered {
         assert!(corrected.stats.rms_error < base.stats.rms_error);
     }
 }
+
+#[test]
+fn adaptive_knots_go_where_the_error_is() {
+    // A straight line with a narrow bump around x = 0.7: a cubic needs knots there only.
+    let pts: Vec<DVec3> = (0..600)
+        .map(|k| {
+            let x = k as f64 / 599.0;
+            DVec3::new(x, 0.05 * (-((x - 0.7) / 0.02).powi(2)).exp(), 0.0)
+        })
+        .collect();
+    let fit = adaptive_curve(&pts, 3, 1e-4, ParamMethod::ChordLength, 600).expect("fit");
+    assert!(fit.stats.max_error <= 1e-4);
+    let k = fit.curve.knots();
+    let interior: Vec<f64> = k[4..k.len() - 4].to_vec();
+    // Chord-length parameters of x = 0.6 and 0.8 (the bump adds length between them).
+    let t_at = |x: f64| fit.params[(x * 599.0).round() as usize];
+    let near = interior
+        .iter()
+        .filter(|&&t| t > t_at(0.6) && t < t_at(0.8))
+        .count();
+    assert!(
+        near * 10 >= interior.len() * 8,
+        "{near} of {} interior knots near the bump",
+        interior.len()
+    );
+    assert!(
+        fit.curve.controls().len() < 60,
+        "{}",
+        fit.curve.controls().len()
+    );
+}
