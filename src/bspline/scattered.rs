@@ -63,7 +63,8 @@ pub struct ScatteredOptions {
     pub degrees: (usize, usize),
     /// Weight of the second-difference energy of the control net, relative to the data:
     /// the penalty rows are scaled by sqrt(smoothing * data points / control points) so a
-    /// value means the same balance at any density. 0 = none.
+    /// value means the same balance at any density. 0 = none. Direct solver only: LSPIA
+    /// iterates on the data alone.
     pub smoothing: f64,
     pub solver: ScatteredSolver,
     /// Rounds of foot-point projection of every point followed by a refit.

@@ -58,7 +58,8 @@ pub struct BsplineFitArgs {
     pub method: GridMethod,
     #[arg(long, value_enum, default_value = "chord")]
     pub param: Param,
-    /// Scattered fits: weight of the control-net smoothing energy relative to the data.
+    /// Scattered fits: weight of the control-net smoothing energy relative to the data
+    /// (direct solver only).
     #[arg(long, default_value_t = 1e-6)]
     pub smoothing: f64,
     #[arg(long, value_enum, default_value = "direct")]
