@@ -282,6 +282,35 @@ fn de_casteljau_patch_equals_the_basis_row_evaluation() {
     }
 }
 
+/// Shoelace area of a closed (u, v) loop: positive when counter-clockwise.
+fn signed_area(l: &[(f64, f64)]) -> f64 {
+    l.windows(2)
+        .map(|w| w[0].0 * w[1].1 - w[1].0 * w[0].1)
+        .sum::<f64>()
+        / 2.0
+}
+
+/// Region loops partition the domain: outer loops counter-clockwise, holes clockwise, and
+/// the signed areas of all loops add up to the domain's area.
+fn assert_partition(a: &trispline::curvature::regions::Analysis, domain_area: f64) {
+    let mut total = 0.0;
+    for r in &a.regions {
+        let areas: Vec<f64> = r.param_loops.iter().map(|l| signed_area(l)).collect();
+        let region: f64 = areas.iter().sum();
+        assert!(region > 0.0, "region {} has area {region}", r.id);
+        assert_eq!(
+            areas.iter().filter(|&&x| x > 0.0).count(),
+            1,
+            "one outer loop"
+        );
+        total += region;
+    }
+    assert!(
+        (total - domain_area).abs() < 1e-9 * domain_area,
+        "{total} vs {domain_area}"
+    );
+}
+
 fn counts(a: &trispline::curvature::regions::Analysis) -> (usize, usize, usize) {
     (
         a.count(RegionKind::Convex),
@@ -327,6 +356,7 @@ fn known_regions_of_sin_x_sin_y() {
         }
         let samples: usize = a.regions.iter().map(|r| r.samples).sum();
         assert_eq!(samples, grid * grid);
+        assert_partition(&a, 6.0 * 1.3);
     }
     // The same surface as an interpolating bicubic B-spline gives the same partition.
     let (rows, cols) = (121, 41);
@@ -381,6 +411,9 @@ fn small_regions_are_merged() {
         },
     );
     assert!(raw.regions.len() >= 2, "{:?}", counts(&raw));
+    // The sheet around the dimple is a region with a hole.
+    assert!(raw.regions.iter().any(|r| r.loops.len() >= 2));
+    assert_partition(&raw, 4.0);
     let cleaned = analyze(
         &m,
         &AnalysisOptions {
