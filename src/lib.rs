@@ -3,7 +3,9 @@
 //! Layering (see ARCHITECTURE.md): `io` is the only module that knows file formats;
 //! `mesh`, `surface` and `fit` are pure geometry on `f64`.
 
+pub mod bspline;
 pub mod cli;
+pub mod curvature;
 pub mod daemon;
 pub mod fit;
 pub mod io;

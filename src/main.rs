@@ -22,6 +22,10 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The daemon: watch a folder, fit every patch that arrives.
     Watch(cli::watch::WatchArgs),
+    /// Fit a tensor-product B-spline surface to grid or scattered points (JSON, IGES, GLB).
+    BsplineFit(cli::bspline_fit::BsplineFitArgs),
+    /// Curvature, convex/concave/saddle regions and their boundaries of a surface.json.
+    Curvature(cli::curvature::CurvatureArgs),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +36,8 @@ fn main() -> ExitCode {
         Command::Coarsen(a) => cli::mesh_tools::coarsen_cmd(a),
         Command::Fit(a) => cli::fit::run(a),
         Command::Watch(a) => cli::watch::run_watch(a),
+        Command::BsplineFit(a) => cli::bspline_fit::run(a),
+        Command::Curvature(a) => cli::curvature::run(a),
     };
     match result {
         Ok(code) => code,

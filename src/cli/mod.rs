@@ -1,4 +1,6 @@
 //! Subcommand implementations; main.rs only dispatches.
+pub mod bspline_fit;
+pub mod curvature;
 pub mod fit;
 pub mod mesh_tools;
 pub mod watch;

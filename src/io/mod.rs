@@ -2,10 +2,13 @@
 
 pub mod glb;
 pub mod gltf_reader;
+pub mod iges;
 pub mod obj;
 pub mod off;
 pub mod ply;
+pub mod polylines;
 pub mod stl;
+pub mod surface_json;
 pub mod writers;
 
 use crate::mesh::TriMesh;

@@ -1,0 +1,293 @@
+//! `trispline bspline-fit`: grid or scattered points in; `surface.json`, `surface.igs`,
+//! `surface.glb` and `report.json` out.
+
+use crate::bspline::basis::ParamMethod;
+use crate::bspline::fit::{adaptive_grid, fit_grid, ErrorStats, Grid, GridMethod};
+use crate::bspline::scattered::{
+    adaptive_scattered, fit_scattered, planar_parameters, ScatteredOptions, ScatteredSolver,
+};
+use crate::bspline::BSplineSurface;
+use crate::io::glb::{glb_bytes, GlbAttributes};
+use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
+use crate::io::surface_json::bspline_json;
+use crate::io::{read_mesh_file, write_atomic, LoadOptions};
+use anyhow::{bail, Context};
+use glam::DVec3;
+use serde_json::json;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Param {
+    Chord,
+    Centripetal,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Solver {
+    Direct,
+    Lspia,
+}
+
+#[derive(clap::Args, Debug)]
+#[command(group(clap::ArgGroup::new("layout").required(true).args(["grid", "scattered"])))]
+pub struct BsplineFitArgs {
+    pub input: PathBuf,
+    /// The input's vertices are R rows of C points, row-major (a PLY range grid is read as
+    /// its grid, or an R x C window of it with --window).
+    #[arg(long, value_name = "RxC", value_parser = parse_pair_x)]
+    pub grid: Option<(usize, usize)>,
+    /// Range grids: the first row and column of the R x C window.
+    #[arg(long, value_name = "ROW,COL", value_parser = parse_pair_comma, requires = "grid")]
+    pub window: Option<(usize, usize)>,
+    /// Every vertex is a data point; parameters by projection onto the best-fit plane.
+    #[arg(long)]
+    pub scattered: bool,
+    /// Control points U x V (with --tolerance: the most the adaptive loop may use).
+    #[arg(long, value_name = "UxV", value_parser = parse_pair_x)]
+    pub control: (usize, usize),
+    #[arg(long, value_name = "p,q", value_parser = parse_pair_comma, default_value = "3,3")]
+    pub degree: (usize, usize),
+    /// Grow the control net from the minimum until every point is within this distance.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
+    /// Grid fits: `lsq` is the exact least-squares surface; `two-pass` the documents'
+    /// columns-then-rows approximation with interpolated ends.
+    #[arg(long, value_enum, default_value = "lsq")]
+    pub method: GridMethod,
+    #[arg(long, value_enum, default_value = "chord")]
+    pub param: Param,
+    /// Scattered fits: weight of the control-net smoothing energy relative to the data
+    /// (direct solver only).
+    #[arg(long, default_value_t = 1e-6)]
+    pub smoothing: f64,
+    #[arg(long, value_enum, default_value = "direct")]
+    pub solver: Solver,
+    #[arg(long, default_value_t = 500)]
+    pub lspia_iterations: usize,
+    /// Scattered fits: rounds of foot-point parameter correction.
+    #[arg(long, default_value_t = 2)]
+    pub correction: usize,
+    /// Units declared in the IGES file (coordinates are written unscaled).
+    #[arg(long, value_enum, default_value = "mm")]
+    pub units: IgesUnits,
+    /// Segments per side of the tessellation in surface.glb.
+    #[arg(long, default_value_t = 64)]
+    pub tessellation: usize,
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+fn parse_pair(s: &str, sep: char) -> Result<(usize, usize), String> {
+    let (a, b) = s
+        .split_once(sep)
+        .ok_or_else(|| format!("expected two integers separated by '{sep}'"))?;
+    let p = |x: &str| x.trim().parse::<usize>().map_err(|e| format!("{x:?}: {e}"));
+    Ok((p(a)?, p(b)?))
+}
+fn parse_pair_x(s: &str) -> Result<(usize, usize), String> {
+    parse_pair(&s.to_ascii_lowercase(), 'x')
+}
+fn parse_pair_comma(s: &str) -> Result<(usize, usize), String> {
+    parse_pair(s, ',')
+}
+
+/// The R x C grid of points the arguments describe.
+fn grid_points(args: &BsplineFitArgs, rows: usize, cols: usize) -> anyhow::Result<Vec<DVec3>> {
+    let loaded = read_mesh_file(&args.input, &LoadOptions::default())?;
+    let name = args.input.display();
+    match (&loaded.grid, args.window) {
+        (Some(g), window) => {
+            let (r0, c0) = window.unwrap_or((0, 0));
+            if window.is_none() && (g.rows, g.cols) != (rows, cols) {
+                bail!("{name}: range grid is {}x{}, not {rows}x{cols} (use --window ROW,COL for a part)", g.rows, g.cols);
+            }
+            if r0 + rows > g.rows || c0 + cols > g.cols {
+                bail!(
+                    "{name}: window {rows}x{cols} at {r0},{c0} leaves the {}x{} range grid",
+                    g.rows,
+                    g.cols
+                );
+            }
+            let mut pts = Vec::with_capacity(rows * cols);
+            let mut missing = 0;
+            for r in r0..r0 + rows {
+                for c in c0..c0 + cols {
+                    match g.points[r * g.cols + c] {
+                        Some(p) => pts.push(p),
+                        None => missing += 1,
+                    }
+                }
+            }
+            if missing > 0 {
+                bail!("{name}: {missing} cells of the {rows}x{cols} grid have no range data (grid fits need complete grids; use --scattered)");
+            }
+            Ok(pts)
+        }
+        (None, Some(_)) => bail!("{name}: --window needs a range grid input"),
+        (None, None) => {
+            let pts = loaded.mesh.positions;
+            if pts.len() != rows * cols {
+                bail!(
+                    "{name}: {} vertices cannot be {rows}x{cols} grid points",
+                    pts.len()
+                );
+            }
+            Ok(pts)
+        }
+    }
+}
+
+fn scattered_points(args: &BsplineFitArgs) -> anyhow::Result<Vec<DVec3>> {
+    let loaded = read_mesh_file(&args.input, &LoadOptions::default())?;
+    // Range grids: the valid cells (vertices of the triangulation may be a subset).
+    Ok(match loaded.grid {
+        Some(g) => g.points.into_iter().flatten().collect(),
+        None => loaded.mesh.positions,
+    })
+}
+
+pub fn run(args: &BsplineFitArgs) -> anyhow::Result<ExitCode> {
+    let t0 = Instant::now();
+    let param = match args.param {
+        Param::Chord => ParamMethod::ChordLength,
+        Param::Centripetal => ParamMethod::Centripetal,
+    };
+    // Sizes that would only exhaust memory are refused up front.
+    let (cu, cv) = args.control;
+    if cu > 4096 || cv > 4096 || cu * cv > 1 << 20 {
+        bail!("--control {cu}x{cv}: at most 4096 a side and 2^20 in all");
+    }
+    if !(1..=4096).contains(&args.tessellation) {
+        bail!("--tessellation must be in 1..=4096");
+    }
+    if let Some(t) = args.tolerance {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--tolerance must be a positive number");
+        }
+    }
+    let name = args.input.display().to_string();
+    let (surface, stats, points, layout, fit_ms) = if let Some((rows, cols)) = args.grid {
+        let pts = grid_points(args, rows, cols)?;
+        let grid = Grid {
+            rows,
+            cols,
+            points: &pts,
+        };
+        let t = Instant::now();
+        let fit = match args.tolerance {
+            Some(tol) => adaptive_grid(&grid, args.degree, tol, param, args.method, args.control),
+            None => fit_grid(&grid, args.control, args.degree, param, args.method),
+        }
+        .with_context(|| format!("{name}: grid fit"))?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        (
+            fit.surface,
+            fit.stats,
+            pts.len(),
+            json!({"grid": [rows, cols], "window": args.window}),
+            ms,
+        )
+    } else {
+        let pts = scattered_points(args)?;
+        let t = Instant::now();
+        let params = planar_parameters(&pts);
+        let o = ScatteredOptions {
+            counts: args.control,
+            degrees: args.degree,
+            smoothing: args.smoothing,
+            solver: match args.solver {
+                Solver::Direct => ScatteredSolver::Direct,
+                Solver::Lspia => ScatteredSolver::Lspia {
+                    iterations: args.lspia_iterations,
+                },
+            },
+            parameter_correction: args.correction,
+        };
+        let fit = match args.tolerance {
+            Some(tol) => adaptive_scattered(&pts, &params, &o, tol),
+            None => fit_scattered(&pts, &params, &o),
+        }
+        .with_context(|| format!("{name}: scattered fit"))?;
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        (
+            fit.surface,
+            fit.stats,
+            pts.len(),
+            json!({"scattered": true, "smoothing": args.smoothing, "solver": o.solver, "parameter_correction": args.correction}),
+            ms,
+        )
+    };
+    write_outputs(args, &surface, stats, points, layout, fit_ms, t0)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+fn write_outputs(
+    args: &BsplineFitArgs,
+    surface: &BSplineSurface,
+    stats: ErrorStats,
+    points: usize,
+    layout: serde_json::Value,
+    fit_ms: f64,
+    t0: Instant,
+) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
+    let (cu, cv) = surface.counts();
+    let within = args.tolerance.is_none_or(|t| stats.max_error <= t);
+    let fit = json!({
+        "max_error": stats.max_error,
+        "rms_error": stats.rms_error,
+        "mean_error": stats.mean_error,
+        "error_measure": "distance between each data point and the surface at its parameters",
+    });
+    let mut sj = bspline_json(surface);
+    sj["fit"] = fit.clone();
+    let iges = iges_bytes(
+        &[surface],
+        &[],
+        &IgesOptions {
+            units: args.units,
+            file_name: "surface.igs".into(),
+            author: "trispline".into(),
+            time: Some(std::time::SystemTime::now()),
+        },
+    );
+    let (mesh, normals) = surface.tessellate(args.tessellation, args.tessellation);
+    let glb = glb_bytes(
+        &mesh,
+        &GlbAttributes {
+            normals: Some(&normals),
+            ..Default::default()
+        },
+    );
+    write_atomic(&args.out.join("surface.igs"), &iges)?;
+    write_atomic(&args.out.join("surface.glb"), &glb)?;
+    let report = json!({
+        "input": args.input.display().to_string(),
+        "points": points,
+        "layout": layout,
+        "degree": [surface.degrees().0, surface.degrees().1],
+        "control_grid": [cu, cv],
+        "control_points": cu * cv,
+        "method": if args.grid.is_some() { json!(args.method) } else { json!("scattered-lsq") },
+        "tolerance": args.tolerance,
+        "within_tolerance": within,
+        "max_error": stats.max_error,
+        "rms_error": stats.rms_error,
+        "mean_error": stats.mean_error,
+        "fit_ms": fit_ms,
+        "wall_ms": t0.elapsed().as_secs_f64() * 1e3,
+    });
+    write_atomic(
+        &args.out.join("report.json"),
+        &serde_json::to_vec_pretty(&report)?,
+    )?;
+    // surface.json last: its presence marks a complete set.
+    write_atomic(
+        &args.out.join("surface.json"),
+        &serde_json::to_vec_pretty(&sj)?,
+    )?;
+    Ok(())
+}

@@ -1,0 +1,267 @@
+//! The `surface.json` schema (`trispline.surface/1`): the B-spline kind written here, and
+//! a reader for every kind (`bezier`, `loop`, `bspline`) for the tools that consume fitted
+//! surfaces (`trispline curvature`).
+
+use super::IoError;
+use crate::bspline::BSplineSurface;
+use crate::surface::bezier::lattice_len;
+use glam::DVec3;
+use serde_json::{json, Value};
+
+pub const SCHEMA: &str = "trispline.surface/1";
+
+/// A surface as described by a `surface.json`.
+#[derive(Clone, Debug)]
+pub enum SurfaceDescription {
+    /// Triangular Bezier patch of the given degree, controls in lattice order.
+    Bezier {
+        degree: usize,
+        controls: Vec<DVec3>,
+    },
+    /// Loop limit surface (quartic box spline) of a regular lattice net.
+    Loop {
+        domain_segments: usize,
+        controls: Vec<DVec3>,
+    },
+    BSpline(BSplineSurface),
+}
+
+/// The JSON object of a B-spline surface (without fit statistics, which callers add).
+pub fn bspline_json(s: &BSplineSurface) -> Value {
+    let (p, q) = s.degrees();
+    let (nu, nv) = s.counts();
+    json!({
+        "schema": SCHEMA,
+        "kind": "bspline",
+        "degree_u": p,
+        "degree_v": q,
+        "knots_u": s.knots_u(),
+        "knots_v": s.knots_v(),
+        "control_grid": [nu, nv],
+        "control_ordering": "row-major: control (i, j), i = 0..control_grid[0] along u, j along v, at index i * control_grid[1] + j",
+        "domain": "u in [knots_u[degree_u], knots_u[control_grid[0]]], v likewise; S(u, v) = sum_ij N_i,degree_u(u) N_j,degree_v(v) P_ij (clamped, non-rational)",
+        "control_points": s.controls().iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
+    })
+}
+
+fn field<'a>(v: &'a Value, key: &str, name: &str) -> Result<&'a Value, IoError> {
+    v.get(key)
+        .ok_or_else(|| IoError::new(name, Some(format!("key {key}")), "missing"))
+}
+
+fn uint(v: &Value, key: &str, name: &str) -> Result<usize, IoError> {
+    field(v, key, name)?
+        .as_u64()
+        .map(|x| x as usize)
+        .ok_or_else(|| {
+            IoError::new(
+                name,
+                Some(format!("key {key}")),
+                "not a non-negative integer",
+            )
+        })
+}
+
+fn reals(v: &Value, key: &str, name: &str) -> Result<Vec<f64>, IoError> {
+    let arr = field(v, key, name)?
+        .as_array()
+        .ok_or_else(|| IoError::new(name, Some(format!("key {key}")), "not an array"))?;
+    arr.iter()
+        .enumerate()
+        .map(|(k, x)| {
+            x.as_f64()
+                .ok_or_else(|| IoError::new(name, Some(format!("{key}[{k}]")), "not a number"))
+        })
+        .collect()
+}
+
+fn points(v: &Value, name: &str) -> Result<Vec<DVec3>, IoError> {
+    let arr = field(v, "control_points", name)?
+        .as_array()
+        .ok_or_else(|| IoError::new(name, Some("key control_points".into()), "not an array"))?;
+    arr.iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let c = p.as_array().filter(|c| c.len() == 3).ok_or_else(|| {
+                IoError::new(name, Some(format!("control_points[{k}]")), "not [x, y, z]")
+            })?;
+            let mut x = [0.0; 3];
+            for (d, e) in x.iter_mut().zip(c) {
+                *d = e.as_f64().filter(|f| f.is_finite()).ok_or_else(|| {
+                    IoError::new(
+                        name,
+                        Some(format!("control_points[{k}]")),
+                        "not a finite number",
+                    )
+                })?;
+            }
+            Ok(DVec3::from_array(x))
+        })
+        .collect()
+}
+
+fn expect_len(name: &str, got: usize, want: usize, what: &str) -> Result<(), IoError> {
+    if got != want {
+        return Err(IoError::new(
+            name,
+            Some("key control_points".into()),
+            format!("{got} control points, {what} needs {want}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Reads a `surface.json`; `name` is used in errors.
+pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription, IoError> {
+    let v: Value = serde_json::from_slice(bytes).map_err(|e| {
+        IoError::new(
+            name,
+            Some(format!("line {}, column {}", e.line(), e.column())),
+            e.to_string(),
+        )
+    })?;
+    match v.get("schema").and_then(Value::as_str) {
+        Some(SCHEMA) => {}
+        other => {
+            return Err(IoError::new(
+                name,
+                Some("key schema".into()),
+                format!("expected {SCHEMA:?}, found {other:?}"),
+            ))
+        }
+    }
+    let kind = field(&v, "kind", name)?.as_str().unwrap_or_default();
+    match kind {
+        "bezier" => {
+            let degree = uint(&v, "degree", name)?;
+            if degree == 0 || degree > 64 {
+                return Err(IoError::new(
+                    name,
+                    Some("key degree".into()),
+                    "degree outside 1..=64",
+                ));
+            }
+            let controls = points(&v, name)?;
+            expect_len(
+                name,
+                controls.len(),
+                lattice_len(degree),
+                "a triangular Bezier patch of this degree",
+            )?;
+            Ok(SurfaceDescription::Bezier { degree, controls })
+        }
+        "loop" => {
+            let n = uint(&v, "domain_segments", name)?;
+            if n == 0 || n > 4096 {
+                return Err(IoError::new(
+                    name,
+                    Some("key domain_segments".into()),
+                    "outside 1..=4096",
+                ));
+            }
+            let controls = points(&v, name)?;
+            expect_len(
+                name,
+                controls.len(),
+                lattice_len(n + 3),
+                "a regular lattice net of n + 3 segments",
+            )?;
+            Ok(SurfaceDescription::Loop {
+                domain_segments: n,
+                controls,
+            })
+        }
+        "bspline" => {
+            let (p, q) = (uint(&v, "degree_u", name)?, uint(&v, "degree_v", name)?);
+            let grid = reals(&v, "control_grid", name)?;
+            let (nu, nv) = match grid[..] {
+                [a, b]
+                    if (1.0..=1e7).contains(&a)
+                        && (1.0..=1e7).contains(&b)
+                        && a.fract() == 0.0
+                        && b.fract() == 0.0 =>
+                {
+                    (a as usize, b as usize)
+                }
+                _ => {
+                    return Err(IoError::new(
+                        name,
+                        Some("key control_grid".into()),
+                        "not [count_u, count_v] with counts in 1..=10^7",
+                    ))
+                }
+            };
+            let ku = reals(&v, "knots_u", name)?;
+            let kv = reals(&v, "knots_v", name)?;
+            let controls = points(&v, name)?;
+            BSplineSurface::new((p, q), ku, kv, (nu, nv), controls)
+                .map(SurfaceDescription::BSpline)
+                .map_err(|e| IoError::new(name, None, e.to_string()))
+        }
+        other => Err(IoError::new(
+            name,
+            Some("key kind".into()),
+            format!("unknown surface kind {other:?} (bezier, loop, bspline)"),
+        )),
+    }
+}
+
+/// Reads a `surface.json` file.
+pub fn read_surface_json(path: &std::path::Path) -> Result<SurfaceDescription, IoError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
+    parse_surface_json(&bytes, &name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bspline_round_trips() {
+        let s = BSplineSurface::new(
+            (2, 1),
+            vec![0.0, 0.0, 0.0, 0.5, 1.0, 1.0, 1.0],
+            vec![0.0, 0.0, 1.0, 1.0],
+            (4, 2),
+            (0..8)
+                .map(|k| DVec3::new(k as f64, (k * k) as f64 * 0.1, -0.3))
+                .collect(),
+        )
+        .expect("valid");
+        let bytes = serde_json::to_vec(&bspline_json(&s)).expect("json");
+        match parse_surface_json(&bytes, "t").expect("parse") {
+            SurfaceDescription::BSpline(r) => assert_eq!(r, s),
+            other => panic!("wrong kind {other:?}"),
+        }
+    }
+
+    #[test]
+    fn malformed_files_name_the_problem() {
+        let cases = [
+            (r#"{"schema":"x","kind":"bezier"}"#, "schema"),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":2,"degree_v":2,"control_grid":[1e300,3],"knots_u":[],"knots_v":[],"control_points":[]}"#,
+                "control_grid",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":18446744073709551615,"degree_v":2,"control_grid":[3,3],"knots_u":[0,0,0,1,1,1],"knots_v":[0,0,0,1,1,1],"control_points":[]}"#,
+                "degree",
+            ),
+            (r#"{"schema":"trispline.surface/1","kind":"torus"}"#, "kind"),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bezier","degree":2,"control_points":[[0,0,0]]}"#,
+                "control_points",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":2,"degree_v":2,"control_grid":[3,3],"knots_u":[0,0,0,1,1],"knots_v":[0,0,0,1,1,1],"control_points":[]}"#,
+                "knot",
+            ),
+            ("{", "line"),
+        ];
+        for (text, needle) in cases {
+            let e = parse_surface_json(text.as_bytes(), "s.json").expect_err(text);
+            assert!(e.to_string().contains(needle), "{e} lacks {needle}");
+        }
+    }
+}

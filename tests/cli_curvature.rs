@@ -1,0 +1,156 @@
+//! `trispline curvature` as a process, on every surface kind the project writes.
+
+use std::path::Path;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_trispline"))
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).expect("read")).expect("json")
+}
+
+fn run_ok(cmd: &mut Command) {
+    let out = cmd.output().expect("run");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Outputs exist, counts add up, loops are closed polylines.
+fn check_outputs(dir: &Path) -> serde_json::Value {
+    for f in [
+        "curvature.glb",
+        "boundaries.json",
+        "boundaries.obj",
+        "boundaries.igs",
+        "regions.json",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let regions = json(&dir.join("regions.json"));
+    let b = json(&dir.join("boundaries.json"));
+    let list = b["regions"].as_array().expect("regions");
+    let n = |k: &str| regions[k].as_u64().expect(k) as usize;
+    assert_eq!(n("convex") + n("concave") + n("saddle"), list.len());
+    for r in list {
+        let loops = r["loops"].as_array().expect("loops");
+        assert!(!loops.is_empty());
+        for l in loops {
+            let l = l.as_array().expect("loop");
+            assert!(l.len() >= 4);
+            assert_eq!(l.first(), l.last(), "closed loop");
+        }
+    }
+    let glb = std::fs::read(dir.join("curvature.glb")).expect("glb");
+    let (doc, _, _) = gltf::import_slice(&glb).expect("valid glb");
+    let prims = doc.meshes().next().expect("mesh").primitives().count();
+    let loops: usize = list
+        .iter()
+        .map(|r| r["loops"].as_array().map_or(0, Vec::len))
+        .sum();
+    assert_eq!(prims, 1 + loops, "surface + one line strip per loop");
+    regions
+}
+
+#[test]
+fn bspline_surface_of_sin_x_sin_y_has_the_known_regions() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (rows, cols) = (121, 41);
+    let mut obj = String::new();
+    for r in 0..rows {
+        for c in 0..cols {
+            let x = -3.0 + 6.0 * r as f64 / (rows - 1) as f64;
+            let y = 0.1 + 1.3 * c as f64 / (cols - 1) as f64;
+            obj.push_str(&format!("v {x} {y} {}\n", x.sin() * y.sin()));
+        }
+    }
+    obj.push_str("f 1 2 3\n");
+    let input = tmp.path().join("sinsin.obj");
+    std::fs::write(&input, obj).expect("write");
+    let fit = tmp.path().join("fit");
+    run_ok(
+        bin()
+            .arg("bspline-fit")
+            .arg(&input)
+            .args(["--grid", "121x41", "--control", "60x20", "--out"])
+            .arg(&fit),
+    );
+    let out = tmp.path().join("curv");
+    run_ok(
+        bin()
+            .arg("curvature")
+            .arg(fit.join("surface.json"))
+            .args(["--grid", "201", "--out"])
+            .arg(&out),
+    );
+    let r = check_outputs(&out);
+    assert_eq!(
+        (
+            r["convex"].as_u64(),
+            r["concave"].as_u64(),
+            r["saddle"].as_u64()
+        ),
+        (Some(1), Some(1), Some(3))
+    );
+    assert_eq!(r["samples"], 201 * 201);
+    // Colouring by curvature works as well.
+    run_ok(
+        bin()
+            .arg("curvature")
+            .arg(fit.join("surface.json"))
+            .args(["--grid", "41", "--colour", "gaussian", "--out"])
+            .arg(tmp.path().join("k")),
+    );
+}
+
+#[test]
+fn triangular_kinds_written_by_fit() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let dome = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    for kind in ["bezier", "loop"] {
+        let fit = tmp.path().join(kind);
+        run_ok(
+            bin()
+                .arg("fit")
+                .arg(&dome)
+                .args(["--surface", kind, "--out"])
+                .arg(&fit),
+        );
+        let out = tmp.path().join(format!("{kind}-curv"));
+        run_ok(
+            bin()
+                .arg("curvature")
+                .arg(fit.join("surface.json"))
+                .args(["--grid", "61", "--out"])
+                .arg(&out),
+        );
+        let r = check_outputs(&out);
+        assert_eq!(r["surface_kind"], kind);
+        // The triangular lattice of 61 a side.
+        assert_eq!(r["samples"], 61 * 62 / 2);
+    }
+}
+
+#[test]
+fn malformed_surface_json_is_refused() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let bad = tmp.path().join("surface.json");
+    std::fs::write(
+        &bad,
+        r#"{"schema":"trispline.surface/1","kind":"bspline","degree_u":3}"#,
+    )
+    .expect("write");
+    let out = bin()
+        .arg("curvature")
+        .arg(&bad)
+        .arg("--out")
+        .arg(tmp.path().join("o"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("degree_v"));
+}
