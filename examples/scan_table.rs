@@ -127,12 +127,9 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
             .unwrap_or(0.0)
     };
     let (prepare_ms, fit_ms) = (f.prepare_ms, f.fit_ms);
-    let map = fitted
-        .scan
-        .as_ref()
-        .map_or("subdivision".to_string(), |s| {
-            format!("{:?}, {} folds", s.map_method, s.folds_projected)
-        });
+    let map = fitted.scan.as_ref().map_or("subdivision".to_string(), |s| {
+        format!("{:?}, {} folds", s.map_method, s.folds_projected)
+    });
     println!(
         "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.0} {u} | {:.1} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.0} {u} | {:.0} {u} | {map} |",
         f.data.len(),

@@ -3,7 +3,7 @@
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
-use crate::curvature::{BezierPatch, DerivativeSurface, RegionKind, Triangular};
+use crate::curvature::{BezierPatch, DerivativeSurface, GridPatch, RegionKind, Triangular};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::polylines::obj_polylines_bytes;
@@ -91,6 +91,9 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<(Box<dyn DerivativeSurface>, &'s
         SurfaceDescription::BSpline(s) => (Box::new(s) as Box<dyn DerivativeSurface>, "bspline"),
         SurfaceDescription::Bezier { degree, controls } => {
             (Box::new(BezierPatch { degree, controls }), "bezier")
+        }
+        SurfaceDescription::LoopGrid { surface, controls } => {
+            (Box::new(GridPatch { surface, controls }), "loop")
         }
         SurfaceDescription::Loop {
             domain_segments,

@@ -25,12 +25,20 @@ pub enum Domain {
     },
     /// u, v >= 0, u + v <= 1.
     Triangle,
+    /// Cells of a grid: the surface samples itself through
+    /// [`DerivativeSurface::own_lattice`].
+    Cells,
 }
 
 /// Position and first and second partial derivatives at a parameter.
 pub trait DerivativeSurface: Sync {
     fn domain(&self) -> Domain;
     fn derivatives(&self, u: f64, v: f64) -> Derivatives;
+    /// Domains other than a rectangle or the triangle: parameters and counter-clockwise
+    /// triangles of a sampling with about `n` samples across.
+    fn own_lattice(&self, _n: usize) -> (Vec<(f64, f64)>, Vec<[u32; 3]>) {
+        (Vec::new(), Vec::new())
+    }
     /// Derivatives at many parameters (in parallel); separable surfaces do better on grids
     /// through [`DerivativeSurface::derivatives_on_grid`].
     fn derivatives_at(&self, params: &[(f64, f64)]) -> Vec<Derivatives> {
@@ -59,6 +67,29 @@ impl DerivativeSurface for BSplineSurface {
     }
     fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
         BSplineSurface::derivatives_on_grid(self, us, vs)
+    }
+}
+
+/// The Loop surface over grid cells that `trispline fit` writes for scans.
+pub struct GridPatch {
+    pub surface: crate::surface::grid_spline::GridSpline,
+    pub controls: Vec<DVec3>,
+}
+
+impl DerivativeSurface for GridPatch {
+    fn domain(&self) -> Domain {
+        Domain::Cells
+    }
+    fn derivatives(&self, u: f64, v: f64) -> Derivatives {
+        self.surface
+            .evaluate(&self.controls, SurfaceParam { face: 0, u, v })
+    }
+    fn own_lattice(&self, n: usize) -> (Vec<(f64, f64)>, Vec<[u32; 3]>) {
+        let per_cell = n as f64 / (self.surface.cells().len().max(1) as f64).sqrt();
+        let (params, tris) = self
+            .surface
+            .sample_lattice((per_cell.ceil() as usize).max(2));
+        (params.into_iter().map(|p| (p.u, p.v)).collect(), tris)
     }
 }
 

@@ -52,7 +52,9 @@ type FastSet<K> = HashSet<K, BuildHasherDefault<FxHasher>>;
 pub struct Lattice {
     pub params: Vec<(f64, f64)>,
     pub triangles: Vec<[u32; 3]>,
-    pub boundary: Vec<u32>,
+    /// Directed domain-boundary edges, the domain on their left (one loop for a rectangle
+    /// or triangle, several for a union of grid cells with holes).
+    pub boundary: Vec<(u32, u32)>,
     /// Rectangle: (rows, cols) of the row-major grid; triangle: (n + 1, 0).
     pub shape: (usize, usize),
 }
@@ -69,6 +71,7 @@ impl Lattice {
         boundary.extend((0..n - 1).map(|c| id(n - 1, c)));
         boundary.extend((1..n).rev().map(|r| id(r, n - 1)));
         boundary.extend((1..n).rev().map(|c| id(0, c)));
+        let boundary = loop_edges(&boundary);
         Self {
             params,
             triangles: crate::bspline::surface::grid_triangles(n, n),
@@ -90,6 +93,7 @@ impl Lattice {
         let mut boundary: Vec<u32> = (0..s).map(|i| id(i, 0)).collect();
         boundary.extend((0..s).map(|j| id(s - j, j)));
         boundary.extend((1..=s).rev().map(|j| id(0, j)));
+        let boundary = loop_edges(&boundary);
         Self {
             params,
             triangles: lattice_triangles(s),
@@ -98,11 +102,43 @@ impl Lattice {
         }
     }
 
+    /// A counter-clockwise triangulation given by the surface (cells of a grid): the
+    /// boundary is every edge of one triangle only.
+    pub fn triangulated(params: Vec<(f64, f64)>, triangles: Vec<[u32; 3]>) -> Self {
+        let mut count: FastMap<(u32, u32), u32> = FastMap::default();
+        for t in &triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                *count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            }
+        }
+        let mut boundary = Vec::new();
+        for t in &triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                if count.get(&(a.min(b), a.max(b))) == Some(&1) {
+                    boundary.push((a, b));
+                }
+            }
+        }
+        let n = params.len();
+        Self {
+            params,
+            triangles,
+            boundary,
+            shape: (n, 0),
+        }
+    }
+
     /// The lattice matching a surface's domain.
-    pub fn for_domain(domain: Domain, n: usize) -> Self {
-        match domain {
+    pub fn for_surface(surface: &dyn DerivativeSurface, n: usize) -> Self {
+        match surface.domain() {
             Domain::Rectangle { u, v } => Self::rectangle(u, v, n),
             Domain::Triangle => Self::triangle(n),
+            Domain::Cells => {
+                let (params, triangles) = surface.own_lattice(n);
+                Self::triangulated(params, triangles)
+            }
         }
     }
 
@@ -201,14 +237,14 @@ impl Analysis {
 pub fn analyze(surface: &dyn DerivativeSurface, o: &AnalysisOptions) -> Analysis {
     let clock = std::time::Instant::now();
     let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
-    let lattice = Lattice::for_domain(surface.domain(), o.grid);
+    let lattice = Lattice::for_surface(surface, o.grid);
     let derivs = match (surface.domain(), lattice.shape) {
         (Domain::Rectangle { .. }, (rows, cols)) => {
             let us: Vec<f64> = (0..rows).map(|r| lattice.params[r * cols].0).collect();
             let vs: Vec<f64> = (0..cols).map(|c| lattice.params[c].1).collect();
             surface.derivatives_on_grid(&us, &vs)
         }
-        (Domain::Triangle, _) => surface.derivatives_at(&lattice.params),
+        (Domain::Triangle | Domain::Cells, _) => surface.derivatives_at(&lattice.params),
     };
     let positions: Vec<DVec3> = derivs.iter().map(|d| d.position).collect();
     let curv: Vec<Option<Curvature>> = {
@@ -423,9 +459,7 @@ fn trace(
         next.insert((l[i], mid(t[j], t[k])), mid(t[k], t[i]));
         next.insert((l[k], mid(t[k], t[i])), mid(t[j], t[k]));
     }
-    let b = &lattice.boundary;
-    for e in 0..b.len() {
-        let (a, c) = (b[e], b[(e + 1) % b.len()]);
+    for &(a, c) in &lattice.boundary {
         let (ra, rc) = (region[a as usize], region[c as usize]);
         if ra == rc {
             next.insert((ra, Node::Vertex(a)), Node::Vertex(c));
@@ -522,4 +556,9 @@ fn node_order(n: Node) -> (u8, u32, u32) {
         Node::Mid(a, b) => (1, a, b),
         Node::Centroid(t) => (2, t, 0),
     }
+}
+
+/// The directed edges of a closed vertex loop.
+fn loop_edges(l: &[u32]) -> Vec<(u32, u32)> {
+    (0..l.len()).map(|e| (l[e], l[(e + 1) % l.len()])).collect()
 }

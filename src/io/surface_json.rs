@@ -5,6 +5,7 @@
 use super::IoError;
 use crate::bspline::BSplineSurface;
 use crate::surface::bezier::lattice_len;
+use crate::surface::grid_spline::GridSpline;
 use glam::DVec3;
 use serde_json::{json, Value};
 
@@ -23,7 +24,36 @@ pub enum SurfaceDescription {
         domain_segments: usize,
         controls: Vec<DVec3>,
     },
+    /// Loop limit surface over cells of the three-direction grid (remeshed scans).
+    LoopGrid {
+        surface: GridSpline,
+        controls: Vec<DVec3>,
+    },
     BSpline(BSplineSurface),
+}
+
+/// `[[a, b, c], ...]` of integers as triples.
+fn int_rows<const N: usize>(v: &Value, key: &str, name: &str) -> Result<Vec<[i64; N]>, IoError> {
+    let bad = || {
+        IoError::new(
+            name,
+            Some(format!("key {key}")),
+            format!("not a list of {N} integers each"),
+        )
+    };
+    field(v, key, name)?
+        .as_array()
+        .ok_or_else(bad)?
+        .iter()
+        .map(|row| {
+            let a = row.as_array().filter(|a| a.len() == N).ok_or_else(bad)?;
+            let mut out = [0i64; N];
+            for (o, x) in out.iter_mut().zip(a) {
+                *o = x.as_i64().filter(|x| x.abs() < 1 << 40).ok_or_else(bad)?;
+            }
+            Ok(out)
+        })
+        .collect()
 }
 
 /// The JSON object of a B-spline surface (without fit statistics, which callers add).
@@ -149,6 +179,32 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
                 "a triangular Bezier patch of this degree",
             )?;
             Ok(SurfaceDescription::Bezier { degree, controls })
+        }
+        "loop" if v.get("layout").and_then(Value::as_str) == Some("grid") => {
+            let cells = int_rows::<3>(&v, "cells", name)?;
+            let coords = int_rows::<2>(&v, "control_coords", name)?;
+            let surface = GridSpline::new(cells.iter().map(|c| (c[0], c[1], c[2] != 0)));
+            let same = surface.control_coords().len() == coords.len()
+                && surface
+                    .control_coords()
+                    .iter()
+                    .zip(&coords)
+                    .all(|(a, b)| a.0 == b[0] && a.1 == b[1]);
+            if !same {
+                return Err(IoError::new(
+                    name,
+                    Some("key control_coords".into()),
+                    "not the control points of the listed cells (in row order)",
+                ));
+            }
+            let controls = points(&v, name)?;
+            expect_len(
+                name,
+                controls.len(),
+                coords.len(),
+                "the grid's control list",
+            )?;
+            Ok(SurfaceDescription::LoopGrid { surface, controls })
         }
         "loop" => {
             let n = uint(&v, "domain_segments", name)?;

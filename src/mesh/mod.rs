@@ -3,8 +3,8 @@
 use glam::DVec3;
 
 pub mod clean;
-pub mod distance;
 pub mod detect;
+pub mod distance;
 pub mod inverse;
 pub mod loop_subdiv;
 pub mod stats;

@@ -6,12 +6,10 @@ use super::scan::{ScanFit, SurfaceModel};
 use super::PatchFit;
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::surface::bezier::{lattice_points, lattice_triangles};
-use crate::surface::grid_spline::{Cell, GridSpline};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
 use serde_json::json;
-use std::collections::HashMap;
 
 pub fn surface_json(
     f: &PatchFit,
@@ -138,7 +136,10 @@ pub fn tessellate(f: &PatchFit, segments: usize, trim: Option<&[(f64, f64)]>) ->
                 .collect();
             (params, lattice_triangles(n))
         }
-        SurfaceModel::Grid(g) => grid_tessellation(g, segments),
+        SurfaceModel::Grid(g) => {
+            let per_cell = segments as f64 / (g.cells().len().max(1) as f64).sqrt();
+            g.sample_lattice((per_cell.ceil() as usize).clamp(4, 32))
+        }
     };
     let surface = f.model.as_surface();
     let evals: Vec<_> = params
@@ -169,39 +170,6 @@ pub fn tessellate(f: &PatchFit, segments: usize, trim: Option<&[(f64, f64)]>) ->
         params,
         triangles,
     }
-}
-
-fn grid_tessellation(g: &GridSpline, segments: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
-    let cells = g.cells().len().max(1);
-    let k = ((segments as f64 / (cells as f64).sqrt()).ceil() as i64).clamp(4, 32);
-    let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
-    let mut params = Vec::new();
-    let mut triangles = Vec::new();
-    let local = lattice_points(k as usize);
-    let sub = lattice_triangles(k as usize);
-    for &(i, j, down) in g.cells() {
-        let cell: Cell = (i, j, down);
-        let vid: Vec<u32> = local
-            .iter()
-            .map(|&(a, b)| {
-                let key = if cell.2 {
-                    (k * (i + 1) - a as i64, k * (j + 1) - b as i64)
-                } else {
-                    (k * i + a as i64, k * j + b as i64)
-                };
-                *ids.entry(key).or_insert_with(|| {
-                    params.push(SurfaceParam {
-                        face: 0,
-                        u: key.0 as f64 / k as f64,
-                        v: key.1 as f64 / k as f64,
-                    });
-                    params.len() as u32 - 1
-                })
-            })
-            .collect();
-        triangles.extend(sub.iter().map(|t| t.map(|x| vid[x as usize])));
-    }
-    (params, triangles)
 }
 
 /// The GLB of a tessellation, each vertex coloured by the geometric error of the data point

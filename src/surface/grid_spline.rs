@@ -7,9 +7,11 @@
 //! plane point of (x, y) is `x a1 + y a2` with a1 = (1, 0), a2 = (1/2, sqrt(3)/2) times the
 //! grid spacing. Cell (i, j) "up" is (i,j),(i+1,j),(i,j+1); "down" is (i+1,j),(i+1,j+1),(i,j+1).
 
+use super::bezier::{lattice_points, lattice_triangles};
 use super::box_spline::{stencil_weights, STENCIL};
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
+use std::collections::HashMap;
 
 /// A grid cell: lower-left vertex (i, j) and whether it is the down triangle.
 pub type Cell = (i64, i64, bool);
@@ -123,6 +125,41 @@ impl GridSpline {
             .all(|&(a, b)| self.control_at(a, b).is_some())
     }
 
+    /// Every cell split into k x k sub-triangles (shared vertices merged): parameters and
+    /// counter-clockwise triangles, for tessellation and curvature sampling.
+    pub fn sample_lattice(&self, k: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+        let k = k.max(1);
+        let ki = k as i64;
+        let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
+        let mut params = Vec::new();
+        let mut triangles = Vec::with_capacity(self.cells.len() * k * k);
+        let local = lattice_points(k);
+        let sub = lattice_triangles(k);
+        for &(i, j, down) in &self.cells {
+            // A down cell is the up lattice turned by 180 degrees about the cell's centre.
+            let vid: Vec<u32> = local
+                .iter()
+                .map(|&(a, b)| {
+                    let key = if down {
+                        (ki * (i + 1) - a as i64, ki * (j + 1) - b as i64)
+                    } else {
+                        (ki * i + a as i64, ki * j + b as i64)
+                    };
+                    *ids.entry(key).or_insert_with(|| {
+                        params.push(SurfaceParam {
+                            face: 0,
+                            u: key.0 as f64 / k as f64,
+                            v: key.1 as f64 / k as f64,
+                        });
+                        params.len() as u32 - 1
+                    })
+                })
+                .collect();
+            triangles.extend(sub.iter().map(|t| t.map(|x| vid[x as usize])));
+        }
+        (params, triangles)
+    }
+
     /// Grid triangles whose three corners are all control points: the net the fairness
     /// term smooths.
     pub fn net_triangles(&self) -> Vec<[u32; 3]> {
@@ -231,7 +268,6 @@ impl TriSurface for GridSpline {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::surface::bezier::lattice_points;
     use crate::surface::box_spline::LatticeSpline;
 
     /// On the cells of a triangular lattice the grid spline is the lattice spline.
