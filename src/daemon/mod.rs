@@ -388,7 +388,9 @@ impl Loop {
 
     fn dispatch(&mut self) {
         while self.in_flight < self.workers {
-            let Some(a) = self.sched.next_ready() else { break };
+            let Some(a) = self.sched.next_ready() else {
+                break;
+            };
             self.in_flight += 1;
             let job = Job {
                 warm: self.warm.remove(&a.id),
