@@ -298,8 +298,11 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
             break;
         }
     }
+    // Sources may still hold writer senders (a pipe thread blocked in a read), so the
+    // writer is told to finish rather than waiting for every sender to go.
+    intake_stop.store(true, Ordering::Relaxed);
     drop(lp.job_tx);
-    drop(lp.wtx);
+    let _ = lp.wtx.send(WriterMsg::Shutdown);
     let summary = writer.join().unwrap_or_default();
     tracing::info!(
         fitted = summary.fitted,

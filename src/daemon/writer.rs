@@ -43,6 +43,8 @@ pub enum WriterMsg {
     /// Stopping with an inline version not fitted: write it into the watch folder, where the
     /// next start finds it.
     Spill(Arrival),
+    /// Everything sent before this is handled; the thread then returns.
+    Shutdown,
 }
 
 pub struct Writer {
@@ -85,6 +87,7 @@ impl Writer {
                 } => self.reject(&id, &label, keep, &reason),
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
+                WriterMsg::Shutdown => break,
             }
         }
         self.summary
