@@ -271,7 +271,9 @@ impl Writer {
             .append(true)
             .open(&path)
             .and_then(|mut f| {
-                writeln!(f, "{line}")?;
+                // One write of the whole line: a crash cannot leave half a line that a
+                // formatter's piecewise writes could.
+                f.write_all(format!("{line}\n").as_bytes())?;
                 f.sync_data()
             });
         if let Err(e) = appended {
