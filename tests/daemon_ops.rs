@@ -156,7 +156,7 @@ fn systemd_notifications_follow_ready_reload_and_stop() {
         .stderr(Stdio::null())
         .spawn()
         .expect("spawns");
-    let mut next = || {
+    let next = || {
         let mut buf = [0u8; 256];
         let n = sock.recv(&mut buf).expect("a notification");
         String::from_utf8_lossy(&buf[..n]).to_string()

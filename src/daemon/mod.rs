@@ -193,6 +193,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     }
     let intake_stop = Arc::new(AtomicBool::new(false));
     let mut open_sources = 1;
+    let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);
     let folder = FolderWatcher {
         dir: opts.watch_dir.clone(),
         cell: Arc::clone(&cell),
@@ -201,6 +202,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         tx: tx.clone(),
         writer: wtx.clone(),
         stop: Arc::clone(&intake_stop),
+        ready: ready_tx,
     };
     spawn("watcher", move || folder.run())?;
     if let Some(spec) = opts.pipe.clone() {
@@ -221,6 +223,10 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     tracing::info!(
         dir = %opts.watch_dir.display(), out = %opts.out_dir.display(), workers, "started"
     );
+    // READY only once files renamed in from now on are certain to be seen.
+    if ready_rx.recv_timeout(Duration::from_secs(30)).is_err() {
+        tracing::warn!("the folder watcher is slow to start");
+    }
     sdnotify::notify("READY=1");
     let mut lp = Loop {
         sched: Scheduler::default(),

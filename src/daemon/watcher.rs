@@ -46,6 +46,8 @@ pub struct FolderWatcher {
     pub tx: Sender<Msg>,
     pub writer: Sender<WriterMsg>,
     pub stop: Arc<AtomicBool>,
+    /// Told once the watch is in place and the start-up scan is done (readiness).
+    pub ready: Sender<()>,
 }
 
 struct Tracker {
@@ -80,6 +82,7 @@ impl FolderWatcher {
             });
         tracing::info!(dir = %self.dir.display(), native = native.is_some(), "watching");
         self.scan(&mut t);
+        let _ = self.ready.send(());
         loop {
             let cfg = self.cell.get();
             let settle = Duration::from_millis(cfg.daemon.settle_ms);

@@ -139,6 +139,9 @@ impl Writer {
                         write_atomic(&surface, &to_json(&outputs.surface))
                             .map_err(|e| e.to_string())
                     });
+                // Detection to commit: the latency a client waiting for surface.json sees,
+                // minus the detection itself.
+                let commit_ms = a.detected.elapsed().as_secs_f64() * 1e3;
                 if let Err(e) = written {
                     // The input is fine and stays where it is; the output folder is not.
                     tracing::error!(error = %e, "cannot write outputs");
@@ -175,7 +178,7 @@ impl Writer {
                     "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
                     "warm_start": warm_start, "wall_ms": latency_ms,
                     "timings": {"queued_ms": done.timings.queued_ms, "read_ms": done.timings.read_ms,
-                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "write_ms": write_ms},
+                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "write_ms": write_ms, "commit_ms": commit_ms},
                     "paths": paths,
                 }));
                 self.processed(a, out.processed);
