@@ -87,6 +87,8 @@ struct Daemon {
     inbox: PathBuf,
     out: PathBuf,
     staging: PathBuf,
+    /// Kept open: the daemon also reports reloads and the stop here.
+    _notify: UnixDatagram,
 }
 
 impl Daemon {
@@ -126,6 +128,7 @@ impl Daemon {
             inbox,
             out,
             staging,
+            _notify: sock,
         })
     }
 
@@ -167,8 +170,9 @@ impl Daemon {
 
     /// The daemon's event line for a version.
     fn event(&self, version: &str) -> Res<serde_json::Value> {
-        let text = std::fs::read_to_string(self.out.join("events.ndjson"))?;
-        for _ in 0..100 {
+        // The event line is appended just after surface.json is committed.
+        for _ in 0..500 {
+            let text = std::fs::read_to_string(self.out.join("events.ndjson")).unwrap_or_default();
             if let Some(v) = text
                 .lines()
                 .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())

@@ -8,7 +8,7 @@ use super::ops::metrics::Metrics;
 use super::scheduler::{Arrival, Input};
 use super::state::{PatchState, StateStore};
 use super::{Msg, Summary};
-use crate::io::write_atomic;
+use crate::io::{write_atomic, write_atomic_group};
 use crossbeam_channel::{Receiver, Sender};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -125,20 +125,22 @@ impl Writer {
                 let out = &done.cfg.output;
                 let to_json =
                     |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
+                let report_bytes = out.report.then(|| to_json(&outputs.report));
+                let surface_bytes = to_json(&outputs.surface);
+                let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
+                if out.glb {
+                    group.push(("surface.glb", &outputs.glb));
+                }
+                if let Some(r) = &report_bytes {
+                    group.push(("report.json", r));
+                }
+                // Last: its presence says the version is complete.
+                group.push(("surface.json", &surface_bytes));
                 let written = std::fs::create_dir_all(&dir)
                     .map_err(|e| format!("{}: {e}", dir.display()))
-                    .and_then(|_| optional(&glb, out.glb.then_some(outputs.glb.as_slice())))
-                    .and_then(|_| {
-                        optional(
-                            &report,
-                            out.report.then(|| to_json(&outputs.report)).as_deref(),
-                        )
-                    })
-                    // Last: its presence says the version is complete.
-                    .and_then(|_| {
-                        write_atomic(&surface, &to_json(&outputs.surface))
-                            .map_err(|e| e.to_string())
-                    });
+                    .and_then(|_| remove_disabled(&glb, out.glb))
+                    .and_then(|_| remove_disabled(&report, out.report))
+                    .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
                 // Detection to commit: the latency a client waiting for surface.json sees,
                 // minus the detection itself.
                 let commit_ms = a.detected.elapsed().as_secs_f64() * 1e3;
@@ -285,16 +287,16 @@ impl Writer {
     }
 }
 
-/// Writes an optional output, or removes a stale one from an earlier config so that the
-/// folder never mixes versions.
-fn optional(path: &Path, bytes: Option<&[u8]>) -> Result<(), String> {
-    match bytes {
-        Some(b) => write_atomic(path, b).map_err(|e| e.to_string()),
-        None => match std::fs::remove_file(path) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                Err(format!("{}: {e}", path.display()))
-            }
-            _ => Ok(()),
-        },
+/// Removes an optional output that the config no longer asks for, so that the folder never
+/// mixes versions.
+fn remove_disabled(path: &Path, enabled: bool) -> Result<(), String> {
+    if enabled {
+        return Ok(());
+    }
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(format!("{}: {e}", path.display()))
+        }
+        _ => Ok(()),
     }
 }
