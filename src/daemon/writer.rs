@@ -141,9 +141,8 @@ impl Writer {
                     .and_then(|_| remove_disabled(&glb, out.glb))
                     .and_then(|_| remove_disabled(&report, out.report))
                     .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
-                // Detection to commit: the latency a client waiting for surface.json sees,
-                // minus the detection itself.
-                let commit_ms = a.detected.elapsed().as_secs_f64() * 1e3;
+                // The part of the write that a client waiting for surface.json waits for.
+                let outputs_ms = start.elapsed().as_secs_f64() * 1e3;
                 if let Err(e) = written {
                     // The input is fine and stays where it is; the output folder is not.
                     tracing::error!(error = %e, "cannot write outputs");
@@ -180,7 +179,7 @@ impl Writer {
                     "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
                     "warm_start": warm_start, "wall_ms": latency_ms,
                     "timings": {"queued_ms": done.timings.queued_ms, "read_ms": done.timings.read_ms,
-                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "write_ms": write_ms, "commit_ms": commit_ms},
+                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
                     "paths": paths,
                 }));
                 self.processed(a, out.processed);
