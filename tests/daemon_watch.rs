@@ -191,10 +191,17 @@ fn corrupt_files_are_quarantined_and_the_daemon_keeps_going() {
             && ev.iter().filter(|e| e["status"] == "rejected").count() >= 3
     };
     assert!(wait_until(done), "{}", s.log());
-    // Still alive: a later good file is fitted too.
+    // Still alive: a later good file is fitted too; a second bad file of the same name
+    // does not overwrite the first in quarantine.
     drop_file(&s.inbox, "late.ply", &patch_ply(12, 7));
+    drop_file(&s.inbox, "broken.ply", b"ply\nsecond broken file\n");
     assert!(
         wait_until(|| s.out.join("late/surface.json").exists()),
+        "{}",
+        s.log()
+    );
+    assert!(
+        wait_until(|| s.out.join("quarantine/broken~1.ply.error.json").exists()),
         "{}",
         s.log()
     );
@@ -206,6 +213,14 @@ fn corrupt_files_are_quarantined_and_the_daemon_keeps_going() {
         assert!(note["reason"].as_str().is_some_and(|r| !r.is_empty()));
         assert!(!s.inbox.join(name).exists());
     }
+    assert_eq!(
+        std::fs::read(q.join("broken.ply")).expect("first"),
+        CORRUPT_PLY
+    );
+    assert_eq!(
+        std::fs::read(q.join("broken~1.ply")).expect("second"),
+        b"ply\nsecond broken file\n"
+    );
     let ev = events(&s.out);
     let broken = ev
         .iter()

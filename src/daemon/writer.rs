@@ -194,8 +194,8 @@ impl Writer {
             ProcessedPolicy::Delete => std::fs::remove_file(path),
             ProcessedPolicy::Move => {
                 let dir = self.out_dir.join("processed");
-                let name = path.file_name().map(PathBuf::from).unwrap_or_default();
-                std::fs::create_dir_all(&dir).and_then(|_| std::fs::rename(path, dir.join(name)))
+                std::fs::create_dir_all(&dir)
+                    .and_then(|_| std::fs::rename(path, free_name(&dir, path)))
             }
         };
         if let Err(e) = result {
@@ -214,15 +214,14 @@ impl Writer {
             Keep::Nothing => Ok(None),
             Keep::Already(p) => Ok(Some(p)),
             Keep::Move(path) => {
-                let name = path.file_name().map(PathBuf::from).unwrap_or_default();
-                let target = q.join(name);
+                let target = free_name(q, &path);
                 std::fs::create_dir_all(q)
                     .and_then(|_| std::fs::rename(&path, &target))
                     .map(|_| Some(target))
                     .map_err(|e| e.to_string())
             }
             Keep::Bytes(data, name) => {
-                let target = q.join(name);
+                let target = free_name(q, Path::new(&name));
                 std::fs::create_dir_all(q)
                     .map_err(|e| e.to_string())
                     .and_then(|_| write_atomic(&target, &data).map_err(|e| e.to_string()))
@@ -284,6 +283,28 @@ impl Writer {
             tracing::error!(error = %e, path = %path.display(), "cannot append event");
         }
     }
+}
+
+/// `dir/<file name of path>`, or `dir/<stem>~N.<ext>` when that is taken: a second bad file
+/// of the same name must not overwrite the first one in quarantine.
+fn free_name(dir: &Path, path: &Path) -> PathBuf {
+    let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+    let first = dir.join(&name);
+    if !first.exists() {
+        return first;
+    }
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    (1u64..)
+        .map(|n| dir.join(format!("{stem}~{n}{ext}")))
+        .find(|p| !p.exists())
+        .unwrap_or(first)
 }
 
 /// Removes an optional output that the config no longer asks for, so that the folder never
