@@ -56,6 +56,52 @@ fn sigterm_with_work_in_flight_loses_nothing() {
 }
 
 #[test]
+fn a_stop_bound_of_zero_keeps_the_record_in_flight() {
+    let s = setup(
+        &config(0, "native", "")
+            .replace("workers = 2", "workers = 1")
+            .replace("stop_timeout_ms = 20000", "stop_timeout_ms = 0")
+            .replace("max_iterations = 20", "max_iterations = 400"),
+    );
+    let log = s.out.parent().expect("tmp").join("daemon.log");
+    let mut child = bin()
+        .args(s.args())
+        .args(["--pipe", "-"])
+        .env("RUST_LOG", "debug")
+        .stdin(Stdio::piped())
+        .stderr(std::fs::File::create(&log).expect("log"))
+        .spawn()
+        .expect("spawns");
+    let mut w = child.stdin.take().expect("stdin");
+    let bytes = patch_ply(120, 1);
+    write_all(
+        &mut w,
+        format!(
+            "{{\"patch\": \"big\", \"format\": \"ply\", \"bytes\": {}}}\n",
+            bytes.len()
+        )
+        .as_bytes(),
+    );
+    write_all(&mut w, &bytes);
+    w.flush().expect("flush");
+    let fitting = || std::fs::read_to_string(&log).is_ok_and(|l| l.contains("fitting"));
+    assert!(wait_until(fitting));
+    signal(&child, "TERM");
+    let status = wait_exit(&mut child);
+    drop(w);
+    assert!(status.is_some_and(|st| st.success()), "{status:?}");
+    let ev = events(&s.out);
+    let fitted = ev.iter().any(|e| e["patch"] == "big" && is_fitted(e));
+    let spilled: Vec<_> = ev.iter().filter(|e| e["status"] == "spilled").collect();
+    println!("fitted before the stop: {fitted}; spilled: {}", spilled.len());
+    assert!(fitted || spilled.len() == 1, "{ev:?}");
+    if let Some(e) = spilled.first() {
+        let path = e["path"].as_str().expect("path");
+        assert_eq!(std::fs::read(path).expect("spilled file"), bytes);
+    }
+}
+
+#[test]
 fn restart_skips_unchanged_inputs_until_the_fit_config_changes() {
     let s = setup(&config(0, "poll", ""));
     for k in 0..2 {

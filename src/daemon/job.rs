@@ -56,6 +56,7 @@ pub fn run_job(job: Job, store: &StateStore) -> JobDone {
     let span =
         tracing::info_span!("patch", patch = %job.arrival.id, version = %job.arrival.version);
     let _guard = span.enter();
+    tracing::debug!("fitting");
     let mut timings = Timings {
         queued_ms: ms(job.arrival.detected),
         ..Timings::default()
