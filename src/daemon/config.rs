@@ -206,8 +206,19 @@ impl DaemonConfig {
                 "must be 1..=2048",
             );
         }
-        if self.daemon.poll_interval_ms == 0 {
-            return bad("daemon.poll_interval_ms", "0".into(), "must be positive");
+        if !(1..=60_000).contains(&self.daemon.poll_interval_ms) {
+            return bad(
+                "daemon.poll_interval_ms",
+                self.daemon.poll_interval_ms.to_string(),
+                "must be 1..=60000",
+            );
+        }
+        if self.daemon.stop_timeout_ms > 3_600_000 {
+            return bad(
+                "daemon.stop_timeout_ms",
+                self.daemon.stop_timeout_ms.to_string(),
+                "must be at most 3600000",
+            );
         }
         if self.daemon.max_file_bytes == 0 {
             return bad("daemon.max_file_bytes", "0".into(), "must be positive");

@@ -89,7 +89,8 @@ impl FolderWatcher {
             let poll = Duration::from_millis(cfg.daemon.poll_interval_ms);
             if native.is_some() {
                 // Only files that neither closed nor were renamed in need the settle clock.
-                let tick = (settle / 4).clamp(Duration::from_millis(10), poll);
+                let floor = Duration::from_millis(10);
+                let tick = (settle / 4).clamp(floor, poll.max(floor));
                 match nrx.recv_timeout(tick) {
                     Ok(ev) => {
                         self.native_event(&mut t, ev);
