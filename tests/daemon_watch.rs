@@ -14,8 +14,9 @@ fn fitted_for(out: &std::path::Path, patch: &str) -> Vec<serde_json::Value> {
         .collect()
 }
 
-/// Writes `bytes` through one handle in `pieces`, pausing between them (well under the settle
-/// time), the way a slow network copy does.
+/// Writes `bytes` through one handle in `pieces`, pausing between them, the way a slow
+/// network copy does. The pauses are a tenth of the tests' settle time, so that a loaded
+/// machine stretching a sleep does not make the file look complete.
 fn write_slowly(path: &std::path::Path, bytes: &[u8], pieces: usize, pause: Duration) {
     let mut f = std::fs::File::create(path).expect("create");
     for chunk in bytes.chunks(bytes.len().div_ceil(pieces)) {
@@ -37,7 +38,7 @@ fn assert_fitted_complete(s: &Setup, patch: &str, bytes: &[u8]) {
 
 #[test]
 fn native_reads_files_only_when_complete() {
-    let s = setup(&config(400, "native", ""));
+    let s = setup(&config(1000, "native", ""));
     let child = s.spawn(&[]);
     let whole = patch_ply(14, 1);
     std::fs::write(s.inbox.join("whole.ply"), &whole).expect("write");
@@ -88,7 +89,7 @@ fn native_reads_files_only_when_complete() {
 
 #[test]
 fn poll_watcher_waits_for_the_settle_time() {
-    let s = setup(&config(400, "poll", ""));
+    let s = setup(&config(1000, "poll", ""));
     let child = s.spawn(&[]);
     let slow = patch_ply(14, 5);
     write_slowly(
