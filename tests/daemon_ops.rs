@@ -93,7 +93,10 @@ fn a_stop_bound_of_zero_keeps_the_record_in_flight() {
     let ev = events(&s.out);
     let fitted = ev.iter().any(|e| e["patch"] == "big" && is_fitted(e));
     let spilled: Vec<_> = ev.iter().filter(|e| e["status"] == "spilled").collect();
-    println!("fitted before the stop: {fitted}; spilled: {}", spilled.len());
+    println!(
+        "fitted before the stop: {fitted}; spilled: {}",
+        spilled.len()
+    );
     assert!(fitted || spilled.len() == 1, "{ev:?}");
     if let Some(e) = spilled.first() {
         let path = e["path"].as_str().expect("path");
@@ -166,7 +169,7 @@ fn sighup_applies_a_good_config_and_keeps_the_old_one_on_a_bad_one() {
     assert!(wait_until(|| count("config_rejected") >= 1), "{}", s.log());
     let rejected = events(&s.out)
         .into_iter()
-        .find(|e| e["status"] == "config_rejected")
+        .rfind(|e| e["status"] == "config_rejected")
         .expect("event");
     assert!(
         rejected["reason"]
@@ -233,16 +236,24 @@ fn http_get(port: u16, path: &str) -> String {
 
 #[test]
 fn metrics_and_health_on_loopback() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("free port")
-        .port();
-    let s = setup(&config(
-        0,
-        "native",
-        &format!("metrics_addr = \"127.0.0.1:{port}\""),
-    ));
+    // Port 0: the daemon binds a free port and logs it, so no other process can take it
+    // between a probe and the start.
+    let s = setup(&config(0, "native", "metrics_addr = \"127.0.0.1:0\""));
     let child = s.spawn(&[]);
+    let mut port = 0u16;
+    let bound = wait_until(|| {
+        let log = s.log();
+        let Some(at) = log.find("addr=127.0.0.1:") else {
+            return false;
+        };
+        let digits: String = log[at + 15..]
+            .chars()
+            .take_while(|c| c.is_ascii_digit())
+            .collect();
+        port = digits.parse().unwrap_or(0);
+        port != 0
+    });
+    assert!(bound, "{}", s.log());
     drop_file(&s.inbox, "a.ply", &patch_ply(12, 1));
     drop_file(&s.inbox, "b.ply", &patch_ply(12, 2));
     drop_file(&s.inbox, "bad.ply", CORRUPT_PLY);

@@ -40,6 +40,9 @@ pub enum Reloaded {
 pub struct Reloader {
     path: Option<PathBuf>,
     last_hash: Option<u64>,
+    /// New content seen on the previous look: a file still being written in place changes
+    /// between looks, and reading it half-written would only produce a refusal.
+    candidate: Option<u64>,
 }
 
 impl Reloader {
@@ -48,19 +51,29 @@ impl Reloader {
             .as_ref()
             .and_then(|p| std::fs::read(p).ok())
             .map(|b| content_hash(&b));
-        Self { path, last_hash }
+        Self {
+            path,
+            last_hash,
+            candidate: None,
+        }
     }
 
     /// Whether the file's content changed since the last look (false without `--config`).
     pub fn file_changed(&mut self) -> bool {
         let Some(path) = &self.path else { return false };
         let now = std::fs::read(path).ok().map(|b| content_hash(&b));
-        // A file that vanished for a moment (rename-replace) is not a change yet.
-        if now.is_some() && now != self.last_hash {
-            self.last_hash = now;
-            return true;
+        // A file that vanished for a moment (rename-replace) is not a change yet; new content
+        // counts once it is the same on two consecutive looks.
+        if now.is_none() || now == self.last_hash {
+            self.candidate = None;
+            return false;
         }
-        false
+        if now != self.candidate {
+            self.candidate = now;
+            return false;
+        }
+        self.candidate = None;
+        true
     }
 
     /// Reads and validates the file and, when good, puts it in the cell with the keys that
