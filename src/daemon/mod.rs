@@ -406,10 +406,17 @@ impl Loop {
                 arrival: a,
                 cfg: self.cell.get(),
             };
-            if self.job_tx.try_send(job).is_err() {
-                // Cannot happen while in_flight bounds the queue; if it does, say so rather
-                // than lose track of the patch.
-                tracing::error!("job queue refused a job");
+            if let Err(e) = self.job_tx.try_send(job) {
+                // Cannot happen while in_flight bounds the queue; if it does, the version
+                // goes back to wait rather than being lost.
+                tracing::error!("job queue refused a job; retrying later");
+                let job = e.into_inner();
+                self.in_flight -= 1;
+                self.sched.finish(&job.arrival.id);
+                if let Some(w) = job.warm {
+                    self.warm.insert(job.arrival.id.clone(), w);
+                }
+                self.sched.add(job.arrival);
                 break;
             }
         }
