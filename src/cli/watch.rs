@@ -1,11 +1,11 @@
 //! `trispline watch`: the daemon's command line.
 
-use crate::daemon::config::{DaemonConfig, DEFAULT_CONFIG};
-use crate::daemon::{run, DaemonOptions};
+use crate::daemon::config::{DaemonConfig, LogFormat, DEFAULT_CONFIG};
+use crate::daemon::pipe::PipeSpec;
+use crate::daemon::{run, Control, DaemonOptions};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 #[derive(clap::Args, Debug)]
@@ -14,10 +14,15 @@ pub struct WatchArgs {
     pub dir: PathBuf,
     #[arg(long)]
     pub out: PathBuf,
+    /// Also read records from this FIFO, or `-` for stdin (stdin EOF ends the daemon once
+    /// the work is done).
+    #[arg(long)]
+    pub pipe: Option<PathBuf>,
     /// Warm-start state (default OUT/.state).
     #[arg(long)]
     pub state: Option<PathBuf>,
-    /// TOML config; without it the embedded default is used.
+    /// TOML config; without it the embedded default is used. Re-read on SIGHUP and when
+    /// the file changes.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Process what is there, then exit.
@@ -27,7 +32,7 @@ pub struct WatchArgs {
     pub print_config: bool,
     #[arg(long)]
     pub check_config: bool,
-    /// Log lines as JSON.
+    /// Log lines as JSON (overrides log.format).
     #[arg(long)]
     pub log_json: bool,
 }
@@ -58,23 +63,24 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         println!("{name}: ok");
         return Ok(ExitCode::SUCCESS);
     }
-    let builder = tracing_subscriber::fmt()
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
-        );
-    let _ = if args.log_json {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
+    let set_log_level = init_logging(&config, args.log_json);
+    let ctl = Control {
+        set_log_level: Some(set_log_level),
+        ..Control::default()
     };
-    let stop = Arc::new(AtomicBool::new(false));
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(sig, Arc::clone(&stop))
+        signal_hook::flag::register(sig, Arc::clone(&ctl.stop))
             .context("installing signal handlers")?;
     }
+    signal_hook::flag::register(signal_hook::consts::SIGHUP, Arc::clone(&ctl.reload))
+        .context("installing the SIGHUP handler")?;
+    let pipe = args.pipe.as_ref().map(|p| {
+        if p.as_os_str() == "-" {
+            PipeSpec::Stdin
+        } else {
+            PipeSpec::Fifo(p.clone())
+        }
+    });
     let opts = DaemonOptions {
         watch_dir: args.dir.clone(),
         out_dir: args.out.clone(),
@@ -84,11 +90,45 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
             .unwrap_or_else(|| args.out.join(".state")),
         once: args.once,
         config,
+        config_path: args.config.clone(),
+        pipe,
     };
-    let summary = run(&opts, &stop)?;
+    let summary = run(opts, &ctl)?;
     eprintln!(
         "fitted {}, rejected {}, superseded {}, unchanged {}",
         summary.fitted, summary.rejected, summary.superseded, summary.unchanged
     );
     Ok(ExitCode::SUCCESS)
+}
+
+type SetLevel = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
+
+/// Logs to stderr, human or JSON, with a filter that a config reload can replace. RUST_LOG,
+/// when set, wins at start-up; a reload applies `log.level`.
+fn init_logging(config: &DaemonConfig, force_json: bool) -> SetLevel {
+    use tracing_subscriber::layer::SubscriberExt;
+    use tracing_subscriber::util::SubscriberInitExt;
+    use tracing_subscriber::{fmt, reload, EnvFilter};
+    let filter = EnvFilter::try_from_default_env()
+        .or_else(|_| EnvFilter::try_new(&config.log.level))
+        .unwrap_or_else(|_| EnvFilter::new("info"));
+    let (filter, handle) = reload::Layer::new(filter);
+    let registry = tracing_subscriber::registry().with(filter);
+    let _ = if force_json || config.log.format == LogFormat::Json {
+        registry
+            .with(fmt::layer().json().with_writer(std::io::stderr))
+            .try_init()
+    } else {
+        registry
+            .with(
+                fmt::layer()
+                    .with_writer(std::io::stderr)
+                    .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())),
+            )
+            .try_init()
+    };
+    Box::new(move |level: &str| {
+        let f = EnvFilter::try_new(level).map_err(|e| e.to_string())?;
+        handle.reload(f).map_err(|e| e.to_string())
+    })
 }

@@ -12,6 +12,8 @@ pub struct DaemonConfig {
     pub daemon: DaemonSection,
     #[serde(default)]
     pub output: OutputSection,
+    #[serde(default)]
+    pub log: LogSection,
 }
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -21,12 +23,106 @@ pub struct DaemonSection {
     pub poll_interval_ms: u64,
     pub max_file_bytes: u64,
     pub max_vertices: usize,
+    /// Fitting threads; 0 means one per available core. Needs a restart to change.
+    #[serde(default)]
+    pub workers: usize,
+    /// Needs a restart to change.
+    #[serde(default)]
+    pub watcher: WatcherKind,
+    /// How long a graceful stop waits for fits in progress.
+    #[serde(default = "default_stop_timeout_ms")]
+    pub stop_timeout_ms: u64,
+    /// `/metrics` and `/healthz` on this loopback address; absent: off. Needs a restart.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metrics_addr: Option<String>,
 }
 
-#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+fn default_stop_timeout_ms() -> u64 {
+    30_000
+}
+
+/// `native`: inotify (rename-into and close-after-write count at once, settle time for the
+/// rest); `poll`: directory scans every `poll_interval_ms`, for network filesystems where
+/// change notifications do not arrive.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WatcherKind {
+    #[default]
+    Native,
+    Poll,
+}
+
+/// What happens to an input once its content has been fitted. Inputs that were not fitted
+/// (superseded, rejected) are never deleted.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ProcessedPolicy {
+    #[default]
+    Leave,
+    /// Moved to OUT/processed.
+    Move,
+    Delete,
+}
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputSection {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quarantine_dir: Option<PathBuf>,
+    /// `surface.json` is always written (last, as the commit marker); these are optional.
+    #[serde(default = "yes")]
+    pub glb: bool,
+    #[serde(default = "yes")]
+    pub report: bool,
+    #[serde(default)]
+    pub processed: ProcessedPolicy,
+}
+
+impl Default for OutputSection {
+    fn default() -> Self {
+        Self {
+            quarantine_dir: None,
+            glb: true,
+            report: true,
+            processed: ProcessedPolicy::Leave,
+        }
+    }
+}
+
+fn yes() -> bool {
+    true
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    #[default]
+    Human,
+    Json,
+}
+
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LogSection {
+    /// A tracing filter (`info`, `debug`, `trispline=debug,warn`); changes live.
+    #[serde(default = "default_level")]
+    pub level: String,
+    /// Needs a restart to change.
+    #[serde(default)]
+    pub format: LogFormat,
+}
+
+impl Default for LogSection {
+    fn default() -> Self {
+        Self {
+            level: default_level(),
+            format: LogFormat::Human,
+        }
+    }
+}
+
+fn default_level() -> String {
+    "info".to_string()
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -110,13 +206,96 @@ impl DaemonConfig {
                 "must be 1..=2048",
             );
         }
-        if self.daemon.poll_interval_ms == 0 {
-            return bad("daemon.poll_interval_ms", "0".into(), "must be positive");
+        if !(1..=60_000).contains(&self.daemon.poll_interval_ms) {
+            return bad(
+                "daemon.poll_interval_ms",
+                self.daemon.poll_interval_ms.to_string(),
+                "must be 1..=60000",
+            );
+        }
+        if self.daemon.stop_timeout_ms > 3_600_000 {
+            return bad(
+                "daemon.stop_timeout_ms",
+                self.daemon.stop_timeout_ms.to_string(),
+                "must be at most 3600000",
+            );
         }
         if self.daemon.max_file_bytes == 0 {
             return bad("daemon.max_file_bytes", "0".into(), "must be positive");
         }
+        if self.daemon.workers > 256 {
+            return bad(
+                "daemon.workers",
+                self.daemon.workers.to_string(),
+                "must be 0..=256 (0: one per core)",
+            );
+        }
+        if self.daemon.settle_ms > 3_600_000 {
+            return bad(
+                "daemon.settle_ms",
+                self.daemon.settle_ms.to_string(),
+                "must be at most 3600000",
+            );
+        }
+        if let Some(addr) = &self.daemon.metrics_addr {
+            match addr.parse::<std::net::SocketAddr>() {
+                Err(e) => return bad("daemon.metrics_addr", addr.clone(), &e.to_string()),
+                // The responder has no authentication: it must not be reachable from outside.
+                Ok(a) if !a.ip().is_loopback() => {
+                    return bad(
+                        "daemon.metrics_addr",
+                        addr.clone(),
+                        "must be a loopback address (127.0.0.1 or ::1)",
+                    )
+                }
+                Ok(_) => {}
+            }
+        }
+        if let Err(e) = tracing_subscriber::EnvFilter::try_new(&self.log.level) {
+            return bad("log.level", self.log.level.clone(), &e.to_string());
+        }
         Ok(())
+    }
+
+    /// Workers actually started: the configured number, or one per available core.
+    pub fn worker_threads(&self) -> usize {
+        match self.daemon.workers {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n,
+        }
+    }
+
+    /// Hash of everything that shapes the outputs of a fit: an unchanged input is refitted
+    /// when this changes.
+    pub fn output_hash(&self) -> u64 {
+        let shaping = serde_json::json!({
+            "fit": self.fit,
+            "glb": self.output.glb,
+            "report": self.output.report,
+        });
+        super::state::content_hash(shaping.to_string().as_bytes())
+    }
+
+    /// Keys whose change a reload cannot apply (threads, sockets and the watcher are set up
+    /// once); reported so that nobody believes they took effect.
+    pub fn restart_only_changes(&self, new: &DaemonConfig) -> Vec<&'static str> {
+        let mut keys = Vec::new();
+        if self.daemon.workers != new.daemon.workers {
+            keys.push("daemon.workers");
+        }
+        if self.daemon.watcher != new.daemon.watcher {
+            keys.push("daemon.watcher");
+        }
+        if self.daemon.metrics_addr != new.daemon.metrics_addr {
+            keys.push("daemon.metrics_addr");
+        }
+        if self.log.format != new.log.format {
+            keys.push("log.format");
+        }
+        if self.output.quarantine_dir != new.output.quarantine_dir {
+            keys.push("output.quarantine_dir");
+        }
+        keys
     }
 
     pub fn to_toml(&self) -> String {
@@ -154,5 +333,52 @@ mod tests {
             .expect_err("refused")
             .to_string();
         assert!(e.contains("fit.levels"), "{e}");
+    }
+
+    #[test]
+    fn metrics_address_must_be_loopback() {
+        let with = |addr: &str| {
+            DEFAULT_CONFIG.replace(
+                "# metrics_addr = \"127.0.0.1:9187\"",
+                &format!("metrics_addr = \"{addr}\""),
+            )
+        };
+        assert!(DaemonConfig::parse(&with("127.0.0.1:9187"), "m.toml").is_ok());
+        assert!(DaemonConfig::parse(&with("[::1]:9187"), "m.toml").is_ok());
+        let e = DaemonConfig::parse(&with("0.0.0.0:9187"), "m.toml")
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            e.contains("daemon.metrics_addr") && e.contains("loopback"),
+            "{e}"
+        );
+        assert!(DaemonConfig::parse(&with("localhost"), "m.toml").is_err());
+    }
+
+    #[test]
+    fn new_keys_have_defaults_and_are_checked() {
+        let old = "[fit]\nsurface = \"bezier\"\nlevels = 1\nmethod = \"cg\"\ninverse = \"exact\"\nmax_iterations = 5\ntolerance_rel = 1e-3\nlattice = 8\nsmoothing = 1e-5\ntessellation = 8\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
+        let cfg = DaemonConfig::parse(old, "old.toml").expect("configs without the new keys");
+        assert_eq!(cfg.daemon.watcher, WatcherKind::Native);
+        assert_eq!(cfg.output.processed, ProcessedPolicy::Leave);
+        assert!(cfg.output.glb && cfg.output.report);
+        let e = DaemonConfig::parse(&format!("{old}watcher = \"smoke\"\n"), "w.toml")
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains("watcher"), "{e}");
+        let e = DaemonConfig::parse(&format!("{old}[log]\nlevel = \"=[\"\n"), "l.toml")
+            .expect_err("refused")
+            .to_string();
+        assert!(e.contains("log.level"), "{e}");
+    }
+
+    #[test]
+    fn output_hash_follows_the_fit_section_only() {
+        let a = DaemonConfig::embedded_default().expect("default");
+        let mut b = a.clone();
+        b.daemon.settle_ms += 1;
+        assert_eq!(a.output_hash(), b.output_hash());
+        b.fit.max_iterations += 1;
+        assert_ne!(a.output_hash(), b.output_hash());
     }
 }

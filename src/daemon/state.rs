@@ -8,6 +8,10 @@ use std::path::PathBuf;
 pub struct PatchState {
     pub version: String,
     pub input_hash: u64,
+    /// `DaemonConfig::output_hash` of the fit: a config change refits an unchanged input.
+    /// States written before it existed read as 0, which matches no config.
+    #[serde(default)]
+    pub config_hash: u64,
     pub warm: WarmStart,
 }
 

@@ -208,3 +208,52 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     }
     Ok(())
 }
+
+/// Several files of one folder made visible in the given order (the last one as the commit
+/// marker): every temp file is written and fsynced (concurrently, so the syncs overlap),
+/// then all are renamed in order and the folder is fsynced once. Each file on its own is
+/// old-complete or new-complete after a crash, as with `write_atomic`, and the last one is
+/// only durable together with the others because they share the folder's one fsync.
+pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
+    use std::io::Write;
+    let err = |name: &str, e: &dyn std::fmt::Display| {
+        IoError::new(dir.join(name).display().to_string(), None, e.to_string())
+    };
+    let temps: Vec<Result<tempfile::NamedTempFile, IoError>> = std::thread::scope(|scope| {
+        let handles: Vec<_> = files
+            .iter()
+            .map(|&(name, bytes)| {
+                scope.spawn(move || {
+                    let mut tmp = tempfile::Builder::new()
+                        .prefix(".trispline-")
+                        .suffix(".tmp")
+                        .tempfile_in(dir)
+                        .map_err(|e| err(name, &e))?;
+                    tmp.write_all(bytes).map_err(|e| err(name, &e))?;
+                    tmp.as_file().sync_all().map_err(|e| err(name, &e))?;
+                    Ok(tmp)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .zip(files)
+            .map(|(h, (name, _))| {
+                h.join()
+                    .unwrap_or_else(|_| Err(err(name, &"writer thread panicked")))
+            })
+            .collect()
+    });
+    let mut ready = Vec::with_capacity(temps.len());
+    for t in temps {
+        // An error drops every temp file: nothing of this group becomes visible.
+        ready.push(t?);
+    }
+    for (tmp, (name, _)) in ready.into_iter().zip(files) {
+        tmp.persist(dir.join(name))
+            .map_err(|e| err(name, &e.error))?;
+    }
+    std::fs::File::open(dir)
+        .and_then(|d| d.sync_all())
+        .map_err(|e| err("", &e))
+}

@@ -1,0 +1,156 @@
+//! What a worker thread does with one version: read, skip when unchanged, parse, fit.
+//! Writing is left to the writer thread; everything here runs under `catch_unwind`.
+
+use super::config::DaemonConfig;
+use super::scheduler::{Arrival, Input};
+use super::state::{content_hash, StateStore};
+use crate::io::{read_mesh_bytes, Format, LoadOptions};
+use crate::pipeline::worker::{run_patch, PatchOutputs, WarmStart};
+use std::sync::Arc;
+use std::time::Instant;
+
+pub struct Job {
+    pub arrival: Arrival,
+    pub cfg: Arc<DaemonConfig>,
+    /// The warm start of a fit that was dropped as stale (a newer version was waiting): newer
+    /// than what the state store holds.
+    pub warm: Option<WarmStart>,
+}
+
+pub enum Outcome {
+    Fitted {
+        outputs: Box<PatchOutputs>,
+        hash: u64,
+    },
+    /// Same content and same output-shaping config as the last fit.
+    Unchanged {
+        hash: u64,
+    },
+    Rejected {
+        reason: String,
+    },
+}
+
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Timings {
+    /// Detection to a worker picking it up.
+    pub queued_ms: f64,
+    pub read_ms: f64,
+    pub parse_ms: f64,
+    /// Inside `run_patch`.
+    pub fit_ms: f64,
+}
+
+pub struct JobDone {
+    pub arrival: Arrival,
+    pub cfg: Arc<DaemonConfig>,
+    pub outcome: Outcome,
+    pub timings: Timings,
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}
+
+pub fn run_job(job: Job, store: &StateStore) -> JobDone {
+    let span =
+        tracing::info_span!("patch", patch = %job.arrival.id, version = %job.arrival.version);
+    let _guard = span.enter();
+    tracing::debug!("fitting");
+    let mut timings = Timings {
+        queued_ms: ms(job.arrival.detected),
+        ..Timings::default()
+    };
+    let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        fit_one(&job, store, &mut timings)
+    }))
+    .unwrap_or_else(|payload| {
+        let what = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        Outcome::Rejected {
+            reason: format!("the fitting worker panicked: {what}"),
+        }
+    });
+    JobDone {
+        arrival: job.arrival,
+        cfg: job.cfg,
+        outcome,
+        timings,
+    }
+}
+
+fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
+    let a = &job.arrival;
+    let limits = &job.cfg.daemon;
+    let reject = |reason: String| Outcome::Rejected { reason };
+    let start = Instant::now();
+    let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
+        Input::Inline { data, format } => (Arc::clone(data), *format),
+        Input::File(path) => {
+            let Some(format) = Format::from_path(path) else {
+                return reject("unknown extension (obj, gltf, glb, ply, stl, off)".into());
+            };
+            // Refuse before reading: the limit exists so that one file cannot exhaust memory.
+            match std::fs::metadata(path) {
+                Ok(m) if m.len() > limits.max_file_bytes => {
+                    return reject(format!(
+                        "{} bytes exceeds daemon.max_file_bytes = {}",
+                        m.len(),
+                        limits.max_file_bytes
+                    ))
+                }
+                Ok(_) => {}
+                Err(e) => return reject(format!("cannot read: {e}")),
+            }
+            match std::fs::read(path) {
+                Ok(b) => (Arc::new(b), format),
+                Err(e) => return reject(format!("cannot read: {e}")),
+            }
+        }
+    };
+    if bytes.len() as u64 > limits.max_file_bytes {
+        return reject(format!(
+            "{} bytes exceeds daemon.max_file_bytes = {}",
+            bytes.len(),
+            limits.max_file_bytes
+        ));
+    }
+    let hash = content_hash(&bytes);
+    t.read_ms = ms(start);
+    let previous = store.load(&a.id);
+    let config_hash = job.cfg.output_hash();
+    if previous
+        .as_ref()
+        .is_some_and(|p| p.input_hash == hash && p.config_hash == config_hash)
+    {
+        return Outcome::Unchanged { hash };
+    }
+    let start = Instant::now();
+    let mesh = match read_mesh_bytes(&bytes, format, &a.label, &LoadOptions::default()) {
+        Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
+            return reject(format!(
+                "{} vertices exceeds daemon.max_vertices = {}",
+                l.mesh.positions.len(),
+                limits.max_vertices
+            ))
+        }
+        Ok(l) => l.mesh,
+        Err(e) => return reject(e.to_string()),
+    };
+    drop(bytes);
+    t.parse_ms = ms(start);
+    let warm = job.warm.as_ref().or(previous.as_ref().map(|p| &p.warm));
+    let start = Instant::now();
+    let fitted = run_patch(&mesh, warm, &job.cfg.fit);
+    t.fit_ms = ms(start);
+    match fitted {
+        Ok(outputs) => Outcome::Fitted {
+            outputs: Box::new(outputs),
+            hash,
+        },
+        Err(e) => reject(e.to_string()),
+    }
+}

@@ -1,0 +1,274 @@
+//! The folder source. Native: inotify through `notify`; a rename into the folder or a close
+//! after writing counts as arrival at once, anything else (a writer that keeps the file
+//! open) when size and mtime have been stable for the settle time. Poll: directory scans
+//! with the settle time only. Both rescan the whole folder at start-up; native also on
+//! overflow. Arrivals go to the scheduler over an unbounded channel: this thread never
+//! waits for fitting.
+
+use super::config::WatcherKind;
+use super::reload::ConfigCell;
+use super::scheduler::{Arrival, Input, VersionKey};
+use super::writer::{Keep, WriterMsg};
+use super::{ignored, patch_id, Msg, Source};
+use crossbeam_channel::{RecvTimeoutError, Sender};
+use notify::event::{AccessKind, AccessMode, ModifyKind, RenameMode};
+use notify::{EventKind, RecursiveMode, Watcher};
+use std::collections::HashMap;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+/// What identifies one state of a file: a new inode (rename-into) or new size or mtime is a
+/// new version.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+struct Stamp {
+    size: u64,
+    mtime: SystemTime,
+    ino: u64,
+}
+
+fn stamp(path: &Path) -> Option<Stamp> {
+    let m = std::fs::metadata(path).ok()?;
+    m.is_file().then(|| Stamp {
+        size: m.len(),
+        mtime: m.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+        ino: m.ino(),
+    })
+}
+
+pub struct FolderWatcher {
+    pub dir: PathBuf,
+    pub cell: Arc<ConfigCell>,
+    pub kind: WatcherKind,
+    pub once: bool,
+    pub tx: Sender<Msg>,
+    pub writer: Sender<WriterMsg>,
+    pub stop: Arc<AtomicBool>,
+    /// Told once the watch is in place and the start-up scan is done (readiness).
+    pub ready: Sender<()>,
+}
+
+struct Tracker {
+    /// Files seen but not yet complete: stamp and since when it has been unchanged.
+    settling: HashMap<PathBuf, (Stamp, Instant)>,
+    /// The stamp each file had when handed on, so that a rescan does not repeat it.
+    emitted: HashMap<PathBuf, Stamp>,
+    batch: Vec<Arrival>,
+}
+
+impl FolderWatcher {
+    pub fn run(self) {
+        let mut t = Tracker {
+            settling: HashMap::new(),
+            emitted: HashMap::new(),
+            batch: Vec::new(),
+        };
+        // Keep the watcher alive for the whole loop; it is created before the first scan so
+        // that nothing arriving in between is missed.
+        let (ntx, nrx) = crossbeam_channel::unbounded();
+        let native = (self.kind == WatcherKind::Native && !self.once)
+            .then(|| {
+                let mut w = notify::recommended_watcher(move |ev| {
+                    let _ = ntx.send(ev);
+                })?;
+                w.watch(&self.dir, RecursiveMode::NonRecursive)?;
+                Ok::<_, notify::Error>(w)
+            })
+            .and_then(|r| {
+                r.map_err(|e| tracing::warn!(error = %e, "native watching unavailable; polling"))
+                    .ok()
+            });
+        tracing::info!(dir = %self.dir.display(), native = native.is_some(), "watching");
+        self.scan(&mut t);
+        let _ = self.ready.send(());
+        loop {
+            let cfg = self.cell.get();
+            let settle = Duration::from_millis(cfg.daemon.settle_ms);
+            let poll = Duration::from_millis(cfg.daemon.poll_interval_ms);
+            if native.is_some() {
+                // Only files that neither closed nor were renamed in need the settle clock.
+                let floor = Duration::from_millis(10);
+                let tick = (settle / 4).clamp(floor, poll.max(floor));
+                match nrx.recv_timeout(tick) {
+                    Ok(ev) => {
+                        self.native_event(&mut t, ev);
+                        while let Ok(ev) = nrx.try_recv() {
+                            self.native_event(&mut t, ev);
+                        }
+                    }
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => break,
+                }
+            } else {
+                std::thread::sleep(poll);
+                self.scan(&mut t);
+            }
+            self.settle(&mut t, settle);
+            self.flush(&mut t);
+            if self.stop.load(Ordering::Relaxed) || (self.once && t.settling.is_empty()) {
+                break;
+            }
+        }
+        drop(native);
+        let _ = self.tx.send(Msg::SourceDone(Source::Folder));
+    }
+
+    fn native_event(&self, t: &mut Tracker, ev: notify::Result<notify::Event>) {
+        let ev = match ev {
+            Ok(ev) => ev,
+            Err(e) => {
+                tracing::warn!(error = %e, "watch error; rescanning");
+                return self.scan(t);
+            }
+        };
+        if ev.need_rescan() {
+            tracing::info!("event queue overflowed; rescanning");
+            return self.scan(t);
+        }
+        match ev.kind {
+            EventKind::Access(AccessKind::Close(AccessMode::Write))
+            | EventKind::Modify(ModifyKind::Name(RenameMode::To)) => {
+                if let Some(p) = ev.paths.first() {
+                    self.complete(t, p);
+                }
+            }
+            EventKind::Modify(ModifyKind::Name(RenameMode::Both)) => {
+                if let Some(p) = ev.paths.get(1) {
+                    self.complete(t, p);
+                }
+            }
+            EventKind::Modify(ModifyKind::Name(RenameMode::From)) | EventKind::Remove(_) => {
+                for p in &ev.paths {
+                    t.settling.remove(p);
+                    t.emitted.remove(p);
+                }
+            }
+            EventKind::Create(_) | EventKind::Modify(_) => {
+                for p in &ev.paths {
+                    self.seen(t, p, Instant::now());
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A file that is known to be complete (renamed in, or closed after writing).
+    fn complete(&self, t: &mut Tracker, path: &Path) {
+        if path.parent() != Some(self.dir.as_path()) || ignored(path) {
+            return;
+        }
+        t.settling.remove(path);
+        if let Some(s) = stamp(path) {
+            self.emit(t, path, s);
+        }
+    }
+
+    /// A file that may still be written: starts or restarts its settle clock.
+    fn seen(&self, t: &mut Tracker, path: &Path, now: Instant) {
+        if ignored(path) {
+            return;
+        }
+        let Some(s) = stamp(path) else {
+            t.settling.remove(path);
+            return;
+        };
+        if t.emitted.get(path) == Some(&s) {
+            return;
+        }
+        match t.settling.get_mut(path) {
+            Some((old, since)) if *old != s => {
+                *old = s;
+                *since = now;
+            }
+            Some(_) => {}
+            None => {
+                t.settling.insert(path.to_path_buf(), (s, now));
+            }
+        }
+    }
+
+    fn scan(&self, t: &mut Tracker) {
+        let entries = match std::fs::read_dir(&self.dir) {
+            Ok(e) => e,
+            Err(e) => {
+                // The folder may be remounted or recreated; keep trying rather than exit.
+                tracing::error!(error = %e, dir = %self.dir.display(), "cannot list the watch folder");
+                return;
+            }
+        };
+        let now = Instant::now();
+        let mut present = std::collections::HashSet::new();
+        for entry in entries.flatten() {
+            let path = entry.path();
+            present.insert(path.clone());
+            self.seen(t, &path, now);
+        }
+        t.emitted.retain(|p, _| present.contains(p));
+        t.settling.retain(|p, _| present.contains(p));
+    }
+
+    fn settle(&self, t: &mut Tracker, settle: Duration) {
+        let now = Instant::now();
+        let paths: Vec<PathBuf> = t.settling.keys().cloned().collect();
+        for path in paths {
+            match stamp(&path) {
+                None => {
+                    t.settling.remove(&path);
+                }
+                Some(s) => {
+                    let Some((old, since)) = t.settling.get_mut(&path) else {
+                        continue;
+                    };
+                    if *old != s {
+                        *old = s;
+                        *since = now;
+                    } else if now.duration_since(*since) >= settle {
+                        t.settling.remove(&path);
+                        self.emit(t, &path, s);
+                    }
+                }
+            }
+        }
+    }
+
+    fn emit(&self, t: &mut Tracker, path: &Path, s: Stamp) {
+        if t.emitted.insert(path.to_path_buf(), s) == Some(s) {
+            return;
+        }
+        let label = path.display().to_string();
+        let Some(id) = patch_id(path) else {
+            let _ = self.writer.send(WriterMsg::Reject {
+                id: String::new(),
+                label,
+                keep: Keep::Move(path.to_path_buf()),
+                reason: "file name gives no usable patch id".into(),
+            });
+            return;
+        };
+        let version = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        t.batch.push(Arrival {
+            id,
+            input: Input::File(path.to_path_buf()),
+            key: VersionKey {
+                time: s.mtime,
+                tie: version.clone(),
+            },
+            version,
+            label,
+            detected: Instant::now(),
+        });
+    }
+
+    /// Sends what one scan or one burst of events found as one message, so the scheduler
+    /// coalesces versions before it hands any of them out.
+    fn flush(&self, t: &mut Tracker) {
+        if !t.batch.is_empty() {
+            let _ = self.tx.send(Msg::Arrivals(std::mem::take(&mut t.batch)));
+        }
+    }
+}

@@ -1,0 +1,322 @@
+//! The writer thread: the only one that changes OUT, the state folder and the inputs
+//! (quarantine, processed-file policy), so that events.ndjson has a single appender and an
+//! input is never moved while a worker reads it.
+
+use super::config::ProcessedPolicy;
+use super::job::{JobDone, Outcome};
+use super::ops::metrics::Metrics;
+use super::scheduler::{Arrival, Input};
+use super::state::{PatchState, StateStore};
+use super::{Msg, Summary};
+use crate::io::{write_atomic, write_atomic_group};
+use crossbeam_channel::{Receiver, Sender};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+use std::time::{Instant, SystemTime};
+
+/// What to do with the bytes of something rejected.
+pub enum Keep {
+    /// A file: moved into quarantine.
+    Move(PathBuf),
+    /// Bytes held in memory (a pipe record): written into quarantine under this name.
+    Bytes(Arc<Vec<u8>>, String),
+    /// Already written into quarantine by the pipe reader (streamed, too large to hold).
+    Already(PathBuf),
+    Nothing,
+}
+
+pub enum WriterMsg {
+    Done(JobDone),
+    Superseded {
+        loser: Arrival,
+        by: String,
+    },
+    Reject {
+        id: String,
+        label: String,
+        keep: Keep,
+        reason: String,
+    },
+    Event(serde_json::Value),
+    /// Stopping with an inline version not fitted: write it into the watch folder, where the
+    /// next start finds it.
+    Spill(Arrival),
+    /// Everything sent before this is handled; the thread then returns.
+    Shutdown,
+}
+
+pub struct Writer {
+    pub out_dir: PathBuf,
+    pub watch_dir: PathBuf,
+    pub quarantine: PathBuf,
+    pub store: Arc<StateStore>,
+    pub metrics: Arc<Metrics>,
+    pub acks: Sender<Msg>,
+    pub summary: Summary,
+}
+
+fn secs(t: SystemTime) -> f64 {
+    t.duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+impl Writer {
+    pub fn run(mut self, inbox: Receiver<WriterMsg>) -> Summary {
+        for msg in inbox {
+            match msg {
+                WriterMsg::Done(done) => {
+                    let id = done.arrival.id.clone();
+                    self.finish(done);
+                    // The scheduler keeps the patch busy until here, so a newer version
+                    // starts from this fit's saved state.
+                    let _ = self.acks.send(Msg::Written(id));
+                }
+                WriterMsg::Superseded { loser, by } => {
+                    tracing::info!(patch = %loser.id, input = %loser.label, by = %by, "superseded");
+                    self.summary.superseded += 1;
+                    self.metrics.superseded.fetch_add(1, Ordering::Relaxed);
+                    self.event(json!({"patch": loser.id, "version": loser.version, "input": loser.label, "status": "superseded", "by": by}));
+                }
+                WriterMsg::Reject {
+                    id,
+                    label,
+                    keep,
+                    reason,
+                } => self.reject(&id, &label, keep, &reason),
+                WriterMsg::Event(v) => self.event(v),
+                WriterMsg::Spill(a) => self.spill(&a),
+                WriterMsg::Shutdown => break,
+            }
+        }
+        self.summary
+    }
+
+    fn finish(&mut self, done: JobDone) {
+        let a = &done.arrival;
+        let span = tracing::info_span!("patch", patch = %a.id, version = %a.version);
+        let _guard = span.enter();
+        match done.outcome {
+            Outcome::Rejected { reason } => {
+                let keep = match &a.input {
+                    Input::File(p) => Keep::Move(p.clone()),
+                    Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
+                };
+                self.reject(&a.id, &a.label, keep, &reason);
+            }
+            Outcome::Unchanged { .. } => {
+                tracing::info!("unchanged since the last fit; skipped");
+                self.summary.unchanged += 1;
+                self.metrics.unchanged.fetch_add(1, Ordering::Relaxed);
+                // Its content was fitted, so the processed-file policy applies.
+                self.processed(a, done.cfg.output.processed);
+            }
+            Outcome::Fitted { mut outputs, hash } => {
+                let start = Instant::now();
+                let warm_start = outputs.report["warm_start"].as_bool().unwrap_or(false);
+                outputs.report["patch"] = json!(a.id);
+                outputs.report["version"] = json!(a.version);
+                outputs.report["input"] = json!(a.label);
+                outputs.report["input_hash"] = json!(format!("{hash:016x}"));
+                let dir = self.out_dir.join(&a.id);
+                let (glb, report) = (dir.join("surface.glb"), dir.join("report.json"));
+                let surface = dir.join("surface.json");
+                let out = &done.cfg.output;
+                let to_json =
+                    |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
+                let report_bytes = out.report.then(|| to_json(&outputs.report));
+                let surface_bytes = to_json(&outputs.surface);
+                let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
+                if out.glb {
+                    group.push(("surface.glb", &outputs.glb));
+                }
+                if let Some(r) = &report_bytes {
+                    group.push(("report.json", r));
+                }
+                // Last: its presence says the version is complete.
+                group.push(("surface.json", &surface_bytes));
+                let written = std::fs::create_dir_all(&dir)
+                    .map_err(|e| format!("{}: {e}", dir.display()))
+                    .and_then(|_| remove_disabled(&glb, out.glb))
+                    .and_then(|_| remove_disabled(&report, out.report))
+                    .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
+                // The part of the write that a client waiting for surface.json waits for.
+                let outputs_ms = start.elapsed().as_secs_f64() * 1e3;
+                if let Err(e) = written {
+                    // The input is fine and stays where it is; the output folder is not.
+                    tracing::error!(error = %e, "cannot write outputs");
+                    self.metrics
+                        .error(&format!("{}: cannot write outputs: {e}", a.label));
+                    self.event(json!({"patch": a.id, "version": a.version, "input": a.label, "status": "write_failed", "reason": e}));
+                    return;
+                }
+                let state = PatchState {
+                    version: a.version.clone(),
+                    input_hash: hash,
+                    config_hash: done.cfg.output_hash(),
+                    warm: outputs.warm.clone(),
+                };
+                if let Err(e) = self.store.save(&a.id, &state) {
+                    tracing::warn!(error = %e, "cannot save warm-start state");
+                }
+                let write_ms = start.elapsed().as_secs_f64() * 1e3;
+                self.summary.fitted += 1;
+                self.metrics.fitted.fetch_add(1, Ordering::Relaxed);
+                self.metrics.observe_fit(done.timings.fit_ms / 1e3);
+                let latency_ms = a.detected.elapsed().as_secs_f64() * 1e3;
+                tracing::info!(status = ?outputs.status, fit_ms = done.timings.fit_ms, latency_ms, warm_start, "fitted");
+                let mut paths = json!({"surface": surface});
+                if out.glb {
+                    paths["glb"] = json!(glb);
+                }
+                if out.report {
+                    paths["report"] = json!(report);
+                }
+                self.event(json!({
+                    "patch": a.id, "version": a.version, "input": a.label, "status": outputs.status,
+                    "errors": outputs.report["final"],
+                    "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
+                    "warm_start": warm_start, "wall_ms": latency_ms,
+                    "timings": {"queued_ms": done.timings.queued_ms, "read_ms": done.timings.read_ms,
+                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
+                    "paths": paths,
+                }));
+                self.processed(a, out.processed);
+            }
+        }
+    }
+
+    fn processed(&self, a: &Arrival, policy: ProcessedPolicy) {
+        let Input::File(path) = &a.input else { return };
+        let result = match policy {
+            ProcessedPolicy::Leave => return,
+            ProcessedPolicy::Delete => std::fs::remove_file(path),
+            ProcessedPolicy::Move => {
+                let dir = self.out_dir.join("processed");
+                std::fs::create_dir_all(&dir)
+                    .and_then(|_| std::fs::rename(path, free_name(&dir, path)))
+            }
+        };
+        if let Err(e) = result {
+            tracing::warn!(error = %e, input = %path.display(), ?policy, "processed-file policy failed");
+        }
+    }
+
+    /// Moves or writes the bad input to quarantine with `<name>.error.json`, and records it.
+    fn reject(&mut self, id: &str, label: &str, keep: Keep, reason: &str) {
+        tracing::warn!(patch = id, input = label, reason, "rejected");
+        self.summary.rejected += 1;
+        self.metrics.rejected.fetch_add(1, Ordering::Relaxed);
+        self.metrics.error(&format!("{label}: {reason}"));
+        let q = &self.quarantine;
+        let kept: Result<Option<PathBuf>, String> = match keep {
+            Keep::Nothing => Ok(None),
+            Keep::Already(p) => Ok(Some(p)),
+            Keep::Move(path) => {
+                let target = free_name(q, &path);
+                std::fs::create_dir_all(q)
+                    .and_then(|_| std::fs::rename(&path, &target))
+                    .map(|_| Some(target))
+                    .map_err(|e| e.to_string())
+            }
+            Keep::Bytes(data, name) => {
+                let target = free_name(q, Path::new(&name));
+                std::fs::create_dir_all(q)
+                    .map_err(|e| e.to_string())
+                    .and_then(|_| write_atomic(&target, &data).map_err(|e| e.to_string()))
+                    .map(|_| Some(target))
+            }
+        };
+        let kept = kept.unwrap_or_else(|e| {
+            // The input stays where it was (a file) or is lost with the process (a record):
+            // say so loudly.
+            tracing::error!(error = %e, input = label, "cannot quarantine");
+            None
+        });
+        if let Some(target) = &kept {
+            let name = target
+                .file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_default();
+            let note =
+                json!({"input": label, "patch": id, "reason": reason, "quarantined_as": target});
+            let _ = write_atomic(
+                &q.join(format!("{name}.error.json")),
+                &serde_json::to_vec_pretty(&note).unwrap_or_default(),
+            );
+        }
+        self.event(json!({"patch": id, "input": label, "status": "rejected", "reason": reason, "quarantined_as": kept}));
+    }
+
+    fn spill(&mut self, a: &Arrival) {
+        let Input::Inline { data, .. } = &a.input else {
+            return;
+        };
+        let target = self.watch_dir.join(&a.version);
+        match write_atomic(&target, data) {
+            Ok(()) => {
+                tracing::info!(patch = %a.id, path = %target.display(), "unfitted pipe record kept in the watch folder");
+                self.event(json!({"patch": a.id, "version": a.version, "input": a.label, "status": "spilled", "path": target}));
+            }
+            Err(e) => {
+                tracing::error!(error = %e, patch = %a.id, "cannot keep an unfitted pipe record")
+            }
+        }
+    }
+
+    fn event(&self, mut line: serde_json::Value) {
+        use std::io::Write;
+        line["time"] = json!(secs(SystemTime::now()));
+        let path = self.out_dir.join("events.ndjson");
+        let appended = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .and_then(|mut f| {
+                // One write of the whole line: a crash cannot leave half a line that a
+                // formatter's piecewise writes could.
+                f.write_all(format!("{line}\n").as_bytes())?;
+                f.sync_data()
+            });
+        if let Err(e) = appended {
+            tracing::error!(error = %e, path = %path.display(), "cannot append event");
+        }
+    }
+}
+
+/// `dir/<file name of path>`, or `dir/<stem>~N.<ext>` when that is taken: a second bad file
+/// of the same name must not overwrite the first one in quarantine.
+fn free_name(dir: &Path, path: &Path) -> PathBuf {
+    let name = path.file_name().map(PathBuf::from).unwrap_or_default();
+    let first = dir.join(&name);
+    if !first.exists() {
+        return first;
+    }
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| format!(".{}", e.to_string_lossy()))
+        .unwrap_or_default();
+    (1u64..)
+        .map(|n| dir.join(format!("{stem}~{n}{ext}")))
+        .find(|p| !p.exists())
+        .unwrap_or(first)
+}
+
+/// Removes an optional output that the config no longer asks for, so that the folder never
+/// mixes versions.
+fn remove_disabled(path: &Path, enabled: bool) -> Result<(), String> {
+    if enabled {
+        return Ok(());
+    }
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(format!("{}: {e}", path.display()))
+        }
+        _ => Ok(()),
+    }
+}
