@@ -35,9 +35,9 @@ fn main() {
     ];
     let out = std::env::temp_dir().join(format!("trispline-scan-table-{}", std::process::id()));
     println!(
-        "| file | surface | data pts | ctrl (% data) | geo max | geo rms | status | read ms | prepare ms | fit ms | outputs ms | total ms | tess->data max | p99.9 | map |"
+        "| file | surface | data pts | ctrl (% data) | geo max | geo rms | status | read ms | prepare ms | fit ms | outputs ms | total ms | tess->data max | p99.9 | tess->filled max | p99.9 | map |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for rel in files {
         let path = root.join(rel);
         if !path.exists() {
@@ -63,6 +63,8 @@ fn main() {
 }
 
 fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
+    // The Stanford files are in metres: errors in micrometres. Others in their own units,
+    // relative to the bounding-box diagonal.
     let unit = if rel.starts_with("range_scans") || rel.contains("bun_zipper") {
         (1e6, "um")
     } else {
@@ -113,25 +115,35 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
             used[v as usize] = true;
         }
     }
-    let mut dist: Vec<f64> = tess
-        .positions
-        .par_iter()
-        .zip(used.par_iter())
-        .filter(|(_, u)| **u)
-        .filter_map(|(p, _)| md.distance(*p))
-        .collect();
-    dist.sort_by(f64::total_cmp);
-    let pct = |q: f64| {
-        dist.get(((dist.len().max(1) - 1) as f64 * q) as usize)
+    let distances = |md: &MeshDistance| {
+        let mut d: Vec<f64> = tess
+            .positions
+            .par_iter()
+            .zip(used.par_iter())
+            .filter(|(_, u)| **u)
+            .filter_map(|(p, _)| md.distance(*p))
+            .collect();
+        d.sort_by(f64::total_cmp);
+        d
+    };
+    let dist = distances(&md);
+    let pct = |d: &[f64], q: f64| {
+        d.get(((d.len().max(1) - 1) as f64 * q) as usize)
             .copied()
             .unwrap_or(0.0)
     };
+    // Over holes the data mesh is far by construction; the filled patch (holes closed flat
+    // in the plane) is what a surface without bulges stays near.
+    let filled = fitted.scan.as_ref().map_or_else(
+        || dist.clone(),
+        |s| distances(&MeshDistance::new(&s.filled)),
+    );
     let (prepare_ms, fit_ms) = (f.prepare_ms, f.fit_ms);
     let map = fitted.scan.as_ref().map_or("subdivision".to_string(), |s| {
         format!("{:?}, {} folds", s.map_method, s.folds_projected)
     });
     println!(
-        "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.0} {u} | {:.1} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.0} {u} | {:.0} {u} | {map} |",
+        "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.4} {u} | {:.4} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.4} {u} | {:.4} {u} | {:.4} {u} | {:.4} {u} | {map}; diagonal {:.4} |",
         f.data.len(),
         f.controls.len(),
         100.0 * f.controls.len() as f64 / f.data.len().max(1) as f64,
@@ -139,8 +151,11 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
         f.geometric_rms() * unit.0,
         f.outcome.status,
         if written { "" } else { " (write failed)" },
-        pct(1.0) * unit.0,
-        pct(0.999) * unit.0,
+        pct(&dist, 1.0) * unit.0,
+        pct(&dist, 0.999) * unit.0,
+        pct(&filled, 1.0) * unit.0,
+        pct(&filled, 0.999) * unit.0,
+        loaded.mesh.bounds_diagonal() * unit.0,
         u = unit.1,
     );
 }

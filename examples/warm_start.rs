@@ -7,6 +7,7 @@
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::pipeline::worker::{run_patch, PatchOutputs, WarmStart, WorkerConfig};
+use trispline::pipeline::SurfaceKind;
 use trispline::{DVec3, TriMesh};
 
 fn second_version(mesh: &TriMesh) -> TriMesh {
@@ -48,6 +49,7 @@ fn main() {
     let v1 = loaded.mesh;
     let v2 = second_version(&v1);
     let base = WorkerConfig {
+        surface: SurfaceKind::Loop,
         max_iterations: 2000,
         ..WorkerConfig::default()
     };
@@ -73,7 +75,15 @@ fn main() {
     };
     let (cold_ms, cold) = run(None);
     let (warm_ms, warm) = run(Some(&first.warm));
-    let steps = |o: &PatchOutputs| o.report["iterations"].as_array().map_or(0, |a| a.len() - 1);
+    // Steps: conjugate-gradient steps in all (the last iteration entry's k; each correction
+    // round adds its CG steps and one entry).
+    let steps = |o: &PatchOutputs| {
+        o.report["iterations"]
+            .as_array()
+            .and_then(|a| a.last())
+            .and_then(|s| s["k"].as_u64())
+            .unwrap_or(0)
+    };
     println!(
         "version 1: {} data points; version 2: {} data points",
         first.report["data_points"], reference.report["data_points"]

@@ -10,7 +10,7 @@ use super::domain::{
 use super::{collocation, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::distance::{solve_distance, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian;
-use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem, StepStats};
+use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem, FitStatus, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::stats::UnionFind;
 use crate::remesh::fill_holes;
@@ -101,6 +101,8 @@ pub struct ScanFit {
     pub domain: Domain,
     pub map_method: MapMethod,
     pub folds_projected: usize,
+    /// The patch as mapped: real triangles (folds left out) and the hole fills.
+    pub filled: TriMesh,
     pub initial: InitialNet,
     /// Outer boundary of the data in parameter coordinates, ordered: the trim.
     pub trim: Vec<(f64, f64)>,
@@ -281,7 +283,14 @@ pub fn fit_scan(
     let mut steps = outcome.steps.clone();
     let mut errors = foot_points(surface, &outcome.controls, data, &mut params);
     let mut correction_rms = vec![rms(&errors)];
-    for _ in 0..scan.correction_rounds {
+    // Foot-point distances never exceed the distances at the parameters, so a budget met by
+    // the first fit holds geometrically too: no correction needed.
+    let rounds = if outcome.status == FitStatus::Met {
+        0
+    } else {
+        scan.correction_rounds
+    };
+    for _ in 0..rounds {
         let (controls, cg_steps) = match scan.correction {
             Correction::Parameters => {
                 let next = run_fit(
@@ -333,16 +342,22 @@ pub fn fit_scan(
             .map(|(p, u)| *p - surface.evaluate(&controls, *u).position)
             .collect();
         let k = steps.last().map_or(0, |s| s.k) + cg_steps.max(1);
-        steps.push(StepStats::from_residuals(
+        let stats = StepStats::from_residuals(
             k,
             &residuals,
             opts.budget.tolerance,
             t2.elapsed().as_secs_f64() * 1e3,
-        ));
+        );
+        let met = opts.budget.met(&stats);
+        steps.push(stats);
         outcome.controls = controls;
         params = trial;
         errors = e;
         correction_rms.push(rms(&errors));
+        if met {
+            outcome.status = FitStatus::Met;
+            break;
+        }
     }
     outcome.steps = steps;
     outcome.iterations = outcome.steps.len().saturating_sub(1);
@@ -378,6 +393,7 @@ pub fn fit_scan(
         domain,
         map_method: map.method,
         folds_projected: map.folds_projected,
+        filled: map.mesh.clone(),
         initial,
         trim,
         correction_rms,
