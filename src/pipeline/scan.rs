@@ -279,7 +279,32 @@ pub fn fit_scan(
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t2 = Instant::now();
-    let mut outcome = run_fit(surface, &params, data, &fairness, smoothing, start, opts)?;
+    // A warm start that covers the domain already sits near the fit: its foot points are
+    // better parameters than the projection, so it goes straight to the correction rounds.
+    let warm_enough = scan.correction_rounds > 0
+        && scan.correction == Correction::Distance
+        && reused as f64 >= 0.9 * start.len() as f64;
+    let mut outcome = if warm_enough {
+        let mut residuals = vec![DVec3::ZERO; data.len()];
+        foot_points(surface, &start, data, &mut params);
+        residuals
+            .par_iter_mut()
+            .zip(data.par_iter().zip(params.par_iter()))
+            .for_each(|(r, (p, u))| *r = *p - surface.evaluate(&start, *u).position);
+        let stats = StepStats::from_residuals(0, &residuals, opts.budget.tolerance, 0.0);
+        FitOutcome {
+            status: if opts.budget.met(&stats) {
+                FitStatus::Met
+            } else {
+                FitStatus::Capped
+            },
+            controls: start,
+            steps: vec![stats],
+            iterations: 0,
+        }
+    } else {
+        run_fit(surface, &params, data, &fairness, smoothing, start, opts)?
+    };
     let mut steps = outcome.steps.clone();
     let mut errors = foot_points(surface, &outcome.controls, data, &mut params);
     let mut correction_rms = vec![rms(&errors)];
