@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb};
+use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 
@@ -91,8 +91,11 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     let fit_total = ms(t1);
     let t2 = Instant::now();
     let f = &fitted.fit;
-    let trim = fitted.scan.as_ref().map(|s| s.trim.as_slice());
-    let tess = tessellate(f, cfg.tessellation, trim);
+    let coverage = fitted
+        .scan
+        .as_ref()
+        .map(|s| Coverage::new(&s.filled.triangles, &f.params, &s.mapped_params));
+    let tess = tessellate(f, cfg.tessellation, coverage.as_ref());
     let glb = tessellated_glb(f, &tess, fitted.budget.tolerance);
     let report = serde_json::json!({"final": {}, "status": f.outcome.status});
     let surface_value = surface_json(f, fitted.scan.as_ref(), &report);

@@ -81,9 +81,21 @@ fn main() {
             .unwrap_or(0)
     };
     let budgets = [
-        ("mean <= 1.02 x best", Some(best * 1.02), base.max_iterations),
-        ("mean <= 1.005 x best", Some(best * 1.005), base.max_iterations),
-        ("default budget", None, WorkerConfig::default().max_iterations),
+        (
+            "mean <= 1.02 x best",
+            Some(best * 1.02),
+            base.max_iterations,
+        ),
+        (
+            "mean <= 1.005 x best",
+            Some(best * 1.005),
+            base.max_iterations,
+        ),
+        (
+            "default budget",
+            None,
+            WorkerConfig::default().max_iterations,
+        ),
     ];
     for (name, mean_error, max_iterations) in budgets {
         let budget = WorkerConfig {

@@ -5,10 +5,13 @@ use super::geometric::error_colour;
 use super::scan::{ScanFit, SurfaceModel};
 use super::PatchFit;
 use crate::io::glb::{glb_bytes, GlbAttributes};
+use crate::remesh::param::Locator;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
+use glam::DVec2;
 use glam::DVec3;
+use rayon::prelude::*;
 use serde_json::json;
 
 pub fn surface_json(
@@ -119,10 +122,56 @@ pub struct Tessellation {
     pub triangles: Vec<[u32; 3]>,
 }
 
+/// The scanned region in parameter space: the triangles of the mapped patch (data and
+/// hole fills) with the data vertices at their corrected parameters. A triangle that the
+/// correction stretched to more than `MAX_STRETCH` times its mapped size (a foot point that
+/// slid far, typically on a grazing wall) is left out rather than let it cover ground the
+/// data never saw. The tessellation shows where the surface was fitted, never where it
+/// only extrapolates.
+pub struct Coverage {
+    triangles: Vec<[u32; 3]>,
+    params: Vec<DVec2>,
+}
+
+const MAX_STRETCH: f64 = 3.0;
+
+impl Coverage {
+    /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
+    /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map.
+    pub fn new(triangles: &[[u32; 3]], corrected: &[SurfaceParam], mapped: &[DVec2]) -> Self {
+        let params: Vec<DVec2> = mapped
+            .iter()
+            .enumerate()
+            .map(|(v, m)| corrected.get(v).map_or(*m, |q| DVec2::new(q.u, q.v)))
+            .collect();
+        let triangles = triangles
+            .iter()
+            .copied()
+            .filter(|t| {
+                (0..3).all(|k| {
+                    let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                    (params[a] - params[b]).length()
+                        <= MAX_STRETCH * (mapped[a] - mapped[b]).length() + 1e-12
+                })
+            })
+            .collect();
+        Self { triangles, params }
+    }
+
+    /// Returns a test for parameters: inside a kept triangle.
+    pub fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
+        let locator = Locator::new(&self.triangles, &self.params);
+        move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
+    }
+}
+
 /// `segments`: per side of the Bezier triangle; for a grid, the total budget spread over
 /// the cells, at least 4 per cell side (a quartic cell flattened into 4 x 4 keeps the
-/// chordal error far below scan noise at scan-like curvatures).
-pub fn tessellate(f: &PatchFit, segments: usize, trim: Option<&[(f64, f64)]>) -> Tessellation {
+/// chordal error far below scan noise at scan-like curvatures). With a coverage, only
+/// triangles whose three corners lie on the scanned region are kept: the surface is shown
+/// where it was fitted and never where it only extrapolates.
+pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) -> Tessellation {
+    let covers = coverage.map(Coverage::tester);
     let (params, triangles) = match &f.model {
         SurfaceModel::Bezier(_) => {
             let n = segments.max(1);
@@ -142,24 +191,17 @@ pub fn tessellate(f: &PatchFit, segments: usize, trim: Option<&[(f64, f64)]>) ->
         }
     };
     let surface = f.model.as_surface();
-    let evals: Vec<_> = params
-        .iter()
-        .map(|p| surface.evaluate(&f.controls, *p))
-        .collect();
-    let trim_test = trim.map(TrimTest::new);
-    let triangles = triangles
+    let inside: Vec<bool> = match &covers {
+        Some(c) => params.par_iter().map(|p| c(p.u, p.v)).collect(),
+        None => vec![true; params.len()],
+    };
+    let triangles: Vec<[u32; 3]> = triangles
         .into_iter()
-        .filter(|t| {
-            trim_test.as_ref().is_none_or(|tt| {
-                let c = t.iter().fold((0.0, 0.0), |acc, &i| {
-                    (
-                        acc.0 + params[i as usize].u / 3.0,
-                        acc.1 + params[i as usize].v / 3.0,
-                    )
-                });
-                tt.inside(c)
-            })
-        })
+        .filter(|t| t.iter().all(|&v| inside[v as usize]))
+        .collect();
+    let evals: Vec<_> = params
+        .par_iter()
+        .map(|p| surface.evaluate(&f.controls, *p))
         .collect();
     Tessellation {
         positions: evals.iter().map(|d| d.position).collect(),

@@ -101,8 +101,10 @@ pub struct ScanFit {
     pub domain: Domain,
     pub map_method: MapMethod,
     pub folds_projected: usize,
-    /// The patch as mapped: real triangles (folds left out) and the hole fills.
+    /// The patch as mapped: real triangles (folds left out) and the hole fills...
     pub filled: TriMesh,
+    /// ... and its vertices' parameters on the plain map (before correction).
+    pub mapped_params: Vec<DVec2>,
     pub initial: InitialNet,
     /// Outer boundary of the data in parameter coordinates, ordered: the trim.
     pub trim: Vec<(f64, f64)>,
@@ -391,7 +393,18 @@ pub fn fit_scan(
     let trim = patch
         .outer
         .iter()
-        .map(|&v| domain.param(plane[v as usize]))
+        .map(|&v| {
+            params
+                .get(v as usize)
+                .map_or_else(|| domain.param(plane[v as usize]), |q| (q.u, q.v))
+        })
+        .collect();
+    let mapped_params = plane
+        .iter()
+        .map(|p| {
+            let (u, v) = domain.param(*p);
+            DVec2::new(u, v)
+        })
         .collect();
     let degree = match &model {
         SurfaceModel::Bezier(b) => b.degree,
@@ -419,6 +432,7 @@ pub fn fit_scan(
         map_method: map.method,
         folds_projected: map.folds_projected,
         filled: map.mesh.clone(),
+        mapped_params,
         initial,
         trim,
         correction_rms,

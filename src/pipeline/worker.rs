@@ -1,7 +1,7 @@
 //! The worker as one pure function: (mesh, previous control net, config) -> outputs as
 //! bytes and JSON values. The CLI and the daemon write them; nothing here touches files.
 
-use super::output::{surface_json, tessellate, tessellated_glb};
+use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use super::scan::{fit_scan, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepStats};
@@ -205,8 +205,10 @@ pub fn run_patch(
         scan: scan_info,
         budget,
     } = fit_patch(mesh, previous, cfg)?;
-    let trim = scan_info.as_ref().map(|s| s.trim.as_slice());
-    let tess = tessellate(&fitted, cfg.tessellation.max(1), trim);
+    let coverage = scan_info
+        .as_ref()
+        .map(|s| Coverage::new(&s.filled.triangles, &fitted.params, &s.mapped_params));
+    let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
     let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
     let mut report = report_json(cfg, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);
     if let Some(s) = &scan_info {

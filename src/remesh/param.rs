@@ -320,6 +320,15 @@ impl<'a> Locator<'a> {
         [1.0 - l1 - l2, l1, l2]
     }
 
+    /// Whether `q` lies in (or within rounding of) a triangle.
+    pub fn contains(&self, q: DVec2) -> bool {
+        let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
+        self.buckets[cy * self.dim + cx].iter().any(|&f| {
+            let b = self.bary(f, q);
+            b[0].min(b[1]).min(b[2]) >= -1e-9
+        })
+    }
+
     /// The containing triangle and barycentric weights; on the boundary or in a numerical
     /// gap, the nearby triangle whose weights are least negative, clamped.
     pub fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {

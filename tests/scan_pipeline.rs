@@ -1,0 +1,161 @@
+//! The real-scan path: planar maps, grid domains, distance correction, warm starts, and the
+//! quality goals on a Stanford range scan.
+
+use trispline::io::{read_mesh_file, LoadOptions};
+use trispline::pipeline::scan::Domain;
+use trispline::pipeline::worker::{fit_patch, run_patch, WorkerConfig};
+use trispline::pipeline::SurfaceKind;
+use trispline::remesh::fill_holes;
+use trispline::remesh::planar::{folded_triangles, planar_map, MapMethod, PlaneFrame};
+use trispline::testdata::shared_data;
+use trispline::{DVec3, TriMesh};
+
+/// A grid of (n+1)^2 points lifted by `f`, with a square hole of `hole` cells in the middle.
+fn height_field(n: usize, hole: usize, f: impl Fn(f64, f64) -> DVec3) -> TriMesh {
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            positions.push(f(i as f64 / n as f64, j as f64 / n as f64));
+        }
+    }
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let (h0, h1) = ((n - hole) / 2, (n + hole) / 2);
+    let mut triangles = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            if hole > 0 && (h0..h1).contains(&i) && (h0..h1).contains(&j) {
+                continue;
+            }
+            triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+            triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    TriMesh::new(positions, triangles)
+}
+
+#[test]
+fn a_tilted_height_field_is_projected_without_folds_and_its_hole_ear_clipped() {
+    // Tilted 35 degrees about x: the least-fold search must still find a fold-free plane.
+    let (s, c) = (35f64.to_radians().sin(), 35f64.to_radians().cos());
+    let mesh = height_field(40, 8, |x, y| {
+        let z = 0.1 * (3.0 * x).sin() * (2.0 * y).cos();
+        DVec3::new(x, y * c - z * s, y * s + z * c)
+    });
+    let patch = fill_holes(&mesh).expect("disk with a hole");
+    assert_eq!(patch.holes, 1);
+    let frame = PlaneFrame::fit_least_folds(&mesh).expect("frame");
+    let map = planar_map(&patch, &frame).expect("map");
+    assert_eq!(map.method, MapMethod::Projection);
+    assert_eq!(map.folds_projected, 0);
+    assert!(folded_triangles(&map.mesh.triangles, &map.plane).is_empty());
+    // The square hole's 32-edge rim closed by 30 ear triangles, no virtual vertex used.
+    assert_eq!(map.mesh.triangles.len(), mesh.triangles.len() + 30);
+    assert!(map
+        .mesh
+        .triangles
+        .iter()
+        .all(|t| t.iter().all(|&v| (v as usize) < mesh.positions.len())));
+}
+
+#[test]
+fn a_patch_that_is_no_height_field_falls_back_to_the_bijective_disk_map() {
+    // Three quarters of a sphere: no direction sees it without folds.
+    let mesh = height_field(40, 0, |x, y| {
+        let (theta, phi) = (x * std::f64::consts::TAU * 0.75, 0.3 + y * 2.5);
+        DVec3::new(phi.sin() * theta.cos(), phi.sin() * theta.sin(), phi.cos())
+    });
+    let patch = fill_holes(&mesh).expect("disk");
+    let frame = PlaneFrame::fit_least_folds(&mesh).expect("frame");
+    let map = planar_map(&patch, &frame).expect("map");
+    assert_eq!(map.method, MapMethod::MeanValueDisk);
+    assert!(map.folds_projected > 0);
+    assert!(folded_triangles(&map.mesh.triangles, &map.plane).is_empty());
+}
+
+#[test]
+fn a_smooth_patch_is_fitted_on_a_grid_far_below_its_size() {
+    let mesh = height_field(60, 10, |x, y| {
+        DVec3::new(x, y, 0.15 * (2.5 * x).sin() * (1.5 * y + 0.3).cos())
+    });
+    let cfg = WorkerConfig {
+        surface: SurfaceKind::Loop,
+        ..WorkerConfig::default()
+    };
+    let f = fit_patch(&mesh, None, &cfg).expect("fits");
+    let scan = f.scan.as_ref().expect("remeshed");
+    assert!(matches!(scan.domain, Domain::Grid { .. }));
+    let data = f.fit.data.len();
+    assert!(f.fit.controls.len() as f64 <= 0.05 * data as f64);
+    // A smooth surface of size 1: a quartic spline on ~180 controls follows it to 1e-4.
+    assert!(
+        f.fit.geometric_rms() < 1e-4,
+        "rms {}",
+        f.fit.geometric_rms()
+    );
+    // Distance rounds never make the fit worse than the first point-to-point fit.
+    let rms = &scan.correction_rms;
+    assert!(rms.windows(2).all(|w| w[1] < w[0]), "{rms:?}");
+}
+
+/// The Stanford scan: default settings, 5 % control points, RMS under 75 um (issue goal:
+/// 1.5x the scan noise), and a warm start from a first version needs fewer CG steps.
+#[test]
+fn stanford_range_scan_quality_and_warm_start() {
+    let Some(path) = shared_data("range_scans/bun000_range_grid.ply") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("reads")
+        .mesh;
+    let cfg = WorkerConfig {
+        surface: SurfaceKind::Loop,
+        ..WorkerConfig::default()
+    };
+    let first = run_patch(&mesh, None, &cfg).expect("fits");
+    let report = &first.report;
+    let data = report["data_points"].as_f64().expect("data");
+    let controls = report["control_points"].as_f64().expect("controls");
+    assert!(
+        controls <= 0.05 * data,
+        "{controls} controls for {data} points"
+    );
+    let rms = report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("rms");
+    assert!(rms < 75e-6, "geometric rms {:.1} um", rms * 1e6);
+
+    // Version 2: the 20% lowest-x vertices cut away.
+    let mut xs: Vec<f64> = mesh.positions.iter().map(|p| p.x).collect();
+    let cut = *xs.select_nth_unstable_by(xs.len() / 5, f64::total_cmp).1;
+    let v2 = TriMesh::new(
+        mesh.positions.clone(),
+        mesh.triangles
+            .iter()
+            .copied()
+            .filter(|t| t.iter().all(|&v| mesh.positions[v as usize].x >= cut))
+            .collect(),
+    );
+    let budget = WorkerConfig {
+        mean_error: Some(report["final"]["mean_error"].as_f64().expect("mean") * 1.05),
+        max_iterations: 1000,
+        ..cfg
+    };
+    let cg_steps = |o: &trispline::pipeline::worker::PatchOutputs| {
+        o.report["iterations"]
+            .as_array()
+            .and_then(|a| a.last())
+            .and_then(|s| s["k"].as_u64())
+            .expect("steps")
+    };
+    let cold = run_patch(&v2, None, &budget).expect("cold");
+    let warm = run_patch(&v2, Some(&first.warm), &budget).expect("warm");
+    assert_eq!(warm.report["warm_start"], true);
+    assert_eq!(cold.report["status"], "met");
+    assert_eq!(warm.report["status"], "met");
+    assert!(
+        3 * cg_steps(&warm) <= cg_steps(&cold),
+        "warm {} vs cold {} CG steps",
+        cg_steps(&warm),
+        cg_steps(&cold)
+    );
+}
