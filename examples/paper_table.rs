@@ -88,32 +88,7 @@ fn main() {
     };
     println!("data points {} (lattice {fine_n}), inverse levels {levels}, degree {degree}, control points {}", data.len(), initial.len());
     println!("setup (topology, detection, inverse Loop, collocation matrix): {setup_ms:.2} ms");
-    let budget = Budget {
-        tolerance: 0.002,
-        max_iterations: 10,
-        stall_steps: 0,
-        ..Budget::default()
-    };
-    for method in [Method::Pia, Method::Lspia, Method::Cg] {
-        // Best of 5 for the timing; the table is from the last run (all runs are identical).
-        let mut best = f64::MAX;
-        let mut outcome = None;
-        for _ in 0..5 {
-            let t = Instant::now();
-            let out = fit(&problem, initial.clone(), method, &budget).expect("fit");
-            best = best.min(t.elapsed().as_secs_f64() * 1e3);
-            outcome = Some(out);
-        }
-        let Some(out) = outcome else { continue };
-        println!("\n{method:?}: 10 steps in {best:.2} ms (best of 5)");
-        println!("| k | max | mean | N% (<= 0.002) |\n|---|---|---|---|");
-        for s in &out.steps {
-            println!(
-                "| {} | {:.6} | {:.6} | {:.3} |",
-                s.k, s.max_error, s.mean_error, s.within_tolerance_pct
-            );
-        }
-    }
+    run_methods("", &problem, &initial);
 
     loop_rows(
         &points,
@@ -194,27 +169,33 @@ fn loop_rows(
         fairness: None,
         pia_operator: Some(&pia_op),
     };
+    println!(
+        "\nloop: Loop limit surface of the {n}-segment net, {} control points (net + one ring)",
+        start.len()
+    );
+    run_methods("loop ", &problem, &start);
+}
+
+/// 10 steps of each method from `start`: best-of-5 time and the rows of table 2 (from the
+/// last run; all runs are identical).
+fn run_methods(label: &str, problem: &FitProblem, start: &[DVec3]) {
     let budget = Budget {
         tolerance: 0.002,
         max_iterations: 10,
         stall_steps: 0,
         ..Budget::default()
     };
-    println!(
-        "\nloop: Loop limit surface of the {n}-segment net, {} control points (net + one ring)",
-        start.len()
-    );
     for method in [Method::Pia, Method::Lspia, Method::Cg] {
         let mut best = f64::MAX;
         let mut outcome = None;
         for _ in 0..5 {
             let t = Instant::now();
-            let out = fit(&problem, start.clone(), method, &budget).expect("fit");
+            let out = fit(problem, start.to_vec(), method, &budget).expect("fit");
             best = best.min(t.elapsed().as_secs_f64() * 1e3);
             outcome = Some(out);
         }
         let Some(out) = outcome else { continue };
-        println!("\nloop {method:?}: 10 steps in {best:.2} ms (best of 5)");
+        println!("\n{label}{method:?}: 10 steps in {best:.2} ms (best of 5)");
         println!("| k | max | mean | N% (<= 0.002) |\n|---|---|---|---|");
         for s in &out.steps {
             println!(

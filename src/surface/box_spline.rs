@@ -273,18 +273,6 @@ impl TriSurface for LatticeSpline {
         self.n * self.n
     }
 
-    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
-        let mut rows = BasisDerivRows::default();
-        self.basis_rows_with_derivatives(p, &mut rows);
-        out.clear();
-        out.extend(
-            rows.indices
-                .iter()
-                .zip(&rows.weights)
-                .map(|(&i, w)| (i, w[0])),
-        );
-    }
-
     fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
         let (ids, lu, lv, down) = self.locate(p);
         let w = stencil_weights(lu, lv, down, self.n as f64);

@@ -191,18 +191,6 @@ impl TriSurface for GridSpline {
         self.cells.len()
     }
 
-    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
-        let mut rows = BasisDerivRows::default();
-        self.basis_rows_with_derivatives(p, &mut rows);
-        out.clear();
-        out.extend(
-            rows.indices
-                .iter()
-                .zip(&rows.weights)
-                .map(|(&i, w)| (i, w[0])),
-        );
-    }
-
     /// Outside the covered cells a stencil point may be missing: its weight is dropped
     /// (callers keep parameters inside with `covers` and `step`, so this only guards
     /// against a panic).

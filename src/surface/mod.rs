@@ -38,7 +38,18 @@ pub trait TriSurface: Send + Sync {
     fn control_count(&self) -> usize;
     fn domain_face_count(&self) -> usize;
     /// The sparse basis row at `p`: (control index, weight), weights >= 0 summing to 1.
-    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>);
+    /// By default the value column of the rows with derivatives.
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        let mut rows = BasisDerivRows::default();
+        self.basis_rows_with_derivatives(p, &mut rows);
+        out.clear();
+        out.extend(
+            rows.indices
+                .iter()
+                .zip(&rows.weights)
+                .map(|(&i, w)| (i, w[0])),
+        );
+    }
     fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows);
     fn evaluate(&self, controls: &[DVec3], p: SurfaceParam) -> Derivatives {
         let mut rows = BasisDerivRows::default();
