@@ -68,3 +68,28 @@ fn closed_and_higher_genus_meshes_are_refused() {
         assert!(!out.join("surface.json").exists());
     }
 }
+
+#[test]
+fn absurd_resolutions_are_refused_before_allocating() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("out");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    for args in [
+        &["--surface", "loop", "--lattice", "100000"][..],
+        &["--surface", "loop", "--levels", "12"][..],
+        &["--surface", "bezier", "--levels", "14"][..],
+        &["--surface", "bezier", "--lattice", "500"][..],
+    ] {
+        let mut all = vec!["fit", input.to_str().unwrap_or_default()];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--out", out.to_str().unwrap_or_default()]);
+        let o = trispline(&all);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("too fine") || err.contains("at most"),
+            "{args:?}: {err}"
+        );
+        assert!(!out.join("surface.json").exists());
+    }
+}

@@ -199,6 +199,23 @@ impl DaemonConfig {
         if !(f.smoothing >= 0.0 && f.smoothing.is_finite()) {
             return bad("fit.smoothing", f.smoothing.to_string(), "must be >= 0");
         }
+        if let Some(n) = f.grid_segments.filter(|n| !(1..=4096).contains(n)) {
+            return bad("fit.grid_segments", n.to_string(), "must be 1..=4096");
+        }
+        if !(f.target_controls_pct > 0.0 && f.target_controls_pct <= 100.0) {
+            return bad(
+                "fit.target_controls_pct",
+                f.target_controls_pct.to_string(),
+                "must be in (0, 100]",
+            );
+        }
+        if f.correction_rounds > 100 {
+            return bad(
+                "fit.correction_rounds",
+                f.correction_rounds.to_string(),
+                "must be 0..=100",
+            );
+        }
         if !(1..=2048).contains(&f.tessellation) {
             return bad(
                 "fit.tessellation",

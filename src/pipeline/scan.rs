@@ -198,6 +198,13 @@ pub fn fit_scan(
     let (model, domain, initial, fairness_tris) = match opts.surface {
         SurfaceKind::Bezier => {
             let n0 = scan.lattice.max(1);
+            let segments = (n0 as f64) * 2f64.powi(opts.levels.min(60) as i32);
+            if n0 > MAX_BEZIER_DEGREE || (segments + 1.0) * (segments + 2.0) / 2.0 > 1e8 {
+                return Err(PipelineError::Unsupported(format!(
+                    "Bezier degree {n0} with {} levels: the degree must be at most {MAX_BEZIER_DEGREE} and the resampled lattice ({segments} segments) at most 1e8 points",
+                    opts.levels
+                )));
+            }
             let corners = match warm.and_then(|w| w.domain) {
                 Some(Domain::Triangle { corners })
                     if plane.iter().all(|p| {
@@ -234,6 +241,7 @@ pub fn fit_scan(
                 }
             };
             let gf = GridFrame { spacing };
+            check_grid_size(plane, spacing, opts.levels)?;
             let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
             let initial = grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse);
             let tris = grid.net_triangles();
@@ -440,6 +448,31 @@ pub fn fit_scan(
         resample_ms,
         reused_controls: reused,
     })
+}
+
+/// Cells of the grid's bounding box times the 4^levels resampling triangles of each: a
+/// bound on the memory the grid path takes, checked before anything is allocated (a tiny
+/// spacing from a degenerate patch or a huge `--lattice` would otherwise exhaust memory).
+const MAX_RESAMPLED_TRIANGLES: f64 = 2e8;
+
+/// Beyond this the single patch is neither a sensible model of a scan nor cheap to evaluate.
+const MAX_BEZIER_DEGREE: usize = 96;
+
+fn check_grid_size(plane: &[DVec2], spacing: f64, levels: usize) -> Result<(), PipelineError> {
+    let (lo, hi) = plane.iter().fold(
+        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let extent = (hi - lo).max(DVec2::ZERO);
+    let cells = 2.0 * (extent.x / spacing + 3.0) * (extent.y / (0.866 * spacing) + 3.0);
+    let triangles = cells * 4f64.powi(levels.min(30) as i32);
+    if !(spacing > 0.0 && triangles.is_finite() && triangles <= MAX_RESAMPLED_TRIANGLES) {
+        return Err(PipelineError::Unsupported(format!(
+            "grid too fine for this patch: spacing {spacing:e} over a {:e} x {:e} map with {levels} levels (about {triangles:.1e} resampling triangles, limit {MAX_RESAMPLED_TRIANGLES:e})",
+            extent.x, extent.y
+        )));
+    }
+    Ok(())
 }
 
 fn run_fit(
