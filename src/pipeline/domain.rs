@@ -71,8 +71,14 @@ pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> 
         })
         .sum();
     let target = target.max(16) as f64;
+    let (lo, hi) = plane.iter().fold(
+        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    // Never more than 4096 cells across: a flat (zero-area) map must not ask for billions.
+    let floor = ((hi - lo).max_element() / 4096.0).max(1e-300);
     // One control point per rhombus of area sqrt(3)/2 h^2.
-    let mut h = (area / (SQRT3_2 * target)).sqrt().max(1e-12);
+    let mut h = (area / (SQRT3_2 * target)).sqrt().max(floor);
     let mut best: Option<(f64, usize)> = None;
     for _ in 0..6 {
         let count = GridSpline::new(covered_cells(&GridFrame { spacing: h }, plane, tris))
@@ -84,7 +90,8 @@ pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> 
         if (count as f64 - target).abs() <= 0.02 * target && count as f64 <= target {
             break;
         }
-        h *= (count as f64 / target).sqrt() * if count as f64 > target { 1.01 } else { 1.0 };
+        h = (h * (count as f64 / target).sqrt() * if count as f64 > target { 1.01 } else { 1.0 })
+            .max(floor);
     }
     best.map_or(h, |(h, _)| h)
 }

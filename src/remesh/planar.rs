@@ -171,6 +171,9 @@ pub fn folded_triangles(tris: &[[u32; 3]], plane: &[DVec2]) -> Vec<usize> {
         .collect()
 }
 
+/// Longest hole rim closed by ear clipping.
+const MAX_EAR_CLIP: usize = 1000;
+
 /// Above this share of folded triangles the patch is no height field over the plane.
 const MAX_FOLD_FRACTION: f64 = 0.01;
 
@@ -191,7 +194,9 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         if area < 0.0 {
             poly.reverse();
         }
-        match ear_clip(&poly, &plane) {
+        // Ear clipping is quadratic (cubic at worst): long rims keep their fan.
+        let clipped = (poly.len() <= MAX_EAR_CLIP).then(|| ear_clip(&poly, &plane));
+        match clipped.flatten() {
             Some(tris) => mesh.triangles.extend(tris),
             None => {
                 let fan = patch.mesh.triangles[patch.real_triangles..]
@@ -264,9 +269,12 @@ fn ear_clip(poly: &[u32], plane: &[DVec2]) -> Option<Vec<[u32; 3]>> {
     let mut out = Vec::with_capacity(poly.len().saturating_sub(2));
     let at = |v: u32| plane[v as usize];
     let cross = |a: DVec2, b: DVec2, c: DVec2| (b - a).perp_dot(c - a);
+    // The search resumes where the last ear was cut: ears cluster, which keeps the usual
+    // cost quadratic.
+    let mut from = 0;
     while ring.len() > 3 {
         let n = ring.len();
-        let ear = (0..n).find(|&k| {
+        let ear = (0..n).map(|d| (from + d) % n).find(|&k| {
             let (a, b, c) = (ring[(k + n - 1) % n], ring[k], ring[(k + 1) % n]);
             let (pa, pb, pc) = (at(a), at(b), at(c));
             if cross(pa, pb, pc) <= 0.0 {
@@ -283,6 +291,7 @@ fn ear_clip(poly: &[u32], plane: &[DVec2]) -> Option<Vec<[u32; 3]>> {
         let (a, b, c) = (ring[(ear + n - 1) % n], ring[ear], ring[(ear + 1) % n]);
         out.push([a, b, c]);
         ring.remove(ear);
+        from = ear.saturating_sub(1);
     }
     if ring.len() == 3 {
         if cross(at(ring[0]), at(ring[1]), at(ring[2])) <= 0.0 {
