@@ -52,6 +52,9 @@ pub enum Correction {
     Distance,
 }
 
+/// Relative geometric RMS gain below which correction rounds stop.
+const ROUND_MIN_GAIN: f64 = 0.02;
+
 /// Share of the point-to-point term in distance rounds.
 const DISTANCE_TANGENTIAL: f64 = 0.02;
 
@@ -368,7 +371,8 @@ pub fn fit_scan(
         let mut trial = params.clone();
         let e = foot_points(surface, &controls, data, &mut trial);
         // A round that does not lower the geometric error is dropped.
-        if rms(&e) >= rms(&errors) {
+        let (before, after) = (rms(&errors), rms(&e));
+        if after >= before {
             break;
         }
         let residuals: Vec<DVec3> = data
@@ -391,6 +395,12 @@ pub fn fit_scan(
         correction_rms.push(rms(&errors));
         if met {
             outcome.status = FitStatus::Met;
+            break;
+        }
+        // Rounds converge: once one gains under 2 % the next would gain less (a warm start
+        // from the previous version's surface usually stops here after one round).
+        if after > (1.0 - ROUND_MIN_GAIN) * before {
+            outcome.status = FitStatus::Stalled;
             break;
         }
     }
