@@ -8,7 +8,7 @@
 //! percentile: over a hole the nearest data is the hole's rim, so the maximum there is
 //! about the hole's radius even for a perfect fill). Then the meshes that must be refused.
 //!
-//!     cargo run --release --example scan_table [-- DATA_DIR]
+//!     cargo run --release --example scan_table [-- DATA_DIR [bezier|loop]]
 
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -24,6 +24,11 @@ fn main() {
         .nth(1)
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let only = match std::env::args().nth(2).as_deref() {
+        Some("bezier") => Some(SurfaceKind::Bezier),
+        Some("loop") => Some(SurfaceKind::Loop),
+        _ => None,
+    };
     let files = [
         "range_scans/bun000_tri.ply",
         "range_scans/bun045_tri.ply",
@@ -45,6 +50,9 @@ fn main() {
             continue;
         }
         for surface in [SurfaceKind::Bezier, SurfaceKind::Loop] {
+            if only.is_some_and(|o| o != surface) {
+                continue;
+            }
             row(&path, rel, surface, &out);
         }
     }
@@ -91,10 +99,14 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     let fit_total = ms(t1);
     let t2 = Instant::now();
     let f = &fitted.fit;
-    let coverage = fitted
-        .scan
-        .as_ref()
-        .map(|s| Coverage::new(&s.filled.triangles, &f.params, &s.mapped_params));
+    let coverage = fitted.scan.as_ref().map(|s| {
+        Coverage::new(
+            &s.filled.triangles,
+            &f.params,
+            &s.mapped_params,
+            &s.near_fold,
+        )
+    });
     let tess = tessellate(f, cfg.tessellation, coverage.as_ref());
     let glb = tessellated_glb(f, &tess, fitted.budget.tolerance);
     let report = serde_json::json!({"final": {}, "status": f.outcome.status});

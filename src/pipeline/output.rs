@@ -137,8 +137,15 @@ const MAX_STRETCH: f64 = 3.0;
 
 impl Coverage {
     /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
-    /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map.
-    pub fn new(triangles: &[[u32; 3]], corrected: &[SurfaceParam], mapped: &[DVec2]) -> Self {
+    /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map;
+    /// `untrusted[v]`: a vertex of a folded triangle of the map, whose triangles are left out
+    /// (at a folded silhouette the map overlaps itself and the surface there is a guess).
+    pub fn new(
+        triangles: &[[u32; 3]],
+        corrected: &[SurfaceParam],
+        mapped: &[DVec2],
+        untrusted: &[bool],
+    ) -> Self {
         let params: Vec<DVec2> = mapped
             .iter()
             .enumerate()
@@ -147,6 +154,7 @@ impl Coverage {
         let triangles = triangles
             .iter()
             .copied()
+            .filter(|t| !t.iter().any(|&v| untrusted.get(v as usize) == Some(&true)))
             .filter(|t| {
                 (0..3).all(|k| {
                     let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);

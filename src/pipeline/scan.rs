@@ -106,8 +106,10 @@ pub struct ScanFit {
     pub folds_projected: usize,
     /// The patch as mapped: real triangles (folds left out) and the hole fills...
     pub filled: TriMesh,
-    /// ... and its vertices' parameters on the plain map (before correction).
+    /// ... and its vertices' parameters on the plain map (before correction)...
     pub mapped_params: Vec<DVec2>,
+    /// ... and which of them belong to folded triangles of the map.
+    pub near_fold: Vec<bool>,
     pub initial: InitialNet,
     /// Outer boundary of the data in parameter coordinates, ordered: the trim.
     pub trim: Vec<(f64, f64)>,
@@ -451,6 +453,7 @@ pub fn fit_scan(
         folds_projected: map.folds_projected,
         filled: map.mesh.clone(),
         mapped_params,
+        near_fold: map.near_fold.clone(),
         initial,
         trim,
         correction_rms,

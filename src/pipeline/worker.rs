@@ -205,9 +205,14 @@ pub fn run_patch(
         scan: scan_info,
         budget,
     } = fit_patch(mesh, previous, cfg)?;
-    let coverage = scan_info
-        .as_ref()
-        .map(|s| Coverage::new(&s.filled.triangles, &fitted.params, &s.mapped_params));
+    let coverage = scan_info.as_ref().map(|s| {
+        Coverage::new(
+            &s.filled.triangles,
+            &fitted.params,
+            &s.mapped_params,
+            &s.near_fold,
+        )
+    });
     let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
     let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
     let mut report = report_json(cfg, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);

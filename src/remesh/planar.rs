@@ -153,6 +153,8 @@ pub struct PlanarMap {
     pub method: MapMethod,
     /// Folded triangles of the projection (left out of `mesh` when the projection is used).
     pub folds_projected: usize,
+    /// Vertices of those folded triangles: where the map is not to be trusted.
+    pub near_fold: Vec<bool>,
 }
 
 /// Triangles with non-positive signed area in the map.
@@ -212,8 +214,12 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         // A few folds at grazing silhouettes: leave them out of the mapped mesh (they only
         // serve point location); their vertices keep their projected parameters as data.
         let mut drop = vec![false; mesh.triangles.len()];
+        let mut near_fold = vec![false; plane.len()];
         for f in folds {
             drop[f] = true;
+            for v in mesh.triangles[f] {
+                near_fold[v as usize] = true;
+            }
         }
         let mut k = 0;
         mesh.triangles.retain(|_| {
@@ -225,6 +231,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
             plane,
             method: MapMethod::Projection,
             folds_projected,
+            near_fold,
         });
     }
     // Not a height field over any plane: the provably bijective map.
@@ -248,6 +255,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         )));
     }
     Ok(PlanarMap {
+        near_fold: vec![false; disk.len()],
         mesh: patch.mesh.clone(),
         plane: disk,
         method: MapMethod::MeanValueDisk,
