@@ -170,3 +170,44 @@ fn refuses_unsupported_inputs_with_status_2() {
     );
     assert!(!out.join("surface.json").exists());
 }
+
+#[test]
+fn a_missed_budget_refines_to_one_level_less() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let input = dir.path().join("patch.obj");
+    write_obj(&input, &lattice_patch(32)).expect("write");
+    let out = dir.path().join("out");
+    let fit = |extra: &[&str]| {
+        let mut args = vec![
+            "fit",
+            input.to_str().unwrap_or_default(),
+            "--surface",
+            "bezier",
+            "--levels",
+            "3",
+            "--tolerance",
+            "1e-9",
+            "--out",
+            out.to_str().unwrap_or_default(),
+        ];
+        args.extend_from_slice(extra);
+        let o = trispline(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        read_json(&out.join("report.json"))
+    };
+    // Degree 4 (L = 3) cannot follow sin * cos to 1e-9; degree 8, 16 and the square case
+    // only get closer: with the floor at 1 the fit ends at L = 1 (degree 16), having tried
+    // L = 3 and 2 first.
+    let report = fit(&[]);
+    assert_eq!(report["levels"], 1);
+    assert_eq!(report["degree"], 16);
+    let tried = report["refinement"].as_array().expect("refinement");
+    let levels: Vec<_> = tried.iter().map(|t| t["levels"].as_u64()).collect();
+    assert_eq!(levels, vec![Some(3), Some(2)]);
+    let err = |v: &serde_json::Value| v["final"]["max_error"].as_f64().expect("max");
+    assert!(err(&report) < err(&tried[1]) && err(&tried[1]) < err(&tried[0]));
+    // With the floor at the starting level nothing is refined.
+    let report = fit(&["--min-levels", "3"]);
+    assert_eq!(report["levels"], 3);
+    assert!(report.get("refinement").is_none());
+}

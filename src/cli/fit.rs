@@ -17,6 +17,10 @@ pub struct FitArgs {
     /// Levels of inverse subdivision (the input must have subdivision connectivity this deep).
     #[arg(long, default_value_t = 2)]
     pub levels: usize,
+    /// Inputs with subdivision connectivity: when the budget is not met, refit with one level
+    /// less (4x control points) down to this floor.
+    #[arg(long, default_value_t = 1)]
+    pub min_levels: usize,
     #[arg(long, default_value = "cg")]
     pub method: Method,
     #[arg(long, default_value = "exact")]
@@ -69,6 +73,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let cfg = WorkerConfig {
         surface: args.surface,
         levels: args.levels,
+        min_levels: args.min_levels,
         method: args.method,
         inverse: args.inverse,
         max_iterations: args.iterations,

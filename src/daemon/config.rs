@@ -170,6 +170,9 @@ impl DaemonConfig {
         if !(1..=6).contains(&f.levels) {
             return bad("fit.levels", f.levels.to_string(), "must be 1..=6");
         }
+        if f.min_levels > 6 {
+            return bad("fit.min_levels", f.min_levels.to_string(), "must be 0..=6");
+        }
         if !(1..=64).contains(&f.lattice) {
             return bad("fit.lattice", f.lattice.to_string(), "must be 1..=64");
         }

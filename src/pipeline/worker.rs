@@ -18,6 +18,10 @@ use std::time::Instant;
 pub struct WorkerConfig {
     pub surface: SurfaceKind,
     pub levels: usize,
+    /// Inputs with subdivision connectivity: when the budget is not met, refit with one
+    /// level of inverse subdivision less (4x control points), down to this floor.
+    #[serde(default = "default_min_levels")]
+    pub min_levels: usize,
     pub method: Method,
     pub inverse: InverseMethod,
     pub max_iterations: usize,
@@ -49,6 +53,10 @@ pub struct WorkerConfig {
     pub tessellation: usize,
 }
 
+fn default_min_levels() -> usize {
+    1
+}
+
 fn default_target_controls_pct() -> f64 {
     5.0
 }
@@ -66,6 +74,7 @@ impl Default for WorkerConfig {
         Self {
             surface: SurfaceKind::Bezier,
             levels: 2,
+            min_levels: default_min_levels(),
             method: Method::Cg,
             inverse: InverseMethod::Exact,
             max_iterations: 100,
@@ -141,6 +150,10 @@ pub struct FittedPatch {
     /// Remeshed scans: the preparation and domain.
     pub scan: Option<ScanFit>,
     pub budget: Budget,
+    /// Levels of inverse subdivision of the fit returned (subdivided inputs may refine).
+    pub levels: usize,
+    /// Subdivided inputs: the fits that missed the budget before it, coarsest first.
+    pub refinement: Vec<serde_json::Value>,
 }
 
 /// The fit alone: subdivision connectivity when the input has it, else the scan path.
@@ -159,7 +172,26 @@ pub fn fit_patch(
     };
     let previous = previous.filter(|w| w.surface == cfg.surface);
     let mut scan_info = None;
-    let subdivided = fit_subdivided(mesh, &opts, previous.map(|w| w.controls.as_slice()));
+    let mut levels = cfg.levels;
+    let mut refinement = Vec::new();
+    let subdivided = loop {
+        let at_level = FitOptions {
+            levels,
+            ..opts.clone()
+        };
+        match fit_subdivided(mesh, &at_level, previous.map(|w| w.controls.as_slice())) {
+            Ok(f) if f.outcome.status != FitStatus::Met && levels > cfg.min_levels => {
+                refinement.push(json!({
+                    "levels": levels,
+                    "control_points": f.controls.len(),
+                    "status": f.outcome.status,
+                    "final": f.outcome.steps.last().map(step_json),
+                }));
+                levels -= 1;
+            }
+            other => break other,
+        }
+    };
     let fitted = match subdivided {
         Ok(f) => f,
         Err(PipelineError::NoSubdivision(why) | PipelineError::Unsupported(why)) => {
@@ -188,9 +220,15 @@ pub fn fit_patch(
         Err(e) => return Err(e),
     };
     Ok(FittedPatch {
+        levels: if scan_info.is_some() {
+            cfg.levels
+        } else {
+            levels
+        },
         fit: fitted,
         scan: scan_info,
         budget,
+        refinement,
     })
 }
 
@@ -204,6 +242,8 @@ pub fn run_patch(
         fit: fitted,
         scan: scan_info,
         budget,
+        levels,
+        refinement,
     } = fit_patch(mesh, previous, cfg)?;
     let coverage = scan_info.as_ref().map(|s| {
         Coverage::new(
@@ -216,6 +256,10 @@ pub fn run_patch(
     let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
     let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
     let mut report = report_json(cfg, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);
+    report["levels"] = json!(levels);
+    if !refinement.is_empty() {
+        report["refinement"] = json!(refinement);
+    }
     if let Some(s) = &scan_info {
         report["remeshed"] = json!(true);
         report["components"] = json!(s.components);
