@@ -1,11 +1,13 @@
 //! Low-distortion planar maps of scan patches.
 //!
-//! A range scan is a height field seen from the scanner, so its projection onto the plane
-//! across the mean normal is nearly isometric and, where no triangle folds over, a
-//! bijection. That projection is tried first. Folded triangles (overhangs, grazing
+//! A range scan is a height field seen from the scanner, so its projection along the line of
+//! sight is nearly isometric and, where no triangle folds over, a bijection. The direction
+//! that folds the fewest triangles (searched around the mean normal) stands in for the line
+//! of sight, which the files do not record. That projection is tried first. Folded triangles (overhangs, grazing
 //! silhouettes, < 1 % of the triangles) are left out of the mapped mesh, which only serves
 //! point location; their vertices keep their projected parameters as data, which needs no
-//! injectivity. Holes are closed by ear clipping in the plane. A patch with more folds is no
+//! injectivity. Holes are closed by ear clipping in the plane (the fans of `fill_holes` where
+//! a rim is too long or not simple there). A patch with more folds is no
 //! height field: it falls back to Floater's mean-value map with the boundary on a circle,
 //! provably bijective, and verified to have no triangle of non-positive area.
 
