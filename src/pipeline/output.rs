@@ -61,58 +61,6 @@ pub fn surface_json(
     v
 }
 
-/// Even-odd point-in-polygon with the edges bucketed by y, for many queries.
-pub struct TrimTest {
-    poly: Vec<(f64, f64)>,
-    y0: f64,
-    dy: f64,
-    buckets: Vec<Vec<u32>>,
-}
-
-impl TrimTest {
-    pub fn new(poly: &[(f64, f64)]) -> Self {
-        let (y0, y1) = poly
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.1), b.max(p.1)));
-        let nb = (poly.len() / 4).clamp(1, 4096);
-        let dy = ((y1 - y0) / nb as f64).max(1e-300);
-        let mut buckets = vec![Vec::new(); nb];
-        for k in 0..poly.len() {
-            let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
-            let lo = (((a.1.min(b.1) - y0) / dy) as usize).min(nb - 1);
-            let hi = (((a.1.max(b.1) - y0) / dy) as usize).min(nb - 1);
-            for bucket in &mut buckets[lo..=hi] {
-                bucket.push(k as u32);
-            }
-        }
-        Self {
-            poly: poly.to_vec(),
-            y0,
-            dy,
-            buckets,
-        }
-    }
-
-    pub fn inside(&self, p: (f64, f64)) -> bool {
-        if self.poly.len() < 3 || !p.1.is_finite() {
-            return false;
-        }
-        let b = (p.1 - self.y0) / self.dy;
-        if b < 0.0 || b >= self.buckets.len() as f64 + 1.0 {
-            return false;
-        }
-        let mut c = false;
-        for &k in &self.buckets[(b as usize).min(self.buckets.len() - 1)] {
-            let k = k as usize;
-            let (a, b) = (self.poly[k], self.poly[(k + 1) % self.poly.len()]);
-            if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1) {
-                c = !c;
-            }
-        }
-        c
-    }
-}
-
 /// A tessellation of the fitted surface: parameters, points, normals, triangles (trimmed
 /// to the scanned region when a trim is given).
 pub struct Tessellation {
@@ -334,42 +282,5 @@ impl<'a> NearestParam<'a> {
             }
         }
         best.map(|b| b.1)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn trim_test_agrees_with_a_plain_even_odd_test() {
-        let poly: Vec<(f64, f64)> = (0..300)
-            .map(|k| {
-                let t = k as f64 / 300.0 * std::f64::consts::TAU;
-                let r = 1.0 + 0.4 * (5.0 * t).sin();
-                (r * t.cos(), r * t.sin())
-            })
-            .collect();
-        let tt = TrimTest::new(&poly);
-        let plain = |p: (f64, f64)| {
-            let mut c = false;
-            for k in 0..poly.len() {
-                let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
-                if (a.1 > p.1) != (b.1 > p.1) && p.0 < a.0 + (p.1 - a.1) * (b.0 - a.0) / (b.1 - a.1)
-                {
-                    c = !c;
-                }
-            }
-            c
-        };
-        let mut inside = 0;
-        for i in 0..60 {
-            for j in 0..60 {
-                let p = (-1.5 + i as f64 * 0.05, -1.5 + j as f64 * 0.05);
-                assert_eq!(tt.inside(p), plain(p), "{p:?}");
-                inside += usize::from(plain(p));
-            }
-        }
-        assert!(inside > 500);
     }
 }
