@@ -1,6 +1,6 @@
-//! From an arbitrary disk-like scan component to a regular triangular lattice with Loop
-//! subdivision connectivity: hole filling (virtual faces, never data), Floater mean-value
-//! parameterization onto a triangle, and resampling at the lattice points.
+//! From an arbitrary disk-like scan component to a planar map: boundary loops, hole filling
+//! (virtual faces, never data), the least-fold projection (`planar`) and its bijective
+//! fallback, Floater's mean-value map onto a disk (`param`), and point location in the map.
 
 pub mod param;
 pub mod planar;
@@ -118,23 +118,10 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
     })
 }
 
-/// Corners of the domain triangle in the plane (equilateral, side 1). Barycentric
-/// coordinates w.r.t. these are the surface parameters (u, v, w).
+/// An equilateral triangle of side 1; the mean-value disk map puts the boundary on (a
+/// slightly shrunk copy of) its inscribed circle.
 pub const DOMAIN: [DVec2; 3] = [
     DVec2::new(1.0, 0.0),
     DVec2::new(0.5, 0.866_025_403_784_438_6),
     DVec2::new(0.0, 0.0),
 ];
-
-/// Barycentric (u, v) of a planar point w.r.t. `DOMAIN` (u for corner 0, v for corner 1).
-pub fn to_barycentric(p: DVec2) -> (f64, f64) {
-    let [a, b, c] = DOMAIN;
-    let det = (a - c).perp_dot(b - c);
-    let u = (p - c).perp_dot(b - c) / det;
-    let v = (a - c).perp_dot(p - c) / det;
-    (u, v)
-}
-
-pub fn from_barycentric(u: f64, v: f64) -> DVec2 {
-    DOMAIN[0] * u + DOMAIN[1] * v + DOMAIN[2] * (1.0 - u - v)
-}

@@ -1,102 +1,13 @@
-//! Floater's mean-value parameterization with the outer boundary on the domain triangle
-//! (convex, so the map is bijective), and resampling on the regular lattice.
+//! Floater's mean-value parameterization with the outer boundary on a circle (convex, so the
+//! map is bijective): the fallback of `planar` for patches that are no height field; and
+//! point location in a planar triangulation.
 
-use super::{fill_holes, from_barycentric, to_barycentric, FilledPatch, RemeshError, DOMAIN};
-use crate::mesh::TriMesh;
-use crate::surface::bezier::lattice_points;
+use super::{FilledPatch, RemeshError, DOMAIN};
 use glam::{DVec2, DVec3};
-use std::time::Instant;
 
-#[derive(Clone, Debug)]
-pub struct PreparedPatch {
-    /// Barycentric (u, v) of every real input vertex on the domain triangle.
-    pub uv: Vec<(f64, f64)>,
-    /// Lattice of `segments` per side, in lattice order, sampled on the patch.
-    pub lattice: Vec<DVec3>,
-    pub segments: usize,
-    pub holes: usize,
-    /// Triangles with negative area in the domain (zero-area ones along a straight domain
-    /// side, where three boundary vertices are collinear by construction, are not counted).
-    pub flipped_triangles: usize,
-    /// Outer boundary in (u, v), ordered: the trim of the scanned region.
-    pub trim: Vec<(f64, f64)>,
-    pub parameterization_ms: f64,
-    pub resample_ms: f64,
-}
-
-/// Parameterizes a clean, manifold, disk-like component and samples it on a lattice of
-/// `segments` per side.
-/// Where the outer boundary goes: onto the domain triangle itself (a Bezier patch has no
-/// control points outside it), or onto the circle inscribed in it (less distortion at the
-/// corners; the lattice spline's control points outside the disk follow the fairness term).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DomainShape {
-    Triangle,
-    Disk,
-}
-
-pub fn prepare(
-    mesh: &TriMesh,
-    segments: usize,
-    shape: DomainShape,
-) -> Result<PreparedPatch, RemeshError> {
-    let t0 = Instant::now();
-    let patch = fill_holes(mesh)?;
-    let plane = mean_value_map(&patch, shape)?;
-    let flipped = patch
-        .mesh
-        .triangles
-        .iter()
-        .filter(|t| {
-            let (a, b, c) = (
-                plane[t[0] as usize],
-                plane[t[1] as usize],
-                plane[t[2] as usize],
-            );
-            (b - a).perp_dot(c - a) < 0.0
-        })
-        .count();
-    let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let t1 = Instant::now();
-    let locator = Locator::new(&patch.mesh.triangles, &plane);
-    let lattice = lattice_points(segments)
-        .into_iter()
-        .map(|(i, j)| {
-            let q = from_barycentric(i as f64 / segments as f64, j as f64 / segments as f64);
-            let (f, b) = locator.locate(q);
-            let t = patch.mesh.triangles[f];
-            patch.mesh.positions[t[0] as usize] * b[0]
-                + patch.mesh.positions[t[1] as usize] * b[1]
-                + patch.mesh.positions[t[2] as usize] * b[2]
-        })
-        .collect();
-    let resample_ms = t1.elapsed().as_secs_f64() * 1e3;
-    Ok(PreparedPatch {
-        uv: plane[..patch.real_vertices]
-            .iter()
-            .map(|p| to_barycentric(*p))
-            .collect(),
-        lattice,
-        segments,
-        holes: patch.holes,
-        flipped_triangles: flipped,
-        trim: patch
-            .outer
-            .iter()
-            .map(|&v| to_barycentric(plane[v as usize]))
-            .collect(),
-        parameterization_ms,
-        resample_ms,
-    })
-}
-
-/// Outer boundary on the triangle by arc length (corner 0 at the boundary vertex farthest
-/// from the boundary's centroid, corners 1 and 2 a third and two thirds of the way round),
-/// interior by mean-value weights, solved with BiCGSTAB.
-pub(crate) fn mean_value_map(
-    patch: &FilledPatch,
-    shape: DomainShape,
-) -> Result<Vec<DVec2>, RemeshError> {
+/// Outer boundary on the circle by arc length (starting at the boundary vertex farthest
+/// from the boundary's centroid), interior by mean-value weights, solved with BiCGSTAB.
+pub(crate) fn mean_value_disk(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshError> {
     let pos = &patch.mesh.positions;
     let n = pos.len();
     let outer = &patch.outer;
@@ -119,23 +30,13 @@ pub(crate) fn mean_value_map(
     let total = arc[ring.len()].max(1e-300);
     let mut plane = vec![DVec2::ZERO; n];
     let mut fixed = vec![false; n];
+    // The circle inscribed in the equilateral domain, shrunk a little (the caller scales
+    // the map to the patch's size).
+    let centre = (DOMAIN[0] + DOMAIN[1] + DOMAIN[2]) / 3.0;
+    let radius = 0.95 * 3f64.sqrt() / 6.0;
     for (k, &v) in ring.iter().enumerate() {
-        let s = 3.0 * arc[k] / total;
-        plane[v as usize] = match shape {
-            DomainShape::Triangle => {
-                let side = (s.floor() as usize).min(2);
-                let f = s - side as f64;
-                DOMAIN[side] * (1.0 - f) + DOMAIN[(side + 1) % 3] * f
-            }
-            DomainShape::Disk => {
-                // Incircle of the equilateral domain, shrunk a little so that the data
-                // keeps clear of the lattice's outer triangles.
-                let centre = (DOMAIN[0] + DOMAIN[1] + DOMAIN[2]) / 3.0;
-                let radius = 0.95 * 3f64.sqrt() / 6.0;
-                let angle = std::f64::consts::TAU * arc[k] / total;
-                centre + DVec2::new(angle.cos(), angle.sin()) * radius
-            }
-        };
+        let angle = std::f64::consts::TAU * arc[k] / total;
+        plane[v as usize] = centre + DVec2::new(angle.cos(), angle.sin()) * radius;
         fixed[v as usize] = true;
     }
     // Mean-value weights: w_ij = (tan(a1/2) + tan(a2/2)) / |x_i - x_j|, angles at i.

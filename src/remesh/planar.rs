@@ -11,7 +11,7 @@
 //! height field: it falls back to Floater's mean-value map with the boundary on a circle,
 //! provably bijective, and verified to have no triangle of non-positive area.
 
-use super::param::{mean_value_map, DomainShape};
+use super::param::mean_value_disk;
 use super::{FilledPatch, RemeshError};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
@@ -237,7 +237,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         });
     }
     // Not a height field over any plane: the provably bijective map.
-    let mut disk = mean_value_map(patch, DomainShape::Disk)?;
+    let mut disk = mean_value_disk(patch)?;
     // Scale to the patch's size so grid spacings stay in the input's units.
     let length_3d: f64 = ring_length(patch.outer.iter().map(|&v| mesh.positions[v as usize]));
     let length_2d: f64 = ring_length(patch.outer.iter().map(|&v| disk[v as usize].extend(0.0)));
