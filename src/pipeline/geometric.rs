@@ -1,21 +1,22 @@
 //! Geometric error: the distance from a data point to its foot point on the surface,
 //! found by Newton iterations on `|S(u) - p|^2` started from the data point's parameter.
 
-use crate::surface::{SurfaceParam, TriSurface};
+use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
 
 /// Newton iterations per point. Started from the fitting parameter the foot point is
 /// usually within a small fraction of a face; a handful of steps reaches machine precision.
 const MAX_NEWTON_STEPS: usize = 8;
 
-/// Returns the foot-point parameter and the distance to it. The distance never exceeds the
-/// distance at `start`: a step that does not reduce it is halved and finally refused.
+/// Returns the foot-point parameter and the surface's derivatives there (the distance is
+/// `|position - point|`). The distance never exceeds the distance at `start`: a step that
+/// does not reduce it is halved and finally refused.
 pub fn foot_point(
     surface: &dyn TriSurface,
     controls: &[DVec3],
     point: DVec3,
     start: SurfaceParam,
-) -> (SurfaceParam, f64) {
+) -> (SurfaceParam, Derivatives) {
     let mut param = start;
     let mut d = surface.evaluate(controls, param);
     let mut dist2 = (d.position - point).length_squared();
@@ -60,7 +61,7 @@ pub fn foot_point(
             break;
         }
     }
-    (param, dist2.sqrt())
+    (param, d)
 }
 
 /// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green

@@ -196,6 +196,6 @@ pub fn geometric_errors(
 ) -> Vec<f64> {
     data.par_iter()
         .zip(params.par_iter())
-        .map(|(p, u)| geometric::foot_point(surface, controls, *p, *u).1)
+        .map(|(p, u)| (geometric::foot_point(surface, controls, *p, *u).1.position - *p).length())
         .collect()
 }

@@ -299,15 +299,10 @@ pub fn fit_scan(
     let warm_enough = scan.correction_rounds > 0
         && scan.correction == Correction::Distance
         && reused as f64 >= 0.9 * start.len() as f64;
-    let mut outcome = if warm_enough {
-        let mut residuals = vec![DVec3::ZERO; data.len()];
-        foot_points(surface, &start, data, &mut params);
-        residuals
-            .par_iter_mut()
-            .zip(data.par_iter().zip(params.par_iter()))
-            .for_each(|(r, (p, u))| *r = *p - surface.evaluate(&start, *u).position);
-        let stats = StepStats::from_residuals(0, &residuals, opts.budget.tolerance, 0.0);
-        FitOutcome {
+    let (mut outcome, mut feet) = if warm_enough {
+        let feet = foot_points(surface, &start, data, &mut params);
+        let stats = StepStats::from_residuals(0, &feet.residuals, opts.budget.tolerance, 0.0);
+        let outcome = FitOutcome {
             status: if opts.budget.met(&stats) {
                 FitStatus::Met
             } else {
@@ -316,12 +311,15 @@ pub fn fit_scan(
             controls: start,
             steps: vec![stats],
             iterations: 0,
-        }
+        };
+        (outcome, feet)
     } else {
-        run_fit(surface, &params, data, &fairness, smoothing, start, opts)?
+        let outcome = run_fit(surface, &params, data, &fairness, smoothing, start, opts)?;
+        let feet = foot_points(surface, &outcome.controls, data, &mut params);
+        (outcome, feet)
     };
     let mut steps = outcome.steps.clone();
-    let mut errors = foot_points(surface, &outcome.controls, data, &mut params);
+    let mut errors = feet.distances();
     let mut correction_rms = vec![rms(&errors)];
     // Foot-point distances never exceed the distances at the parameters, so a budget met by
     // the first fit holds geometrically too: no correction needed.
@@ -346,18 +344,11 @@ pub fn fit_scan(
                 (next.controls, n)
             }
             Correction::Distance => {
-                let normals: Vec<DVec3> = params
-                    .par_iter()
-                    .map(|p| {
-                        let d = surface.evaluate(&outcome.controls, *p);
-                        d.du.cross(d.dv).normalize_or_zero()
-                    })
-                    .collect();
                 let basis = collocation(surface, &params);
                 let problem = DistanceProblem {
                     basis: &basis,
                     data,
-                    normals: &normals,
+                    normals: &feet.normals,
                     tangential: DISTANCE_TANGENTIAL,
                     fairness: Some(&fairness),
                     smoothing,
@@ -371,21 +362,17 @@ pub fn fit_scan(
             }
         };
         let mut trial = params.clone();
-        let e = foot_points(surface, &controls, data, &mut trial);
+        let trial_feet = foot_points(surface, &controls, data, &mut trial);
+        let e = trial_feet.distances();
         // A round that does not lower the geometric error is dropped.
         let (before, after) = (rms(&errors), rms(&e));
         if after >= before {
             break;
         }
-        let residuals: Vec<DVec3> = data
-            .par_iter()
-            .zip(trial.par_iter())
-            .map(|(p, u)| *p - surface.evaluate(&controls, *u).position)
-            .collect();
         let k = steps.last().map_or(0, |s| s.k) + cg_steps.max(1);
         let stats = StepStats::from_residuals(
             k,
-            &residuals,
+            &trial_feet.residuals,
             opts.budget.tolerance,
             t2.elapsed().as_secs_f64() * 1e3,
         );
@@ -393,6 +380,7 @@ pub fn fit_scan(
         steps.push(stats);
         outcome.controls = controls;
         params = trial;
+        feet = trial_feet;
         errors = e;
         correction_rms.push(rms(&errors));
         if met {
@@ -509,21 +497,36 @@ fn run_fit(
     Ok(fit(&problem, start, opts.method, budget)?)
 }
 
-/// Moves every parameter to its foot point and returns the distances.
+/// The data seen from their foot points: residual p - S(foot) and the unit surface normal.
+struct Feet {
+    residuals: Vec<DVec3>,
+    normals: Vec<DVec3>,
+}
+
+impl Feet {
+    fn distances(&self) -> Vec<f64> {
+        self.residuals.iter().map(|r| r.length()).collect()
+    }
+}
+
+/// Moves every parameter to its foot point; what a round needs of the surface there comes
+/// from the foot-point search's last evaluation.
 fn foot_points(
     surface: &dyn TriSurface,
     controls: &[DVec3],
     data: &[DVec3],
     params: &mut [SurfaceParam],
-) -> Vec<f64> {
-    data.par_iter()
+) -> Feet {
+    let (residuals, normals) = data
+        .par_iter()
         .zip(params.par_iter_mut())
         .map(|(p, u)| {
             let (foot, d) = geometric::foot_point(surface, controls, *p, *u);
             *u = foot;
-            d
+            (*p - d.position, d.du.cross(d.dv).normalize_or_zero())
         })
-        .collect()
+        .unzip();
+    Feet { residuals, normals }
 }
 
 fn rms(e: &[f64]) -> f64 {
