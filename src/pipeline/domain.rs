@@ -9,12 +9,13 @@
 
 use crate::mesh::inverse::{coarsen, InverseMethod};
 use crate::remesh::param::Locator;
+use crate::remesh::planar::doubled_area;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::grid_spline::{Cell, GridSpline};
 use crate::surface::TriSurface;
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashSet, VecDeque};
 
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
 
@@ -35,10 +36,19 @@ impl GridFrame {
     }
 }
 
+/// Width and height of the points' bounding box (zero for no points).
+pub fn plane_extent(points: &[DVec2]) -> DVec2 {
+    let (lo, hi) = points.iter().fold(
+        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    (hi - lo).max(DVec2::ZERO)
+}
+
 /// Every cell whose parallelogram meets a triangle's bounding box (in grid coordinates).
 /// Conservative: a cell the patch only grazes is kept, never one it covers dropped.
 pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> Vec<Cell> {
-    let mut seen: HashMap<(i64, i64), ()> = HashMap::new();
+    let mut seen: HashSet<(i64, i64)> = HashSet::new();
     for t in tris {
         let g = t.map(|v| frame.to_grid(plane[v as usize]));
         let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
@@ -47,11 +57,11 @@ pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> V
         let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
         for j in y0..=y1 {
             for i in x0..=x1 {
-                seen.insert((i, j), ());
+                seen.insert((i, j));
             }
         }
     }
-    seen.into_keys()
+    seen.into_iter()
         .flat_map(|(i, j)| [(i, j, false), (i, j, true)])
         .collect()
 }
@@ -61,22 +71,11 @@ pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> V
 pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> f64 {
     let area: f64 = tris
         .iter()
-        .map(|t| {
-            let (a, b, c) = (
-                plane[t[0] as usize],
-                plane[t[1] as usize],
-                plane[t[2] as usize],
-            );
-            0.5 * (b - a).perp_dot(c - a).abs()
-        })
+        .map(|t| 0.5 * doubled_area(plane, t).abs())
         .sum();
     let target = target.max(16) as f64;
-    let (lo, hi) = plane.iter().fold(
-        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
     // Never more than 4096 cells across: a flat (zero-area) map must not ask for billions.
-    let floor = ((hi - lo).max_element() / 4096.0).max(1e-300);
+    let floor = (plane_extent(plane).max_element() / 4096.0).max(1e-300);
     // One control point per rhombus of area sqrt(3)/2 h^2.
     let mut h = (area / (SQRT3_2 * target)).sqrt().max(floor);
     let mut best: Option<(f64, usize)> = None;
@@ -208,31 +207,7 @@ pub fn grid_initial_net(
 ) -> InitialNet {
     let locator = Locator::new(&mesh.triangles, plane);
     let f = 1i64 << levels;
-    let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
-    let mut coords: Vec<(i64, i64)> = Vec::new();
-    let mut id = |c: (i64, i64), coords: &mut Vec<(i64, i64)>| {
-        *ids.entry(c).or_insert_with(|| {
-            coords.push(c);
-            coords.len() as u32 - 1
-        })
-    };
-    let sub = lattice_triangles(f as usize);
-    let local = lattice_points(f as usize);
-    let mut triangles = Vec::with_capacity(grid.cells().len() * sub.len());
-    for &(i, j, down) in grid.cells() {
-        // A down cell is the up lattice turned by 180 degrees about its centre.
-        let global = |(a, b): (usize, usize)| {
-            if down {
-                (f * (i + 1) - a as i64, f * (j + 1) - b as i64)
-            } else {
-                (f * i + a as i64, f * j + b as i64)
-            }
-        };
-        let cell_ids: Vec<u32> = local.iter().map(|&p| id(global(p), &mut coords)).collect();
-        for t in &sub {
-            triangles.push(t.map(|k| cell_ids[k as usize]));
-        }
-    }
+    let (coords, triangles) = grid.refined_lattice(f as usize);
     let positions: Vec<DVec3> = coords
         .iter()
         .map(|&(a, b)| {

@@ -5,7 +5,7 @@
 
 use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
-    spacing_for_target, GridFrame, InitialNet,
+    plane_extent, spacing_for_target, GridFrame, InitialNet,
 };
 use super::{collocation, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::distance::{solve_distance, DistanceProblem};
@@ -232,13 +232,7 @@ pub fn fit_scan(
         }
         SurfaceKind::Loop => {
             let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
-                (_, Some(n)) => {
-                    let (lo, hi) = plane.iter().fold(
-                        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
-                        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-                    );
-                    (hi - lo).max_element().max(1e-300) / n.max(1) as f64
-                }
+                (_, Some(n)) => plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
                 (Some(Domain::Grid { spacing }), None) => *spacing,
                 _ => {
                     let target = (scan.target_controls_pct / 100.0 * real as f64).round();
@@ -460,11 +454,7 @@ const MAX_RESAMPLED_TRIANGLES: f64 = 2e8;
 const MAX_BEZIER_DEGREE: usize = 96;
 
 fn check_grid_size(plane: &[DVec2], spacing: f64, levels: usize) -> Result<(), PipelineError> {
-    let (lo, hi) = plane.iter().fold(
-        (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let extent = (hi - lo).max(DVec2::ZERO);
+    let extent = plane_extent(plane);
     let cells = 2.0 * (extent.x / spacing + 3.0) * (extent.y / (0.866 * spacing) + 3.0);
     let triangles = cells * 4f64.powi(levels.min(30) as i32);
     if !(spacing > 0.0 && triangles.is_finite() && triangles <= MAX_RESAMPLED_TRIANGLES) {

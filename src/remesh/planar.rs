@@ -159,18 +159,21 @@ pub struct PlanarMap {
     pub near_fold: Vec<bool>,
 }
 
+/// Twice the signed area of a triangle in the map (positive counter-clockwise).
+pub fn doubled_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
+    let (a, b, c) = (
+        plane[t[0] as usize],
+        plane[t[1] as usize],
+        plane[t[2] as usize],
+    );
+    (b - a).perp_dot(c - a)
+}
+
 /// Triangles with non-positive signed area in the map.
 pub fn folded_triangles(tris: &[[u32; 3]], plane: &[DVec2]) -> Vec<usize> {
     tris.iter()
         .enumerate()
-        .filter(|(_, t)| {
-            let (a, b, c) = (
-                plane[t[0] as usize],
-                plane[t[1] as usize],
-                plane[t[2] as usize],
-            );
-            (b - a).perp_dot(c - a) <= 0.0
-        })
+        .filter(|(_, t)| doubled_area(plane, t) <= 0.0)
         .map(|(f, _)| f)
         .collect()
 }

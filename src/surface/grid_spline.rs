@@ -125,13 +125,15 @@ impl GridSpline {
             .all(|&(a, b)| self.control_at(a, b).is_some())
     }
 
-    /// Every cell split into k x k sub-triangles (shared vertices merged): parameters and
-    /// counter-clockwise triangles, for tessellation and curvature sampling.
-    pub fn sample_lattice(&self, k: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+    /// Every cell split into k x k sub-triangles, shared vertices merged: the vertices'
+    /// integer coordinates on the grid refined k times (vertex (a, b) sits at grid point
+    /// (a / k, b / k)) and the counter-clockwise triangles. Used for resampling (k = 2^L)
+    /// and, through `sample_lattice`, for tessellation and curvature sampling.
+    pub fn refined_lattice(&self, k: usize) -> (Vec<(i64, i64)>, Vec<[u32; 3]>) {
         let k = k.max(1);
         let ki = k as i64;
         let mut ids: HashMap<(i64, i64), u32> = HashMap::new();
-        let mut params = Vec::new();
+        let mut coords = Vec::new();
         let mut triangles = Vec::with_capacity(self.cells.len() * k * k);
         let local = lattice_points(k);
         let sub = lattice_triangles(k);
@@ -146,17 +148,28 @@ impl GridSpline {
                         (ki * i + a as i64, ki * j + b as i64)
                     };
                     *ids.entry(key).or_insert_with(|| {
-                        params.push(SurfaceParam {
-                            face: 0,
-                            u: key.0 as f64 / k as f64,
-                            v: key.1 as f64 / k as f64,
-                        });
-                        params.len() as u32 - 1
+                        coords.push(key);
+                        coords.len() as u32 - 1
                     })
                 })
                 .collect();
             triangles.extend(sub.iter().map(|t| t.map(|x| vid[x as usize])));
         }
+        (coords, triangles)
+    }
+
+    /// `refined_lattice` with its vertices as surface parameters.
+    pub fn sample_lattice(&self, k: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+        let k = k.max(1);
+        let (coords, triangles) = self.refined_lattice(k);
+        let params = coords
+            .into_iter()
+            .map(|(a, b)| SurfaceParam {
+                face: 0,
+                u: a as f64 / k as f64,
+                v: b as f64 / k as f64,
+            })
+            .collect();
         (params, triangles)
     }
 
