@@ -16,15 +16,16 @@
 
 use glam::DVec3;
 use std::time::Instant;
-use trispline::fit::{fit, Budget, Collocation, Csr, FitProblem, Method};
+use trispline::fit::{fit, Budget, FitProblem, Method};
 use trispline::mesh::detect::Hierarchy;
 use trispline::mesh::inverse::{coarsen, composed_exact_inverse, InverseMethod};
 use trispline::mesh::topology::Topology;
+use trispline::pipeline::collocation;
 use trispline::surface::bezier::{
     lattice_index, lattice_points, lattice_triangles, BezierTriangle,
 };
 use trispline::surface::box_spline::LatticeSpline;
-use trispline::surface::{SurfaceParam, TriSurface};
+use trispline::surface::SurfaceParam;
 use trispline::TriMesh;
 
 fn surface(u: f64, v: f64) -> DVec3 {
@@ -59,24 +60,8 @@ fn main() {
         .mesh
         .positions;
     let r = composed_exact_inverse(&topo, &hierarchy).expect("manifold");
-    let bezier = BezierTriangle::new(degree);
-    let rows: Vec<Vec<(u32, f64)>> = points
-        .iter()
-        .map(|&(i, j)| {
-            let mut row = Vec::new();
-            let p = SurfaceParam {
-                face: 0,
-                u: i as f64 / fine_n as f64,
-                v: j as f64 / fine_n as f64,
-            };
-            bezier.basis_row(p, &mut row);
-            row
-        })
-        .collect();
-    let col = Collocation::new(Csr::from_rows(
-        bezier.control_count(),
-        rows.iter().map(|r| r.as_slice()),
-    ));
+    let params = lattice_params(&points, fine_n);
+    let col = collocation(&BezierTriangle::new(degree), &params);
     let setup_ms = t0.elapsed().as_secs_f64() * 1e3;
     let pia_op = |res: &[DVec3]| r.apply(res);
     let problem = FitProblem {
@@ -98,6 +83,18 @@ fn main() {
         degree,
         &|res: &[DVec3]| r.apply(res),
     );
+}
+
+/// The data points' parameters: lattice point (i, j) at (i / n, j / n).
+fn lattice_params(points: &[(usize, usize)], n: usize) -> Vec<SurfaceParam> {
+    points
+        .iter()
+        .map(|&(i, j)| SurfaceParam {
+            face: 0,
+            u: i as f64 / n as f64,
+            v: j as f64 / n as f64,
+        })
+        .collect()
 }
 
 /// The loop rows: same data, parameters and inverse-subdivided net.
@@ -141,23 +138,7 @@ fn loop_rows(
             net[c] * 2.0 - net[lattice_index(n, i as usize, j as usize)]
         })
         .collect();
-    let rows: Vec<Vec<(u32, f64)>> = points
-        .iter()
-        .map(|&(i, j)| {
-            let mut row = Vec::new();
-            let p = SurfaceParam {
-                face: 0,
-                u: i as f64 / fine_n as f64,
-                v: j as f64 / fine_n as f64,
-            };
-            spline.basis_row(p, &mut row);
-            row
-        })
-        .collect();
-    let col = Collocation::new(Csr::from_rows(
-        spline.control_count(),
-        rows.iter().map(|r| r.as_slice()),
-    ));
+    let col = collocation(&spline, &lattice_params(points, fine_n));
     let pia_op = |res: &[DVec3]| {
         let delta = inverse(res);
         nearest.iter().map(|&(c, _)| delta[c]).collect::<Vec<_>>()
