@@ -109,8 +109,8 @@ pub struct PatchOutputs {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct WarmStart {
     pub surface: SurfaceKind,
-    /// Bezier degree (0 for a Loop grid): with `surface`, the control-net structure.
-    pub degree: usize,
+    /// Matched to the new net by count (a triangular lattice's count fixes its degree) or,
+    /// for a Loop grid, by `coords`.
     pub controls: Vec<DVec3>,
     /// Remeshed scans: the plane and domain the previous version was mapped to, so that the
     /// new version's parameters line up with the previous controls.
@@ -284,7 +284,6 @@ pub fn run_patch(
     let surface = surface_json(&fitted, scan_info.as_ref(), &report);
     let warm = WarmStart {
         surface: fitted.surface,
-        degree: fitted.degree,
         controls: fitted.controls.clone(),
         frame: scan_info.as_ref().map(|s| s.frame),
         domain: scan_info.as_ref().map(|s| s.domain.clone()),
