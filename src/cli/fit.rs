@@ -3,11 +3,12 @@
 use crate::fit::Method;
 use crate::io::{read_mesh_file, write_atomic, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
-use crate::pipeline::worker::{run_patch, WorkerConfig};
+use crate::pipeline::components::ComponentMode;
+use crate::pipeline::worker::{run_input, PatchOutputs, WorkerConfig};
 use crate::pipeline::{PipelineError, SurfaceKind};
 use anyhow::Context;
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
@@ -61,6 +62,17 @@ pub struct FitArgs {
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = 1e-5)]
     pub smoothing: f64,
+    /// Scans: fit the largest component (`largest`) or every component big enough (`all`,
+    /// written to OUT/c0, OUT/c1, ... largest first, with OUT/components.json).
+    #[arg(long, value_enum, default_value = "largest")]
+    pub components: ComponentMode,
+    /// Scans: components with fewer vertices are not fitted.
+    #[arg(long, default_value_t = 200)]
+    pub min_component_vertices: usize,
+    /// Scans, `--components all`: components under this fraction of the largest (in
+    /// vertices) are not fitted.
+    #[arg(long, default_value_t = 0.05)]
+    pub min_component_fraction: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = 128)]
     pub tessellation: usize,
@@ -90,8 +102,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         correction: args.correction,
         smoothing: args.smoothing,
         tessellation: args.tessellation,
+        components: args.components,
+        min_component_vertices: args.min_component_vertices,
+        min_component_fraction: args.min_component_fraction,
     };
-    let mut out = match run_patch(&mesh, None, &cfg) {
+    let input = match run_input(&mesh, None, &cfg) {
         Ok(o) => o,
         Err(
             e @ (PipelineError::NoSubdivision(_)
@@ -103,18 +118,53 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         }
         Err(e) => return Err(e).context(format!("{}: fit failed", args.input.display())),
     };
-    out.report["input"] = json!(args.input.display().to_string());
+    let label = args.input.display().to_string();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
-    write_atomic(&args.out.join("surface.glb"), &out.glb)?;
+    if args.components == ComponentMode::Largest {
+        for part in input.parts {
+            write_outputs(&args.out, part.outputs, &label)?;
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let mut listing = Vec::new();
+    for part in input.parts {
+        let name = part.suffix.trim_start_matches('.').to_string();
+        listing.push(json!({
+            "component": name,
+            "status": part.outputs.status,
+            "data_points": part.outputs.report["data_points"],
+            "final": part.outputs.report["final"],
+        }));
+        write_outputs(&args.out.join(&name), part.outputs, &label)?;
+    }
+    for (suffix, reason) in &input.failed {
+        eprintln!("{label}: component {suffix} not fitted: {reason}");
+    }
+    let failed: Vec<_> = input
+        .failed
+        .iter()
+        .map(|(s, r)| json!({"component": s.trim_start_matches('.'), "reason": r}))
+        .collect();
     write_atomic(
-        &args.out.join("report.json"),
-        &serde_json::to_vec_pretty(&out.report)?,
-    )?;
-    // surface.json last: its presence marks a complete set.
-    write_atomic(
-        &args.out.join("surface.json"),
-        &serde_json::to_vec_pretty(&out.surface)?,
+        &args.out.join("components.json"),
+        &serde_json::to_vec_pretty(&json!({"input": label, "fitted": listing, "failed": failed}))?,
     )?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// One surface's files; surface.json last, its presence marks a complete set.
+fn write_outputs(dir: &Path, mut out: PatchOutputs, label: &str) -> anyhow::Result<()> {
+    out.report["input"] = json!(label);
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    write_atomic(&dir.join("surface.glb"), &out.glb)?;
+    write_atomic(
+        &dir.join("report.json"),
+        &serde_json::to_vec_pretty(&out.report)?,
+    )?;
+    write_atomic(
+        &dir.join("surface.json"),
+        &serde_json::to_vec_pretty(&out.surface)?,
+    )?;
+    Ok(())
 }

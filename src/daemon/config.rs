@@ -212,6 +212,20 @@ impl DaemonConfig {
                 "must be in (0, 100]",
             );
         }
+        if !(0.0..=1.0).contains(&f.min_component_fraction) {
+            return bad(
+                "fit.min_component_fraction",
+                f.min_component_fraction.to_string(),
+                "must be 0..=1",
+            );
+        }
+        if f.min_component_vertices < 3 {
+            return bad(
+                "fit.min_component_vertices",
+                f.min_component_vertices.to_string(),
+                "must be at least 3",
+            );
+        }
         if f.correction_rounds > 100 {
             return bad(
                 "fit.correction_rounds",

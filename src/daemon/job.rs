@@ -5,7 +5,7 @@ use super::config::DaemonConfig;
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
 use crate::io::{read_mesh_bytes, Format, LoadOptions};
-use crate::pipeline::worker::{run_patch, PatchOutputs, WarmStart};
+use crate::pipeline::worker::{run_input, InputOutputs, WarmStart};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -19,7 +19,7 @@ pub struct Job {
 
 pub enum Outcome {
     Fitted {
-        outputs: Box<PatchOutputs>,
+        outputs: Box<InputOutputs>,
         hash: u64,
     },
     /// Same content and same output-shaping config as the last fit.
@@ -37,7 +37,7 @@ pub struct Timings {
     pub queued_ms: f64,
     pub read_ms: f64,
     pub parse_ms: f64,
-    /// Inside `run_patch`.
+    /// Inside `run_input`.
     pub fit_ms: f64,
 }
 
@@ -144,7 +144,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     t.parse_ms = ms(start);
     let warm = job.warm.as_ref().or(previous.as_ref().map(|p| &p.warm));
     let start = Instant::now();
-    let fitted = run_patch(&mesh, warm, &job.cfg.fit);
+    let fitted = run_input(&mesh, warm, &job.cfg.fit);
     t.fit_ms = ms(start);
     match fitted {
         Ok(outputs) => Outcome::Fitted {

@@ -2,13 +2,15 @@
 //! (quarantine, processed-file policy), so that events.ndjson has a single appender and an
 //! input is never moved while a worker reads it.
 
+use super::config::DaemonConfig;
 use super::config::ProcessedPolicy;
-use super::job::{JobDone, Outcome};
+use super::job::{JobDone, Outcome, Timings};
 use super::ops::metrics::Metrics;
 use super::scheduler::{Arrival, Input};
 use super::state::{PatchState, StateStore};
 use super::{Msg, Summary};
 use crate::io::{write_atomic, write_atomic_group};
+use crate::pipeline::worker::{InputOutputs, PatchOutputs};
 use crossbeam_channel::{Receiver, Sender};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -112,79 +114,124 @@ impl Writer {
                 // Its content was fitted, so the processed-file policy applies.
                 self.processed(a, done.cfg.output.processed);
             }
-            Outcome::Fitted { mut outputs, hash } => {
+            Outcome::Fitted { outputs, hash } => {
                 let start = Instant::now();
-                let warm_start = outputs.report["warm_start"].as_bool().unwrap_or(false);
-                outputs.report["patch"] = json!(a.id);
-                outputs.report["version"] = json!(a.version);
-                outputs.report["input"] = json!(a.label);
-                outputs.report["input_hash"] = json!(format!("{hash:016x}"));
-                let dir = self.out_dir.join(&a.id);
-                let (glb, report) = (dir.join("surface.glb"), dir.join("report.json"));
-                let surface = dir.join("surface.json");
-                let out = &done.cfg.output;
-                let to_json =
-                    |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
-                let report_bytes = out.report.then(|| to_json(&outputs.report));
-                let surface_bytes = to_json(&outputs.surface);
-                let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
-                if out.glb {
-                    group.push(("surface.glb", &outputs.glb));
+                let InputOutputs {
+                    parts,
+                    failed,
+                    warm,
+                } = *outputs;
+                let mut written_all = true;
+                for part in parts {
+                    let id = format!("{}{}", a.id, part.suffix);
+                    written_all &= self.write_part(
+                        a,
+                        &done.cfg,
+                        &done.timings,
+                        &id,
+                        part.outputs,
+                        hash,
+                        start,
+                    );
                 }
-                if let Some(r) = &report_bytes {
-                    group.push(("report.json", r));
+                for (suffix, reason) in failed {
+                    // The input as a whole is fitted (some component is); this piece is
+                    // reported, not quarantined, since the input stays in use.
+                    let id = format!("{}{suffix}", a.id);
+                    tracing::warn!(patch = %id, reason, "component not fitted");
+                    self.metrics.error(&format!("{} ({id}): {reason}", a.label));
+                    self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "component_failed", "reason": reason}));
                 }
-                // Last: its presence says the version is complete.
-                group.push(("surface.json", &surface_bytes));
-                let written = std::fs::create_dir_all(&dir)
-                    .map_err(|e| format!("{}: {e}", dir.display()))
-                    .and_then(|_| remove_disabled(&glb, out.glb))
-                    .and_then(|_| remove_disabled(&report, out.report))
-                    .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
-                // The part of the write that a client waiting for surface.json waits for.
-                let outputs_ms = start.elapsed().as_secs_f64() * 1e3;
-                if let Err(e) = written {
-                    // The input is fine and stays where it is; the output folder is not.
-                    tracing::error!(error = %e, "cannot write outputs");
-                    self.metrics
-                        .error(&format!("{}: cannot write outputs: {e}", a.label));
-                    self.event(json!({"patch": a.id, "version": a.version, "input": a.label, "status": "write_failed", "reason": e}));
+                if !written_all {
+                    // Keep the old state: the next start refits this input.
                     return;
                 }
                 let state = PatchState {
                     version: a.version.clone(),
                     input_hash: hash,
                     config_hash: done.cfg.output_hash(),
-                    warm: outputs.warm.clone(),
+                    warm,
                 };
                 if let Err(e) = self.store.save(&a.id, &state) {
                     tracing::warn!(error = %e, "cannot save warm-start state");
                 }
-                let write_ms = start.elapsed().as_secs_f64() * 1e3;
-                self.summary.fitted += 1;
-                self.metrics.fitted.fetch_add(1, Ordering::Relaxed);
-                self.metrics.observe_fit(done.timings.fit_ms / 1e3);
-                let latency_ms = a.detected.elapsed().as_secs_f64() * 1e3;
-                tracing::info!(status = ?outputs.status, fit_ms = done.timings.fit_ms, latency_ms, warm_start, "fitted");
-                let mut paths = json!({"surface": surface});
-                if out.glb {
-                    paths["glb"] = json!(glb);
-                }
-                if out.report {
-                    paths["report"] = json!(report);
-                }
-                self.event(json!({
-                    "patch": a.id, "version": a.version, "input": a.label, "status": outputs.status,
-                    "errors": outputs.report["final"],
-                    "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
-                    "warm_start": warm_start, "wall_ms": latency_ms,
-                    "timings": {"queued_ms": done.timings.queued_ms, "read_ms": done.timings.read_ms,
-                        "parse_ms": done.timings.parse_ms, "fit_ms": done.timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
-                    "paths": paths,
-                }));
-                self.processed(a, out.processed);
+                self.processed(a, done.cfg.output.processed);
             }
         }
+    }
+
+    /// Writes one surface's outputs to `OUT/<id>/` and its event line; false when the
+    /// outputs could not be written.
+    #[allow(clippy::too_many_arguments)]
+    fn write_part(
+        &mut self,
+        a: &Arrival,
+        cfg: &DaemonConfig,
+        timings: &Timings,
+        id: &str,
+        mut outputs: PatchOutputs,
+        hash: u64,
+        start: Instant,
+    ) -> bool {
+        let warm_start = outputs.report["warm_start"].as_bool().unwrap_or(false);
+        outputs.report["patch"] = json!(id);
+        outputs.report["version"] = json!(a.version);
+        outputs.report["input"] = json!(a.label);
+        outputs.report["input_hash"] = json!(format!("{hash:016x}"));
+        let dir = self.out_dir.join(id);
+        let (glb, report) = (dir.join("surface.glb"), dir.join("report.json"));
+        let surface = dir.join("surface.json");
+        let out = &cfg.output;
+        let to_json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
+        let report_bytes = out.report.then(|| to_json(&outputs.report));
+        let surface_bytes = to_json(&outputs.surface);
+        let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
+        if out.glb {
+            group.push(("surface.glb", &outputs.glb));
+        }
+        if let Some(r) = &report_bytes {
+            group.push(("report.json", r));
+        }
+        // Last: its presence says the version is complete.
+        group.push(("surface.json", &surface_bytes));
+        let written = std::fs::create_dir_all(&dir)
+            .map_err(|e| format!("{}: {e}", dir.display()))
+            .and_then(|_| remove_disabled(&glb, out.glb))
+            .and_then(|_| remove_disabled(&report, out.report))
+            .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
+        // The part of the write that a client waiting for surface.json waits for.
+        let outputs_ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Err(e) = written {
+            // The input is fine and stays where it is; the output folder is not.
+            tracing::error!(patch = id, error = %e, "cannot write outputs");
+            self.metrics
+                .error(&format!("{}: cannot write outputs: {e}", a.label));
+            self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "write_failed", "reason": e}));
+            return false;
+        }
+        let write_ms = start.elapsed().as_secs_f64() * 1e3;
+        self.summary.fitted += 1;
+        self.metrics.fitted.fetch_add(1, Ordering::Relaxed);
+        self.metrics.observe_fit(timings.fit_ms / 1e3);
+        let latency_ms = a.detected.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(patch = id, status = ?outputs.status, fit_ms = timings.fit_ms, latency_ms, warm_start, "fitted");
+        let mut paths = json!({"surface": surface});
+        if out.glb {
+            paths["glb"] = json!(glb);
+        }
+        if out.report {
+            paths["report"] = json!(report);
+        }
+        self.event(json!({
+            "patch": id, "version": a.version, "input": a.label, "status": outputs.status,
+            "errors": outputs.report["final"],
+            "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
+            "warm_start": warm_start, "wall_ms": latency_ms,
+            "timings": {"queued_ms": timings.queued_ms, "read_ms": timings.read_ms,
+                "parse_ms": timings.parse_ms, "fit_ms": timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
+            "paths": paths,
+        }));
+        true
     }
 
     fn processed(&self, a: &Arrival, policy: ProcessedPolicy) {

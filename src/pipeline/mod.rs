@@ -1,6 +1,7 @@
 //! The worker: a mesh with Loop subdivision connectivity in, a fitted surface out.
 //! Pure: no file IO; the CLI writes what it returns.
 
+pub mod components;
 pub mod domain;
 pub mod geometric;
 pub mod lattice;

@@ -3,6 +3,7 @@
 //! (`domain`), resample and inverse-subdivide for the initial net, then fit the ORIGINAL
 //! scan points with a fairness term and a few rounds of parameter correction.
 
+use super::components::connected_components;
 use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
     plane_extent, spacing_for_target, GridFrame, InitialNet,
@@ -12,7 +13,6 @@ use crate::fit::distance::{solve_distance, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem, FitStatus, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
-use crate::mesh::stats::UnionFind;
 use crate::remesh::fill_holes;
 use crate::remesh::planar::{planar_map, MapMethod, PlaneFrame};
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};
@@ -21,7 +21,6 @@ use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
@@ -38,6 +37,8 @@ pub struct ScanOptions {
     /// Rounds of correction after the first fit (data parameters moved to their foot points).
     pub correction_rounds: usize,
     pub correction: Correction,
+    /// The largest component must have at least this many vertices.
+    pub min_component_vertices: usize,
 }
 
 /// What a correction round refits after moving the parameters to the foot points.
@@ -131,47 +132,6 @@ pub struct ScanWarm<'a> {
     pub coords: &'a [(i64, i64)],
 }
 
-/// The largest edge-connected component of a cleaned mesh, compacted.
-pub fn largest_component(mesh: &TriMesh) -> (TriMesh, usize) {
-    let mut uf = UnionFind::new(mesh.triangles.len());
-    let mut edge_face: HashMap<(u32, u32), usize> = HashMap::new();
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if let Some(&g) = edge_face.get(&(a.min(b), a.max(b))) {
-                uf.union(f, g);
-            } else {
-                edge_face.insert((a.min(b), a.max(b)), f);
-            }
-        }
-    }
-    let mut size: HashMap<usize, usize> = HashMap::new();
-    for f in 0..mesh.triangles.len() {
-        *size.entry(uf.find(f)).or_insert(0) += 1;
-    }
-    let components = size.len();
-    let Some((&root, _)) = size.iter().max_by_key(|(r, s)| (**s, usize::MAX - **r)) else {
-        return (TriMesh::default(), 0);
-    };
-    let mut map = vec![u32::MAX; mesh.positions.len()];
-    let mut out = TriMesh::default();
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        if uf.find(f) != root {
-            continue;
-        }
-        let mut nt = [0u32; 3];
-        for (k, &v) in t.iter().enumerate() {
-            if map[v as usize] == u32::MAX {
-                map[v as usize] = out.positions.len() as u32;
-                out.positions.push(mesh.positions[v as usize]);
-            }
-            nt[k] = map[v as usize];
-        }
-        out.triangles.push(nt);
-    }
-    (out, components)
-}
-
 pub fn fit_scan(
     mesh: &TriMesh,
     opts: &FitOptions,
@@ -180,11 +140,20 @@ pub fn fit_scan(
 ) -> Result<ScanFit, PipelineError> {
     let t0 = Instant::now();
     let cleaned = clean(mesh, &CleanOptions::default());
-    let (part, components) = largest_component(&cleaned.mesh);
+    let parts = connected_components(&cleaned.mesh);
+    let components = parts.len();
+    let part = parts.into_iter().next().unwrap_or_default();
     if part.triangles.is_empty() {
         return Err(PipelineError::Unsupported(
             "no faces left after cleaning".into(),
         ));
+    }
+    if part.positions.len() < scan.min_component_vertices {
+        return Err(PipelineError::Unsupported(format!(
+            "the largest component has {} vertices, fewer than min_component_vertices = {}",
+            part.positions.len(),
+            scan.min_component_vertices
+        )));
     }
     let unsupported = |e: crate::remesh::RemeshError| PipelineError::Unsupported(e.to_string());
     let patch = fill_holes(&part).map_err(unsupported)?;

@@ -1,10 +1,12 @@
 //! The worker as one pure function: (mesh, previous control net, config) -> outputs as
 //! bytes and JSON values. The CLI and the daemon write them; nothing here touches files.
 
+use super::components::{split_components, ComponentFilter, ComponentMode};
 use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use super::scan::{fit_scan, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepStats};
+use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::remesh::planar::PlaneFrame;
 use crate::TriMesh;
@@ -51,6 +53,25 @@ pub struct WorkerConfig {
     pub smoothing: f64,
     /// Tessellation segments per side in the GLB.
     pub tessellation: usize,
+    /// Scans: fit the largest component, or every kept component as its own surface.
+    #[serde(default)]
+    pub components: ComponentMode,
+    /// Scans: components with fewer vertices are not fitted (the largest too: the input is
+    /// then refused).
+    #[serde(default = "default_min_component_vertices")]
+    pub min_component_vertices: usize,
+    /// Scans, `components = "all"`: components with fewer vertices than this fraction of the
+    /// largest are not fitted.
+    #[serde(default = "default_min_component_fraction")]
+    pub min_component_fraction: f64,
+}
+
+fn default_min_component_vertices() -> usize {
+    200
+}
+
+fn default_min_component_fraction() -> f64 {
+    0.05
 }
 
 fn default_min_levels() -> usize {
@@ -91,6 +112,9 @@ impl Default for WorkerConfig {
             correction: default_correction(),
             smoothing: 1e-5,
             tessellation: 128,
+            components: ComponentMode::default(),
+            min_component_vertices: default_min_component_vertices(),
+            min_component_fraction: default_min_component_fraction(),
         }
     }
 }
@@ -121,6 +145,21 @@ pub struct WarmStart {
     /// Loop grid: grid coordinates of `controls`.
     #[serde(default)]
     pub coords: Vec<(i64, i64)>,
+    /// `components = "all"`: one warm start per fitted component (the fields above are then
+    /// empty).
+    #[serde(default)]
+    pub parts: Vec<PartWarm>,
+}
+
+/// A component's warm start and where the component was, so that the pieces of the next
+/// version find theirs even when their sizes (and so their order) change.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct PartWarm {
+    pub suffix: String,
+    pub centroid: DVec3,
+    pub diagonal: f64,
+    pub vertices: usize,
+    pub warm: WarmStart,
 }
 
 /// The error budget with the tolerance resolved against the mesh's size; with no target set
@@ -203,6 +242,7 @@ pub fn fit_patch(
                 smoothing: cfg.smoothing,
                 correction_rounds: cfg.correction_rounds,
                 correction: cfg.correction,
+                min_component_vertices: cfg.min_component_vertices,
             };
             let warm = previous.map(|w| ScanWarm {
                 frame: w.frame,
@@ -291,6 +331,7 @@ pub fn run_patch(
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
             SurfaceModel::Bezier(_) => Vec::new(),
         },
+        parts: Vec::new(),
     };
     Ok(PatchOutputs {
         surface,
@@ -299,6 +340,150 @@ pub fn run_patch(
         warm,
         status: fitted.outcome.status,
     })
+}
+
+/// One fitted surface of an input: the whole patch (`suffix` empty) or one component
+/// (`suffix` = `.c<k>`, appended to the patch id).
+pub struct PartOutputs {
+    pub suffix: String,
+    pub outputs: PatchOutputs,
+}
+
+/// Everything one input yields under the component policy.
+pub struct InputOutputs {
+    pub parts: Vec<PartOutputs>,
+    /// Components that were kept but could not be fitted: (suffix, reason).
+    pub failed: Vec<(String, String)>,
+    /// What the next version of the input starts from.
+    pub warm: WarmStart,
+}
+
+impl InputOutputs {
+    /// The worst status over the fitted parts.
+    pub fn status(&self) -> FitStatus {
+        let rank = |s: FitStatus| match s {
+            FitStatus::Met => 0,
+            FitStatus::Stalled => 1,
+            FitStatus::Capped => 2,
+        };
+        self.parts
+            .iter()
+            .map(|p| p.outputs.status)
+            .max_by_key(|s| rank(*s))
+            .unwrap_or(FitStatus::Met)
+    }
+}
+
+/// The worker under the component policy: `largest` is `run_patch` on the input; `all`
+/// cleans and splits the input and fits every component big enough, each warm-started from
+/// the previous version's component that sat in the same place.
+pub fn run_input(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Result<InputOutputs, PipelineError> {
+    if cfg.components == ComponentMode::Largest {
+        let outputs = run_patch(mesh, previous.filter(|w| w.parts.is_empty()), cfg)?;
+        return Ok(InputOutputs {
+            warm: outputs.warm.clone(),
+            parts: vec![PartOutputs {
+                suffix: String::new(),
+                outputs,
+            }],
+            failed: Vec::new(),
+        });
+    }
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let filter = ComponentFilter {
+        min_vertices: cfg.min_component_vertices,
+        min_fraction: cfg.min_component_fraction,
+    };
+    let split = split_components(&cleaned.mesh, &filter);
+    if split.kept.is_empty() {
+        return Err(PipelineError::Unsupported(format!(
+            "no component has min_component_vertices = {} vertices (the largest has {})",
+            cfg.min_component_vertices,
+            split.dropped_vertices.first().copied().unwrap_or(0)
+        )));
+    }
+    let previous_parts = previous.map_or(&[][..], |w| w.parts.as_slice());
+    let mut taken = vec![false; previous_parts.len()];
+    let mut parts = Vec::new();
+    let mut failed = Vec::new();
+    let mut warm_parts = Vec::new();
+    for (k, c) in split.kept.iter().enumerate() {
+        let suffix = format!(".c{k}");
+        let vertices = c.mesh.positions.len();
+        let matched = matching_part(previous_parts, &taken, c.centroid, c.diagonal, vertices);
+        if let Some(i) = matched {
+            taken[i] = true;
+        }
+        match run_patch(&c.mesh, matched.map(|i| &previous_parts[i].warm), cfg) {
+            Ok(mut outputs) => {
+                outputs.report["component"] = json!({
+                    "index": k,
+                    "vertices": vertices,
+                    "kept": split.kept.len(),
+                    "total": split.total,
+                    "dropped_vertices": split.dropped_vertices,
+                });
+                warm_parts.push(PartWarm {
+                    suffix: suffix.clone(),
+                    centroid: c.centroid,
+                    diagonal: c.diagonal,
+                    vertices,
+                    warm: outputs.warm.clone(),
+                });
+                parts.push(PartOutputs { suffix, outputs });
+            }
+            Err(e) => failed.push((suffix, e.to_string())),
+        }
+    }
+    if parts.is_empty() {
+        let reasons: Vec<String> = failed.iter().map(|(s, r)| format!("{s}: {r}")).collect();
+        return Err(PipelineError::Unsupported(format!(
+            "no component could be fitted ({})",
+            reasons.join("; ")
+        )));
+    }
+    Ok(InputOutputs {
+        parts,
+        failed,
+        warm: WarmStart {
+            surface: cfg.surface,
+            controls: Vec::new(),
+            frame: None,
+            domain: None,
+            coords: Vec::new(),
+            parts: warm_parts,
+        },
+    })
+}
+
+/// The untaken previous component nearest to a new one, if it is plausibly the same piece:
+/// centroids within a quarter of the larger diagonal and vertex counts within 2x.
+fn matching_part(
+    previous: &[PartWarm],
+    taken: &[bool],
+    centroid: DVec3,
+    diagonal: f64,
+    vertices: usize,
+) -> Option<usize> {
+    previous
+        .iter()
+        .enumerate()
+        .filter(|(i, p)| {
+            let ratio = p.vertices.max(1) as f64 / vertices.max(1) as f64;
+            !taken[*i]
+                && (0.5..=2.0).contains(&ratio)
+                && p.centroid.distance(centroid) <= 0.25 * p.diagonal.max(diagonal)
+        })
+        .min_by(|(_, a), (_, b)| {
+            a.centroid
+                .distance(centroid)
+                .total_cmp(&b.centroid.distance(centroid))
+        })
+        .map(|(i, _)| i)
 }
 
 fn step_json(s: &StepStats) -> serde_json::Value {

@@ -1,0 +1,184 @@
+//! Splitting a cleaned scan into its edge-connected pieces and deciding which are worth a
+//! surface of their own. Range scans come in 8–28 pieces, most of them a few stray triangles
+//! at silhouettes; a fit of such a sliver is noise, so pieces are kept by size.
+
+use crate::mesh::stats::UnionFind;
+use crate::TriMesh;
+use glam::DVec3;
+use std::collections::HashMap;
+
+/// Which components of an input get a surface.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum ComponentMode {
+    /// The largest kept component only; the patch keeps its id.
+    #[default]
+    Largest,
+    /// Every kept component, each as its own surface with the id suffixed `.c<k>`
+    /// (k = 0 for the largest, in decreasing size).
+    All,
+}
+
+/// Size thresholds: a component is kept when it has at least `min_vertices` vertices AND at
+/// least `min_fraction` of the largest component's vertices.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ComponentFilter {
+    pub min_vertices: usize,
+    pub min_fraction: f64,
+}
+
+/// One kept component: its own compacted mesh and where it sits (for matching the pieces
+/// of a new version to those of the previous one).
+#[derive(Clone, Debug)]
+pub struct Component {
+    pub mesh: TriMesh,
+    pub centroid: DVec3,
+    pub diagonal: f64,
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct Split {
+    /// Kept components, largest first.
+    pub kept: Vec<Component>,
+    /// How many components the mesh has in all.
+    pub total: usize,
+    /// Vertex counts of the components dropped as too small, largest first.
+    pub dropped_vertices: Vec<usize>,
+}
+
+/// Edge-connected components of `mesh`, each compacted, largest (by vertices) first; ties
+/// go to the component whose first face comes first, so the order is deterministic.
+pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
+    let mut uf = UnionFind::new(mesh.triangles.len());
+    let mut edge_face: HashMap<(u32, u32), usize> = HashMap::new();
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if let Some(&g) = edge_face.get(&(a.min(b), a.max(b))) {
+                uf.union(f, g);
+            } else {
+                edge_face.insert((a.min(b), a.max(b)), f);
+            }
+        }
+    }
+    let mut slot_of_root: HashMap<usize, usize> = HashMap::new();
+    let mut parts: Vec<TriMesh> = Vec::new();
+    let mut maps: Vec<HashMap<u32, u32>> = Vec::new();
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        let root = uf.find(f);
+        let slot = *slot_of_root.entry(root).or_insert_with(|| {
+            parts.push(TriMesh::default());
+            maps.push(HashMap::new());
+            parts.len() - 1
+        });
+        let (part, map) = (&mut parts[slot], &mut maps[slot]);
+        let mut nt = [0u32; 3];
+        for (k, &v) in t.iter().enumerate() {
+            nt[k] = *map.entry(v).or_insert_with(|| {
+                part.positions.push(mesh.positions[v as usize]);
+                (part.positions.len() - 1) as u32
+            });
+        }
+        part.triangles.push(nt);
+    }
+    // Stable sort: equal sizes keep first-face order.
+    parts.sort_by_key(|p| std::cmp::Reverse(p.positions.len()));
+    parts
+}
+
+/// Splits and filters. The largest component is always reported in `kept` when it passes
+/// `min_vertices`; an empty `kept` means nothing is big enough.
+pub fn split_components(mesh: &TriMesh, filter: &ComponentFilter) -> Split {
+    let parts = connected_components(mesh);
+    let total = parts.len();
+    let largest = parts.first().map_or(0, |p| p.positions.len());
+    let mut split = Split {
+        total,
+        ..Split::default()
+    };
+    for part in parts {
+        let n = part.positions.len();
+        if n >= filter.min_vertices && n as f64 >= filter.min_fraction * largest as f64 {
+            let centroid = part.positions.iter().sum::<DVec3>() / n.max(1) as f64;
+            let diagonal = part.bounds_diagonal();
+            split.kept.push(Component {
+                mesh: part,
+                centroid,
+                diagonal,
+            });
+        } else {
+            split.dropped_vertices.push(n);
+        }
+    }
+    split
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A strip of `n` quads (2n triangles) starting at x = `x0`.
+    fn strip(mesh: &mut TriMesh, x0: f64, n: usize) {
+        let base = mesh.positions.len() as u32;
+        for i in 0..=n {
+            mesh.positions.push(DVec3::new(x0 + i as f64, 0.0, 0.0));
+            mesh.positions.push(DVec3::new(x0 + i as f64, 1.0, 0.0));
+        }
+        for i in 0..n as u32 {
+            let (a, b, c, d) = (
+                base + 2 * i,
+                base + 2 * i + 2,
+                base + 2 * i + 1,
+                base + 2 * i + 3,
+            );
+            mesh.triangles.push([a, b, c]);
+            mesh.triangles.push([c, b, d]);
+        }
+    }
+
+    #[test]
+    fn components_come_largest_first_and_small_ones_are_dropped() {
+        let mut mesh = TriMesh::default();
+        strip(&mut mesh, 0.0, 3); // 8 vertices
+        strip(&mut mesh, 10.0, 20); // 42 vertices
+        strip(&mut mesh, 40.0, 9); // 20 vertices
+        let all = connected_components(&mesh);
+        let sizes: Vec<usize> = all.iter().map(|p| p.positions.len()).collect();
+        assert_eq!(sizes, vec![42, 20, 8]);
+        assert_eq!(all[0].triangles.len(), 40);
+
+        let split = split_components(
+            &mesh,
+            &ComponentFilter {
+                min_vertices: 10,
+                min_fraction: 0.4,
+            },
+        );
+        assert_eq!(split.total, 3);
+        let kept: Vec<usize> = split.kept.iter().map(|c| c.mesh.positions.len()).collect();
+        assert_eq!(kept, vec![42, 20]);
+        assert_eq!(split.dropped_vertices, vec![8]);
+        // The second strip spans x = 40..49.
+        assert!((split.kept[1].centroid.x - 44.5).abs() < 1e-12);
+
+        let strict = split_components(
+            &mesh,
+            &ComponentFilter {
+                min_vertices: 10,
+                min_fraction: 0.5,
+            },
+        );
+        assert_eq!(strict.kept.len(), 1);
+        assert_eq!(strict.dropped_vertices, vec![20, 8]);
+    }
+}
