@@ -4,7 +4,7 @@
 use super::stats::UnionFind;
 use super::TriMesh;
 use glam::DVec3;
-use std::collections::HashMap;
+use rustc_hash::{FxHashMap, FxHashSet};
 
 #[derive(Clone, Debug, Default)]
 pub struct CleanOptions {
@@ -40,7 +40,8 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     let mut positions = input.positions.clone();
     let mut origin: Vec<u32> = (0..nv as u32).collect();
     // Degenerate and duplicate faces.
-    let mut seen = std::collections::HashSet::new();
+    let mut seen = FxHashSet::default();
+    seen.reserve(input.triangles.len());
     let mut faces: Vec<[u32; 3]> = Vec::with_capacity(input.triangles.len());
     for t in &input.triangles {
         if t.iter().any(|&v| v as usize >= nv) {
@@ -65,22 +66,12 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     }
     // Non-manifold edges: the first two faces keep the edge; every further face gets its
     // own copies of the edge's endpoints (the pinch split below then tidies the fans).
-    let mut edge_faces: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
-    for (f, t) in faces.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            edge_faces.entry((a.min(b), a.max(b))).or_default().push(f);
-        }
-    }
-    let mut split_edges: Vec<((u32, u32), Vec<usize>)> = edge_faces
-        .iter()
-        .filter(|(_, f)| f.len() > 2)
-        .map(|(e, f)| (*e, f.clone()))
-        .collect();
-    split_edges.sort_unstable();
+    let incidence = EdgeIncidence::new(&faces);
+    let split_edges = incidence.non_manifold();
     report.non_manifold_edges_split = split_edges.len();
     for ((a, b), fs) in split_edges {
         for &f in &fs[2..] {
+            let f = f as usize;
             for end in [a, b] {
                 let copy = positions.len() as u32;
                 positions.push(positions[end as usize]);
@@ -123,7 +114,7 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
             *v = rank[*v as usize];
         }
     }
-    let kept_inputs: std::collections::HashSet<u32> = original_vertex.iter().copied().collect();
+    let kept_inputs: FxHashSet<u32> = original_vertex.iter().copied().collect();
     report.unreferenced_vertices_removed =
         (nv - report.welded_vertices).saturating_sub(kept_inputs.len());
     Cleaned {
@@ -138,7 +129,8 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
     let n = positions.len();
     match tolerance.filter(|t| *t > 0.0) {
         None => {
-            let mut first: HashMap<[u64; 3], u32> = HashMap::with_capacity(n);
+            let mut first: FxHashMap<[u64; 3], u32> = FxHashMap::default();
+            first.reserve(n);
             positions
                 .iter()
                 .enumerate()
@@ -154,7 +146,7 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
                 let q = (p / tol).floor();
                 [q.x as i64, q.y as i64, q.z as i64]
             };
-            let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+            let mut grid: FxHashMap<[i64; 3], Vec<u32>> = FxHashMap::default();
             for (i, p) in positions.iter().enumerate() {
                 grid.entry(cell(*p)).or_default().push(i as u32);
             }
@@ -183,13 +175,7 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
 /// Breadth-first flips so that neighbours use each shared edge in opposite directions.
 /// Returns the number of faces flipped; counts components where that is impossible.
 fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
-    let mut edge_faces: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
-    for (f, t) in faces.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            edge_faces.entry((a.min(b), a.max(b))).or_default().push(f);
-        }
-    }
+    let incidence = EdgeIncidence::new(faces);
     let has_directed =
         |t: &[u32; 3], a: u32, b: u32| (0..3).any(|k| t[k] == a && t[(k + 1) % 3] == b);
     let mut state = vec![0u8; faces.len()]; // 0 unvisited, 1 visited
@@ -205,13 +191,14 @@ fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
             let t = faces[f];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                let Some(nbrs) = edge_faces.get(&(a.min(b), a.max(b))) else {
+                let Some(nbrs) = incidence.manifold(a, b) else {
                     continue;
                 };
-                if nbrs.len() != 2 {
-                    continue;
-                }
-                let g = if nbrs[0] == f { nbrs[1] } else { nbrs[0] };
+                let g = if nbrs[0] as usize == f {
+                    nbrs[1]
+                } else {
+                    nbrs[0]
+                } as usize;
                 let consistent = has_directed(&faces[g], b, a);
                 if state[g] == 0 {
                     if !consistent {
@@ -239,22 +226,36 @@ fn split_pinches(
     origin: &mut Vec<u32>,
 ) -> usize {
     let nv = positions.len();
-    let mut incident: Vec<Vec<usize>> = vec![Vec::new(); nv];
-    for (f, t) in faces.iter().enumerate() {
+    // Faces around each vertex, as one flat array with offsets.
+    let mut start = vec![0usize; nv + 1];
+    for t in faces.iter() {
         for &v in t {
-            incident[v as usize].push(f);
+            start[v as usize + 1] += 1;
         }
     }
-    let mut edge_count: HashMap<(u32, u32), u32> = HashMap::new();
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut incident = vec![0usize; start[nv]];
+    for (f, t) in faces.iter().enumerate() {
+        for &v in t {
+            incident[fill[v as usize]] = f;
+            fill[v as usize] += 1;
+        }
+    }
+    let mut edge_count: FxHashMap<u64, u32> = FxHashMap::default();
+    edge_count.reserve(faces.len() * 3 / 2 + 16);
     for t in faces.iter() {
         for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *edge_count.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+            *edge_count
+                .entry(edge_key(t[k], t[(k + 1) % 3]))
+                .or_insert(0) += 1;
         }
     }
     let mut split = 0;
     for v in 0..nv as u32 {
-        let fs = incident[v as usize].clone();
+        let fs = &incident[start[v as usize]..start[v as usize + 1]];
         if fs.len() < 2 {
             continue;
         }
@@ -264,13 +265,13 @@ fn split_pinches(
                 let shared = faces[fs[i]]
                     .iter()
                     .filter(|&&w| w != v && faces[fs[j]].contains(&w))
-                    .any(|&w| edge_count.get(&(v.min(w), v.max(w))) == Some(&2));
+                    .any(|&w| edge_count.get(&edge_key(v, w)) == Some(&2));
                 if shared {
                     uf.union(i, j);
                 }
             }
         }
-        let mut fan_copy: HashMap<usize, u32> = HashMap::new();
+        let mut fan_copy: FxHashMap<usize, u32> = FxHashMap::default();
         let first_root = uf.find(0);
         for i in 0..fs.len() {
             let root = uf.find(i);
@@ -287,12 +288,10 @@ fn split_pinches(
                 let (a, b) = (t[k], t[(k + 1) % 3]);
                 if a == v || b == v {
                     let other = if a == v { b } else { a };
-                    if let Some(c) = edge_count.get_mut(&(v.min(other), v.max(other))) {
+                    if let Some(c) = edge_count.get_mut(&edge_key(v, other)) {
                         *c -= 1;
                     }
-                    *edge_count
-                        .entry((copy.min(other), copy.max(other)))
-                        .or_insert(0) += 1;
+                    *edge_count.entry(edge_key(copy, other)).or_insert(0) += 1;
                 }
             }
             for w in faces[fs[i]].iter_mut() {
@@ -306,4 +305,69 @@ fn split_pinches(
         }
     }
     split
+}
+
+/// An undirected edge as one hashable word.
+fn edge_key(a: u32, b: u32) -> u64 {
+    ((a.min(b) as u64) << 32) | a.max(b) as u64
+}
+
+/// Faces on each undirected edge: the first two in face order inline (most edges have at
+/// most two), further ones in a side list. Built with one hash entry per edge and no
+/// allocation per edge: cleaning runs on every input and must stay a small share of a fit.
+struct EdgeIncidence {
+    /// (first face, second face or u32::MAX, total count).
+    edges: FxHashMap<u64, (u32, u32, u32)>,
+    /// (edge, face) beyond the second, in face order.
+    more: Vec<(u64, u32)>,
+}
+
+impl EdgeIncidence {
+    fn new(faces: &[[u32; 3]]) -> Self {
+        let mut edges: FxHashMap<u64, (u32, u32, u32)> = FxHashMap::default();
+        edges.reserve(faces.len() * 3 / 2 + 16);
+        let mut more = Vec::new();
+        for (f, t) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let key = edge_key(t[k], t[(k + 1) % 3]);
+                let e = edges.entry(key).or_insert((f as u32, u32::MAX, 0));
+                match e.2 {
+                    0 => {}
+                    1 => e.1 = f as u32,
+                    _ => more.push((key, f as u32)),
+                }
+                e.2 += 1;
+            }
+        }
+        Self { edges, more }
+    }
+
+    /// The two faces of an edge that has exactly two.
+    fn manifold(&self, a: u32, b: u32) -> Option<[u32; 2]> {
+        match self.edges.get(&edge_key(a, b)) {
+            Some(&(f, g, 2)) => Some([f, g]),
+            _ => None,
+        }
+    }
+
+    /// Edges with more than two faces and all their faces in face order, sorted by edge.
+    fn non_manifold(&self) -> Vec<((u32, u32), Vec<u32>)> {
+        // Grouped by edge (faces stay in face order: the sort is by (edge, face)).
+        let mut more = self.more.clone();
+        more.sort_unstable();
+        let mut out: Vec<((u32, u32), Vec<u32>)> = self
+            .edges
+            .iter()
+            .filter(|(_, e)| e.2 > 2)
+            .map(|(&key, e)| {
+                let mut fs = vec![e.0, e.1];
+                let from = more.partition_point(|m| m.0 < key);
+                let to = more.partition_point(|m| m.0 <= key);
+                fs.extend(more[from..to].iter().map(|m| m.1));
+                (((key >> 32) as u32, key as u32), fs)
+            })
+            .collect();
+        out.sort_unstable();
+        out
+    }
 }

@@ -5,7 +5,8 @@
 use crate::mesh::stats::UnionFind;
 use crate::TriMesh;
 use glam::DVec3;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
+use std::collections::hash_map::Entry;
 
 /// Which components of an input get a surface.
 #[derive(
@@ -60,34 +61,49 @@ pub struct Split {
 /// go to the component whose first face comes first, so the order is deterministic.
 pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
     let mut uf = UnionFind::new(mesh.triangles.len());
-    let mut edge_face: HashMap<(u32, u32), usize> = HashMap::new();
+    let mut edge_face: FxHashMap<u64, usize> = FxHashMap::default();
+    edge_face.reserve(mesh.triangles.len() * 3 / 2 + 16);
     for (f, t) in mesh.triangles.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            if let Some(&g) = edge_face.get(&(a.min(b), a.max(b))) {
-                uf.union(f, g);
-            } else {
-                edge_face.insert((a.min(b), a.max(b)), f);
+            let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
+            match edge_face.entry(key) {
+                Entry::Occupied(g) => uf.union(f, *g.get()),
+                Entry::Vacant(slot) => {
+                    slot.insert(f);
+                }
             }
         }
     }
-    let mut slot_of_root: HashMap<usize, usize> = HashMap::new();
+    let mut slot_of_root: FxHashMap<usize, usize> = FxHashMap::default();
     let mut parts: Vec<TriMesh> = Vec::new();
-    let mut maps: Vec<HashMap<u32, u32>> = Vec::new();
+    // A vertex belongs to one component (faces sharing it are joined only through edges,
+    // but a pinch vertex can sit in two): remember its index per (component, vertex).
+    let mut local: FxHashMap<(usize, u32), u32> = FxHashMap::default();
+    let mut single = vec![(u32::MAX, u32::MAX); mesh.positions.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
         let root = uf.find(f);
         let slot = *slot_of_root.entry(root).or_insert_with(|| {
             parts.push(TriMesh::default());
-            maps.push(HashMap::new());
             parts.len() - 1
         });
-        let (part, map) = (&mut parts[slot], &mut maps[slot]);
+        let part = &mut parts[slot];
         let mut nt = [0u32; 3];
         for (k, &v) in t.iter().enumerate() {
-            nt[k] = *map.entry(v).or_insert_with(|| {
+            let (owner, id) = single[v as usize];
+            nt[k] = if owner == slot as u32 {
+                id
+            } else if owner == u32::MAX {
+                let id = part.positions.len() as u32;
                 part.positions.push(mesh.positions[v as usize]);
-                (part.positions.len() - 1) as u32
-            });
+                single[v as usize] = (slot as u32, id);
+                id
+            } else {
+                *local.entry((slot, v)).or_insert_with(|| {
+                    part.positions.push(mesh.positions[v as usize]);
+                    (part.positions.len() - 1) as u32
+                })
+            };
         }
         part.triangles.push(nt);
     }

@@ -11,14 +11,15 @@ const MAX_NEWTON_STEPS: usize = 8;
 /// Returns the foot-point parameter and the surface's derivatives there (the distance is
 /// `|position - point|`). The distance never exceeds the distance at `start`: a step that
 /// does not reduce it is halved and finally refused.
+/// `evaluate` is the surface's evaluator for the control set (`TriSurface::evaluator`).
 pub fn foot_point(
     surface: &dyn TriSurface,
-    controls: &[DVec3],
+    evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
     point: DVec3,
     start: SurfaceParam,
 ) -> (SurfaceParam, Derivatives) {
     let mut param = start;
-    let mut d = surface.evaluate(controls, param);
+    let mut d = evaluate(param);
     let mut dist2 = (d.position - point).length_squared();
     for _ in 0..MAX_NEWTON_STEPS {
         let r = d.position - point;
@@ -45,7 +46,7 @@ pub fn foot_point(
         let mut improved = false;
         for _ in 0..6 {
             let trial = surface.step(param, du, dv);
-            let td = surface.evaluate(controls, trial);
+            let td = evaluate(trial);
             let t2 = (td.position - point).length_squared();
             if t2 < dist2 {
                 param = trial;

@@ -195,8 +195,15 @@ pub fn geometric_errors(
     data: &[DVec3],
     params: &[SurfaceParam],
 ) -> Vec<f64> {
+    let evaluate = surface.evaluator(controls);
     data.par_iter()
         .zip(params.par_iter())
-        .map(|(p, u)| (geometric::foot_point(surface, controls, *p, *u).1.position - *p).length())
+        .map(|(p, u)| {
+            (geometric::foot_point(surface, &*evaluate, *p, *u)
+                .1
+                .position
+                - *p)
+                .length()
+        })
         .collect()
 }

@@ -155,10 +155,8 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         .into_iter()
         .filter(|t| t.iter().all(|&v| inside[v as usize]))
         .collect();
-    let evals: Vec<_> = params
-        .par_iter()
-        .map(|p| surface.evaluate(&f.controls, *p))
-        .collect();
+    let evaluate = surface.evaluator(&f.controls);
+    let evals: Vec<_> = params.par_iter().map(|p| evaluate(*p)).collect();
     Tessellation {
         positions: evals.iter().map(|d| d.position).collect(),
         normals: evals

@@ -476,11 +476,12 @@ fn foot_points(
     data: &[DVec3],
     params: &mut [SurfaceParam],
 ) -> Feet {
+    let evaluate = surface.evaluator(controls);
     let (residuals, normals) = data
         .par_iter()
         .zip(params.par_iter_mut())
         .map(|(p, u)| {
-            let (foot, d) = geometric::foot_point(surface, controls, *p, *u);
+            let (foot, d) = geometric::foot_point(surface, &*evaluate, *p, *u);
             *u = foot;
             (*p - d.position, d.du.cross(d.dv).normalize_or_zero())
         })

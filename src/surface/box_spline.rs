@@ -12,10 +12,11 @@
 //! its full 12-point neighbourhood; the outer ring of control points has no data of its own.
 
 use super::bezier::{lattice_index, lattice_len, lattice_points, BezierTriangle};
-use super::{BasisDerivRows, SurfaceParam, TriSurface};
+use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use crate::mesh::detect::Hierarchy;
 use crate::mesh::loop_subdiv::loop_step;
 use crate::mesh::topology::Topology;
+use glam::DVec3;
 use std::sync::OnceLock;
 
 /// Offsets of the 12 control points of the up triangle (0,0),(1,0),(0,1).
@@ -161,6 +162,72 @@ pub fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 1
     out
 }
 
+/// Value weights alone of the 12 stencil points (see `stencil_weights`): collocation rows
+/// need no derivatives.
+pub fn stencil_values(lu: f64, lv: f64) -> [f64; 12] {
+    let m = bezier_from_stencil();
+    let bern = quartic_bernstein(lu, lv);
+    let mut out = [0.0; 12];
+    for (row, b) in m.iter().zip(&bern) {
+        for (o, c) in out.iter_mut().zip(row) {
+            *o += c * b[0];
+        }
+    }
+    out
+}
+
+/// The 15 Bezier ordinates (lattice order of degree 4) of the patch over the up triangle
+/// whose stencil points, in `STENCIL` order, are `stencil`: computed once per cell and control
+/// set, they make every later evaluation a 15-term sum.
+pub fn bezier_ordinates(stencil: &[DVec3; 12]) -> [DVec3; 15] {
+    let m = bezier_from_stencil();
+    let mut out = [DVec3::ZERO; 15];
+    for (o, row) in out.iter_mut().zip(m.iter()) {
+        *o = row.iter().zip(stencil).map(|(w, c)| *c * *w).sum();
+    }
+    out
+}
+
+/// Value and derivatives of a patch from its Bezier ordinates, with the local coordinates,
+/// orientation and scale of `stencil_weights`.
+pub fn evaluate_ordinates(
+    net: &[DVec3; 15],
+    lu: f64,
+    lv: f64,
+    down: bool,
+    scale: f64,
+) -> Derivatives {
+    let bern = quartic_bernstein(lu, lv);
+    let mut d = Derivatives::default();
+    for (b, w) in net.iter().zip(&bern) {
+        d.position += *b * w[0];
+        d.du += *b * w[1];
+        d.dv += *b * w[2];
+        d.duu += *b * w[3];
+        d.duv += *b * w[4];
+        d.dvv += *b * w[5];
+    }
+    let s1 = if down { -scale } else { scale };
+    let s2 = scale * scale;
+    d.du *= s1;
+    d.dv *= s1;
+    d.duu *= s2;
+    d.duv *= s2;
+    d.dvv *= s2;
+    d
+}
+
+/// `lattice_points(4)` as a constant: the Bernstein values below run millions of times per
+/// fit and must not allocate.
+#[rustfmt::skip]
+const QUARTIC_LATTICE: [(usize, usize); 15] = [
+    (0, 0), (1, 0), (2, 0), (3, 0), (4, 0),
+    (0, 1), (1, 1), (2, 1), (3, 1),
+    (0, 2), (1, 2), (2, 2),
+    (0, 3), (1, 3),
+    (0, 4),
+];
+
 /// The 15 quartic Bernstein polynomials u^i v^j w^k 4!/(i! j! k!) in lattice order, with
 /// their (u, v) derivatives (w = 1 - u - v): value, du, dv, duu, duv, dvv. Closed form
 /// without allocation: this runs for every data point at every foot-point step.
@@ -183,7 +250,7 @@ fn quartic_bernstein(u: f64, v: f64) -> [[f64; 6]; 15] {
     };
     const FACT: [f64; 5] = [1.0, 1.0, 2.0, 6.0, 24.0];
     let mut out = [[0.0; 6]; 15];
-    for (idx, (i, j)) in lattice_points(4).into_iter().enumerate() {
+    for (idx, &(i, j)) in QUARTIC_LATTICE.iter().enumerate() {
         {
             let k = 4 - i - j;
             let c = 24.0 / (FACT[i] * FACT[j] * FACT[k]);
@@ -289,6 +356,11 @@ impl TriSurface for LatticeSpline {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_quartic_lattice_constant_is_the_lattice_order() {
+        assert_eq!(super::QUARTIC_LATTICE.to_vec(), super::lattice_points(4));
+    }
+
     use super::*;
     use glam::DVec3;
 

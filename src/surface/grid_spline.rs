@@ -8,7 +8,9 @@
 //! grid spacing. Cell (i, j) "up" is (i,j),(i+1,j),(i,j+1); "down" is (i+1,j),(i+1,j+1),(i,j+1).
 
 use super::bezier::{lattice_points, lattice_triangles};
-use super::box_spline::{stencil_weights, STENCIL};
+use super::box_spline::{
+    bezier_ordinates, evaluate_ordinates, stencil_values, stencil_weights, STENCIL,
+};
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
 use std::collections::HashMap;
@@ -195,6 +197,76 @@ impl GridSpline {
     }
 }
 
+/// One control set's Bezier ordinates for every cell of the grid: a foot-point search
+/// evaluates each data point's patch several times per round, and 15 ordinates per cell
+/// replace the 12 stencil weights through the 15x12 matrix at every evaluation.
+pub struct GridEvaluator<'a> {
+    grid: &'a GridSpline,
+    controls: &'a [DVec3],
+    /// Net index of cell (i, j, down) at `2 * (row * width + column) + down`, over the
+    /// controls' bounding box (every cell's corner lies in it); `u32::MAX` for cells not
+    /// in the grid's list.
+    slot: Vec<u32>,
+    nets: Vec<[DVec3; 15]>,
+}
+
+impl<'a> GridEvaluator<'a> {
+    pub fn new(grid: &'a GridSpline, controls: &'a [DVec3]) -> Self {
+        let mut slot = vec![u32::MAX; 2 * grid.width * grid.height];
+        let mut nets = Vec::with_capacity(grid.cells.len());
+        for &cell in &grid.cells {
+            if let Some(k) = grid.cell_slot(cell) {
+                slot[k] = nets.len() as u32;
+                nets.push(Self::net(grid, controls, cell));
+            }
+        }
+        Self {
+            grid,
+            controls,
+            slot,
+            nets,
+        }
+    }
+
+    /// Missing stencil points count as zero, as `evaluate` drops their weights.
+    fn net(grid: &GridSpline, controls: &[DVec3], cell: Cell) -> [DVec3; 15] {
+        let stencil = cell_stencil(cell).map(|(a, b)| {
+            grid.control_at(a, b)
+                .and_then(|id| controls.get(id as usize))
+                .copied()
+                .unwrap_or(DVec3::ZERO)
+        });
+        bezier_ordinates(&stencil)
+    }
+
+    pub fn evaluate(&self, p: SurfaceParam) -> Derivatives {
+        let (cell, lu, lv) = cell_at(p.u, p.v);
+        match self.grid.cell_slot(cell).map(|k| self.slot[k]) {
+            Some(n) if n != u32::MAX => {
+                evaluate_ordinates(&self.nets[n as usize], lu, lv, cell.2, 1.0)
+            }
+            // A cell outside the list (its stencil may still exist): built on the spot.
+            _ => evaluate_ordinates(
+                &Self::net(self.grid, self.controls, cell),
+                lu,
+                lv,
+                cell.2,
+                1.0,
+            ),
+        }
+    }
+}
+
+impl GridSpline {
+    fn cell_slot(&self, (i, j, down): Cell) -> Option<usize> {
+        let (a, b) = (i - self.i0, j - self.j0);
+        if a < 0 || b < 0 || a as usize >= self.width || b as usize >= self.height {
+            return None;
+        }
+        Some(2 * (b as usize * self.width + a as usize) + down as usize)
+    }
+}
+
 impl TriSurface for GridSpline {
     fn control_count(&self) -> usize {
         self.coords.len()
@@ -240,6 +312,25 @@ impl TriSurface for GridSpline {
             }
         }
         d
+    }
+
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        let (cell, lu, lv) = cell_at(p.u, p.v);
+        let w = stencil_values(lu, lv);
+        out.clear();
+        for (k, (a, b)) in cell_stencil(cell).into_iter().enumerate() {
+            if let Some(id) = self.control_at(a, b) {
+                out.push((id, w[k]));
+            }
+        }
+    }
+
+    fn evaluator<'a>(
+        &'a self,
+        controls: &'a [DVec3],
+    ) -> Box<dyn Fn(SurfaceParam) -> Derivatives + Sync + 'a> {
+        let ev = GridEvaluator::new(self, controls);
+        Box::new(move |p| ev.evaluate(p))
     }
 
     /// Moves by (du, dv) as far as the covered cells allow (bisection on the step length).
@@ -361,5 +452,45 @@ mod tests {
         assert!((e.du - DVec3::new(1.0, 0.0, 0.5)).length() < 1e-12);
         assert!((e.dv - DVec3::new(0.0, 1.0, -0.25)).length() < 1e-12);
         assert!(e.duu.length() < 1e-10 && e.duv.length() < 1e-10);
+    }
+    #[test]
+    fn the_per_cell_evaluator_equals_the_stencil_evaluation() {
+        let grid = GridSpline::new([(0, 0, false), (0, 0, true), (1, 0, false), (2, 1, true)]);
+        let controls: Vec<DVec3> = grid
+            .control_coords()
+            .iter()
+            .map(|&(i, j)| DVec3::new(i as f64, j as f64, ((i * 7 + j * 3) % 5) as f64 * 0.1))
+            .collect();
+        let fast = grid.evaluator(&controls);
+        // Points in listed cells, and one in an unlisted cell whose stencil partly exists.
+        for &(x, y) in &[
+            (0.2, 0.3),
+            (0.7, 0.6),
+            (1.25, 0.5),
+            (2.9, 1.8),
+            (1.5, 1.4),
+            (0.1, 0.85),
+        ] {
+            let p = SurfaceParam {
+                face: 0,
+                u: x,
+                v: y,
+            };
+            let (a, b) = (grid.evaluate(&controls, p), fast(p));
+            let mut row = Vec::new();
+            grid.basis_row(p, &mut row);
+            let from_row: DVec3 = row.iter().map(|&(i, w)| controls[i as usize] * w).sum();
+            assert!((from_row - a.position).length() < 1e-12);
+            for (x1, x2) in [
+                (a.position, b.position),
+                (a.du, b.du),
+                (a.dv, b.dv),
+                (a.duu, b.duu),
+                (a.duv, b.duv),
+                (a.dvv, b.dvv),
+            ] {
+                assert!((x1 - x2).length() < 1e-12, "at ({x}, {y}): {x1} vs {x2}");
+            }
+        }
     }
 }

@@ -66,6 +66,14 @@ pub trait TriSurface: Send + Sync {
         }
         d
     }
+    /// An evaluator for many parameters with one control set (foot-point searches,
+    /// tessellation): surfaces that can precompute per-face data for `controls` do so.
+    fn evaluator<'a>(
+        &'a self,
+        controls: &'a [DVec3],
+    ) -> Box<dyn Fn(SurfaceParam) -> Derivatives + Sync + 'a> {
+        Box::new(move |p| self.evaluate(controls, p))
+    }
     /// Moves a parameter by (du, dv), staying in the domain (clamped at its boundary).
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam;
 }
