@@ -53,7 +53,7 @@ pub struct FitArgs {
     #[arg(long, default_value_t = 5.0)]
     pub target_controls_pct: f64,
     /// Scans: rounds of parameter correction (data parameters moved to foot points).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 8)]
     pub corrections: usize,
     /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
     /// or `parameters` (point-to-point again).
@@ -67,7 +67,7 @@ pub struct FitArgs {
     #[arg(long, value_enum, default_value = "largest")]
     pub components: ComponentMode,
     /// Scans: components with fewer vertices are not fitted.
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = 100)]
     pub min_component_vertices: usize,
     /// Scans, `--components all`: components under this fraction of the largest (in
     /// vertices) are not fitted.

@@ -148,6 +148,9 @@ pub fn fit_scan(
             "no faces left after cleaning".into(),
         ));
     }
+    let unsupported = |e: crate::remesh::RemeshError| PipelineError::Unsupported(e.to_string());
+    let patch = fill_holes(&part).map_err(unsupported)?;
+    // After the topology checks, whose reasons (closed, not disk-like) say more.
     if part.positions.len() < scan.min_component_vertices {
         return Err(PipelineError::Unsupported(format!(
             "the largest component has {} vertices, fewer than min_component_vertices = {}",
@@ -155,8 +158,6 @@ pub fn fit_scan(
             scan.min_component_vertices
         )));
     }
-    let unsupported = |e: crate::remesh::RemeshError| PipelineError::Unsupported(e.to_string());
-    let patch = fill_holes(&part).map_err(unsupported)?;
     let frame = match warm.and_then(|w| w.frame) {
         Some(f) => f,
         None => PlaneFrame::fit_least_folds(&part)

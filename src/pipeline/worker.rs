@@ -67,7 +67,7 @@ pub struct WorkerConfig {
 }
 
 fn default_min_component_vertices() -> usize {
-    200
+    100
 }
 
 fn default_min_component_fraction() -> f64 {
@@ -83,7 +83,7 @@ fn default_target_controls_pct() -> f64 {
 }
 
 fn default_correction_rounds() -> usize {
-    4
+    8
 }
 
 fn default_correction() -> Correction {
