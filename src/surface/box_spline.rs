@@ -197,24 +197,41 @@ pub fn evaluate_ordinates(
     down: bool,
     scale: f64,
 ) -> Derivatives {
-    let bern = quartic_bernstein(lu, lv);
-    let mut d = Derivatives::default();
-    for (b, w) in net.iter().zip(&bern) {
-        d.position += *b * w[0];
-        d.du += *b * w[1];
-        d.dv += *b * w[2];
-        d.duu += *b * w[3];
-        d.duv += *b * w[4];
-        d.dvv += *b * w[5];
-    }
+    // De Casteljau down to degree 2 and 1: the quadratic points give the second derivatives
+    // and the linear ones the first derivatives and the value (blossoming), in a quarter of
+    // the operations of summing 15 Bernstein values with their derivatives.
+    let lw = 1.0 - lu - lv;
+    let row = |m: usize, j: usize| j * (m + 1) - j * j.saturating_sub(1) / 2;
+    let reduce = |from: &[DVec3], m: usize, to: &mut [DVec3]| {
+        for j in 0..m {
+            for i in 0..m - j {
+                to[row(m - 1, j) + i] = from[row(m, j) + i + 1] * lu
+                    + from[row(m, j + 1) + i] * lv
+                    + from[row(m, j) + i] * lw;
+            }
+        }
+    };
+    let mut cubic = [DVec3::ZERO; 10];
+    reduce(net, 4, &mut cubic);
+    let mut quad = [DVec3::ZERO; 6];
+    reduce(&cubic, 3, &mut quad);
+    let mut lin = [DVec3::ZERO; 3];
+    reduce(&quad, 2, &mut lin);
+    // Quadratic points in lattice order: (0,0) w^2, (1,0) uw, (2,0) u^2, (0,1) vw, (1,1) uv,
+    // (0,2) v^2; linear: (0,0) w, (1,0) u, (0,1) v.
+    let (c002, c101, c200, c011, c110, c020) =
+        (quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]);
+    let (d001, d100, d010) = (lin[0], lin[1], lin[2]);
     let s1 = if down { -scale } else { scale };
     let s2 = scale * scale;
-    d.du *= s1;
-    d.dv *= s1;
-    d.duu *= s2;
-    d.duv *= s2;
-    d.dvv *= s2;
-    d
+    Derivatives {
+        position: d100 * lu + d010 * lv + d001 * lw,
+        du: (d100 - d001) * (4.0 * s1),
+        dv: (d010 - d001) * (4.0 * s1),
+        duu: (c200 + c002 - c101 * 2.0) * (12.0 * s2),
+        duv: (c002 + c110 - c101 - c011) * (12.0 * s2),
+        dvv: (c020 + c002 - c011 * 2.0) * (12.0 * s2),
+    }
 }
 
 /// `lattice_points(4)` as a constant: the Bernstein values below run millions of times per
@@ -356,6 +373,38 @@ impl TriSurface for LatticeSpline {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn de_casteljau_evaluation_equals_the_bernstein_sums() {
+        use glam::DVec3;
+        let net: [DVec3; 15] = std::array::from_fn(|k| {
+            let k = k as f64;
+            DVec3::new((k * 0.7).sin(), (k * 1.3).cos(), k * k * 0.01)
+        });
+        for &(u, v, down, scale) in &[
+            (0.2, 0.3, false, 1.0),
+            (0.0, 0.0, true, 2.5),
+            (0.6, 0.1, false, 0.5),
+            (0.05, 0.9, true, 1.0),
+        ] {
+            let fast = super::evaluate_ordinates(&net, u, v, down, scale);
+            let bern = super::quartic_bernstein(u, v);
+            let (s1, s2) = (if down { -scale } else { scale }, scale * scale);
+            let sum = |c: usize, f: f64| -> DVec3 {
+                net.iter().zip(&bern).map(|(p, b)| *p * b[c]).sum::<DVec3>() * f
+            };
+            for (got, want) in [
+                (fast.position, sum(0, 1.0)),
+                (fast.du, sum(1, s1)),
+                (fast.dv, sum(2, s1)),
+                (fast.duu, sum(3, s2)),
+                (fast.duv, sum(4, s2)),
+                (fast.dvv, sum(5, s2)),
+            ] {
+                assert!((got - want).length() < 1e-12, "{got} vs {want}");
+            }
+        }
+    }
+
     #[test]
     fn the_quartic_lattice_constant_is_the_lattice_order() {
         assert_eq!(super::QUARTIC_LATTICE.to_vec(), super::lattice_points(4));
