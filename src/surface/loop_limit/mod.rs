@@ -402,11 +402,7 @@ impl IrregularPatch {
             }
             VertexKind::Boundary(_) => {
                 let d = VERTEX_NUDGE;
-                self.descend(
-                    (1.0 - d) * u + d / 3.0,
-                    (1.0 - d) * v + d / 3.0,
-                    acc,
-                );
+                self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, acc);
                 for a in acc.iter_mut() {
                     a[0] = 0.0;
                     a[3] = 0.0;
@@ -512,10 +508,38 @@ fn cap_rows(net: &Net, a: f64, b: f64, jac: &Jac, acc: &mut [[f64; 6]]) {
     }
 }
 
+/// Near an irregular vertex at depth d the rows are sums of terms up to 2^d (first
+/// derivatives) or 4^d (second) times larger than the result, so rounding leaves the
+/// column sums off their exact values (1 for the value, 0 for derivatives) by about
+/// 2^d eps. The residual is spread over the entries in proportion to their size, which
+/// keeps translation invariance exact without moving any weight by more than its rounding.
+fn restore_sums(acc: &mut [[f64; 6]]) {
+    for d in 0..6 {
+        let target = if d == 0 { 1.0 } else { 0.0 };
+        let (sum, size) = acc
+            .iter()
+            .fold((0.0, 0.0), |(s, a), w| (s + w[d], a + w[d].abs()));
+        if size > 0.0 {
+            let r = (sum - target) / size;
+            for w in acc.iter_mut() {
+                w[d] -= r * w[d].abs();
+            }
+        }
+    }
+}
+
 /// Clamps a parameter into the face.
 fn clamp_param(u: f64, v: f64) -> (f64, f64) {
-    let u = if u.is_finite() { u.clamp(0.0, 1.0) } else { 0.0 };
-    let v = if v.is_finite() { v.clamp(0.0, 1.0 - u) } else { 0.0 };
+    let u = if u.is_finite() {
+        u.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0 - u)
+    } else {
+        0.0
+    };
     (u, v)
 }
 
@@ -545,6 +569,7 @@ impl TriSurface for LoopLimitSurface {
             FacePatch::Irregular(ip) => {
                 let mut acc = vec![[0.0; 6]; ip.support.len()];
                 ip.rows(u, v, &mut acc);
+                restore_sums(&mut acc);
                 for (s, w) in ip.support.iter().zip(&acc) {
                     if w.iter().any(|&x| x != 0.0) {
                         out.indices.push(*s);

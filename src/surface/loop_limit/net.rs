@@ -56,7 +56,11 @@ impl VertexKind {
             }
             VertexKind::Boundary(r) if r.len() == 2 => vec![(v, 1.0)],
             VertexKind::Boundary(r) => {
-                vec![(v, 2.0 / 3.0), (r[0], 1.0 / 6.0), (r[r.len() - 1], 1.0 / 6.0)]
+                vec![
+                    (v, 2.0 / 3.0),
+                    (r[0], 1.0 / 6.0),
+                    (r[r.len() - 1], 1.0 / 6.0),
+                ]
             }
         }
     }
@@ -167,7 +171,12 @@ impl Net {
             Fine::Odd(a, b) => {
                 let (faces, n) = self.edge_faces(a, b);
                 if n == 2 {
-                    vec![(a, 0.375), (b, 0.375), (faces[0].1, 0.125), (faces[1].1, 0.125)]
+                    vec![
+                        (a, 0.375),
+                        (b, 0.375),
+                        (faces[0].1, 0.125),
+                        (faces[1].1, 0.125),
+                    ]
                 } else {
                     debug_assert!(
                         self.edge_is_boundary(a, b),
@@ -227,7 +236,8 @@ impl Net {
             faces_total.push(match f {
                 Fine::Even(v) => self.faces_total[v as usize],
                 Fine::Odd(a, b) if self.edge_faces(a, b).1 == 2 => 6,
-                Fine::Odd(..) => 2,
+                // A boundary edge's odd point lies in three of its face's children.
+                Fine::Odd(..) => 3,
             });
         }
         Net {
