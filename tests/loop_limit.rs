@@ -777,3 +777,54 @@ fn refuses_bad_meshes() {
     fn sync<T: Sync + Send>() {}
     sync::<LoopLimitSurface>();
 }
+
+#[test]
+fn small_steps_across_edges_follow_the_derivatives_on_irregular_meshes() {
+    // A step across an edge moves the surface point by the first-order change the
+    // derivatives predict: the unfolding agrees with the C1 structure of the surface.
+    let mut r = Rng(41);
+    let mut worst = 0.0f64;
+    for m in [polar(5, 2, true, 1), polar(8, 2, true, 2), icosahedron()] {
+        let s = surface(&m);
+        let sc = scale(&m);
+        let mut crossed = 0;
+        for f in 0..m.tris.len() {
+            for _ in 0..6 {
+                // Start 0.02 from an edge and step 0.04 across it.
+                let t = r.range(0.1, 0.88);
+                let (u, v, du, dv) = match r.f() {
+                    x if x < 1.0 / 3.0 => (0.02, t, -0.04, 0.0),
+                    x if x < 2.0 / 3.0 => (t, 0.02, 0.0, -0.04),
+                    _ => (t, 0.98 - t, 0.02, 0.02),
+                };
+                let p = SurfaceParam {
+                    face: f as u32,
+                    u,
+                    v,
+                };
+                let e = s.evaluate(&m.pos, p);
+                let q = s.step(p, du, dv);
+                if q.face == p.face {
+                    // Clamped at the mesh boundary.
+                    assert!(q.u.min(q.v).min(1.0 - q.u - q.v) < 1e-15, "{q:?}");
+                    continue;
+                }
+                crossed += 1;
+                // Second-order residual: half the Hessian along the step, taken at p.
+                let lin = e.position + e.du * du + e.dv * dv;
+                let quad = lin + (e.duu * du * du + e.duv * 2.0 * du * dv + e.dvv * dv * dv) * 0.5;
+                let got = s.evaluate(&m.pos, q).position;
+                let err = (got - quad).length() / sc;
+                let step_len = du.abs() + dv.abs();
+                assert!(
+                    err < 2.0 * step_len.powi(3) + 1e-12,
+                    "{} face {f} {p:?} + ({du}, {dv}) -> {q:?}: {err:e}",
+                    m.name
+                );
+                worst = worst.max(err / step_len.powi(3));
+            }
+        }
+        assert!(crossed > 2 * m.tris.len(), "{}: {crossed}", m.name);
+    }
+    println!("steps across edges: max |S(step) - quadratic Taylor| / |d|^3 = {worst:e}");
+}

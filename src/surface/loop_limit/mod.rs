@@ -189,7 +189,12 @@ impl Node {
             .regular_stencil()
             .map(|st| RegularPatch::new(&net, &st, |s| s));
         Node {
-            net,
+            // A regular node is a leaf: only its patch is read again.
+            net: if regular.is_some() {
+                Net::default()
+            } else {
+                net
+            },
             regular,
             children: Default::default(),
         }

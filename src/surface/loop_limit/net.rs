@@ -11,7 +11,7 @@ use crate::mesh::loop_subdiv::loop_beta;
 /// Coefficient of one vertex of the net in a linear combination.
 pub(super) type Term = (u32, f64);
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub(super) struct Net {
     /// Row-major `vertex count x nsup` weights over the root support.
     pub rows: Vec<f64>,
