@@ -61,17 +61,31 @@ struct RegularPatch {
     cols: Vec<u32>,
     /// 12 x cols row-major, or `None` when stencil point k is exactly column k.
     mat: Option<Vec<f64>>,
+    /// For a quadtree node: the matrix holds the stencil points' differences from the
+    /// node's base weights, which the value adds once (see `Net`).
+    base: Option<Vec<f64>>,
 }
 
 impl RegularPatch {
-    fn new(net: &Net, stencil: &[Vec<Term>], map: impl Fn(u32) -> u32) -> Self {
+    /// `absolute`: fold the base into the matrix (exact at a root face, whose weights are
+    /// unit vectors); otherwise keep it apart.
+    fn new(net: &Net, stencil: &[Vec<Term>], absolute: bool, map: impl Fn(u32) -> u32) -> Self {
         let nsup = net.nsup;
         let mut dense = vec![0.0; 12 * nsup];
         for (k, terms) in stencil.iter().enumerate() {
-            net.accumulate(terms, 1.0, &mut dense[k * nsup..(k + 1) * nsup]);
+            let row = &mut dense[k * nsup..(k + 1) * nsup];
+            net.add_diff(terms, 1.0, row);
+            if absolute {
+                // Stencil terms sum to 1 (ghosts are v + a - b).
+                for (r, b) in row.iter_mut().zip(&net.base) {
+                    *r += b;
+                }
+            }
         }
         let used: Vec<usize> = (0..nsup)
-            .filter(|&s| (0..12).any(|k| dense[k * nsup + s] != 0.0))
+            .filter(|&s| {
+                (0..12).any(|k| dense[k * nsup + s] != 0.0) || (!absolute && net.base[s] != 0.0)
+            })
             .collect();
         // A plain stencil (every row a distinct unit column) needs no matrix.
         let unit: Option<Vec<u32>> = (0..12)
@@ -81,8 +95,12 @@ impl RegularPatch {
                 (nz.len() == 1 && row[nz[0]] == 1.0).then(|| map(nz[0] as u32))
             })
             .collect();
-        if let Some(cols) = unit.filter(|_| used.len() == 12) {
-            return Self { cols, mat: None };
+        if let Some(cols) = unit.filter(|_| absolute && used.len() == 12) {
+            return Self {
+                cols,
+                mat: None,
+                base: None,
+            };
         }
         let mut mat = Vec::with_capacity(12 * used.len());
         for k in 0..12 {
@@ -91,6 +109,7 @@ impl RegularPatch {
         Self {
             cols: used.iter().map(|&s| map(s as u32)).collect(),
             mat: Some(mat),
+            base: (!absolute).then(|| used.iter().map(|&s| net.base[s]).collect()),
         }
     }
 
@@ -115,6 +134,12 @@ impl RegularPatch {
                         }
                     }
                 }
+            }
+        }
+        // The value weights of the stencil sum to 1, their derivatives to 0.
+        if let Some(base) = &self.base {
+            for (slot, b) in acc.iter_mut().zip(base) {
+                slot[0] += b;
             }
         }
     }
@@ -187,7 +212,7 @@ impl Node {
     fn new(net: Net) -> Node {
         let regular = net
             .regular_stencil()
-            .map(|st| RegularPatch::new(&net, &st, |s| s));
+            .map(|st| RegularPatch::new(&net, &st, false, |s| s));
         Node {
             // A regular node is a leaf: only its patch is read again.
             net: if regular.is_some() {
@@ -307,11 +332,15 @@ impl LoopLimitSurface {
             bnd.push([0, 1, 2].map(|k| topo.twin[3 * g + k] == NONE));
         }
         let n = support.len();
+        let mut base = vec![0.0; n];
+        base[0] = 1.0;
         let mut rows = vec![0.0; n * n];
-        for i in 0..n {
+        for i in 1..n {
             rows[i * n + i] = 1.0;
+            rows[i * n] = -1.0;
         }
         let net = Net {
+            base,
             rows,
             nsup: n,
             tris,
@@ -322,7 +351,7 @@ impl LoopLimitSurface {
                 .collect(),
         };
         if let Some(st) = net.regular_stencil() {
-            return FacePatch::Regular(RegularPatch::new(&net, &st, |s| support[s as usize]));
+            return FacePatch::Regular(RegularPatch::new(&net, &st, true, |s| support[s as usize]));
         }
         // Deep enough that the node's image is below f64 resolution: near an interior
         // vertex of valence n the limit surface shrinks by the subdominant eigenvalue
@@ -400,9 +429,7 @@ impl IrregularPatch {
                     }
                 };
                 for (col, terms) in [(1usize, &du), (2, &dv)] {
-                    for &(r, w) in terms.iter() {
-                        acc[r as usize][col] += w;
-                    }
+                    add_column(&self.root.net, terms, col, acc);
                 }
             }
             VertexKind::Boundary(_) => {
@@ -416,10 +443,7 @@ impl IrregularPatch {
                 }
             }
         }
-        // Root rows are unit vectors: local vertex i is support column i.
-        for (r, w) in kind.limit_mask(c) {
-            acc[r as usize][0] += w;
-        }
+        add_column(&self.root.net, &kind.limit_mask(c), 0, acc);
     }
 
     fn descend(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
@@ -455,7 +479,7 @@ impl IrregularPatch {
     ) {
         loop {
             if let Some(st) = net.regular_stencil() {
-                let rp = RegularPatch::new(&net, &st, |s| s);
+                let rp = RegularPatch::new(&net, &st, false, |s| s);
                 return add_patch_rows(&rp, a, b, &jac, acc);
             }
             if depth >= self.cap {
@@ -497,27 +521,43 @@ fn cap_rows(net: &Net, a: f64, b: f64, jac: &Jac, acc: &mut [[f64; 6]]) {
         [b, 0.0, 1.0, 0.0, 0.0, 0.0],
         [1.0 - a - b, -1.0, -1.0, 0.0, 0.0, 0.0],
     ];
+    let mut diff = vec![0.0; net.nsup];
     for (c, wc) in w.iter().enumerate() {
         let t = jac.apply(wc);
         let mask = net
             .vertex_kind(c as u32)
             .expect("node corners have complete rings")
             .limit_mask(c as u32);
-        for (v, m) in mask {
-            for (slot, r) in acc.iter_mut().zip(net.row(v)) {
-                if *r != 0.0 {
-                    add6(slot, &t, m * r);
-                }
+        diff.iter_mut().for_each(|x| *x = 0.0);
+        net.add_diff(&mask, 1.0, &mut diff);
+        for (slot, r) in acc.iter_mut().zip(&diff) {
+            if *r != 0.0 {
+                add6(slot, &t, *r);
             }
         }
     }
+    // The interpolation weights sum to 1 and each mask to 1: the base enters the value once.
+    for (slot, b) in acc.iter_mut().zip(&net.base) {
+        slot[0] += b;
+    }
 }
 
-/// Near an irregular vertex at depth d the rows are sums of terms up to 2^d (first
-/// derivatives) or 4^d (second) times larger than the result, so rounding leaves the
-/// column sums off their exact values (1 for the value, 0 for derivatives) by about
-/// 2^d eps. The residual is spread over the entries in proportion to their size, which
-/// keeps translation invariance exact without moving any weight by more than its rounding.
+/// Adds the combination `terms` of net vertices to column `col` of `acc`: with the base
+/// when the coefficients sum to 1 (a mask), without when they sum to 0 (a tangent).
+fn add_column(net: &Net, terms: &[Term], col: usize, acc: &mut [[f64; 6]]) {
+    let mut diff = vec![0.0; net.nsup];
+    net.add_diff(terms, 1.0, &mut diff);
+    let total: f64 = terms.iter().map(|t| t.1).sum();
+    for ((slot, d), b) in acc.iter_mut().zip(&diff).zip(&net.base) {
+        slot[col] += d + total * b;
+    }
+}
+
+/// Rounding leaves the column sums a few ulps of the largest intermediate term off their
+/// exact values (1 for the value, 0 for derivatives, which are 2^depth times larger near an
+/// irregular vertex). The residual is spread over the entries in proportion to their
+/// size, which keeps the rows exactly affine invariant without moving any weight by more
+/// than its rounding.
 fn restore_sums(acc: &mut [[f64; 6]]) {
     for d in 0..6 {
         let target = if d == 0 { 1.0 } else { 0.0 };

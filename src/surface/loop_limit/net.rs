@@ -11,9 +11,15 @@ use crate::mesh::loop_subdiv::loop_beta;
 /// Coefficient of one vertex of the net in a linear combination.
 pub(super) type Term = (u32, f64);
 
+/// Vertex weights are kept as the weights of vertex 0 (`base`) plus each vertex's
+/// difference from them (`rows`): deep in the quadtree all vertices of a node have nearly
+/// the same weights, and derivatives, which only see differences, would otherwise come out
+/// of the cancellation of O(1) numbers scaled by 2^depth.
 #[derive(Clone, Debug, Default)]
 pub(super) struct Net {
-    /// Row-major `vertex count x nsup` weights over the root support.
+    /// Weights of vertex 0 over the root support.
+    pub base: Vec<f64>,
+    /// Row-major `vertex count x nsup`: each vertex's weights minus `base`.
     pub rows: Vec<f64>,
     pub nsup: usize,
     /// Triangle 0 is the node face, its corners are vertices 0, 1, 2 in parameter order.
@@ -78,15 +84,20 @@ fn odd(a: u32, b: u32) -> Fine {
 }
 
 impl Net {
-    pub fn row(&self, v: u32) -> &[f64] {
+    /// A vertex's weights minus those of vertex 0.
+    pub fn diff(&self, v: u32) -> &[f64] {
         let s = v as usize * self.nsup;
         &self.rows[s..s + self.nsup]
     }
 
-    /// Adds `w` times the weights of the combination `terms` to `acc`.
-    pub fn accumulate(&self, terms: &[Term], w: f64, acc: &mut [f64]) {
+    /// Adds `w` times the differences (from vertex 0) of the combination `terms` to `acc`:
+    /// the whole combination when its coefficients sum to 0, else all but the base part.
+    pub fn add_diff(&self, terms: &[Term], w: f64, acc: &mut [f64]) {
         for &(v, c) in terms {
-            for (a, r) in acc.iter_mut().zip(self.row(v)) {
+            if v == 0 {
+                continue;
+            }
+            for (a, r) in acc.iter_mut().zip(self.diff(v)) {
                 *a += w * c * r;
             }
         }
@@ -229,10 +240,19 @@ impl Net {
             }
         }
         let nsup = self.nsup;
+        let rules: Vec<Vec<Term>> = verts.iter().map(|&f| self.rule(f)).collect();
+        // The new base is fine vertex 0; every rule sums to 1, so a fine vertex's difference
+        // from it is its rule minus vertex 0's rule applied to the old differences.
+        let mut base = self.base.clone();
+        self.add_diff(&rules[0], 1.0, &mut base);
         let mut rows = vec![0.0; verts.len() * nsup];
         let mut faces_total = Vec::with_capacity(verts.len());
         for (i, &f) in verts.iter().enumerate() {
-            self.accumulate(&self.rule(f), 1.0, &mut rows[i * nsup..(i + 1) * nsup]);
+            if i > 0 {
+                let row = &mut rows[i * nsup..(i + 1) * nsup];
+                self.add_diff(&rules[i], 1.0, row);
+                self.add_diff(&rules[0], -1.0, row);
+            }
             faces_total.push(match f {
                 Fine::Even(v) => self.faces_total[v as usize],
                 Fine::Odd(a, b) if self.edge_faces(a, b).1 == 2 => 6,
@@ -241,6 +261,7 @@ impl Net {
             });
         }
         Net {
+            base,
             rows,
             nsup,
             tris,
