@@ -193,6 +193,16 @@ fn main() {
                 check
             );
         }
+        let irregular: Vec<SurfaceParam> = dyadic_params(m.triangles.len(), 5)
+            .into_iter()
+            .filter(|p| !s.is_regular_face(p.face as usize))
+            .collect();
+        let (rate, _) = serial(&s, &irregular);
+        println!(
+            "  dyadic level 5, irregular faces only: {:>7} rows, {:>10.0} rows/s",
+            irregular.len(),
+            rate
+        );
         let params = random_params(m.triangles.len(), 200_000);
         let (rate, _) = serial(&s, &params);
         let par = parallel(&s, &params);

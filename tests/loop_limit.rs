@@ -289,10 +289,25 @@ fn meshes_with_extraordinary_vertices() -> Vec<Mesh> {
     ] {
         v.push(polar(n, 2, true, seed));
     }
-    for (m, seed) in [(1, 21), (2, 22), (4, 23), (5, 24)] {
+    for (m, seed) in [(1, 21), (2, 22), (4, 23), (5, 24), (7, 25)] {
         v.push(polar(m, 3, false, seed));
     }
     v.push(lattice(5, 31));
+    // Every vertex a corner; two corners and two boundary vertices with 2 faces.
+    let mut one = vec![DVec3::ZERO, DVec3::X, DVec3::Y];
+    bump(&mut one, 32);
+    v.push(Mesh {
+        name: "one triangle".into(),
+        pos: one,
+        tris: vec![[0, 1, 2]],
+    });
+    let mut two = vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 0.0)];
+    bump(&mut two, 33);
+    v.push(Mesh {
+        name: "two triangles".into(),
+        pos: two,
+        tris: vec![[0, 1, 2], [1, 3, 2]],
+    });
     v
 }
 

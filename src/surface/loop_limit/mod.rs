@@ -296,6 +296,12 @@ impl LoopLimitSurface {
         })
     }
 
+    /// Whether a face is a single box-spline patch (all corners regular), evaluated
+    /// without subdivision.
+    pub fn is_regular_face(&self, face: usize) -> bool {
+        matches!(self.patches.get(face), Some(FacePatch::Regular(_)))
+    }
+
     /// Faces that are not a single box-spline patch.
     pub fn irregular_face_count(&self) -> usize {
         self.patches
