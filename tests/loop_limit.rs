@@ -843,3 +843,43 @@ fn small_steps_across_edges_follow_the_derivatives_on_irregular_meshes() {
     }
     println!("steps across edges: max |S(step) - quadratic Taylor| / |d|^3 = {worst:e}");
 }
+
+#[test]
+fn ghost_point_box_splines_are_exact_on_regular_boundary_faces() {
+    // Regular faces touching the boundary are evaluated as box splines with ghost points
+    // v + a - b, without subdivision: the hypothesis that this is exact, checked on those
+    // faces alone against the dyadic limit masks.
+    let mut worst = 0.0f64;
+    let mut faces = 0;
+    for m in [
+        lattice(6, 51),
+        polar(6, 4, true, 52),
+        polar(3, 4, false, 53),
+    ] {
+        let s = surface(&m);
+        let sc = scale(&m);
+        let topo = Topology::build(m.pos.len(), &m.tris).expect("manifold");
+        let ghost: Vec<bool> = (0..m.tris.len())
+            .map(|f| s.is_regular_face(f) && m.tris[f].iter().any(|&v| topo.is_boundary(v)))
+            .collect();
+        faces += ghost.iter().filter(|&&g| g).count();
+        for level in 1..=4 {
+            let f = subdivide(&m, level);
+            let ft = Topology::build(f.pos.len(), &f.tris).expect("manifold");
+            let lim = limit_positions(&ft, &f.pos);
+            for (t, &(c, bary)) in f.tris.iter().zip(&f.origin) {
+                if !ghost[c] {
+                    continue;
+                }
+                for k in 0..3 {
+                    let e = eval(&s, &m, c, bary[k][0], bary[k][1]);
+                    let err = (e.position - lim[t[k] as usize]).length() / sc;
+                    assert!(err < 1e-12, "{} face {c} level {level}: {err:e}", m.name);
+                    worst = worst.max(err);
+                }
+            }
+        }
+    }
+    assert!(faces > 30, "{faces}");
+    println!("ghost-point boundary patches: {faces} faces, max relative deviation {worst:e}");
+}
