@@ -883,3 +883,102 @@ fn ghost_point_box_splines_are_exact_on_regular_boundary_faces() {
     assert!(faces > 30, "{faces}");
     println!("ghost-point boundary patches: {faces} faces, max relative deviation {worst:e}");
 }
+
+/// Random edge flips on a closed mesh: neighbouring extraordinary vertices of mixed
+/// valences, faces with two or three of them.
+fn flipped(m: Mesh, flips: usize, seed: u64) -> Mesh {
+    let mut tris = m.tris.clone();
+    let mut r = Rng(seed);
+    let mut done = 0;
+    for _ in 0..flips * 20 {
+        if done == flips {
+            break;
+        }
+        let topo = Topology::build(m.pos.len(), &tris).expect("manifold");
+        let h = (r.f() * topo.twin.len() as f64) as usize % topo.twin.len();
+        let t = topo.twin[h];
+        if t == NONE {
+            continue;
+        }
+        let (f, g) = (h / 3, t as usize / 3);
+        let (a, b) = (tris[f][h % 3], tris[f][(h % 3 + 1) % 3]);
+        let (c, d) = (topo.opposite(h as u32), topo.opposite(t));
+        if c == d || topo.valence(a) <= 4 || topo.valence(b) <= 4 || topo.ring(c).contains(&d) {
+            continue;
+        }
+        // Triangles (a, b, c) and (b, a, d) become (c, a, d) and (d, b, c): same orientation.
+        tris[f] = [c, a, d];
+        tris[g] = [d, b, c];
+        if Topology::build(m.pos.len(), &tris).is_err() {
+            return Mesh { tris: m.tris, ..m };
+        }
+        done += 1;
+    }
+    Mesh {
+        name: format!("{} with {done} flips", m.name),
+        pos: m.pos,
+        tris,
+    }
+}
+
+#[test]
+fn mixed_valence_neighbourhoods_match_dyadic_masks_and_are_c1() {
+    let base = {
+        let ico = icosahedron();
+        let f = subdivide(&ico, 1);
+        let mut pos = f.pos;
+        bump(&mut pos, 61);
+        Mesh {
+            name: "icosahedron level 1".into(),
+            pos,
+            tris: f.tris,
+        }
+    };
+    let m = flipped(base, 25, 62);
+    let s = surface(&m);
+    let sc = scale(&m);
+    let topo = Topology::build(m.pos.len(), &m.tris).expect("manifold");
+    let valences: std::collections::BTreeSet<usize> =
+        (0..m.pos.len() as u32).map(|v| topo.valence(v)).collect();
+    assert!(valences.len() >= 4, "{valences:?}");
+    let mut worst = 0.0f64;
+    for level in 1..=3 {
+        let f = subdivide(&m, level);
+        let ft = Topology::build(f.pos.len(), &f.tris).expect("manifold");
+        let lim = limit_positions(&ft, &f.pos);
+        for (t, &(c, bary)) in f.tris.iter().zip(&f.origin) {
+            for k in 0..3 {
+                let e = eval(&s, &m, c, bary[k][0], bary[k][1]);
+                worst = worst.max((e.position - lim[t[k] as usize]).length() / sc);
+            }
+        }
+    }
+    assert!(worst < 1e-12, "{}: {worst:e}", m.name);
+    // C1 across every edge at a random point.
+    let mut r = Rng(63);
+    let mut dworst = 0.0f64;
+    for h in 0..topo.twin.len() {
+        let tw = topo.twin[h];
+        if tw < h as u32 {
+            continue;
+        }
+        let (f, j) = (h / 3, h % 3);
+        let (k, i) = ((j + 1) % 3, (j + 2) % 3);
+        let (g, gk) = ((tw / 3) as usize, (tw % 3) as usize);
+        let (gj, go) = ((gk + 1) % 3, (gk + 2) % 3);
+        let t = r.range(0.05, 0.95);
+        let (mut bf, mut bg) = ([0.0; 3], [0.0; 3]);
+        (bf[j], bf[k], bg[gj], bg[gk]) = (1.0 - t, t, 1.0 - t, t);
+        let ef = eval(&s, &m, f, bf[0], bf[1]);
+        let eg = eval(&s, &m, g, bg[0], bg[1]);
+        let across = (dir(&ef, sub(unit(i), unit(j))) - dir(&eg, sub(unit(gk), unit(go))))
+            .length()
+            .max((ef.position - eg.position).length());
+        dworst = dworst.max(across / sc);
+    }
+    assert!(dworst < 1e-9, "{dworst:e}");
+    println!(
+        "{} (valences {valences:?}): dyadic masks {worst:e}, C1 gap {dworst:e}",
+        m.name
+    );
+}
