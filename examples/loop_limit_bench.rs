@@ -203,6 +203,24 @@ fn main() {
             irregular.len(),
             rate
         );
+        // Within 1e-9..1e-13 of corner 0 of face 0 (an extraordinary vertex in all three
+        // meshes): descents of 30-45 levels, partly past the memoised depth.
+        let near: Vec<SurfaceParam> = (0..2000)
+            .map(|i| {
+                let e = 10f64.powf(-9.0 - 4.0 * (i as f64 / 2000.0));
+                SurfaceParam {
+                    face: 0,
+                    u: 1.0 - e,
+                    v: 0.5 * e * (i % 7) as f64 / 7.0,
+                }
+            })
+            .collect();
+        let (rate, _) = serial(&s, &near);
+        println!(
+            "  within 1e-9..1e-13 of the extraordinary vertex: {:>7} rows, {:>10.0} rows/s",
+            near.len(),
+            rate
+        );
         let params = random_params(m.triangles.len(), 200_000);
         let (rate, _) = serial(&s, &params);
         let par = parallel(&s, &params);

@@ -982,3 +982,31 @@ fn mixed_valence_neighbourhoods_match_dyadic_masks_and_are_c1() {
         m.name
     );
 }
+
+#[test]
+fn parameters_a_hair_from_an_extraordinary_vertex_stay_finite_and_converge() {
+    for m in [
+        polar(3, 2, true, 71),
+        polar(16, 2, true, 72),
+        polar(5, 3, false, 73),
+    ] {
+        let s = surface(&m);
+        let sc = scale(&m);
+        let at = eval(&s, &m, 0, 1.0, 0.0);
+        let mut last = f64::MAX;
+        for e in [1e-3, 1e-6, 1e-9, 1e-12, 1e-15] {
+            let d = eval(&s, &m, 0, 1.0 - e, 0.5 * e);
+            for x in [d.position, d.du, d.dv, d.duu, d.duv, d.dvv] {
+                assert!(x.is_finite(), "{} at {e}: {d:?}", m.name);
+            }
+            let gap = (d.position - at.position).length() / sc;
+            assert!(
+                gap <= last * 1.01 + 1e-15,
+                "{} at {e}: {gap:e} after {last:e}",
+                m.name
+            );
+            last = gap;
+        }
+        assert!(last < 1e-6, "{}: {last:e}", m.name);
+    }
+}
