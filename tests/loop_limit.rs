@@ -1010,3 +1010,33 @@ fn parameters_a_hair_from_an_extraordinary_vertex_stay_finite_and_converge() {
         assert!(last < 1e-6, "{}: {last:e}", m.name);
     }
 }
+
+#[test]
+fn normals_from_two_sides_converge_at_boundary_vertices_with_many_faces() {
+    // Loop's standard boundary rules give a tangent plane at a boundary vertex with k
+    // faces only in the limit, approached slowly for large k: the normals from the first
+    // and the last face of the fan, along matching rays, must still come together.
+    for m in [2usize, 4, 5, 7] {
+        let mesh = polar(m, 3, false, 80 + m as u64);
+        let s = surface(&mesh);
+        // The centre is corner 0 of the first face of every sector.
+        let centre = mesh.tris[0][0];
+        let last = mesh
+            .tris
+            .iter()
+            .rposition(|t| t[0] == centre)
+            .expect("the centre has faces");
+        let mut line = format!("boundary vertex with {m} faces, normal gap at");
+        let mut prev = f64::MAX;
+        for e in [1e-2, 1e-4, 1e-6, 1e-8, 1e-10] {
+            let a = eval(&s, &mesh, 0, 1.0 - e, 0.5 * e);
+            let b = eval(&s, &mesh, last, 1.0 - e, 0.5 * e);
+            let gap = a.du.cross(a.dv).angle_between(b.du.cross(b.dv));
+            assert!(gap <= prev + 1e-12, "{m} faces at {e}: {gap} after {prev}");
+            prev = gap;
+            line += &format!(" {e:e}: {gap:.1e}");
+        }
+        assert!(prev < 0.02, "{m} faces: {prev}");
+        println!("{line} rad");
+    }
+}
