@@ -223,8 +223,10 @@ impl LoopLimitSurface {
         }
         // Deep enough that the node's image is below f64 resolution: near an interior
         // vertex of valence n the limit surface shrinks by the subdominant eigenvalue
-        // 3/8 + cos(2 pi / n) / 4 per level (at most 5/8), near a boundary one by 1/2;
-        // 80 levels of 5/8 is 5e-17.
+        // 3/8 + cos(2 pi / n) / 4 per level (at most 5/8; 80 levels of 5/8 is 5e-17).
+        // Near a boundary vertex the boundary curve shrinks by 1/2 per level; the
+        // cross-boundary rate is not derived here, so those take the full 80 as margin
+        // (the cap costs nothing unless a parameter is within 2^-cap of the vertex).
         let cap = (0..3u32)
             .filter_map(|v| net.vertex_kind(v))
             .map(|k| match k {
@@ -232,7 +234,7 @@ impl LoopLimitSurface {
                     let lambda = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / r.len() as f64).cos();
                     (-38.0 / lambda.ln()).ceil() as usize
                 }
-                VertexKind::Boundary(_) => 60,
+                VertexKind::Boundary(_) => 80,
             })
             .max()
             .unwrap_or(80)
