@@ -3,6 +3,7 @@
 pub mod bezier;
 pub mod box_spline;
 pub mod grid_spline;
+pub mod loop_limit;
 
 use glam::DVec3;
 

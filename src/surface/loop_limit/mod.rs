@@ -1,0 +1,505 @@
+//! The exact Loop limit surface of an arbitrary manifold triangle control mesh (spec 01:
+//! Loop's original beta, boundary odd point 1/2 (a + b), boundary even point
+//! 3/4 v + 1/8 (a + b), corners fixed).
+//!
+//! The domain faces are the control faces; a parameter is (face, u, v) with u, v the
+//! barycentric weights of the face's corners 0 and 1.
+//!
+//! Evaluation: a face whose three corners are regular (interior of valence 6, or boundary
+//! with 3 faces) is a quartic box-spline patch of 12 stencil points, with ghost points
+//! `v + a - b` beyond a boundary (the ghost extension commutes with Loop's boundary rules
+//! on a straight regular boundary; the dyadic tests confirm it). Any other face is
+//! subdivided locally: the 1-ring of the face gives the 1-ring of each child, and the
+//! descent follows the child containing the parameter until the child is regular. Every
+//! local vertex is kept as weights over the face's original 1-ring, so the final row is in
+//! original control indices. The child nets are memoised per quadtree node
+//! (`OnceLock`, so the surface is `Sync` and rows can be built from many threads).
+//!
+//! Only original vertices can be irregular (subdivision adds interior vertices of valence 6
+//! and boundary vertices with 3 faces), so a descent goes deep only towards one of them:
+//! a parameter exactly at an irregular vertex takes its limit-position mask directly
+//! (derivatives there: see `IrregularPatch::vertex_rows`), and a descent that is still
+//! irregular at the depth cap interpolates the exact limit positions of the node corners.
+//!
+//! Derivatives follow the chain rule through each child's affine map (the middle child is
+//! flipped). Node weights are kept as a base row plus differences, so derivatives near an
+//! irregular vertex keep their relative precision although the map scales by 2^depth.
+
+mod net;
+mod patch;
+
+use super::{BasisDerivRows, SurfaceParam, TriSurface};
+use crate::mesh::topology::{Topology, TopologyError, NONE};
+use net::{Net, Term, VertexKind};
+use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
+use std::sync::OnceLock;
+
+/// Child nets are memoised down to this depth; deeper ones (reached only within 2^-40 of
+/// an irregular vertex) are computed on the fly so memory stays bounded.
+const MEMO_DEPTH: usize = 40;
+
+/// Parameter offset (towards the face centre) at which derivatives are taken for a
+/// parameter exactly at an irregular boundary vertex or corner. Small, because with many
+/// faces the normal settles slowly (at 7 faces, 7e-3 rad between the two ends of the fan
+/// at 1e-10); the descent keeps full relative precision at this depth (see `Net`).
+const VERTEX_NUDGE: f64 = 1.0 / (1u64 << 40) as f64;
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LoopLimitError {
+    #[error("the control mesh has no faces")]
+    NoFaces,
+    #[error("{count} control points do not fit 32-bit indices")]
+    TooManyControls { count: usize },
+    #[error("face {face} uses control index {index}, but there are only {count} control points")]
+    IndexOutOfRange {
+        face: usize,
+        index: u32,
+        count: usize,
+    },
+    #[error("face {face} repeats a control point")]
+    DegenerateFace { face: usize },
+    #[error("control point {vertex} belongs to no face, so it has no place on the limit surface")]
+    IsolatedVertex { vertex: usize },
+    #[error("the control mesh is not a manifold: {0}")]
+    NonManifold(TopologyError),
+}
+
+struct Node {
+    net: Net,
+    regular: Option<RegularPatch>,
+    children: [OnceLock<Box<Node>>; 4],
+}
+
+impl Node {
+    fn new(net: Net) -> Node {
+        let regular = net
+            .regular_stencil()
+            .map(|st| RegularPatch::new(&net, &st, false, |s| s));
+        Node {
+            // A regular node is a leaf: only its patch is read again.
+            net: if regular.is_some() {
+                Net::default()
+            } else {
+                net
+            },
+            regular,
+            children: Default::default(),
+        }
+    }
+
+    fn child(&self, c: usize) -> &Node {
+        self.children[c].get_or_init(|| Box::new(Node::new(self.net.child(c))))
+    }
+}
+
+struct IrregularPatch {
+    /// Original control index of each support column (the face's 1-ring).
+    support: Vec<u32>,
+    root: Node,
+    /// Depth at which the descent stops (see `cap_rows`).
+    cap: usize,
+}
+
+enum FacePatch {
+    Regular(RegularPatch),
+    Irregular(Box<IrregularPatch>),
+}
+
+/// The Loop limit surface over the faces of a control mesh.
+pub struct LoopLimitSurface {
+    control_count: usize,
+    topo: Topology,
+    patches: Vec<FacePatch>,
+}
+
+impl std::fmt::Debug for LoopLimitSurface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LoopLimitSurface")
+            .field("control_count", &self.control_count)
+            .field("faces", &self.patches.len())
+            .field("irregular_faces", &self.irregular_face_count())
+            .finish()
+    }
+}
+
+impl LoopLimitSurface {
+    pub fn new(control_count: usize, faces: &[[u32; 3]]) -> Result<Self, LoopLimitError> {
+        if faces.is_empty() {
+            return Err(LoopLimitError::NoFaces);
+        }
+        if u32::try_from(control_count).is_err() {
+            return Err(LoopLimitError::TooManyControls {
+                count: control_count,
+            });
+        }
+        for (f, t) in faces.iter().enumerate() {
+            if let Some(&index) = t.iter().find(|&&i| i as usize >= control_count) {
+                return Err(LoopLimitError::IndexOutOfRange {
+                    face: f,
+                    index,
+                    count: control_count,
+                });
+            }
+            if t[0] == t[1] || t[1] == t[2] || t[0] == t[2] {
+                return Err(LoopLimitError::DegenerateFace { face: f });
+            }
+        }
+        let topo = Topology::build(control_count, faces).map_err(LoopLimitError::NonManifold)?;
+        if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
+            return Err(LoopLimitError::IsolatedVertex { vertex });
+        }
+        let patches = (0..faces.len())
+            .map(|f| Self::face_patch(&topo, f))
+            .collect();
+        Ok(Self {
+            control_count,
+            topo,
+            patches,
+        })
+    }
+
+    /// Whether a face is a single box-spline patch (all corners regular), evaluated
+    /// without subdivision.
+    pub fn is_regular_face(&self, face: usize) -> bool {
+        matches!(self.patches.get(face), Some(FacePatch::Regular(_)))
+    }
+
+    /// Faces that are not a single box-spline patch.
+    pub fn irregular_face_count(&self) -> usize {
+        self.patches
+            .iter()
+            .filter(|p| matches!(p, FacePatch::Irregular(_)))
+            .count()
+    }
+
+    fn face_patch(topo: &Topology, f: usize) -> FacePatch {
+        let corners = topo.triangles[f];
+        let mut support: Vec<u32> = corners.to_vec();
+        let mut faces = vec![f];
+        for &c in &corners {
+            for &h in topo.ring_halfedges(c) {
+                if h != NONE && !faces.contains(&((h / 3) as usize)) {
+                    faces.push((h / 3) as usize);
+                }
+            }
+        }
+        let mut tris = Vec::with_capacity(faces.len());
+        let mut bnd = Vec::with_capacity(faces.len());
+        for &g in &faces {
+            let mut t = [0u32; 3];
+            for (k, &v) in topo.triangles[g].iter().enumerate() {
+                t[k] = match support.iter().position(|&s| s == v) {
+                    Some(i) => i as u32,
+                    None => {
+                        support.push(v);
+                        (support.len() - 1) as u32
+                    }
+                };
+            }
+            tris.push(t);
+            bnd.push([0, 1, 2].map(|k| topo.twin[3 * g + k] == NONE));
+        }
+        let n = support.len();
+        let mut base = vec![0.0; n];
+        base[0] = 1.0;
+        let mut rows = vec![0.0; n * n];
+        for i in 1..n {
+            rows[i * n + i] = 1.0;
+            rows[i * n] = -1.0;
+        }
+        let net = Net {
+            base,
+            rows,
+            nsup: n,
+            tris,
+            bnd,
+            faces_total: support
+                .iter()
+                .map(|&v| topo.face_valence[v as usize])
+                .collect(),
+        };
+        if let Some(st) = net.regular_stencil() {
+            return FacePatch::Regular(RegularPatch::new(&net, &st, true, |s| support[s as usize]));
+        }
+        // Deep enough that the node's image is below f64 resolution: near an interior
+        // vertex of valence n the limit surface shrinks by the subdominant eigenvalue
+        // 3/8 + cos(2 pi / n) / 4 per level (at most 5/8; 80 levels of 5/8 is 5e-17).
+        // Near a boundary vertex the boundary curve shrinks by 1/2 per level; the
+        // cross-boundary rate is not derived here, so those take the full 80 as margin
+        // (the cap costs nothing unless a parameter is within 2^-cap of the vertex).
+        let cap = (0..3u32)
+            .filter_map(|v| net.vertex_kind(v))
+            .map(|k| match k {
+                VertexKind::Interior(r) => {
+                    let lambda = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / r.len() as f64).cos();
+                    (-38.0 / lambda.ln()).ceil() as usize
+                }
+                VertexKind::Boundary(_) => 80,
+            })
+            .max()
+            .unwrap_or(80)
+            .clamp(60, 80);
+        FacePatch::Irregular(Box::new(IrregularPatch {
+            support,
+            root: Node::new(net),
+            cap,
+        }))
+    }
+}
+
+impl IrregularPatch {
+    /// Rows over the support at the face parameter (u, v).
+    fn rows(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
+        let corner = match (u, v) {
+            (1.0, 0.0) => Some(0u32),
+            (0.0, 1.0) => Some(1),
+            (0.0, 0.0) => Some(2),
+            _ => None,
+        };
+        let kind = corner.and_then(|c| self.root.net.vertex_kind(c).map(|k| (c, k)));
+        match kind {
+            Some((c, k)) if !k.is_regular() => self.vertex_rows(c, &k, u, v, acc),
+            _ => self.descend(u, v, acc),
+        }
+    }
+
+    /// At an irregular vertex: the value is Loop's limit-position mask. For an interior
+    /// vertex of valence n the parametric derivatives tend to 0 (n < 6) or grow without
+    /// bound (n > 6); what is returned instead is the derivative along each face edge as
+    /// Loop's tangent mask `2/n sum_m cos(2 pi (m - j) / n) r_m` (exact tangent plane, the
+    /// box spline's values at n = 6), and zero second derivatives. At a boundary vertex or
+    /// corner the derivatives are those at a parameter 2^-40 towards the face centre.
+    fn vertex_rows(&self, c: u32, kind: &VertexKind, u: f64, v: f64, acc: &mut [[f64; 6]]) {
+        match kind {
+            VertexKind::Interior(ring) => {
+                let n = ring.len();
+                // Derivative along the edge from c to its ring neighbour x.
+                let along = |x: u32| -> Vec<Term> {
+                    let j = ring.iter().position(|&r| r == x).unwrap_or(0);
+                    ring.iter()
+                        .enumerate()
+                        .map(|(m, &r)| {
+                            let ang = 2.0 * std::f64::consts::PI * (m as f64 - j as f64) / n as f64;
+                            (r, 2.0 / n as f64 * ang.cos())
+                        })
+                        .collect()
+                };
+                // d/du moves along corner2 -> corner0, d/dv along corner2 -> corner1.
+                let (du, dv): (Vec<Term>, Vec<Term>) = match c {
+                    2 => (along(0), along(1)),
+                    0 => {
+                        let t2 = along(2);
+                        let neg2: Vec<Term> = t2.iter().map(|&(r, w)| (r, -w)).collect();
+                        (neg2.clone(), along(1).into_iter().chain(neg2).collect())
+                    }
+                    _ => {
+                        let t2 = along(2);
+                        let neg2: Vec<Term> = t2.iter().map(|&(r, w)| (r, -w)).collect();
+                        (along(0).into_iter().chain(neg2.clone()).collect(), neg2)
+                    }
+                };
+                for (col, terms) in [(1usize, &du), (2, &dv)] {
+                    add_column(&self.root.net, terms, col, acc);
+                }
+            }
+            VertexKind::Boundary(_) => {
+                let d = VERTEX_NUDGE;
+                self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, acc);
+                for a in acc.iter_mut() {
+                    a[0] = 0.0;
+                    a[3] = 0.0;
+                    a[4] = 0.0;
+                    a[5] = 0.0;
+                }
+            }
+        }
+        add_column(&self.root.net, &kind.limit_mask(c), 0, acc);
+    }
+
+    fn descend(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
+        let (mut a, mut b) = (u, v);
+        let mut jac = Jac::ID;
+        let mut node = &self.root;
+        let mut depth = 0;
+        loop {
+            if let Some(rp) = &node.regular {
+                return add_patch_rows(rp, a, b, &jac, acc);
+            }
+            if depth == self.cap {
+                return cap_rows(&node.net, a, b, &jac, acc);
+            }
+            let (c, na, nb, j) = pick_child(a, b);
+            (a, b, jac) = (na, nb, jac.then(j));
+            depth += 1;
+            if depth > MEMO_DEPTH {
+                return self.descend_unmemoised(node.net.child(c), a, b, jac, depth, acc);
+            }
+            node = node.child(c);
+        }
+    }
+
+    fn descend_unmemoised(
+        &self,
+        mut net: Net,
+        mut a: f64,
+        mut b: f64,
+        mut jac: Jac,
+        mut depth: usize,
+        acc: &mut [[f64; 6]],
+    ) {
+        loop {
+            if let Some(st) = net.regular_stencil() {
+                let rp = RegularPatch::new(&net, &st, false, |s| s);
+                return add_patch_rows(&rp, a, b, &jac, acc);
+            }
+            if depth >= self.cap {
+                return cap_rows(&net, a, b, &jac, acc);
+            }
+            let (c, na, nb, j) = pick_child(a, b);
+            (a, b, jac) = (na, nb, jac.then(j));
+            net = net.child(c);
+            depth += 1;
+        }
+    }
+}
+
+/// Rounding leaves the column sums a few ulps of the largest intermediate term off their
+/// exact values (1 for the value, 0 for derivatives, which are 2^depth times larger near an
+/// irregular vertex). The residual is spread over the entries in proportion to their
+/// size, which keeps the rows exactly affine invariant without moving any weight by more
+/// than its rounding.
+fn restore_sums(acc: &mut [[f64; 6]]) {
+    for d in 0..6 {
+        let target = if d == 0 { 1.0 } else { 0.0 };
+        let (sum, size) = acc
+            .iter()
+            .fold((0.0, 0.0), |(s, a), w| (s + w[d], a + w[d].abs()));
+        if size > 0.0 {
+            let r = (sum - target) / size;
+            for w in acc.iter_mut() {
+                w[d] -= r * w[d].abs();
+            }
+        }
+    }
+}
+
+/// Clamps a parameter into the face.
+fn clamp_param(u: f64, v: f64) -> (f64, f64) {
+    let u = if u.is_finite() {
+        u.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let v = if v.is_finite() {
+        v.clamp(0.0, 1.0 - u)
+    } else {
+        0.0
+    };
+    (u, v)
+}
+
+impl TriSurface for LoopLimitSurface {
+    fn control_count(&self) -> usize {
+        self.control_count
+    }
+
+    fn domain_face_count(&self) -> usize {
+        self.patches.len()
+    }
+
+    /// Out-of-range faces are clamped to the last face, parameters into the face.
+    fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
+        out.indices.clear();
+        out.weights.clear();
+        let f = (p.face as usize).min(self.patches.len() - 1);
+        let (u, v) = clamp_param(p.u, p.v);
+        match &self.patches[f] {
+            FacePatch::Regular(rp) => {
+                let mut acc = [[0.0; 6]; 64];
+                let n = rp.cols.len().min(acc.len());
+                rp.add_rows(u, v, &Jac::ID, &mut acc[..n]);
+                out.indices.extend_from_slice(&rp.cols[..n]);
+                out.weights.extend_from_slice(&acc[..n]);
+            }
+            FacePatch::Irregular(ip) => {
+                let mut acc = vec![[0.0; 6]; ip.support.len()];
+                ip.rows(u, v, &mut acc);
+                restore_sums(&mut acc);
+                for (s, w) in ip.support.iter().zip(&acc) {
+                    if w.iter().any(|&x| x != 0.0) {
+                        out.indices.push(*s);
+                        out.weights.push(*w);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Moves in the parameter plane by (du, dv), crossing into neighbouring faces through
+    /// shared edges. The neighbour is unfolded onto the current face as in the regular
+    /// lattice (its far corner at `a + b - c`), so the remaining barycentric deltas map
+    /// linearly. At a boundary edge the motion across it is dropped and the rest slides
+    /// along the edge.
+    fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
+        let mut f = (p.face as usize).min(self.patches.len() - 1);
+        let (u, v) = clamp_param(p.u, p.v);
+        let mut bary = [u, v, 1.0 - u - v];
+        let (du, dv) = (
+            if du.is_finite() { du } else { 0.0 },
+            if dv.is_finite() { dv } else { 0.0 },
+        );
+        let mut d = [du, dv, -du - dv];
+        // Each crossing enters a new face or removes a component at the boundary; the bound
+        // only guards against a cycle through rounding at a vertex.
+        for _ in 0..(4 * self.patches.len()).clamp(64, 100_000) {
+            let mut t_exit = 1.0;
+            let mut exit = None;
+            for i in 0..3 {
+                if d[i] < 0.0 {
+                    let t = (bary[i] / -d[i]).max(0.0);
+                    if t < t_exit {
+                        t_exit = t;
+                        exit = Some(i);
+                    }
+                }
+            }
+            let Some(i) = exit else {
+                for k in 0..3 {
+                    bary[k] += d[k];
+                }
+                break;
+            };
+            for k in 0..3 {
+                bary[k] += t_exit * d[k];
+                d[k] *= 1.0 - t_exit;
+            }
+            bary[i] = 0.0;
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            let twin = self.topo.twin[3 * f + j];
+            if twin == NONE {
+                d[j] += 0.5 * d[i];
+                d[k] += 0.5 * d[i];
+                d[i] = 0.0;
+                continue;
+            }
+            // Half-edge 3f + j runs corner j -> corner k; its twin runs k -> j in face g.
+            let g = (twin / 3) as usize;
+            let gk = (twin % 3) as usize;
+            let (gj, go) = ((gk + 1) % 3, (gk + 2) % 3);
+            let mut nb = [0.0; 3];
+            let mut nd = [0.0; 3];
+            nb[gj] = bary[j];
+            nb[gk] = bary[k];
+            nd[gj] = d[j] + d[i];
+            nd[gk] = d[k] + d[i];
+            nd[go] = -d[i];
+            (f, bary, d) = (g, nb, nd);
+        }
+        let (u, v) = clamp_param(bary[0], bary[1]);
+        SurfaceParam {
+            face: f as u32,
+            u,
+            v,
+        }
+    }
+}
