@@ -120,7 +120,8 @@ fn refuses_unsupported_inputs_with_status_2() {
         err.contains("subdivision connectivity") && err.contains("not disk-like"),
         "{err}"
     );
-    // The Loop surface of the input's own net is not built: the lattice is remeshed instead.
+    // `loop` on an input with subdivision connectivity: the exact Loop limit surface of its
+    // own coarse net (a 4-segment lattice after 2 levels: 15 controls, 16 faces).
     let input = dir.path().join("patch.obj");
     write_obj(&input, &lattice_patch(16)).expect("write");
     let o = trispline(&[
@@ -128,8 +129,8 @@ fn refuses_unsupported_inputs_with_status_2() {
         input.to_str().unwrap_or_default(),
         "--surface",
         "loop",
-        "--lattice",
-        "6",
+        "--min-levels",
+        "2",
         "--out",
         out.to_str().unwrap_or_default(),
     ]);
@@ -137,17 +138,14 @@ fn refuses_unsupported_inputs_with_status_2() {
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
             .expect("json");
-    assert_eq!(report["remeshed"], true);
+    assert!(report.get("remeshed").is_none());
     let surface: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("surface.json")).expect("surface"))
             .expect("json");
     assert_eq!(surface["kind"], "loop");
-    assert_eq!(surface["layout"], "grid");
-    let coords = surface["control_coords"].as_array().expect("coords").len();
-    assert_eq!(report["control_points"], coords);
-    // 6 cells across the patch plus the ring of outer controls, no more.
-    assert!((20..100).contains(&coords), "{coords} control points");
-    assert!(surface["cells"].as_array().is_some_and(|c| c.len() >= 36));
+    assert_eq!(surface["layout"], "mesh");
+    assert_eq!(surface["control_points"].as_array().map(Vec::len), Some(15));
+    assert_eq!(surface["control_faces"].as_array().map(Vec::len), Some(16));
     std::fs::remove_dir_all(&out).expect("clean");
     // A subdivided closed mesh has connectivity but no single-triangle lattice: Bezier refuses.
     let tet = TriMesh::new(
@@ -169,6 +167,22 @@ fn refuses_unsupported_inputs_with_status_2() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(!out.join("surface.json").exists());
+    // The Loop limit surface takes the closed net as it is.
+    let o = trispline(&[
+        "fit",
+        input.to_str().unwrap_or_default(),
+        "--surface",
+        "loop",
+        "--min-levels",
+        "2",
+        "--out",
+        out.to_str().unwrap_or_default(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let surface: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("surface.json")).expect("surface"))
+            .expect("json");
+    assert_eq!(surface["control_faces"].as_array().map(Vec::len), Some(4));
 }
 
 #[test]

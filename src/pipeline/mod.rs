@@ -14,6 +14,7 @@ use crate::mesh::detect::Hierarchy;
 use crate::mesh::inverse::{coarsen, composed_exact_inverse, InverseError, InverseMethod};
 use crate::mesh::topology::Topology;
 use crate::surface::bezier::{lattice_points, BezierTriangle};
+use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
@@ -77,18 +78,17 @@ impl PatchFit {
     }
 }
 
-/// Fits a mesh that has Loop subdivision connectivity at depth `levels`. `previous` is a
-/// previous fit's control net: used as the starting net when its size matches.
+/// Fits a mesh that has Loop subdivision connectivity at depth `levels`: the coarse net
+/// from inverse subdivision is the control net, every fine vertex has its exact parameter
+/// (coarse face, dyadic barycentric) from the hierarchy. `loop` fits the exact Loop limit
+/// surface of that net (any valences, boundaries); `bezier` needs the net to be one
+/// triangular lattice. `previous` is a previous fit's control net: used as the starting net
+/// when its size matches.
 pub fn fit_subdivided(
     mesh: &TriMesh,
     opts: &FitOptions,
     previous: Option<&[DVec3]>,
 ) -> Result<PatchFit, PipelineError> {
-    if opts.surface == SurfaceKind::Loop {
-        return Err(PipelineError::Unsupported(
-            "the exact Loop surface of an input's own coarse net (extraordinary vertices, Loop boundary rules) is not built yet; the input is remeshed onto a regular lattice instead".into(),
-        ));
-    }
     let t0 = Instant::now();
     let topo = Topology::from_mesh(mesh)
         .map_err(|e| PipelineError::NoSubdivision(format!("not a manifold mesh: {e}")))?;
@@ -106,40 +106,75 @@ pub fn fit_subdivided(
             PipelineError::NoSubdivision(e.to_string())
         }
     })?;
-    let (n, index) =
-        lattice::lattice_coordinates(coarse.mesh.positions.len(), &coarse.mesh.triangles)?;
-    let coords = lattice_points(n);
-    let mut initial = vec![DVec3::ZERO; coords.len()];
-    for (v, &idx) in index.iter().enumerate() {
-        initial[idx] = coarse.mesh.positions[v];
-    }
-    // Each fine vertex: (coarse face, barycentric) -> global lattice (u, v).
-    let coarse_faces = &coarse.mesh.triangles;
-    let params: Vec<SurfaceParam> = hierarchy
-        .fine_vertex_params(&topo)
-        .into_iter()
-        .map(|(f, u, v)| {
-            let t = coarse_faces.get(f as usize).copied().unwrap_or([0, 0, 0]);
-            let w = 1.0 - u - v;
-            let c = |k: usize| coords[index[t[k] as usize]];
-            let gu = (u * c(0).0 as f64 + v * c(1).0 as f64 + w * c(2).0 as f64) / n as f64;
-            let gv = (u * c(0).1 as f64 + v * c(1).1 as f64 + w * c(2).1 as f64) / n as f64;
-            SurfaceParam {
-                face: 0,
-                u: gu,
-                v: gv,
-            }
-        })
-        .collect();
-    let surface = BezierTriangle::new(n);
-    let basis = collocation(&surface, &params);
     let r = composed_exact_inverse(&topo, &hierarchy)
         .map_err(|e| PipelineError::NoSubdivision(e.to_string()))?;
+    let fine_params = hierarchy.fine_vertex_params(&topo);
+    // The PIA update R^L(eps) comes out in coarse vertex order; `to_control[v]` is coarse
+    // vertex v's control index.
+    let (model, params, initial, to_control, degree) = match opts.surface {
+        SurfaceKind::Loop => {
+            let surface =
+                LoopLimitSurface::new(coarse.mesh.positions.len(), &coarse.mesh.triangles)
+                    .map_err(|e| {
+                        PipelineError::Unsupported(format!(
+                            "the coarse net after {} levels has no Loop limit surface: {e}",
+                            opts.levels
+                        ))
+                    })?;
+            let params: Vec<SurfaceParam> = fine_params
+                .into_iter()
+                .map(|(face, u, v)| SurfaceParam { face, u, v })
+                .collect();
+            let identity: Vec<usize> = (0..coarse.mesh.positions.len()).collect();
+            (
+                scan::SurfaceModel::Mesh(std::sync::Arc::new(surface)),
+                params,
+                coarse.mesh.positions.clone(),
+                identity,
+                0,
+            )
+        }
+        SurfaceKind::Bezier => {
+            let (n, index) =
+                lattice::lattice_coordinates(coarse.mesh.positions.len(), &coarse.mesh.triangles)?;
+            let coords = lattice_points(n);
+            let mut initial = vec![DVec3::ZERO; coords.len()];
+            for (v, &idx) in index.iter().enumerate() {
+                initial[idx] = coarse.mesh.positions[v];
+            }
+            // Each fine vertex: (coarse face, barycentric) -> global lattice (u, v).
+            let coarse_faces = &coarse.mesh.triangles;
+            let params: Vec<SurfaceParam> = fine_params
+                .into_iter()
+                .map(|(f, u, v)| {
+                    let t = coarse_faces.get(f as usize).copied().unwrap_or([0, 0, 0]);
+                    let w = 1.0 - u - v;
+                    let c = |k: usize| coords[index[t[k] as usize]];
+                    let gu = (u * c(0).0 as f64 + v * c(1).0 as f64 + w * c(2).0 as f64) / n as f64;
+                    let gv = (u * c(0).1 as f64 + v * c(1).1 as f64 + w * c(2).1 as f64) / n as f64;
+                    SurfaceParam {
+                        face: 0,
+                        u: gu,
+                        v: gv,
+                    }
+                })
+                .collect();
+            (
+                scan::SurfaceModel::Bezier(BezierTriangle::new(n)),
+                params,
+                initial,
+                index,
+                n,
+            )
+        }
+    };
+    let surface = model.as_surface();
+    let basis = collocation(surface, &params);
     let pia = |res: &[DVec3]| {
         let coarse_order = r.apply(res);
         let mut out = vec![DVec3::ZERO; coarse_order.len()];
         for (v, d) in coarse_order.into_iter().enumerate() {
-            out[index[v]] = d;
+            out[to_control[v]] = d;
         }
         out
     };
@@ -156,12 +191,12 @@ pub fn fit_subdivided(
     let t1 = Instant::now();
     let outcome = fit(&problem, start, opts.method, &opts.budget)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let geometric_errors = geometric_errors(&surface, &outcome.controls, &mesh.positions, &params);
+    let geometric_errors = geometric_errors(surface, &outcome.controls, &mesh.positions, &params);
     Ok(PatchFit {
         surface: opts.surface,
-        degree: n,
-        model: scan::SurfaceModel::Bezier(surface.clone()),
+        degree,
         controls: outcome.controls.clone(),
+        model,
         data: mesh.positions.clone(),
         params,
         outcome,

@@ -39,6 +39,13 @@ pub fn surface_json(
             "cells": g.cells().iter().map(|&(i, j, d)| [i, j, i64::from(d)]).collect::<Vec<_>>(),
             "control_coords": g.control_coords().iter().map(|&(i, j)| [i, j]).collect::<Vec<_>>(),
         }),
+        SurfaceModel::Mesh(m) => json!({
+            "kind": "loop",
+            "layout": "mesh",
+            "domain": "every control face is a domain triangle; a parameter is (face, u, v) with u and v the barycentric weights of the face's corners 0 and 1 (w = 1 - u - v of corner 2)",
+            "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; faces whose corners are all regular are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
+            "control_faces": m.faces(),
+        }),
     };
     v["schema"] = json!("trispline.surface/1");
     v["control_points"] = json!(controls);
@@ -145,6 +152,26 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
             let per_cell = segments as f64 / (g.cells().len().max(1) as f64).sqrt();
             g.sample_lattice((per_cell.ceil() as usize).clamp(4, 32))
         }
+        SurfaceModel::Mesh(m) => {
+            // Each face its own lattice (vertices on shared edges repeat: the surface is C1,
+            // so both copies carry the same point and normal).
+            let per_face = segments as f64 / (m.faces().len().max(1) as f64).sqrt();
+            let n = (per_face.ceil() as usize).clamp(4, 32);
+            let local = lattice_points(n);
+            let local_tris = lattice_triangles(n);
+            let mut params = Vec::with_capacity(m.faces().len() * local.len());
+            let mut triangles = Vec::with_capacity(m.faces().len() * local_tris.len());
+            for face in 0..m.faces().len() {
+                let base = params.len() as u32;
+                params.extend(local.iter().map(|&(i, j)| SurfaceParam {
+                    face: face as u32,
+                    u: i as f64 / n as f64,
+                    v: j as f64 / n as f64,
+                }));
+                triangles.extend(local_tris.iter().map(|t| t.map(|v| v + base)));
+            }
+            (params, triangles)
+        }
     };
     let surface = f.model.as_surface();
     let inside: Vec<bool> = match &covers {
@@ -171,13 +198,26 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
 /// The GLB of a tessellation, each vertex coloured by the geometric error of the data point
 /// whose parameter is nearest (blue exact .. red twice the tolerance).
 pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec<u8> {
-    let nearest = NearestParam::new(&f.params);
+    // Parameters are (u, v) within a face: the nearest data point is searched among those
+    // of the same face (one face for Bezier and grid surfaces).
+    let mut by_face: rustc_hash::FxHashMap<u32, (Vec<SurfaceParam>, Vec<usize>)> =
+        Default::default();
+    for (k, p) in f.params.iter().enumerate() {
+        let entry = by_face.entry(p.face).or_default();
+        entry.0.push(*p);
+        entry.1.push(k);
+    }
+    let nearest: rustc_hash::FxHashMap<u32, (NearestParam, &[usize])> = by_face
+        .iter()
+        .map(|(&face, (params, ids))| (face, (NearestParam::new(params), ids.as_slice())))
+        .collect();
     let colors: Vec<[f32; 4]> = tess
         .params
         .iter()
         .map(|p| {
             let e = nearest
-                .nearest(p.u, p.v)
+                .get(&p.face)
+                .and_then(|(n, ids)| n.nearest(p.u, p.v).map(|k| ids[k]))
                 .map_or(0.0, |k| f.geometric_errors[k]);
             error_colour(e, tolerance)
         })

@@ -17,10 +17,12 @@ use crate::remesh::fill_holes;
 use crate::remesh::planar::{planar_map, MapMethod, PlaneFrame};
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};
 use crate::surface::grid_spline::GridSpline;
+use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Clone, Debug)]
@@ -70,6 +72,8 @@ const DISTANCE_TANGENTIAL: f64 = 0.02;
 pub enum SurfaceModel {
     Bezier(BezierTriangle),
     Grid(GridSpline),
+    /// The exact Loop limit surface of an input's own coarse net (subdivided inputs).
+    Mesh(Arc<LoopLimitSurface>),
 }
 
 impl SurfaceModel {
@@ -77,6 +81,7 @@ impl SurfaceModel {
         match self {
             SurfaceModel::Bezier(b) => b,
             SurfaceModel::Grid(g) => g,
+            SurfaceModel::Mesh(m) => m.as_ref(),
         }
     }
 }
@@ -386,7 +391,7 @@ pub fn fit_scan(
         .collect();
     let degree = match &model {
         SurfaceModel::Bezier(b) => b.degree,
-        SurfaceModel::Grid(_) => 0,
+        SurfaceModel::Grid(_) | SurfaceModel::Mesh(_) => 0,
     };
     Ok(ScanFit {
         fit: PatchFit {

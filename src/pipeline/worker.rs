@@ -329,7 +329,7 @@ pub fn run_patch(
         domain: scan_info.as_ref().map(|s| s.domain.clone()),
         coords: match &fitted.model {
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
-            SurfaceModel::Bezier(_) => Vec::new(),
+            SurfaceModel::Bezier(_) | SurfaceModel::Mesh(_) => Vec::new(),
         },
         parts: Vec::new(),
     };

@@ -158,6 +158,11 @@ impl LoopLimitSurface {
         })
     }
 
+    /// The control faces (the domain faces), as given.
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.topo.triangles
+    }
+
     /// Whether a face is a single box-spline patch (all corners regular), evaluated
     /// without subdivision.
     pub fn is_regular_face(&self, face: usize) -> bool {

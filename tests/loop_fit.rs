@@ -1,0 +1,190 @@
+//! `loop` on inputs with subdivision connectivity: the exact Loop limit surface of the
+//! input's own coarse net (extraordinary vertices, boundaries) is fitted, not a remeshed
+//! lattice. Known nets are recovered from their own limit surface; the elephant fits.
+
+use trispline::fit::{Budget, FitStatus, Method};
+use trispline::io::{read_mesh_file, LoadOptions};
+use trispline::mesh::detect::Hierarchy;
+use trispline::mesh::inverse::{coarsen, InverseMethod};
+use trispline::mesh::loop_subdiv::subdivide;
+use trispline::mesh::topology::Topology;
+use trispline::pipeline::worker::{run_patch, WorkerConfig};
+use trispline::pipeline::{fit_subdivided, FitOptions, SurfaceKind};
+use trispline::surface::loop_limit::LoopLimitSurface;
+use trispline::surface::{SurfaceParam, TriSurface};
+use trispline::testdata::shared_data;
+use trispline::{DVec3, TriMesh};
+
+/// An open disc around a valence-5 centre, with a second ring whose vertices have valence
+/// 4 to 7 and boundary vertices with two to four faces: extraordinary everywhere.
+fn irregular_disc() -> TriMesh {
+    let mut positions = vec![DVec3::new(0.0, 0.0, 0.3)];
+    let ring = 5;
+    for k in 0..ring {
+        let a = std::f64::consts::TAU * k as f64 / ring as f64;
+        positions.push(DVec3::new(a.cos(), a.sin(), 0.1 * (3.0 * a).sin()));
+    }
+    let outer = 12;
+    for k in 0..outer {
+        let a = std::f64::consts::TAU * (k as f64 + 0.3) / outer as f64;
+        positions.push(DVec3::new(
+            2.1 * a.cos(),
+            2.0 * a.sin(),
+            -0.2 * (2.0 * a).cos(),
+        ));
+    }
+    let mut triangles = Vec::new();
+    for k in 0..ring as u32 {
+        triangles.push([0, 1 + k, 1 + (k + 1) % ring as u32]);
+    }
+    // Stitch the inner ring (5) to the outer ring (12) by angle.
+    let angle = |p: DVec3| p.y.atan2(p.x).rem_euclid(std::f64::consts::TAU);
+    let (mut i, mut o) = (0usize, 0usize);
+    let inner_id = |i: usize| 1 + (i % ring) as u32;
+    let outer_id = |o: usize| 1 + ring as u32 + (o % outer) as u32;
+    let inner_angle = |i: usize| angle(positions[inner_id(i) as usize]) + (i / ring) as f64 * 7.0;
+    let outer_angle = |o: usize| angle(positions[outer_id(o) as usize]) + (o / outer) as f64 * 7.0;
+    while i < ring || o < outer {
+        let advance_inner = o >= outer || (i < ring && inner_angle(i + 1) < outer_angle(o + 1));
+        if advance_inner {
+            triangles.push([inner_id(i), outer_id(o), inner_id(i + 1)]);
+            i += 1;
+        } else {
+            triangles.push([inner_id(i), outer_id(o), outer_id(o + 1)]);
+            o += 1;
+        }
+    }
+    TriMesh::new(positions, triangles)
+}
+
+/// The fine mesh of `net` subdivided `levels` times with every vertex moved onto the net's
+/// limit surface, and the coarse faces the pipeline will find.
+fn limit_samples(net: &TriMesh, levels: usize) -> TriMesh {
+    let fine = subdivide(net, levels).expect("subdivides");
+    let topo = Topology::from_mesh(&fine).expect("manifold");
+    let (hierarchy, _) = Hierarchy::detect(&topo, levels);
+    assert_eq!(hierarchy.depth(), levels);
+    let coarse = coarsen(&fine, levels, InverseMethod::Exact).expect("coarsens");
+    // Coarse vertices come in the order of the even vertices, which is the net's order.
+    assert_eq!(coarse.mesh.positions.len(), net.positions.len());
+    let surface =
+        LoopLimitSurface::new(net.positions.len(), &coarse.mesh.triangles).expect("surface");
+    let positions = hierarchy
+        .fine_vertex_params(&topo)
+        .into_iter()
+        .map(|(face, u, v)| {
+            surface
+                .evaluate(&net.positions, SurfaceParam { face, u, v })
+                .position
+        })
+        .collect();
+    TriMesh::new(positions, fine.triangles)
+}
+
+fn options(method: Method, levels: usize) -> FitOptions {
+    FitOptions {
+        surface: SurfaceKind::Loop,
+        levels,
+        method,
+        inverse: InverseMethod::Exact,
+        budget: Budget {
+            tolerance: 1e-9,
+            max_error: Some(1e-9),
+            max_iterations: 2000,
+            // Run to convergence: these tests compare with the direct solve.
+            stall_steps: 0,
+            ..Budget::default()
+        },
+    }
+}
+
+#[test]
+fn a_known_irregular_net_is_recovered_from_its_limit_surface() {
+    let net = irregular_disc();
+    let data = limit_samples(&net, 2);
+    for method in [Method::Cg, Method::Direct, Method::Pia] {
+        let fit = fit_subdivided(&data, &options(method, 2), None).expect("fits");
+        assert_eq!(fit.controls.len(), net.positions.len());
+        let worst = fit
+            .controls
+            .iter()
+            .zip(&net.positions)
+            .map(|(a, b)| a.distance(*b))
+            .fold(0.0, f64::max);
+        let last = fit.outcome.steps.last().expect("steps");
+        eprintln!(
+            "{method:?}: {} steps, max error {:.2e}, controls off by {worst:.2e}",
+            fit.outcome.iterations, last.max_error
+        );
+        assert_eq!(fit.outcome.status, FitStatus::Met, "{method:?}");
+        assert!(worst < 1e-6, "{method:?}: controls off by {worst}");
+        assert!(fit.geometric_max() < 1e-8, "{method:?}");
+    }
+}
+
+#[test]
+fn the_exact_path_writes_the_control_faces_and_warm_starts() {
+    let net = irregular_disc();
+    let mut data = limit_samples(&net, 2);
+    // Some noise so that the fit has work to do.
+    for (k, p) in data.positions.iter_mut().enumerate() {
+        p.z += 0.002 * ((k * 7919 % 101) as f64 / 101.0 - 0.5);
+    }
+    let cfg = WorkerConfig {
+        surface: SurfaceKind::Loop,
+        levels: 2,
+        min_levels: 2,
+        tessellation: 8,
+        ..WorkerConfig::default()
+    };
+    let first = run_patch(&data, None, &cfg).expect("fits");
+    assert_eq!(first.surface["kind"], "loop");
+    assert_eq!(first.surface["layout"], "mesh");
+    let faces = first.surface["control_faces"].as_array().expect("faces");
+    assert_eq!(faces.len(), net.triangles.len());
+    assert_eq!(
+        first.surface["control_points"].as_array().map(Vec::len),
+        Some(net.positions.len())
+    );
+    assert_eq!(first.report["warm_start"], false);
+    assert!(first.report.get("remeshed").is_none());
+    // GLB: every face tessellated (at least 4 x 4).
+    assert!(first.glb.len() > net.triangles.len() * 15 * 24);
+    // A new version of the same patch starts from the previous controls.
+    let second = run_patch(&data, Some(&first.warm), &cfg).expect("fits");
+    assert_eq!(second.report["warm_start"], true);
+    let steps = |r: &serde_json::Value| r["iterations"].as_array().map_or(0, Vec::len);
+    assert!(steps(&second.report) <= steps(&first.report));
+}
+
+/// The semi-regular elephant (subd2 = two exact 1-to-4 splits of subd0): fitted on its own
+/// coarse net, which has extraordinary vertices all over.
+#[test]
+fn elephant_fits_on_its_own_coarse_net() {
+    let Some(path) = shared_data("semi_regular/subd2.obj") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("reads")
+        .mesh;
+    let diag = mesh.bounds_diagonal();
+    for (levels, bound) in [(1usize, 2e-3), (2, 4e-3)] {
+        let fit = fit_subdivided(&mesh, &options(Method::Cg, levels), None).expect("fits");
+        let direct = fit_subdivided(&mesh, &options(Method::Direct, levels), None).expect("fits");
+        let rms = |f: &trispline::pipeline::PatchFit| {
+            f.outcome.steps.last().map_or(f64::MAX, |s| s.rms_error)
+        };
+        eprintln!(
+            "elephant L={levels}: {} data, {} controls, cg rms {:.3e} ({} steps), direct rms {:.3e}, geometric rms {:.3e} (diag {diag:.3})",
+            fit.data.len(),
+            fit.controls.len(),
+            rms(&fit),
+            fit.outcome.iterations,
+            rms(&direct),
+            fit.geometric_rms()
+        );
+        // CG reaches the least-squares optimum.
+        assert!(rms(&fit) <= rms(&direct) * (1.0 + 1e-6));
+        assert!(fit.geometric_rms() < bound * diag, "L={levels}");
+    }
+}
