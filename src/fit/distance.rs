@@ -36,15 +36,15 @@ impl DistanceProblem<'_> {
 
     /// M x = N^T W N x + s L^T L x.
     fn apply(&self, x: &[DVec3], scratch: &mut Vec<DVec3>, out: &mut [DVec3]) {
-        scratch.resize(self.basis.n.nrows, DVec3::ZERO);
-        self.basis.n.mul_vec3(x, scratch);
+        scratch.resize(self.basis.nrows(), DVec3::ZERO);
+        self.basis.mul_vec3(x, scratch);
         self.weigh(scratch);
-        self.basis.nt.mul_vec3(scratch, out);
+        self.basis.mul_t_vec3(scratch, out);
         if let Some(l) = self.fairness.filter(|_| self.smoothing > 0.0) {
-            let mut lx = vec![DVec3::ZERO; l.n.nrows];
-            l.n.mul_vec3(x, &mut lx);
+            let mut lx = vec![DVec3::ZERO; l.nrows()];
+            l.mul_vec3(x, &mut lx);
             let mut ltlx = vec![DVec3::ZERO; x.len()];
-            l.nt.mul_vec3(&lx, &mut ltlx);
+            l.mul_t_vec3(&lx, &mut ltlx);
             out.iter_mut()
                 .zip(&ltlx)
                 .for_each(|(o, v)| *o += *v * self.smoothing);
@@ -70,7 +70,7 @@ pub fn solve_distance(
     let mut wp = p.data.to_vec();
     p.weigh(&mut wp);
     let mut b = vec![DVec3::ZERO; m];
-    p.basis.nt.mul_vec3(&wp, &mut b);
+    p.basis.mul_t_vec3(&wp, &mut b);
     let mut mx = vec![DVec3::ZERO; m];
     p.apply(&x, &mut scratch, &mut mx);
     let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();

@@ -482,6 +482,7 @@ fn run_fit(
         smoothing,
         fairness: Some(fairness),
         pia_operator: None,
+        on_step: None,
     };
     let budget: &Budget = &opts.budget;
     Ok(fit(&problem, start, opts.method, budget)?)

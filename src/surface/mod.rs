@@ -66,6 +66,11 @@ pub trait TriSurface: Send + Sync {
         }
         d
     }
+    /// The single Bezier patch behind this surface, if that is what it is: its lattice
+    /// data get a matrix-free collocation operator.
+    fn as_bezier(&self) -> Option<&bezier::BezierTriangle> {
+        None
+    }
     /// Moves a parameter by (du, dv), staying in the domain (clamped at its boundary).
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam;
 }
