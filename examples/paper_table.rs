@@ -91,6 +91,8 @@ fn main() {
         stored.n().nnz(),
         stored.n().nnz() as f64 * 12.0 * 2.0 / 1e6,
     );
+    product_times("matrix-free", &col);
+    product_times("stored CSR", &stored);
     run_methods("", &problem, &initial);
     let csr_problem = FitProblem {
         basis: &stored,
@@ -182,6 +184,29 @@ fn loop_rows(
     );
     run_methods("loop ", &problem, &start);
     steps_to_budget("loop", &problem, &start, &[2e-3, 1e-3, 1e-4]);
+}
+
+/// Min / median of 50 products N x and N^T r.
+fn product_times(label: &str, basis: &Collocation) {
+    let x = vec![DVec3::new(0.1, 0.2, 0.3); basis.ncols()];
+    let mut y = vec![DVec3::ZERO; basis.nrows()];
+    let mut z = vec![DVec3::ZERO; basis.ncols()];
+    let (mut tn, mut tt) = (Vec::new(), Vec::new());
+    for _ in 0..50 {
+        let t = Instant::now();
+        basis.mul_vec3(&x, &mut y);
+        tn.push(t.elapsed().as_secs_f64() * 1e6);
+        let t = Instant::now();
+        basis.mul_t_vec3(&y, &mut z);
+        tt.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    std::hint::black_box(&z);
+    tn.sort_by(f64::total_cmp);
+    tt.sort_by(f64::total_cmp);
+    println!(
+        "{label}: N x {:.0} us min / {:.0} median, N^T r {:.0} us min / {:.0} median",
+        tn[0], tn[25], tt[0], tt[25]
+    );
 }
 
 fn stored_matrix(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Collocation {

@@ -106,6 +106,43 @@ fn dot<const F: bool>(a: &[f64], b: &[f64]) -> f64 {
     (half[0] + half[1]) + (half[2] + half[3]) + tail
 }
 
+/// ys[l] += a[l] x for three lanes in one pass over x (x is the large operand).
+#[inline(always)]
+fn axpy3<const F: bool>(a: [f64; 3], x: &[f64], ys: &mut [f64]) {
+    let len = x.len();
+    let (y0, rest) = ys.split_at_mut(len);
+    let (y1, y2) = rest.split_at_mut(len);
+    for (((x, y0), y1), y2) in x.iter().zip(y0).zip(y1).zip(y2) {
+        *y0 = madd::<F>(a[0], *x, *y0);
+        *y1 = madd::<F>(a[1], *x, *y1);
+        *y2 = madd::<F>(a[2], *x, *y2);
+    }
+}
+
+/// Three dot products against one shared operand `a`, in one pass over it.
+#[inline(always)]
+fn dot3<const F: bool>(a: &[f64], ys: &[f64]) -> [f64; 3] {
+    let len = a.len();
+    let (y0, rest) = ys.split_at(len);
+    let (y1, y2) = rest.split_at(len);
+    let mut acc = [[0.0; 4]; 3];
+    let chunks = len / 4;
+    for c in 0..chunks {
+        for k in 0..4 {
+            let p = 4 * c + k;
+            acc[0][k] = madd::<F>(a[p], y0[p], acc[0][k]);
+            acc[1][k] = madd::<F>(a[p], y1[p], acc[1][k]);
+            acc[2][k] = madd::<F>(a[p], y2[p], acc[2][k]);
+        }
+    }
+    let mut out = [0.0; 3];
+    for (l, y) in [y0, y1, y2].into_iter().enumerate() {
+        let tail: f64 = (4 * chunks..len).map(|p| a[p] * y[p]).sum();
+        out[l] = (acc[l][0] + acc[l][1]) + (acc[l][2] + acc[l][3]) + tail;
+    }
+    out
+}
+
 /// Whether this CPU has AVX2 and FMA (checked once; the answer cannot change).
 fn wide() -> bool {
     #[cfg(target_arch = "x86_64")]
@@ -304,10 +341,17 @@ impl BezierRows {
             let planes = &self.bt[a * n1..e * n1];
             acc.clear();
             acc.resize(L * len, 0.0);
-            for l in 0..L {
-                let y = &mut acc[l * len..(l + 1) * len];
+            if L == 3 {
                 for i in 0..n1 {
-                    axpy::<F>(curve[l * n1 + i], &planes[i * len..(i + 1) * len], y);
+                    let c = [curve[i], curve[n1 + i], curve[2 * n1 + i]];
+                    axpy3::<F>(c, &planes[i * len..(i + 1) * len], &mut acc);
+                }
+            } else {
+                for l in 0..L {
+                    let y = &mut acc[l * len..(l + 1) * len];
+                    for i in 0..n1 {
+                        axpy::<F>(curve[l * n1 + i], &planes[i * len..(i + 1) * len], y);
+                    }
                 }
             }
             for p in 0..len {
@@ -331,7 +375,7 @@ impl BezierRows {
         let g = n1 * n1;
         let mut grid = vec![0.0; L * g];
         let mut vals: Vec<f64> = Vec::new();
-        let mut d = vec![0.0; n1];
+        let mut d = vec![0.0; L * n1];
         for r in rows.0..rows.1 {
             let (a, e) = (self.start[r], self.start[r + 1]);
             let len = e - a;
@@ -348,13 +392,25 @@ impl BezierRows {
             }
             let planes = &self.bt[a * n1..e * n1];
             let bv = &self.bv[r * n1..(r + 1) * n1];
-            for l in 0..L {
-                let yl = &vals[l * len..(l + 1) * len];
-                for (i, di) in d.iter_mut().enumerate() {
-                    *di = dot::<F>(&planes[i * len..(i + 1) * len], yl);
+            if L == 3 {
+                for i in 0..n1 {
+                    let v = dot3::<F>(&planes[i * len..(i + 1) * len], &vals);
+                    for (l, v) in v.into_iter().enumerate() {
+                        d[l * n1 + i] = v;
+                    }
                 }
+            } else {
+                for l in 0..L {
+                    let yl = &vals[l * len..(l + 1) * len];
+                    for i in 0..n1 {
+                        d[l * n1 + i] = dot::<F>(&planes[i * len..(i + 1) * len], yl);
+                    }
+                }
+            }
+            for l in 0..L {
+                let dl = &d[l * n1..(l + 1) * n1];
                 for (s, &b) in bv.iter().enumerate() {
-                    axpy::<F>(b, &d, &mut grid[l * g + s * n1..l * g + (s + 1) * n1]);
+                    axpy::<F>(b, dl, &mut grid[l * g + s * n1..l * g + (s + 1) * n1]);
                 }
             }
         }
