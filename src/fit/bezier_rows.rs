@@ -127,12 +127,15 @@ fn dot3<const F: bool>(a: &[f64], ys: &[f64]) -> [f64; 3] {
     let (y1, y2) = rest.split_at(len);
     let mut acc = [[0.0; 4]; 3];
     let chunks = len / 4;
-    for c in 0..chunks {
-        for k in 0..4 {
-            let p = 4 * c + k;
-            acc[0][k] = madd::<F>(a[p], y0[p], acc[0][k]);
-            acc[1][k] = madd::<F>(a[p], y1[p], acc[1][k]);
-            acc[2][k] = madd::<F>(a[p], y2[p], acc[2][k]);
+    let quads = a
+        .chunks_exact(4)
+        .zip(y0.chunks_exact(4))
+        .zip(y1.chunks_exact(4).zip(y2.chunks_exact(4)));
+    for ((a, y0), (y1, y2)) in quads {
+        for (k, &ak) in a.iter().enumerate() {
+            acc[0][k] = madd::<F>(ak, y0[k], acc[0][k]);
+            acc[1][k] = madd::<F>(ak, y1[k], acc[1][k]);
+            acc[2][k] = madd::<F>(ak, y2[k], acc[2][k]);
         }
     }
     let mut out = [0.0; 3];
