@@ -12,11 +12,18 @@
 //! points outside the domain; those start as reflections of the net across its boundary
 //! (2 p_boundary - p_inside) and PIA moves each by the update of its nearest net point.
 //!
+//! Timings: each method's 10 steps are run 15 times (min / median reported; the machine is
+//! shared). LSPIA's first run includes its 40-step power iteration for lambda_max; the
+//! collocation keeps the estimate, so later runs (like warm starts) skip it. The Bezier
+//! rows run on the matrix-free collocation operator (`fit::bezier_rows`); the same fits on
+//! the stored CSR matrix are timed alongside for comparison and must print the same rows.
+//! Last, steps (and time) each method needs to reach a max-error budget.
+//!
 //! Run: cargo run --release --example paper_table
 
 use glam::DVec3;
 use std::time::Instant;
-use trispline::fit::{fit, Budget, FitProblem, Method};
+use trispline::fit::{fit, Budget, Collocation, Csr, FitProblem, FitStatus, Method};
 use trispline::mesh::detect::Hierarchy;
 use trispline::mesh::inverse::{coarsen, composed_exact_inverse, InverseMethod};
 use trispline::mesh::topology::Topology;
@@ -25,7 +32,7 @@ use trispline::surface::bezier::{
     lattice_index, lattice_points, lattice_triangles, BezierTriangle,
 };
 use trispline::surface::box_spline::LatticeSpline;
-use trispline::surface::SurfaceParam;
+use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::TriMesh;
 
 fn surface(u: f64, v: f64) -> DVec3 {
@@ -63,6 +70,9 @@ fn main() {
     let params = lattice_params(&points, fine_n);
     let col = collocation(&BezierTriangle::new(degree), &params);
     let setup_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let t1 = Instant::now();
+    let stored = stored_matrix(&BezierTriangle::new(degree), &params);
+    let stored_ms = t1.elapsed().as_secs_f64() * 1e3;
     let pia_op = |res: &[DVec3]| r.apply(res);
     let problem = FitProblem {
         basis: &col,
@@ -70,10 +80,27 @@ fn main() {
         smoothing: 0.0,
         fairness: None,
         pia_operator: Some(&pia_op),
+        on_step: None,
     };
     println!("data points {} (lattice {fine_n}), inverse levels {levels}, degree {degree}, control points {}", data.len(), initial.len());
-    println!("setup (topology, detection, inverse Loop, collocation matrix): {setup_ms:.2} ms");
+    println!("setup (topology, detection, inverse Loop, collocation operator): {setup_ms:.2} ms");
+    println!(
+        "collocation: matrix-free {} ({} lattice rows); the stored CSR matrix would hold {} weights ({:.1} MB, {stored_ms:.1} ms to build)",
+        col.is_matrix_free(),
+        fine_n + 1,
+        stored.n().nnz(),
+        stored.n().nnz() as f64 * 12.0 * 2.0 / 1e6,
+    );
+    product_times("matrix-free", &col);
+    product_times("stored CSR", &stored);
     run_methods("", &problem, &initial);
+    let csr_problem = FitProblem {
+        basis: &stored,
+        ..problem
+    };
+    println!("\nThe same 10 steps on the stored CSR matrix (N and N^T):");
+    run_methods("csr ", &csr_problem, &initial);
+    steps_to_budget("bezier", &problem, &initial, &[2e-3, 1e-3, 1e-4]);
 
     loop_rows(
         &points,
@@ -149,16 +176,97 @@ fn loop_rows(
         smoothing: 0.0,
         fairness: None,
         pia_operator: Some(&pia_op),
+        on_step: None,
     };
     println!(
         "\nloop: Loop limit surface of the {n}-segment net, {} control points (net + one ring)",
         start.len()
     );
     run_methods("loop ", &problem, &start);
+    steps_to_budget("loop", &problem, &start, &[2e-3, 1e-3, 1e-4]);
 }
 
-/// 10 steps of each method from `start`: best-of-5 time and the rows of table 2 (from the
-/// last run; all runs are identical).
+/// Min / median of 50 products N x and N^T r.
+fn product_times(label: &str, basis: &Collocation) {
+    let x = vec![DVec3::new(0.1, 0.2, 0.3); basis.ncols()];
+    let mut y = vec![DVec3::ZERO; basis.nrows()];
+    let mut z = vec![DVec3::ZERO; basis.ncols()];
+    let (mut tn, mut tt) = (Vec::new(), Vec::new());
+    for _ in 0..50 {
+        let t = Instant::now();
+        basis.mul_vec3(&x, &mut y);
+        tn.push(t.elapsed().as_secs_f64() * 1e6);
+        let t = Instant::now();
+        basis.mul_t_vec3(&y, &mut z);
+        tt.push(t.elapsed().as_secs_f64() * 1e6);
+    }
+    std::hint::black_box(&z);
+    tn.sort_by(f64::total_cmp);
+    tt.sort_by(f64::total_cmp);
+    println!(
+        "{label}: N x {:.0} us min / {:.0} median, N^T r {:.0} us min / {:.0} median",
+        tn[0], tn[25], tt[0], tt[25]
+    );
+}
+
+fn stored_matrix(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Collocation {
+    let rows: Vec<Vec<(u32, f64)>> = params
+        .iter()
+        .map(|p| {
+            let mut row = Vec::new();
+            surface.basis_row(*p, &mut row);
+            row
+        })
+        .collect();
+    Collocation::new(Csr::from_rows(
+        surface.control_count(),
+        rows.iter().map(|r| r.as_slice()),
+    ))
+}
+
+/// Steps and time each method needs until the max error is at most each target.
+fn steps_to_budget(label: &str, problem: &FitProblem, start: &[DVec3], targets: &[f64]) {
+    println!(
+        "\n{label}: steps to reach max error <= target (cap 5000 steps; time = min of 3 runs)"
+    );
+    println!("| target | pia | lspia | cg |\n|---|---|---|---|");
+    for &target in targets {
+        let mut cells = Vec::new();
+        for method in [Method::Pia, Method::Lspia, Method::Cg] {
+            let budget = Budget {
+                tolerance: target,
+                max_error: Some(target),
+                max_iterations: 5000,
+                stall_steps: 0,
+                ..Budget::default()
+            };
+            let mut best = f64::MAX;
+            let mut last = None;
+            for _ in 0..3 {
+                let t = Instant::now();
+                let out = fit(problem, start.to_vec(), method, &budget).expect("fit");
+                best = best.min(t.elapsed().as_secs_f64() * 1e3);
+                last = Some(out);
+            }
+            cells.push(match last {
+                Some(out) if out.status == FitStatus::Met => {
+                    format!("{} steps, {best:.2} ms", out.iterations)
+                }
+                Some(out) => format!(
+                    "not met ({:?} after {}, max {:.2e})",
+                    out.status,
+                    out.iterations,
+                    out.steps.last().map_or(f64::NAN, |s| s.max_error)
+                ),
+                None => "-".into(),
+            });
+        }
+        println!("| {target:e} | {} |", cells.join(" | "));
+    }
+}
+
+/// 10 steps of each method from `start`: min / median time of 15 runs and the rows of
+/// table 2 (from the last run; all runs are identical).
 fn run_methods(label: &str, problem: &FitProblem, start: &[DVec3]) {
     let budget = Budget {
         tolerance: 0.002,
@@ -167,16 +275,22 @@ fn run_methods(label: &str, problem: &FitProblem, start: &[DVec3]) {
         ..Budget::default()
     };
     for method in [Method::Pia, Method::Lspia, Method::Cg] {
-        let mut best = f64::MAX;
+        let mut times = Vec::new();
         let mut outcome = None;
-        for _ in 0..5 {
+        for _ in 0..15 {
             let t = Instant::now();
             let out = fit(problem, start.to_vec(), method, &budget).expect("fit");
-            best = best.min(t.elapsed().as_secs_f64() * 1e3);
+            times.push(t.elapsed().as_secs_f64() * 1e3);
             outcome = Some(out);
         }
         let Some(out) = outcome else { continue };
-        println!("\n{label}{method:?}: 10 steps in {best:.2} ms (best of 5)");
+        let first = times[0];
+        times.sort_by(f64::total_cmp);
+        println!(
+            "\n{label}{method:?}: 10 steps in {:.2} ms min, {:.2} ms median (15 runs); first run {first:.2} ms",
+            times[0],
+            times[times.len() / 2]
+        );
         println!("| k | max | mean | N% (<= 0.002) |\n|---|---|---|---|");
         for s in &out.steps {
             println!(

@@ -85,13 +85,14 @@ fn every_iterative_method_recovers_a_known_net_from_exact_data() {
     let col = collocation(&s, &ps);
     let truth = known_net(n);
     let mut data = vec![DVec3::ZERO; ps.len()];
-    col.n.mul_vec3(&truth, &mut data);
+    col.mul_vec3(&truth, &mut data);
     let problem = FitProblem {
         basis: &col,
         data: &data,
         smoothing: 0.0,
         fairness: None,
         pia_operator: None,
+        on_step: None,
     };
     for (method, iters) in [
         (Method::Cg, 200),
@@ -115,7 +116,7 @@ fn lspia_and_cg_converge_to_the_direct_solution_on_noisy_data() {
     let ps = params(2000, 11);
     let col = collocation(&s, &ps);
     let mut data = vec![DVec3::ZERO; ps.len()];
-    col.n.mul_vec3(&known_net(n), &mut data);
+    col.mul_vec3(&known_net(n), &mut data);
     let mut r = rng(5);
     data.iter_mut()
         .for_each(|p| *p += DVec3::new(r() - 0.5, r() - 0.5, r() - 0.5) * 0.02);
@@ -127,6 +128,7 @@ fn lspia_and_cg_converge_to_the_direct_solution_on_noisy_data() {
             smoothing,
             fairness: Some(&lap),
             pia_operator: None,
+            on_step: None,
         };
         let direct = fit(&problem, flat_start(n), Method::Direct, &exact_budget(1))
             .expect("direct")
@@ -164,6 +166,7 @@ fn smoothing_keeps_controls_without_data_sane() {
         smoothing: 1e-4,
         fairness: Some(&lap),
         pia_operator: None,
+        on_step: None,
     };
     let out = fit(&problem, flat_start(n), Method::Cg, &exact_budget(2000)).expect("fits");
     let worst = out.controls.iter().map(|p| p.z.abs()).fold(0.0, f64::max);
@@ -178,7 +181,7 @@ fn budget_statuses() {
     let ps = params(1500, 13);
     let col = collocation(&s, &ps);
     let mut data = vec![DVec3::ZERO; ps.len()];
-    col.n.mul_vec3(&known_net(n), &mut data);
+    col.mul_vec3(&known_net(n), &mut data);
     let mut r = rng(9);
     data.iter_mut()
         .for_each(|p| *p += DVec3::new(0.0, 0.0, r() - 0.5) * 0.01);
@@ -188,6 +191,7 @@ fn budget_statuses() {
         smoothing: 0.0,
         fairness: None,
         pia_operator: None,
+        on_step: None,
     };
     // Reachable: noise is +-0.005, so a 0.01 max error is attainable.
     let met = Budget {
@@ -241,7 +245,7 @@ fn pia_converges_on_a_square_problem() {
     let col = collocation(&s, &ps);
     let truth = known_net(n);
     let mut data = vec![DVec3::ZERO; ps.len()];
-    col.n.mul_vec3(&truth, &mut data);
+    col.mul_vec3(&truth, &mut data);
     let identity = |r: &[DVec3]| r.to_vec();
     let problem = FitProblem {
         basis: &col,
@@ -249,6 +253,7 @@ fn pia_converges_on_a_square_problem() {
         smoothing: 0.0,
         fairness: None,
         pia_operator: Some(&identity),
+        on_step: None,
     };
     let out = fit(&problem, data.clone(), Method::Pia, &exact_budget(3000)).expect("fits");
     assert!(max_diff(&out.controls, &truth) < 1e-8);
@@ -265,11 +270,12 @@ fn power_iteration_estimates_lambda_max() {
     let s = BezierTriangle::new(n);
     let ps = params(300, 17);
     let col = collocation(&s, &ps);
-    let nc = col.n.ncols;
+    let nc = col.ncols();
     let mut dense = nalgebra::DMatrix::<f64>::zeros(ps.len(), nc);
-    for r in 0..col.n.nrows {
-        for k in col.n.row_ptr[r]..col.n.row_ptr[r + 1] {
-            dense[(r, col.n.col_idx[k] as usize)] = col.n.values[k];
+    let m = col.n();
+    for r in 0..m.nrows {
+        for k in m.row_ptr[r]..m.row_ptr[r + 1] {
+            dense[(r, m.col_idx[k] as usize)] = m.values[k];
         }
     }
     let ata = dense.transpose() * &dense;

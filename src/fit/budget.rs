@@ -1,6 +1,10 @@
 //! Error budgets and fit statuses.
 
 use glam::DVec3;
+use rayon::prelude::*;
+
+/// Residual statistics of more points than this are computed in parallel chunks.
+const STATS_CHUNK: usize = 1 << 16;
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Budget {
@@ -55,14 +59,26 @@ pub struct StepStats {
 impl StepStats {
     pub fn from_residuals(k: usize, residuals: &[DVec3], tolerance: f64, elapsed_ms: f64) -> Self {
         let n = residuals.len().max(1) as f64;
-        let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
-        for r in residuals {
-            let d = r.length();
-            max = max.max(d);
-            sum += d;
-            sum2 += d * d;
-            within += usize::from(d <= tolerance);
-        }
+        let chunk = |rs: &[DVec3]| {
+            let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
+            for r in rs {
+                let d = r.length();
+                max = max.max(d);
+                sum += d;
+                sum2 += d * d;
+                within += usize::from(d <= tolerance);
+            }
+            (max, sum, sum2, within)
+        };
+        // Fixed chunks summed in order: the same figures whatever the thread count.
+        let (max, sum, sum2, within) = if residuals.len() <= STATS_CHUNK {
+            chunk(residuals)
+        } else {
+            let parts: Vec<_> = residuals.par_chunks(STATS_CHUNK).map(chunk).collect();
+            parts.into_iter().fold((0.0f64, 0.0, 0.0, 0), |a, p| {
+                (a.0.max(p.0), a.1 + p.1, a.2 + p.2, a.3 + p.3)
+            })
+        };
         Self {
             k,
             max_error: max,

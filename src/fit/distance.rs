@@ -39,15 +39,15 @@ impl DistanceProblem<'_> {
 
     /// M x = N^T W N x + s L^T L x.
     fn apply(&self, x: &[DVec3], scratch: &mut Vec<DVec3>, out: &mut [DVec3]) {
-        scratch.resize(self.basis.n.nrows, DVec3::ZERO);
-        self.basis.n.mul_vec3(x, scratch);
+        scratch.resize(self.basis.nrows(), DVec3::ZERO);
+        self.basis.mul_vec3(x, scratch);
         self.weigh(scratch);
-        self.basis.nt.mul_vec3(scratch, out);
+        self.basis.mul_t_vec3(scratch, out);
         if let Some(l) = self.fairness.filter(|_| self.smoothing > 0.0) {
-            let mut lx = vec![DVec3::ZERO; l.n.nrows];
-            l.n.mul_vec3(x, &mut lx);
+            let mut lx = vec![DVec3::ZERO; l.nrows()];
+            l.mul_vec3(x, &mut lx);
             let mut ltlx = vec![DVec3::ZERO; x.len()];
-            l.nt.mul_vec3(&lx, &mut ltlx);
+            l.mul_t_vec3(&lx, &mut ltlx);
             out.iter_mut()
                 .zip(&ltlx)
                 .for_each(|(o, v)| *o += *v * self.smoothing);
@@ -58,13 +58,13 @@ impl DistanceProblem<'_> {
 /// The inverses of the 3x3 diagonal blocks of M (symmetric, stored as [xx, xy, xz, yy, yz,
 /// zz]); a block that cannot be inverted (no data, no fairness) becomes the identity.
 fn block_jacobi(p: &DistanceProblem) -> Vec<glam::DMat3> {
-    let nt = &p.basis.nt;
+    let nt = &p.basis.nt();
     let t = p.tangential;
     let fair_diag: Vec<f64> = match p.fairness.filter(|_| p.smoothing > 0.0) {
-        Some(l) => (0..l.nt.nrows)
+        Some(l) => (0..l.nt().nrows)
             .map(|c| {
-                let range = l.nt.row_ptr[c]..l.nt.row_ptr[c + 1];
-                l.nt.values[range].iter().map(|w| w * w).sum::<f64>() * p.smoothing
+                let range = l.nt().row_ptr[c]..l.nt().row_ptr[c + 1];
+                l.nt().values[range].iter().map(|w| w * w).sum::<f64>() * p.smoothing
             })
             .collect(),
         None => vec![0.0; nt.nrows],
@@ -124,7 +124,7 @@ pub fn solve_distance(
     let mut wp = p.data.to_vec();
     p.weigh(&mut wp);
     let mut b = vec![DVec3::ZERO; m];
-    p.basis.nt.mul_vec3(&wp, &mut b);
+    p.basis.mul_t_vec3(&wp, &mut b);
     let mut mx = vec![DVec3::ZERO; m];
     p.apply(&x, &mut scratch, &mut mx);
     let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();

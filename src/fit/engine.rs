@@ -4,6 +4,7 @@
 use super::budget::{Budget, FitStatus, StepStats};
 use super::sparse::{Collocation, Csr};
 use glam::DVec3;
+use rayon::prelude::*;
 use std::time::Instant;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -49,7 +50,12 @@ pub struct FitProblem<'a> {
     /// Fairness operator L over control points (with its transpose).
     pub fairness: Option<&'a Collocation>,
     pub pia_operator: Option<PiaOperator<'a>>,
+    /// Called with every step's statistics as soon as they exist (k = 0, the starting
+    /// net, first), e.g. for a progress bar. Runs on the fitting thread between steps.
+    pub on_step: Option<StepHook<'a>>,
 }
+
+pub type StepHook<'a> = &'a (dyn Fn(&StepStats) + Sync);
 
 #[derive(Clone, Debug)]
 pub struct FitOutcome {
@@ -71,28 +77,25 @@ impl Stacked<'_> {
         self.p.fairness.filter(|_| self.root_s > 0.0)
     }
     fn apply(&self, x: &[DVec3], data_part: &mut [DVec3], fair_part: &mut Vec<DVec3>) {
-        self.p.basis.n.mul_vec3(x, data_part);
+        self.p.basis.mul_vec3(x, data_part);
         if let Some(l) = self.fair() {
-            fair_part.resize(l.n.nrows, DVec3::ZERO);
-            l.n.mul_vec3(x, fair_part);
+            fair_part.resize(l.nrows(), DVec3::ZERO);
+            l.mul_vec3(x, fair_part);
             fair_part.iter_mut().for_each(|v| *v *= self.root_s);
         }
     }
     /// Residuals of the stacked system at x: data part p - N x, fairness part -sqrt(s) L x.
     fn residuals(&self, x: &[DVec3], data_part: &mut [DVec3], fair_part: &mut Vec<DVec3>) {
         self.apply(x, data_part, fair_part);
-        data_part
-            .iter_mut()
-            .zip(self.p.data)
-            .for_each(|(r, p)| *r = *p - *r);
+        update(data_part, self.p.data, |r, p| *r = p - *r);
         fair_part.iter_mut().for_each(|v| *v = -*v);
     }
 
     fn apply_t(&self, data_part: &[DVec3], fair_part: &[DVec3], out: &mut [DVec3]) {
-        self.p.basis.nt.mul_vec3(data_part, out);
+        self.p.basis.mul_t_vec3(data_part, out);
         if let Some(l) = self.fair() {
             let mut tmp = vec![DVec3::ZERO; out.len()];
-            l.nt.mul_vec3(fair_part, &mut tmp);
+            l.mul_t_vec3(fair_part, &mut tmp);
             out.iter_mut()
                 .zip(&tmp)
                 .for_each(|(o, t)| *o += *t * self.root_s);
@@ -100,8 +103,33 @@ impl Stacked<'_> {
     }
 }
 
+/// Vectors longer than this are reduced and updated in parallel, in fixed chunks so that
+/// results do not depend on the thread count.
+const VEC_CHUNK: usize = 1 << 16;
+
 fn dot3(a: &[DVec3], b: &[DVec3]) -> DVec3 {
-    a.iter().zip(b).map(|(x, y)| *x * *y).sum()
+    let seq =
+        |(a, b): (&[DVec3], &[DVec3])| -> DVec3 { a.iter().zip(b).map(|(x, y)| *x * *y).sum() };
+    if a.len() <= VEC_CHUNK {
+        return seq((a, b));
+    }
+    let parts: Vec<DVec3> = a
+        .par_chunks(VEC_CHUNK)
+        .zip(b.par_chunks(VEC_CHUNK))
+        .map(seq)
+        .collect();
+    parts.into_iter().sum()
+}
+
+/// y = f(y, x) element-wise.
+fn update(y: &mut [DVec3], x: &[DVec3], f: impl Fn(&mut DVec3, DVec3) + Sync) {
+    if y.len() <= VEC_CHUNK {
+        y.iter_mut().zip(x).for_each(|(y, x)| f(y, *x));
+    } else {
+        y.par_iter_mut()
+            .zip(x.par_iter())
+            .for_each(|(y, x)| f(y, *x));
+    }
 }
 
 /// Largest eigenvalue of A^T A by power iteration from the all-ones vector, which for a
@@ -112,24 +140,20 @@ pub fn lambda_max(
     smoothing: f64,
     iterations: usize,
 ) -> f64 {
-    let nc = basis.n.ncols;
+    let nc = basis.ncols();
     let mut x = vec![1.0 / (nc as f64).sqrt(); nc];
     let mut lambda = 0.0;
-    let scalar = |m: &Csr, x: &[f64]| -> Vec<f64> {
-        (0..m.nrows)
-            .map(|r| {
-                (m.row_ptr[r]..m.row_ptr[r + 1])
-                    .map(|k| m.values[k] * x[m.col_idx[k] as usize])
-                    .sum()
-            })
-            .collect()
+    let normal = |m: &Collocation, x: &[f64]| -> Vec<f64> {
+        let mut mx = vec![0.0; m.nrows()];
+        m.mul_scalar(x, &mut mx);
+        let mut out = vec![0.0; m.ncols()];
+        m.mul_t_scalar(&mx, &mut out);
+        out
     };
     for _ in 0..iterations {
-        let nx = scalar(&basis.n, &x);
-        let mut y = scalar(&basis.nt, &nx);
+        let mut y = normal(basis, &x);
         if let Some(l) = fairness.filter(|_| smoothing > 0.0) {
-            let lx = scalar(&l.n, &x);
-            let lt = scalar(&l.nt, &lx);
+            let lt = normal(l, &x);
             y.iter_mut().zip(&lt).for_each(|(a, b)| *a += smoothing * b);
         }
         let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -148,13 +172,19 @@ pub fn fit(
     method: Method,
     budget: &Budget,
 ) -> Result<FitOutcome, FitError> {
-    let n = &problem.basis.n;
-    if problem.data.len() != n.nrows {
-        return Err(FitError::Shape(problem.data.len(), n.nrows));
+    let n = problem.basis;
+    let (nrows, ncols) = (n.nrows(), n.ncols());
+    if problem.data.len() != nrows {
+        return Err(FitError::Shape(problem.data.len(), nrows));
     }
-    if initial.len() != n.ncols {
-        return Err(FitError::InitialShape(initial.len(), n.ncols));
+    if initial.len() != ncols {
+        return Err(FitError::InitialShape(initial.len(), ncols));
     }
+    let report = |s: &StepStats| {
+        if let Some(hook) = problem.on_step {
+            hook(s);
+        }
+    };
     let start = Instant::now();
     let elapsed = || start.elapsed().as_secs_f64() * 1e3;
     let a = Stacked {
@@ -162,7 +192,7 @@ pub fn fit(
         root_s: problem.smoothing.max(0.0).sqrt(),
     };
     let mut x = initial;
-    let mut r_data = vec![DVec3::ZERO; n.nrows];
+    let mut r_data = vec![DVec3::ZERO; nrows];
     let mut r_fair = Vec::new();
     a.residuals(&x, &mut r_data, &mut r_fair);
     let mut steps = vec![StepStats::from_residuals(
@@ -171,6 +201,7 @@ pub fn fit(
         budget.tolerance,
         elapsed(),
     )];
+    report(&steps[0]);
     let time_up = |t: f64| budget.max_time_ms.is_some_and(|m| t >= m as f64);
     let finish = |x: Vec<DVec3>, steps: Vec<StepStats>, status| {
         let iterations = steps.len() - 1;
@@ -186,7 +217,7 @@ pub fn fit(
     }
     if method == Method::Direct {
         let x = direct_solve(problem)?;
-        let mut fitted = vec![DVec3::ZERO; n.nrows];
+        let mut fitted = vec![DVec3::ZERO; nrows];
         n.mul_vec3(&x, &mut fitted);
         let res: Vec<DVec3> = problem
             .data
@@ -200,6 +231,7 @@ pub fn fit(
             budget.tolerance,
             elapsed(),
         ));
+        report(&steps[1]);
         let status = if budget.met(&steps[1]) || !budget.has_targets() {
             FitStatus::Met
         } else {
@@ -211,7 +243,12 @@ pub fn fit(
         return Err(FitError::NoPiaOperator);
     }
     let mu = if method == Method::Lspia {
-        let lambda = lambda_max(problem.basis, problem.fairness, problem.smoothing, 40);
+        let estimate = || lambda_max(problem.basis, problem.fairness, problem.smoothing, 40);
+        let lambda = if problem.fairness.is_none() || problem.smoothing <= 0.0 {
+            problem.basis.cached_lambda_max(estimate)
+        } else {
+            estimate()
+        };
         1.9 / (1.02 * lambda.max(1e-300))
     } else {
         0.0
@@ -222,7 +259,7 @@ pub fn fit(
     let grad0 = dot3(&grad, &grad).max_element().max(1e-300);
     let mut dir = grad.clone();
     let mut gamma = dot3(&grad, &grad);
-    let mut q_data = vec![DVec3::ZERO; n.nrows];
+    let mut q_data = vec![DVec3::ZERO; nrows];
     let mut q_fair = Vec::new();
     for k in 1..=budget.max_iterations {
         match method {
@@ -230,11 +267,8 @@ pub fn fit(
                 a.apply(&dir, &mut q_data, &mut q_fair);
                 let delta = dot3(&q_data, &q_data) + dot3(&q_fair, &q_fair);
                 let alpha = DVec3::select(delta.cmpgt(DVec3::ZERO), gamma / delta, DVec3::ZERO);
-                x.iter_mut().zip(&dir).for_each(|(xi, d)| *xi += alpha * *d);
-                r_data
-                    .iter_mut()
-                    .zip(&q_data)
-                    .for_each(|(r, q)| *r -= alpha * *q);
+                update(&mut x, &dir, |xi, d| *xi += alpha * d);
+                update(&mut r_data, &q_data, |r, q| *r -= alpha * q);
                 r_fair
                     .iter_mut()
                     .zip(&q_fair)
@@ -242,13 +276,11 @@ pub fn fit(
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 let gamma_new = dot3(&grad, &grad);
                 let beta = DVec3::select(gamma.cmpgt(DVec3::ZERO), gamma_new / gamma, DVec3::ZERO);
-                dir.iter_mut()
-                    .zip(&grad)
-                    .for_each(|(d, g)| *d = *g + beta * *d);
+                update(&mut dir, &grad, |d, g| *d = g + beta * *d);
                 gamma = gamma_new;
             }
             Method::Lspia => {
-                x.iter_mut().zip(&grad).for_each(|(xi, g)| *xi += *g * mu);
+                update(&mut x, &grad, |xi, g| *xi += g * mu);
                 a.residuals(&x, &mut r_data, &mut r_fair);
                 a.apply_t(&r_data, &r_fair, &mut grad);
                 gamma = dot3(&grad, &grad);
@@ -265,6 +297,7 @@ pub fn fit(
         }
         let stats = StepStats::from_residuals(k, &r_data, budget.tolerance, elapsed());
         let converged = gamma.max_element() <= 1e-26 * grad0;
+        report(&stats);
         steps.push(stats);
         let last = &steps[k];
         if budget.met(last) {
@@ -293,50 +326,88 @@ pub fn fit(
     finish(x, steps, status)
 }
 
-/// Dense Cholesky of the normal equations. Used as ground truth and for small nets; a
-/// sparse factorisation is needed beyond a few thousand control points.
-pub const DIRECT_MAX_CONTROLS: usize = 6000;
-
-fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
-    let n = &problem.basis.n;
-    let nc = n.ncols;
-    if nc > DIRECT_MAX_CONTROLS {
-        return Err(FitError::Direct(format!(
-            "{nc} control points; the dense solve takes at most {DIRECT_MAX_CONTROLS}"
-        )));
-    }
-    let mut m = nalgebra::DMatrix::<f64>::zeros(nc, nc);
-    let mut rhs = nalgebra::DMatrix::<f64>::zeros(nc, 3);
-    let mut accumulate = |csr: &Csr, scale: f64, data: Option<&[DVec3]>| {
-        for r in 0..csr.nrows {
-            let range = csr.row_ptr[r]..csr.row_ptr[r + 1];
-            for a in range.clone() {
-                let (ca, wa) = (csr.col_idx[a] as usize, csr.values[a]);
-                for b in range.clone() {
-                    m[(ca, csr.col_idx[b] as usize)] += scale * wa * csr.values[b];
-                }
-                if let Some(d) = data {
-                    let p = d[r];
-                    for (k, c) in [p.x, p.y, p.z].into_iter().enumerate() {
-                        rhs[(ca, k)] += wa * c;
+/// The lower triangle of `sum_k scale_k A_k^T A_k` as CSC columns (column c holds rows
+/// >= c, sorted), each `A_k` given with its transpose so a column is one sparse gather.
+fn normal_lower(nc: usize, terms: &[(&Csr, &Csr, f64)]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    let columns: Vec<(Vec<usize>, Vec<f64>)> = (0..nc)
+        .into_par_iter()
+        .map_init(
+            || (vec![0.0f64; nc], vec![false; nc], Vec::<usize>::new()),
+            |(acc, seen, touched), c| {
+                touched.clear();
+                for &(a, at, scale) in terms {
+                    for k in at.row_ptr[c]..at.row_ptr[c + 1] {
+                        let (r, wc) = (at.col_idx[k] as usize, at.values[k] * scale);
+                        for m in a.row_ptr[r]..a.row_ptr[r + 1] {
+                            let j = a.col_idx[m] as usize;
+                            if j < c {
+                                continue;
+                            }
+                            if !seen[j] {
+                                seen[j] = true;
+                                touched.push(j);
+                            }
+                            acc[j] += wc * a.values[m];
+                        }
                     }
                 }
-            }
-        }
-    };
-    accumulate(n, 1.0, Some(problem.data));
-    if let Some(l) = problem.fairness.filter(|_| problem.smoothing > 0.0) {
-        accumulate(&l.n, problem.smoothing, None);
+                touched.sort_unstable();
+                let vals = touched
+                    .iter()
+                    .map(|&j| {
+                        seen[j] = false;
+                        std::mem::take(&mut acc[j])
+                    })
+                    .collect();
+                (touched.clone(), vals)
+            },
+        )
+        .collect();
+    let mut col_ptr = Vec::with_capacity(nc + 1);
+    col_ptr.push(0);
+    let total = columns.iter().map(|c| c.0.len()).sum();
+    let (mut rows, mut vals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+    for (r, v) in columns {
+        rows.extend(r);
+        vals.extend(v);
+        col_ptr.push(rows.len());
     }
-    let chol = nalgebra::Cholesky::new(m).ok_or_else(|| {
+    (col_ptr, rows, vals)
+}
+
+/// Sparse Cholesky (faer, fill-reducing ordering) of `N^T N + s L^T L`.
+fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+    let basis = problem.basis;
+    let nc = basis.ncols();
+    let mut terms = vec![(basis.n(), basis.nt(), 1.0)];
+    if let Some(l) = problem.fairness.filter(|_| problem.smoothing > 0.0) {
+        terms.push((l.n(), l.nt(), problem.smoothing));
+    }
+    let (col_ptr, row_idx, values) = normal_lower(nc, &terms);
+    let symbolic = SymbolicSparseColMat::new_checked(nc, nc, col_ptr, None, row_idx);
+    let matrix = SparseColMat::new(symbolic, values);
+    let llt = matrix.sp_cholesky(faer::Side::Lower).map_err(|_| {
         FitError::Direct(
-            "normal matrix is singular: control points without data; add smoothing".into(),
+            "normal matrix is not positive definite: control points without data; add smoothing"
+                .into(),
         )
     })?;
-    let sol = chol.solve(&rhs);
-    Ok((0..nc)
-        .map(|i| DVec3::new(sol[(i, 0)], sol[(i, 1)], sol[(i, 2)]))
-        .collect())
+    let mut rhs = vec![DVec3::ZERO; nc];
+    basis.mul_t_vec3(problem.data, &mut rhs);
+    let mut b = faer::Mat::<f64>::from_fn(nc, 3, |i, k| rhs[i][k]);
+    llt.solve_in_place(b.as_mut());
+    let x: Vec<DVec3> = (0..nc)
+        .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
+        .collect();
+    if x.iter().all(|p| p.is_finite()) {
+        Ok(x)
+    } else {
+        Err(FitError::Direct(
+            "the factorisation produced non-finite values (ill-conditioned normal matrix)".into(),
+        ))
+    }
 }
 
 /// Umbrella Laplacian of a control net: row i is `P_i - mean(neighbours)`.

@@ -1,5 +1,6 @@
 //! Surface-independent fitting: collocation matrix, methods, budgets.
 
+pub mod bezier_rows;
 pub mod budget;
 pub mod distance;
 pub mod engine;

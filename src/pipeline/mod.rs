@@ -187,6 +187,7 @@ pub fn fit_subdivided(
         smoothing: 0.0,
         fairness: None,
         pia_operator: Some(&pia),
+        on_step: None,
     };
     let t1 = Instant::now();
     let outcome = fit(&problem, start, opts.method, &opts.budget)?;
@@ -207,20 +208,24 @@ pub fn fit_subdivided(
     })
 }
 
-/// The collocation matrix of `params` on `surface`, rows built in parallel.
+/// The collocation operator of `params` on `surface`: matrix-free for a Bezier patch
+/// sampled on lattice rows, otherwise the sparse matrix (rows built in parallel).
 pub fn collocation(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Collocation {
-    let rows: Vec<Vec<(u32, f64)>> = params
-        .par_iter()
-        .map(|p| {
-            let mut row = Vec::new();
-            surface.basis_row(*p, &mut row);
-            row
-        })
-        .collect();
-    Collocation::new(Csr::from_rows(
-        surface.control_count(),
-        rows.iter().map(|r| r.as_slice()),
-    ))
+    let matrix = || {
+        let rows: Vec<Vec<(u32, f64)>> = params
+            .par_iter()
+            .map(|p| {
+                let mut row = Vec::new();
+                surface.basis_row(*p, &mut row);
+                row
+            })
+            .collect();
+        Csr::from_rows(surface.control_count(), rows.iter().map(|r| r.as_slice()))
+    };
+    match surface.as_bezier() {
+        Some(b) => Collocation::bezier(b.degree, params, matrix),
+        None => Collocation::new(matrix()),
+    }
 }
 
 /// Distance of every data point to its foot point, Newton started at its parameter.

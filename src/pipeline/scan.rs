@@ -463,6 +463,7 @@ fn run_fit(
         smoothing,
         fairness: Some(fairness),
         pia_operator: None,
+        on_step: None,
     };
     let budget = Budget {
         max_iterations: opts.budget.max_iterations.min(SOLVE_STEPS),

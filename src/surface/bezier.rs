@@ -146,6 +146,10 @@ impl TriSurface for BezierTriangle {
         }
     }
 
+    fn as_bezier(&self) -> Option<&BezierTriangle> {
+        Some(self)
+    }
+
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
         // Clamp into the triangle: first the coordinates, then the hypotenuse.
         let mut u = (p.u + du).max(0.0);

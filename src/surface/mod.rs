@@ -75,6 +75,11 @@ pub trait TriSurface: Send + Sync {
     ) -> Box<dyn Fn(SurfaceParam) -> Derivatives + Sync + 'a> {
         Box::new(move |p| self.evaluate(controls, p))
     }
+    /// The single Bezier patch behind this surface, if that is what it is: its lattice
+    /// data get a matrix-free collocation operator.
+    fn as_bezier(&self) -> Option<&bezier::BezierTriangle> {
+        None
+    }
     /// Moves a parameter by (du, dv), staying in the domain (clamped at its boundary).
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam;
 }
