@@ -81,7 +81,7 @@ fn limit_samples(net: &TriMesh, levels: usize) -> TriMesh {
     TriMesh::new(positions, fine.triangles)
 }
 
-fn options(method: Method, levels: usize) -> FitOptions {
+fn options(method: Method, levels: usize) -> FitOptions<'static> {
     FitOptions {
         surface: SurfaceKind::Loop,
         levels,
@@ -95,6 +95,7 @@ fn options(method: Method, levels: usize) -> FitOptions {
             stall_steps: 0,
             ..Budget::default()
         },
+        on_step: None,
     }
 }
 

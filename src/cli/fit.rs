@@ -1,10 +1,11 @@
 //! `trispline fit`: one patch in, `surface.json`, `surface.glb` and `report.json` out.
 
+use super::progress::Progress;
 use crate::fit::Method;
 use crate::io::{read_mesh_file, write_atomic, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::components::ComponentMode;
-use crate::pipeline::worker::{run_input, PatchOutputs, WorkerConfig};
+use crate::pipeline::worker::{run_input_with, PatchOutputs, WorkerConfig};
 use crate::pipeline::{PipelineError, SurfaceKind};
 use anyhow::Context;
 use serde_json::json;
@@ -106,7 +107,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         min_component_vertices: args.min_component_vertices,
         min_component_fraction: args.min_component_fraction,
     };
-    let input = match run_input(&mesh, None, &cfg) {
+    let progress = Progress::new(cfg.max_iterations);
+    let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
+    let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));
+    progress.finish();
+    let input = match fitted {
         Ok(o) => o,
         Err(
             e @ (PipelineError::NoSubdivision(_)

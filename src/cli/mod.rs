@@ -3,4 +3,5 @@ pub mod bspline_fit;
 pub mod curvature;
 pub mod fit;
 pub mod mesh_tools;
+pub mod progress;
 pub mod watch;

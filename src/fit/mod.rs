@@ -7,5 +7,5 @@ pub mod engine;
 pub mod sparse;
 
 pub use budget::{Budget, FitStatus, StepStats};
-pub use engine::{fit, FitError, FitOutcome, FitProblem, Method};
+pub use engine::{fit, FitError, FitOutcome, FitProblem, Method, StepHook};
 pub use sparse::{Collocation, Csr};

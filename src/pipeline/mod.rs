@@ -9,7 +9,9 @@ pub mod output;
 pub mod scan;
 pub mod worker;
 
-use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
+use crate::fit::{
+    fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method, StepHook,
+};
 use crate::mesh::detect::Hierarchy;
 use crate::mesh::inverse::{coarsen, composed_exact_inverse, InverseError, InverseMethod};
 use crate::mesh::topology::Topology;
@@ -30,13 +32,16 @@ pub enum SurfaceKind {
     Loop,
 }
 
-#[derive(Clone, Debug)]
-pub struct FitOptions {
+#[derive(Clone)]
+pub struct FitOptions<'a> {
     pub surface: SurfaceKind,
     pub levels: usize,
     pub method: Method,
     pub inverse: InverseMethod,
     pub budget: Budget,
+    /// Called after every fitting step (and every correction round of a scan): progress
+    /// display; `None` costs nothing.
+    pub on_step: Option<StepHook<'a>>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -187,7 +192,7 @@ pub fn fit_subdivided(
         smoothing: 0.0,
         fairness: None,
         pia_operator: Some(&pia),
-        on_step: None,
+        on_step: opts.on_step,
     };
     let t1 = Instant::now();
     let outcome = fit(&problem, start, opts.method, &opts.budget)?;

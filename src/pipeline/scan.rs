@@ -352,6 +352,9 @@ pub fn fit_scan(
             t2.elapsed().as_secs_f64() * 1e3,
         );
         let met = opts.budget.met(&stats);
+        if let Some(hook) = opts.on_step {
+            hook(&stats);
+        }
         steps.push(stats);
         outcome.controls = controls;
         params = trial;
@@ -463,7 +466,7 @@ fn run_fit(
         smoothing,
         fairness: Some(fairness),
         pia_operator: None,
-        on_step: None,
+        on_step: opts.on_step,
     };
     let budget = Budget {
         max_iterations: opts.budget.max_iterations.min(SOLVE_STEPS),

@@ -5,7 +5,7 @@ use super::components::{split_components, ComponentFilter, ComponentMode};
 use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use super::scan::{fit_scan, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
-use crate::fit::{Budget, FitStatus, Method, StepStats};
+use crate::fit::{Budget, FitStatus, Method, StepHook, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::remesh::planar::PlaneFrame;
@@ -201,6 +201,16 @@ pub fn fit_patch(
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
 ) -> Result<FittedPatch, PipelineError> {
+    fit_patch_with(mesh, previous, cfg, None)
+}
+
+/// `fit_patch` reporting every step to `on_step` (a progress display).
+pub fn fit_patch_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<FittedPatch, PipelineError> {
     let budget = resolve_budget(cfg, mesh);
     let opts = FitOptions {
         surface: cfg.surface,
@@ -208,6 +218,7 @@ pub fn fit_patch(
         method: cfg.method,
         inverse: cfg.inverse,
         budget: budget.clone(),
+        on_step,
     };
     let previous = previous.filter(|w| w.surface == cfg.surface);
     let mut scan_info = None;
@@ -277,6 +288,16 @@ pub fn run_patch(
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
 ) -> Result<PatchOutputs, PipelineError> {
+    run_patch_with(mesh, previous, cfg, None)
+}
+
+/// `run_patch` reporting every fitting step to `on_step`.
+pub fn run_patch_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
     let FittedPatch {
         fit: fitted,
@@ -284,7 +305,7 @@ pub fn run_patch(
         budget,
         levels,
         refinement,
-    } = fit_patch(mesh, previous, cfg)?;
+    } = fit_patch_with(mesh, previous, cfg, on_step)?;
     let coverage = scan_info.as_ref().map(|s| {
         Coverage::new(
             &s.filled.triangles,
@@ -382,8 +403,18 @@ pub fn run_input(
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
 ) -> Result<InputOutputs, PipelineError> {
+    run_input_with(mesh, previous, cfg, None)
+}
+
+/// `run_input` reporting every fitting step (of every component) to `on_step`.
+pub fn run_input_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<InputOutputs, PipelineError> {
     if cfg.components == ComponentMode::Largest {
-        let outputs = run_patch(mesh, previous.filter(|w| w.parts.is_empty()), cfg)?;
+        let outputs = run_patch_with(mesh, previous.filter(|w| w.parts.is_empty()), cfg, on_step)?;
         return Ok(InputOutputs {
             warm: outputs.warm.clone(),
             parts: vec![PartOutputs {
@@ -418,7 +449,12 @@ pub fn run_input(
         if let Some(i) = matched {
             taken[i] = true;
         }
-        match run_patch(&c.mesh, matched.map(|i| &previous_parts[i].warm), cfg) {
+        match run_patch_with(
+            &c.mesh,
+            matched.map(|i| &previous_parts[i].warm),
+            cfg,
+            on_step,
+        ) {
             Ok(mut outputs) => {
                 outputs.report["component"] = json!({
                     "index": k,
