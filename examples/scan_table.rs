@@ -8,7 +8,7 @@
 //! percentile: over a hole the nearest data is the hole's rim, so the maximum there is
 //! about the hole's radius even for a perfect fill). Then the meshes that must be refused.
 //!
-//!     cargo run --release --example scan_table [-- DATA_DIR [bezier|loop]]
+//!     cargo run --release --example scan_table [-- DATA_DIR [bezier|loop|both [ROUNDS [SMOOTHING]]]]
 
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -84,9 +84,22 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
         return;
     };
     let read_ms = ms(t0);
+    let defaults = WorkerConfig::default();
+    // Optional third argument: correction rounds instead of the default.
+    let rounds = std::env::args()
+        .nth(3)
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(defaults.correction_rounds);
+    // Optional fourth argument: the fairness weight.
+    let smoothing = std::env::args()
+        .nth(4)
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(defaults.smoothing);
     let cfg = WorkerConfig {
         surface,
-        ..WorkerConfig::default()
+        correction_rounds: rounds,
+        smoothing,
+        ..defaults
     };
     let t1 = Instant::now();
     let fitted = match fit_patch(&loaded.mesh, None, &cfg) {

@@ -58,12 +58,6 @@ pub enum Correction {
 /// Relative geometric RMS gain below which correction rounds stop.
 const ROUND_MIN_GAIN: f64 = 0.02;
 
-/// Conjugate-gradient steps per solve of the scan path (the first fit and every round). A
-/// round's solve need not converge: the next round's foot points change the system anyway.
-/// Measured on the Stanford scans: 20 steps per solve end at the RMS of 100 (bun000 65.9 vs
-/// 65.9 um, chin 81.8 vs 82.4) or close (meshlab 71.3 vs 70.0) in half the time.
-const SOLVE_STEPS: usize = 30;
-
 /// Share of the point-to-point term in distance rounds.
 const DISTANCE_TANGENTIAL: f64 = 0.02;
 
@@ -331,7 +325,7 @@ pub fn fit_scan(
                 solve_distance(
                     &problem,
                     outcome.controls.clone(),
-                    opts.budget.max_iterations.min(SOLVE_STEPS),
+                    opts.budget.max_iterations,
                     1e-6,
                 )
             }
@@ -468,11 +462,8 @@ fn run_fit(
         pia_operator: None,
         on_step: opts.on_step,
     };
-    let budget = Budget {
-        max_iterations: opts.budget.max_iterations.min(SOLVE_STEPS),
-        ..opts.budget.clone()
-    };
-    Ok(fit(&problem, start, opts.method, &budget)?)
+    let budget: &Budget = &opts.budget;
+    Ok(fit(&problem, start, opts.method, budget)?)
 }
 
 /// The data seen from their foot points: residual p - S(foot) and the unit surface normal.
