@@ -3,7 +3,9 @@
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
-use crate::curvature::{BezierPatch, DerivativeSurface, GridPatch, RegionKind, Triangular};
+use crate::curvature::{
+    BezierPatch, DerivativeSurface, GridPatch, LoopMeshPatch, RegionKind, Triangular,
+};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::polylines::obj_polylines_bytes;
@@ -94,6 +96,9 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<(Box<dyn DerivativeSurface>, &'s
         }
         SurfaceDescription::LoopGrid { surface, controls } => {
             (Box::new(GridPatch { surface, controls }), "loop")
+        }
+        SurfaceDescription::LoopMesh { surface, controls } => {
+            (Box::new(LoopMeshPatch::new(surface, controls)), "loop")
         }
         SurfaceDescription::Loop {
             domain_segments,

@@ -1,11 +1,12 @@
 //! The `surface.json` schema (`trispline.surface/1`): the B-spline kind written here, and
-//! a reader for every kind (`bezier`, `loop`, `bspline`) for the tools that consume fitted
-//! surfaces (`trispline curvature`).
+//! a reader for every kind (`bezier`, `loop` with layout lattice, `grid` or `mesh`,
+//! `bspline`) for the tools that consume fitted surfaces (`trispline curvature`).
 
 use super::IoError;
 use crate::bspline::BSplineSurface;
 use crate::surface::bezier::lattice_len;
 use crate::surface::grid_spline::GridSpline;
+use crate::surface::loop_limit::LoopLimitSurface;
 use glam::DVec3;
 use serde_json::{json, Value};
 
@@ -27,6 +28,13 @@ pub enum SurfaceDescription {
     /// Loop limit surface over cells of the three-direction grid (remeshed scans).
     LoopGrid {
         surface: GridSpline,
+        controls: Vec<DVec3>,
+    },
+    /// Loop limit surface of an arbitrary manifold control mesh (`layout: mesh`): the
+    /// control faces are the domain faces. Shared, since the surface memoises its
+    /// subdivision nodes and is not cheap to rebuild.
+    LoopMesh {
+        surface: std::sync::Arc<LoopLimitSurface>,
         controls: Vec<DVec3>,
     },
     BSpline(BSplineSurface),
@@ -205,6 +213,40 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
                 "the grid's control list",
             )?;
             Ok(SurfaceDescription::LoopGrid { surface, controls })
+        }
+        "loop" if v.get("layout").and_then(Value::as_str) == Some("mesh") => {
+            let controls = points(&v, name)?;
+            let faces = int_rows::<3>(&v, "control_faces", name)?
+                .into_iter()
+                .enumerate()
+                .map(|(f, t)| {
+                    // Range-check here so the error names the row; LoopLimitSurface::new
+                    // checks again against the control count.
+                    let mut out = [0u32; 3];
+                    for (o, &i) in out.iter_mut().zip(&t) {
+                        *o = u32::try_from(i)
+                            .ok()
+                            .filter(|&i| (i as usize) < controls.len())
+                            .ok_or_else(|| {
+                                IoError::new(
+                                    name,
+                                    Some(format!("control_faces[{f}]")),
+                                    format!(
+                                        "index {i} is not one of the {} control points",
+                                        controls.len()
+                                    ),
+                                )
+                            })?;
+                    }
+                    Ok(out)
+                })
+                .collect::<Result<Vec<_>, IoError>>()?;
+            let surface = LoopLimitSurface::new(controls.len(), &faces)
+                .map_err(|e| IoError::new(name, Some("key control_faces".into()), e.to_string()))?;
+            Ok(SurfaceDescription::LoopMesh {
+                surface: std::sync::Arc::new(surface),
+                controls,
+            })
         }
         "loop" => {
             let n = uint(&v, "domain_segments", name)?;
