@@ -335,6 +335,35 @@ mod tests {
     }
 
     #[test]
+    fn loop_mesh_round_trips() {
+        let controls = vec![
+            DVec3::new(0.0, 0.0, 0.1),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.2),
+            DVec3::new(-1.0, 0.0, 0.0),
+        ];
+        let faces = vec![[0u32, 1, 2], [0, 2, 3]];
+        let text = json!({
+            "schema": SCHEMA,
+            "kind": "loop",
+            "layout": "mesh",
+            "control_faces": faces,
+            "control_points": controls.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
+        });
+        let bytes = serde_json::to_vec(&text).expect("json");
+        match parse_surface_json(&bytes, "t").expect("parse") {
+            SurfaceDescription::LoopMesh {
+                surface,
+                controls: c,
+            } => {
+                assert_eq!(c, controls);
+                assert_eq!(surface.faces(), &faces[..]);
+            }
+            other => panic!("wrong kind {other:?}"),
+        }
+    }
+
+    #[test]
     fn malformed_files_name_the_problem() {
         let cases = [
             (r#"{"schema":"x","kind":"bezier"}"#, "schema"),
@@ -356,10 +385,28 @@ mod tests {
                 "knot",
             ),
             ("{", "line"),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]],"control_faces":[[0,1]]}"#,
+                "control_faces",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]],"control_faces":[[0,1,3]]}"#,
+                "control_faces[0]",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]]}"#,
+                "key control_faces",
+            ),
+            // Four faces on one edge: the LoopLimitError names the non-manifold net.
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[0,-1,0],[0,0,1],[0,0,-1]],"control_faces":[[0,1,2],[1,0,3],[0,1,4],[1,0,5]]}"#,
+                "not a manifold",
+            ),
         ];
         for (text, needle) in cases {
             let e = parse_surface_json(text.as_bytes(), "s.json").expect_err(text);
             assert!(e.to_string().contains(needle), "{e} lacks {needle}");
+            assert!(e.to_string().contains("s.json"), "{e} lacks the file name");
         }
     }
 }
