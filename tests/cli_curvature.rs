@@ -166,3 +166,103 @@ fn malformed_surface_json_is_refused() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("degree_v"));
 }
+
+/// A coarse net subdivided twice by Loop's rules, written as OBJ: an input with
+/// subdivision connectivity, so `fit --surface loop` writes the mesh layout.
+fn subdivided_obj(path: &Path, positions: Vec<glam::DVec3>, faces: Vec<[u32; 3]>) {
+    let coarse = trispline::TriMesh::new(positions, faces);
+    let fine = trispline::mesh::loop_subdiv::subdivide(&coarse, 2).expect("manifold");
+    trispline::io::writers::write_obj(path, &fine).expect("write");
+}
+
+fn fit_and_analyse(tmp: &Path, name: &str) -> (serde_json::Value, std::path::PathBuf) {
+    let fit = tmp.join(format!("{name}-fit"));
+    run_ok(
+        bin()
+            .arg("fit")
+            .arg(tmp.join(format!("{name}.obj")))
+            .args(["--surface", "loop", "--levels", "2", "--min-levels", "2"])
+            .arg("--out")
+            .arg(&fit),
+    );
+    let surface = json(&fit.join("surface.json"));
+    assert_eq!(surface["layout"], "mesh", "{name}");
+    let out = tmp.join(format!("{name}-curv"));
+    run_ok(
+        bin()
+            .arg("curvature")
+            .arg(fit.join("surface.json"))
+            .args(["--grid", "40", "--out"])
+            .arg(&out),
+    );
+    (surface, out)
+}
+
+#[test]
+fn loop_mesh_layout_written_by_fit() {
+    use glam::DVec3;
+    let tmp = tempfile::tempdir().expect("tmp");
+    // Closed: an octahedron (valence 4 everywhere), faces outwards.
+    let mut faces = Vec::new();
+    for i in 0..4u32 {
+        faces.push([i, (i + 1) % 4, 4]);
+        faces.push([(i + 1) % 4, i, 5]);
+    }
+    let octa = vec![
+        DVec3::X,
+        DVec3::Y,
+        -DVec3::X,
+        -DVec3::Y,
+        DVec3::Z,
+        -DVec3::Z,
+    ];
+    subdivided_obj(&tmp.path().join("octa.obj"), octa, faces);
+    let (surface, out) = fit_and_analyse(tmp.path(), "octa");
+    assert_eq!(surface["control_faces"].as_array().map(Vec::len), Some(8));
+    for f in [
+        "curvature.glb",
+        "boundaries.json",
+        "boundaries.obj",
+        "boundaries.igs",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let r = json(&out.join("regions.json"));
+    assert_eq!(r["surface_kind"], "loop");
+    // The fitted limit surface of a convex net: one convex region, no boundary at all.
+    assert_eq!(
+        (r["convex"].as_u64(), r["saddle"].as_u64()),
+        (Some(1), Some(0)),
+        "{r}"
+    );
+    assert_eq!(r["regions"][0]["loops"], 0, "{r}");
+
+    // Open: a hexagonal fan around a centre of valence 5 (a pentagon of 5 triangles with
+    // a second ring), lifted by a saddle.
+    let mut pos = vec![DVec3::ZERO];
+    for ring in 1..=2 {
+        for k in 0..5 {
+            let a = std::f64::consts::TAU * (k as f64 + 0.5 * (ring - 1) as f64) / 5.0;
+            let (x, y) = (ring as f64 * a.cos(), ring as f64 * a.sin());
+            pos.push(DVec3::new(x, y, 0.3 * (x * x - y * y)));
+        }
+    }
+    let mut faces = Vec::new();
+    for k in 0..5u32 {
+        let (a, b) = (1 + k, 1 + (k + 1) % 5);
+        let (o, p) = (6 + k, 6 + (k + 1) % 5);
+        faces.push([0, a, b]);
+        faces.push([a, o, b]);
+        faces.push([b, o, p]);
+    }
+    subdivided_obj(&tmp.path().join("fan.obj"), pos, faces);
+    let (surface, out) = fit_and_analyse(tmp.path(), "fan");
+    assert_eq!(surface["control_faces"].as_array().map(Vec::len), Some(15));
+    let r = check_outputs(&out);
+    assert!(r["saddle"].as_u64() >= Some(1), "{r}");
+    let b = json(&out.join("boundaries.json"));
+    assert!(
+        b["param_loops_encoding"].is_string(),
+        "mesh layout documents its packing"
+    );
+}

@@ -424,3 +424,208 @@ fn small_regions_are_merged() {
     );
     assert_eq!(cleaned.regions.len(), 1, "{:?}", counts(&cleaned));
 }
+
+// ---- Loop limit surface of an arbitrary control mesh (surface.json layout `mesh`) ----
+
+use std::sync::Arc;
+use trispline::curvature::LoopMeshPatch;
+use trispline::surface::loop_limit::LoopLimitSurface;
+
+fn mesh_patch(controls: Vec<DVec3>, faces: &[[u32; 3]]) -> LoopMeshPatch {
+    let surface = LoopLimitSurface::new(controls.len(), faces).expect("manifold net");
+    LoopMeshPatch::new(Arc::new(surface), controls)
+}
+
+/// The octahedron of radius 1, faces oriented outwards (valence 4 everywhere).
+fn octahedron_patch() -> LoopMeshPatch {
+    let controls = vec![
+        DVec3::X,
+        DVec3::Y,
+        -DVec3::X,
+        -DVec3::Y,
+        DVec3::Z,
+        -DVec3::Z,
+    ];
+    let mut faces = Vec::new();
+    for i in 0..4u32 {
+        faces.push([i, (i + 1) % 4, 4]);
+        faces.push([(i + 1) % 4, i, 5]);
+    }
+    mesh_patch(controls, &faces)
+}
+
+/// An open disc of five lattice sectors of `r` segments around a centre of valence 5
+/// (control 0), lifted by z = x^2 - y^2.
+fn pentagonal_saddle(r: usize) -> LoopMeshPatch {
+    let corner = |s: usize| {
+        let a = std::f64::consts::TAU * (s % 5) as f64 / 5.0;
+        DVec3::new(a.cos(), a.sin(), 0.0)
+    };
+    // Control id of ring q (0 at the centre), position p along it (5 q per ring).
+    let id = |q: usize, p: usize| {
+        if q == 0 {
+            0
+        } else {
+            (1 + 5 * q * (q - 1) / 2 + p % (5 * q)) as u32
+        }
+    };
+    let mut controls = vec![DVec3::ZERO; 1 + 5 * r * (r + 1) / 2];
+    let mut faces = Vec::new();
+    for s in 0..5 {
+        let sector_id = |(i, j): (usize, usize)| id(i + j, s * (i + j) + j);
+        for (i, j) in lattice_points(r) {
+            let p = (corner(s) * i as f64 + corner(s + 1) * j as f64) / r as f64;
+            controls[sector_id((i, j)) as usize] = DVec3::new(p.x, p.y, p.x * p.x - p.y * p.y);
+        }
+        let pts = lattice_points(r);
+        for t in trispline::surface::bezier::lattice_triangles(r) {
+            faces.push(t.map(|k| sector_id(pts[k as usize])));
+        }
+    }
+    mesh_patch(controls, &faces)
+}
+
+#[test]
+fn loop_mesh_lattice_welds_shared_samples() {
+    let p = octahedron_patch();
+    let m = 5;
+    let own = p.lattice_with_segments(m);
+    let (v, e, f) = (6, 12, 8);
+    // One sample per control vertex, m - 1 per control edge, the rest inside faces.
+    assert_eq!(
+        own.params.len(),
+        v + e * (m - 1) + f * (m - 1) * (m - 2) / 2
+    );
+    assert_eq!(own.triangles.len(), f * m * m);
+    let lattice = trispline::curvature::regions::Lattice::for_surface(&p, 12);
+    assert!(lattice.boundary.is_empty(), "a closed net has no boundary");
+    // Every welded sample's position agrees with its position in each triangle's chart.
+    let charts = own.charts.as_ref().expect("per-face charts");
+    for (t, ch) in own.triangles.iter().zip(charts) {
+        for (&s, &(a, b)) in t.iter().zip(ch) {
+            let (x, y) = own.params[s as usize];
+            let d = p.derivatives(x, y).position - p.derivatives(a, b).position;
+            assert!(d.length() < 1e-12, "sample {s}: {d}");
+        }
+    }
+}
+
+#[test]
+fn loop_limit_of_an_octahedron_is_one_convex_region() {
+    let p = octahedron_patch();
+    let a = analyze(
+        &p,
+        &AnalysisOptions {
+            grid: 40,
+            ..Default::default()
+        },
+    );
+    assert!(a.lattice.boundary.is_empty());
+    for (k, c) in a.curvature.iter().enumerate() {
+        let c = c.unwrap_or_else(|| panic!("sample {k} singular"));
+        assert!(c.gaussian > 0.0, "sample {k}: K = {}", c.gaussian);
+        // Outward faces: the cap bulges towards the normal.
+        assert!(c.mean < 0.0, "sample {k}: H = {}", c.mean);
+    }
+    assert!(a.kinds.iter().all(|&k| k == RegionKind::Convex));
+    assert_eq!(a.regions.len(), 1);
+    assert!(a.regions[0].loops.is_empty(), "{:?}", a.regions[0].loops);
+}
+
+#[test]
+fn loop_limit_of_a_saddle_net_is_a_saddle_at_the_centre() {
+    let r = 4;
+    let p = pentagonal_saddle(r);
+    let a = analyze(
+        &p,
+        &AnalysisOptions {
+            grid: 60,
+            ..Default::default()
+        },
+    );
+    // The open net's boundary: its 5 r control boundary edges, each cut into m segments.
+    let faces = p.surface.faces().len();
+    let m = ((60.0 / (faces as f64).sqrt()).ceil() as usize).max(2);
+    assert_eq!(a.lattice.boundary.len(), 5 * r * m);
+    // The sample on the centre control vertex (welded: exactly one) and its neighbours.
+    let (f, c) = p
+        .surface
+        .faces()
+        .iter()
+        .enumerate()
+        .find_map(|(f, t)| t.iter().position(|&x| x == 0).map(|c| (f, c)))
+        .expect("the centre is used");
+    let centre = p.derivatives_in_face(f, f64::from(c == 0), f64::from(c == 1));
+    let nearest: Vec<usize> = (0..a.positions.len())
+        .filter(|&k| (a.positions[k] - centre.position).length() < 0.5 / r as f64)
+        .collect();
+    assert!(
+        nearest.len() > 10,
+        "{} samples near the centre",
+        nearest.len()
+    );
+    for &k in &nearest {
+        assert_eq!(a.kinds[k], RegionKind::Saddle, "sample {k}");
+    }
+    let centre_region = a.region[nearest[0]];
+    assert_eq!(a.regions[centre_region as usize].kind, RegionKind::Saddle);
+    // Off the extraordinary vertex itself, K < 0 outright.
+    let strict = nearest
+        .iter()
+        .filter(|&&k| (a.positions[k] - centre.position).length() > 1e-9)
+        .filter(|&&k| a.curvature[k].is_some_and(|c| c.gaussian < 0.0))
+        .count();
+    assert!(strict + 1 >= nearest.len(), "{strict} of {}", nearest.len());
+}
+
+#[test]
+fn loop_mesh_curvature_agrees_across_shared_edges() {
+    for p in [octahedron_patch(), pentagonal_saddle(3)] {
+        let faces = p.surface.faces();
+        let mut owners: std::collections::HashMap<(u32, u32), Vec<usize>> = Default::default();
+        for (f, t) in faces.iter().enumerate() {
+            for c in 0..3 {
+                let (a, b) = (t[c], t[(c + 1) % 3]);
+                owners.entry((a.min(b), a.max(b))).or_default().push(f);
+            }
+        }
+        // (u, v) in face f of the point with weight `alpha` on control a, 1 - alpha on b.
+        let local = |f: usize, a: u32, b: u32, alpha: f64| {
+            let mut w = [0.0; 3];
+            for (c, &x) in faces[f].iter().enumerate() {
+                if x == a {
+                    w[c] = alpha;
+                } else if x == b {
+                    w[c] = 1.0 - alpha;
+                }
+            }
+            (w[0], w[1])
+        };
+        let mut checked = 0;
+        for (&(a, b), fs) in &owners {
+            let [f, g] = fs[..] else { continue };
+            for k in 1..8 {
+                let alpha = k as f64 / 8.0;
+                let (u0, v0) = local(f, a, b, alpha);
+                let (u1, v1) = local(g, a, b, alpha);
+                let d0 = p.derivatives_in_face(f, u0, v0);
+                let d1 = p.derivatives_in_face(g, u1, v1);
+                assert!((d0.position - d1.position).length() < 1e-12);
+                let (c0, c1) = (
+                    curvature(&d0).expect("regular"),
+                    curvature(&d1).expect("regular"),
+                );
+                let scale = c0.gaussian.abs().max(c1.gaussian.abs()).max(1e-12);
+                assert!(
+                    (c0.gaussian - c1.gaussian).abs() <= 1e-6 * scale,
+                    "edge ({a}, {b}) at {alpha}: K {} vs {}",
+                    c0.gaussian,
+                    c1.gaussian
+                );
+                assert!((c0.mean - c1.mean).abs() <= 1e-6 * c0.mean.abs().max(1e-12));
+                checked += 1;
+            }
+        }
+        assert!(checked > 50, "{checked} edge points");
+    }
+}

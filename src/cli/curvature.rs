@@ -3,7 +3,9 @@
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
-use crate::curvature::{BezierPatch, DerivativeSurface, GridPatch, RegionKind, Triangular};
+use crate::curvature::{
+    BezierPatch, DerivativeSurface, GridPatch, LoopMeshPatch, RegionKind, Triangular,
+};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::polylines::obj_polylines_bytes;
@@ -86,14 +88,28 @@ fn diverging(values: &[f64]) -> Vec<[f32; 4]> {
         .collect()
 }
 
-fn load(args: &CurvatureArgs) -> anyhow::Result<(Box<dyn DerivativeSurface>, &'static str)> {
-    Ok(match read_surface_json(&args.surface)? {
+/// The surface, its kind's name and, for the mesh layout, how `param_loops` pack the face.
+type Loaded = (
+    Box<dyn DerivativeSurface>,
+    &'static str,
+    Option<&'static str>,
+);
+
+fn load(args: &CurvatureArgs) -> anyhow::Result<Loaded> {
+    let d = read_surface_json(&args.surface)?;
+    let packing = matches!(d, SurfaceDescription::LoopMesh { .. }).then_some(
+        "control face f at barycentric (u, v) is the point [2 f + u, v] (u, v in [0, 1])",
+    );
+    let (surface, kind): (Box<dyn DerivativeSurface>, &str) = match d {
         SurfaceDescription::BSpline(s) => (Box::new(s) as Box<dyn DerivativeSurface>, "bspline"),
         SurfaceDescription::Bezier { degree, controls } => {
             (Box::new(BezierPatch { degree, controls }), "bezier")
         }
         SurfaceDescription::LoopGrid { surface, controls } => {
             (Box::new(GridPatch { surface, controls }), "loop")
+        }
+        SurfaceDescription::LoopMesh { surface, controls } => {
+            (Box::new(LoopMeshPatch::new(surface, controls)), "loop")
         }
         SurfaceDescription::Loop {
             domain_segments,
@@ -105,7 +121,8 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<(Box<dyn DerivativeSurface>, &'s
             }),
             "loop",
         ),
-    })
+    };
+    Ok((surface, kind, packing))
 }
 
 pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
@@ -116,7 +133,7 @@ pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
     if !(args.zero_eps >= 0.0 && args.zero_eps.is_finite()) {
         bail!("--zero-eps must be a non-negative number");
     }
-    let (surface, kind) = load(args)?;
+    let (surface, kind, packing) = load(args)?;
     let opts = AnalysisOptions {
         grid: args.grid,
         zero_eps: args.zero_eps,
@@ -154,7 +171,7 @@ pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
         },
     );
     write_atomic(&args.out.join("boundaries.igs"), &iges)?;
-    let boundaries = json!({
+    let mut boundaries = json!({
         "schema": "trispline.boundaries/1",
         "surface": args.surface.display().to_string(),
         "loops": "closed (last point = first), counter-clockwise in (u, v) around the region: outer boundaries counter-clockwise, holes clockwise",
@@ -167,6 +184,9 @@ pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
             "param_loops": r.param_loops.iter().map(|l| l.iter().map(|p| [p.0, p.1]).collect::<Vec<_>>()).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
     });
+    if let Some(p) = packing {
+        boundaries["param_loops_encoding"] = json!(p);
+    }
     write_atomic(
         &args.out.join("boundaries.json"),
         &serde_json::to_vec(&boundaries)?,

@@ -25,19 +25,34 @@ pub enum Domain {
     },
     /// u, v >= 0, u + v <= 1.
     Triangle,
-    /// Cells of a grid: the surface samples itself through
+    /// Cells of a grid, or the faces of a control mesh: the surface samples itself through
     /// [`DerivativeSurface::own_lattice`].
     Cells,
+}
+
+/// A sampling built by the surface itself ([`Domain::Cells`]).
+#[derive(Clone, Debug, Default)]
+pub struct OwnLattice {
+    /// One parameter per sample.
+    pub params: Vec<(f64, f64)>,
+    /// Counter-clockwise triangles of samples.
+    pub triangles: Vec<[u32; 3]>,
+    /// For surfaces whose parameters are per-face charts rather than one plane (see
+    /// [`LoopMeshPatch`]): per triangle, the parameters of its three corners in the chart
+    /// of the face holding the triangle. A sample shared by several faces has one entry in
+    /// `params` (one face's chart), so points inside a triangle must interpolate these
+    /// instead. `None`: `params` are one global chart.
+    pub charts: Option<Vec<[(f64, f64); 3]>>,
 }
 
 /// Position and first and second partial derivatives at a parameter.
 pub trait DerivativeSurface: Sync {
     fn domain(&self) -> Domain;
     fn derivatives(&self, u: f64, v: f64) -> Derivatives;
-    /// Domains other than a rectangle or the triangle: parameters and counter-clockwise
-    /// triangles of a sampling with about `n` samples across.
-    fn own_lattice(&self, _n: usize) -> (Vec<(f64, f64)>, Vec<[u32; 3]>) {
-        (Vec::new(), Vec::new())
+    /// Domains other than a rectangle or the triangle: a sampling with about `n` samples
+    /// across.
+    fn own_lattice(&self, _n: usize) -> OwnLattice {
+        OwnLattice::default()
     }
     /// Derivatives at many parameters (in parallel); separable surfaces do better on grids
     /// through [`DerivativeSurface::derivatives_on_grid`].
@@ -84,12 +99,232 @@ impl DerivativeSurface for GridPatch {
         self.surface
             .evaluate(&self.controls, SurfaceParam { face: 0, u, v })
     }
-    fn own_lattice(&self, n: usize) -> (Vec<(f64, f64)>, Vec<[u32; 3]>) {
+    fn own_lattice(&self, n: usize) -> OwnLattice {
         let per_cell = n as f64 / (self.surface.cells().len().max(1) as f64).sqrt();
-        let (params, tris) = self
+        let (params, triangles) = self
             .surface
             .sample_lattice((per_cell.ceil() as usize).max(2));
-        (params.into_iter().map(|p| (p.u, p.v)).collect(), tris)
+        OwnLattice {
+            params: params.into_iter().map(|p| (p.u, p.v)).collect(),
+            triangles,
+            charts: None,
+        }
+    }
+}
+
+/// The Loop limit surface of an arbitrary control mesh (`surface.json` kind `loop`,
+/// layout `mesh`).
+///
+/// Every control face is its own barycentric chart, so a parameter names a face. It is
+/// packed into the two numbers of [`DerivativeSurface::derivatives`] as
+/// `(2 face + u, v)`: u lies in [0, 1], so `face = floor(s / 2)` and `u = s - 2 face`
+/// are unambiguous, and the corners and edges u = 0, u = 1, v = 0 stay exact (integers
+/// are exact in f64; at 10^6 faces the interior u carries about 1e-10 rounding, far below
+/// what curvature sees). Region boundaries in `param_loops` are in this packing too.
+///
+/// Curvature is geometric, so each sample may use the derivatives of any face that
+/// contains it; the lattice welds samples on shared control edges and vertices so that
+/// regions and boundary loops cross faces.
+///
+/// At an interior control vertex of valence other than 6 the Loop evaluator returns the
+/// exact tangent plane but zero second derivatives (the parametric ones vanish or blow
+/// up there), which would read as a flat point. Such a sample keeps its exact position
+/// but takes its derivatives 2^-30 towards the centre of the face it is sampled in: the
+/// curvature approached along that direction (at valence 3..5 the limit, at valence > 6
+/// large, as the surface's curvature is unbounded there).
+pub struct LoopMeshPatch {
+    pub surface: std::sync::Arc<crate::surface::loop_limit::LoopLimitSurface>,
+    pub controls: Vec<DVec3>,
+    /// Per control: an interior vertex of valence other than 6.
+    irregular: Vec<bool>,
+}
+
+/// Parameter offset for derivatives at an irregular interior vertex (see [`LoopMeshPatch`]).
+const IRREGULAR_NUDGE: f64 = 1.0 / (1u64 << 30) as f64;
+
+impl LoopMeshPatch {
+    pub fn new(
+        surface: std::sync::Arc<crate::surface::loop_limit::LoopLimitSurface>,
+        controls: Vec<DVec3>,
+    ) -> Self {
+        let mut valence = vec![0usize; controls.len()];
+        let mut edge_use: std::collections::HashMap<(u32, u32), u32> =
+            std::collections::HashMap::new();
+        for t in surface.faces() {
+            for c in 0..3 {
+                valence[t[c] as usize] += 1;
+                let (a, b) = (t[c], t[(c + 1) % 3]);
+                *edge_use.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+        }
+        let mut boundary = vec![false; controls.len()];
+        for (&(a, b), &n) in &edge_use {
+            if n == 1 {
+                boundary[a as usize] = true;
+                boundary[b as usize] = true;
+            }
+        }
+        let irregular = (0..controls.len())
+            .map(|v| !boundary[v] && valence[v] != 6)
+            .collect();
+        Self {
+            surface,
+            controls,
+            irregular,
+        }
+    }
+
+    /// Derivatives at `p` by `eval`, moved off an irregular interior vertex (see above).
+    fn sample(&self, eval: &dyn Fn(SurfaceParam) -> Derivatives, p: SurfaceParam) -> Derivatives {
+        let d = eval(p);
+        let w = 1.0 - p.u - p.v;
+        let corner = [p.u, p.v, w].iter().position(|&x| x == 1.0);
+        let on_irregular = corner.is_some_and(|c| {
+            self.surface
+                .faces()
+                .get(p.face as usize)
+                .is_some_and(|t| self.irregular[t[c] as usize])
+        });
+        if !on_irregular {
+            return d;
+        }
+        let e = IRREGULAR_NUDGE;
+        let moved = eval(SurfaceParam {
+            u: (1.0 - e) * p.u + e / 3.0,
+            v: (1.0 - e) * p.v + e / 3.0,
+            ..p
+        });
+        Derivatives {
+            position: d.position,
+            ..moved
+        }
+    }
+
+    /// The packed parameter of (face, u, v).
+    pub fn pack(face: usize, u: f64, v: f64) -> (f64, f64) {
+        (2.0 * face as f64 + u, v)
+    }
+
+    /// The (face, u, v) of a packed parameter; faces out of range are clamped.
+    pub fn unpack(&self, s: f64, v: f64) -> SurfaceParam {
+        let last = self.surface.faces().len().saturating_sub(1);
+        let face = if s.is_finite() && s > 0.0 {
+            ((s / 2.0).floor() as usize).min(last)
+        } else {
+            0
+        };
+        SurfaceParam {
+            face: face as u32,
+            u: s - 2.0 * face as f64,
+            v,
+        }
+    }
+
+    /// Derivatives in one face's chart (another face sharing the point gives other
+    /// derivatives but the same curvature).
+    pub fn derivatives_in_face(&self, face: usize, u: f64, v: f64) -> Derivatives {
+        self.surface.evaluate(
+            &self.controls,
+            SurfaceParam {
+                face: face as u32,
+                u,
+                v,
+            },
+        )
+    }
+
+    /// `m` segments on every face side (m >= 1), samples welded across faces: a sample
+    /// on a control vertex is keyed by the vertex, one on a control edge by the edge and
+    /// its integer step along it, so neighbours find it without comparing coordinates.
+    pub fn lattice_with_segments(&self, m: usize) -> OwnLattice {
+        let m = m.max(1);
+        let faces = self.surface.faces();
+        let mut params = Vec::new();
+        let mut at_vertex = vec![u32::MAX; self.controls.len()];
+        // (lower control index, higher, steps from the lower one) -> sample.
+        let mut on_edge: std::collections::HashMap<(u32, u32, usize), u32> =
+            std::collections::HashMap::new();
+        let mut triangles = Vec::with_capacity(faces.len() * m * m);
+        let mut charts = Vec::with_capacity(faces.len() * m * m);
+        // This face's samples by local lattice index (i, j) at (u, v) = (i, j) / m.
+        let mut local = vec![0u32; (m + 1) * (m + 1)];
+        for (f, t) in faces.iter().enumerate() {
+            for j in 0..=m {
+                for i in 0..=m - j {
+                    // Steps towards corners 0, 1, 2 (barycentric weights times m).
+                    let steps = [i, j, m - i - j];
+                    let p = Self::pack(f, i as f64 / m as f64, j as f64 / m as f64);
+                    let mut fresh = || {
+                        params.push(p);
+                        (params.len() - 1) as u32
+                    };
+                    let zeros = steps.iter().filter(|&&k| k == 0).count();
+                    local[j * (m + 1) + i] = if zeros == 2 {
+                        let c = t[steps.iter().position(|&k| k == m).unwrap_or(0)];
+                        if at_vertex[c as usize] == u32::MAX {
+                            at_vertex[c as usize] = fresh();
+                        }
+                        at_vertex[c as usize]
+                    } else if zeros == 1 {
+                        // On the side opposite the corner with weight 0.
+                        let z = steps.iter().position(|&k| k == 0).unwrap_or(0);
+                        let (a, b) = ((z + 1) % 3, (z + 2) % 3);
+                        let (lo, hi, k) = if t[a] < t[b] {
+                            (t[a], t[b], steps[a])
+                        } else {
+                            (t[b], t[a], steps[b])
+                        };
+                        *on_edge.entry((lo, hi, k)).or_insert_with(fresh)
+                    } else {
+                        fresh()
+                    };
+                }
+            }
+            let id = |i: usize, j: usize| local[j * (m + 1) + i];
+            let chart =
+                |i: usize, j: usize| Self::pack(f, i as f64 / m as f64, j as f64 / m as f64);
+            for j in 0..m {
+                for i in 0..m - j {
+                    // Up and down triangles, counter-clockwise in (u, v) as the face is on
+                    // the surface (du x dv points along the face's orientation).
+                    triangles.push([id(i, j), id(i + 1, j), id(i, j + 1)]);
+                    charts.push([chart(i, j), chart(i + 1, j), chart(i, j + 1)]);
+                    if i + j + 1 < m {
+                        triangles.push([id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+                        charts.push([chart(i + 1, j), chart(i + 1, j + 1), chart(i, j + 1)]);
+                    }
+                }
+            }
+        }
+        OwnLattice {
+            params,
+            triangles,
+            charts: Some(charts),
+        }
+    }
+}
+
+impl DerivativeSurface for LoopMeshPatch {
+    fn domain(&self) -> Domain {
+        Domain::Cells
+    }
+    fn derivatives(&self, s: f64, v: f64) -> Derivatives {
+        let eval = |p| self.surface.evaluate(&self.controls, p);
+        self.sample(&eval, self.unpack(s, v))
+    }
+    fn derivatives_at(&self, params: &[(f64, f64)]) -> Vec<Derivatives> {
+        // One evaluator for all samples: it precomputes per-face data for the controls.
+        let eval = self.surface.evaluator(&self.controls);
+        params
+            .par_iter()
+            .map(|&(s, v)| self.sample(&eval, self.unpack(s, v)))
+            .collect()
+    }
+    /// About `n` samples across the whole surface (faces ~ a square of sqrt(F) faces a
+    /// side), at least 2 segments a face side so every face has a midpoint on each side.
+    fn own_lattice(&self, n: usize) -> OwnLattice {
+        let per_face = n as f64 / (self.surface.faces().len().max(1) as f64).sqrt();
+        self.lattice_with_segments((per_face.ceil() as usize).max(2))
     }
 }
 

@@ -57,6 +57,10 @@ pub struct Lattice {
     pub boundary: Vec<(u32, u32)>,
     /// Rectangle: (rows, cols) of the row-major grid; triangle: (n + 1, 0).
     pub shape: (usize, usize),
+    /// Per triangle, its corners' parameters in its own chart, for surfaces whose samples
+    /// are welded across per-face charts (see [`super::OwnLattice::charts`]); `None` when
+    /// `params` are one global chart.
+    pub charts: Option<Vec<[(f64, f64); 3]>>,
 }
 
 impl Lattice {
@@ -77,6 +81,7 @@ impl Lattice {
             triangles: crate::bspline::surface::grid_triangles(n, n),
             boundary,
             shape: (n, n),
+            charts: None,
         }
     }
 
@@ -99,6 +104,7 @@ impl Lattice {
             triangles: lattice_triangles(s),
             boundary,
             shape: (s + 1, 0),
+            charts: None,
         }
     }
 
@@ -127,6 +133,7 @@ impl Lattice {
             triangles,
             boundary,
             shape: (n, 0),
+            charts: None,
         }
     }
 
@@ -136,8 +143,11 @@ impl Lattice {
             Domain::Rectangle { u, v } => Self::rectangle(u, v, n),
             Domain::Triangle => Self::triangle(n),
             Domain::Cells => {
-                let (params, triangles) = surface.own_lattice(n);
-                Self::triangulated(params, triangles)
+                let own = surface.own_lattice(n);
+                Self {
+                    charts: own.charts,
+                    ..Self::triangulated(own.params, own.triangles)
+                }
             }
         }
     }
@@ -434,6 +444,11 @@ fn trace(
     }
     // Directed boundary segments, keyed by (region, start) -> end.
     let mut next: FastMap<(u32, Node), Node> = FastMap::default();
+    // With per-face charts the midpoint of an edge must be taken in the chart of a
+    // triangle holding it (its ends' own `params` may be in different charts). Every edge
+    // whose ends differ in region lies in a triangle met below, so this map covers all
+    // midpoints of the loops; either triangle of an edge gives the same surface point.
+    let mut mid_param: FastMap<(u32, u32), (f64, f64)> = FastMap::default();
     for (ti, t) in lattice.triangles.iter().enumerate() {
         let l = [
             region[t[0] as usize],
@@ -442,6 +457,16 @@ fn trace(
         ];
         if l[0] == l[1] && l[1] == l[2] {
             continue;
+        }
+        if let Some(ch) = lattice.charts.as_ref().and_then(|c| c.get(ti)) {
+            for c in 0..3 {
+                let c1 = (c + 1) % 3;
+                let (a, b) = (t[c], t[c1]);
+                mid_param.insert(
+                    (a.min(b), a.max(b)),
+                    (0.5 * (ch[c].0 + ch[c1].0), 0.5 * (ch[c].1 + ch[c1].1)),
+                );
+            }
         }
         if l[0] != l[1] && l[1] != l[2] && l[0] != l[2] {
             for c in 0..3 {
@@ -494,15 +519,18 @@ fn trace(
         let p = &lattice.params;
         match n {
             Node::Vertex(v) => p[v as usize],
-            Node::Mid(a, b) => {
+            Node::Mid(a, b) => mid_param.get(&(a, b)).copied().unwrap_or_else(|| {
                 let (x, y) = (p[a as usize], p[b as usize]);
                 (0.5 * (x.0 + y.0), 0.5 * (x.1 + y.1))
-            }
+            }),
             Node::Centroid(t) => {
-                let t = lattice.triangles[t as usize];
-                let s = t.iter().fold((0.0, 0.0), |s, &v| {
-                    (s.0 + p[v as usize].0, s.1 + p[v as usize].1)
-                });
+                let corners = match lattice.charts.as_ref().and_then(|c| c.get(t as usize)) {
+                    Some(ch) => *ch,
+                    None => lattice.triangles[t as usize].map(|v| p[v as usize]),
+                };
+                let s = corners
+                    .iter()
+                    .fold((0.0, 0.0), |s, c| (s.0 + c.0, s.1 + c.1));
                 (s.0 / 3.0, s.1 / 3.0)
             }
         }

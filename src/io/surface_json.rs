@@ -1,11 +1,12 @@
 //! The `surface.json` schema (`trispline.surface/1`): the B-spline kind written here, and
-//! a reader for every kind (`bezier`, `loop`, `bspline`) for the tools that consume fitted
-//! surfaces (`trispline curvature`).
+//! a reader for every kind (`bezier`, `loop` with layout lattice, `grid` or `mesh`,
+//! `bspline`) for the tools that consume fitted surfaces (`trispline curvature`).
 
 use super::IoError;
 use crate::bspline::BSplineSurface;
 use crate::surface::bezier::lattice_len;
 use crate::surface::grid_spline::GridSpline;
+use crate::surface::loop_limit::LoopLimitSurface;
 use glam::DVec3;
 use serde_json::{json, Value};
 
@@ -27,6 +28,13 @@ pub enum SurfaceDescription {
     /// Loop limit surface over cells of the three-direction grid (remeshed scans).
     LoopGrid {
         surface: GridSpline,
+        controls: Vec<DVec3>,
+    },
+    /// Loop limit surface of an arbitrary manifold control mesh (`layout: mesh`): the
+    /// control faces are the domain faces. Shared, since the surface memoises its
+    /// subdivision nodes and is not cheap to rebuild.
+    LoopMesh {
+        surface: std::sync::Arc<LoopLimitSurface>,
         controls: Vec<DVec3>,
     },
     BSpline(BSplineSurface),
@@ -206,6 +214,40 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
             )?;
             Ok(SurfaceDescription::LoopGrid { surface, controls })
         }
+        "loop" if v.get("layout").and_then(Value::as_str) == Some("mesh") => {
+            let controls = points(&v, name)?;
+            let faces = int_rows::<3>(&v, "control_faces", name)?
+                .into_iter()
+                .enumerate()
+                .map(|(f, t)| {
+                    // Range-check here so the error names the row; LoopLimitSurface::new
+                    // checks again against the control count.
+                    let mut out = [0u32; 3];
+                    for (o, &i) in out.iter_mut().zip(&t) {
+                        *o = u32::try_from(i)
+                            .ok()
+                            .filter(|&i| (i as usize) < controls.len())
+                            .ok_or_else(|| {
+                                IoError::new(
+                                    name,
+                                    Some(format!("control_faces[{f}]")),
+                                    format!(
+                                        "index {i} is not one of the {} control points",
+                                        controls.len()
+                                    ),
+                                )
+                            })?;
+                    }
+                    Ok(out)
+                })
+                .collect::<Result<Vec<_>, IoError>>()?;
+            let surface = LoopLimitSurface::new(controls.len(), &faces)
+                .map_err(|e| IoError::new(name, Some("key control_faces".into()), e.to_string()))?;
+            Ok(SurfaceDescription::LoopMesh {
+                surface: std::sync::Arc::new(surface),
+                controls,
+            })
+        }
         "loop" => {
             let n = uint(&v, "domain_segments", name)?;
             if n == 0 || n > 4096 {
@@ -293,6 +335,35 @@ mod tests {
     }
 
     #[test]
+    fn loop_mesh_round_trips() {
+        let controls = vec![
+            DVec3::new(0.0, 0.0, 0.1),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(0.0, 1.0, 0.2),
+            DVec3::new(-1.0, 0.0, 0.0),
+        ];
+        let faces = vec![[0u32, 1, 2], [0, 2, 3]];
+        let text = json!({
+            "schema": SCHEMA,
+            "kind": "loop",
+            "layout": "mesh",
+            "control_faces": faces,
+            "control_points": controls.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
+        });
+        let bytes = serde_json::to_vec(&text).expect("json");
+        match parse_surface_json(&bytes, "t").expect("parse") {
+            SurfaceDescription::LoopMesh {
+                surface,
+                controls: c,
+            } => {
+                assert_eq!(c, controls);
+                assert_eq!(surface.faces(), &faces[..]);
+            }
+            other => panic!("wrong kind {other:?}"),
+        }
+    }
+
+    #[test]
     fn malformed_files_name_the_problem() {
         let cases = [
             (r#"{"schema":"x","kind":"bezier"}"#, "schema"),
@@ -314,10 +385,28 @@ mod tests {
                 "knot",
             ),
             ("{", "line"),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]],"control_faces":[[0,1]]}"#,
+                "control_faces",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]],"control_faces":[[0,1,3]]}"#,
+                "control_faces[0]",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]]}"#,
+                "key control_faces",
+            ),
+            // Four faces on one edge: the LoopLimitError names the non-manifold net.
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[0,-1,0],[0,0,1],[0,0,-1]],"control_faces":[[0,1,2],[1,0,3],[0,1,4],[1,0,5]]}"#,
+                "not a manifold",
+            ),
         ];
         for (text, needle) in cases {
             let e = parse_surface_json(text.as_bytes(), "s.json").expect_err(text);
             assert!(e.to_string().contains(needle), "{e} lacks {needle}");
+            assert!(e.to_string().contains("s.json"), "{e} lacks the file name");
         }
     }
 }
