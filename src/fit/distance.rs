@@ -160,6 +160,116 @@ pub fn solve_distance(
     (x, max_iter)
 }
 
+/// The same minimiser by a sparse Cholesky factorisation of the 3m x 3m normal matrix
+/// (faer, fill-reducing ordering): on scan-sized nets one factorisation costs less than the
+/// 25-45 preconditioned CG steps a round needs, and it is exact. `None` when the matrix is
+/// not positive definite (controls no term holds): callers fall back to `solve_distance`.
+pub fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+    let (n, nt) = (p.basis.n(), p.basis.nt());
+    let m = n.ncols;
+    let t = p.tangential;
+    let fair = p
+        .fairness
+        .filter(|_| p.smoothing > 0.0)
+        .map(|l| (l.n(), l.nt()));
+    // Per control c the lower part of its three columns: blocks (j, c) for j >= c.
+    type Column = (Vec<usize>, Vec<f64>);
+    let columns: Vec<[Column; 3]> = (0..m)
+        .into_par_iter()
+        .map_init(
+            || (vec![[0.0f64; 9]; m], vec![false; m], Vec::<usize>::new()),
+            |(acc, seen, touched), c| {
+                touched.clear();
+                let mut add = |j: usize, w: f64, block: &[f64; 9]| {
+                    if !seen[j] {
+                        seen[j] = true;
+                        touched.push(j);
+                    }
+                    for (a, b) in acc[j].iter_mut().zip(block) {
+                        *a += w * b;
+                    }
+                };
+                for k in nt.row_ptr[c]..nt.row_ptr[c + 1] {
+                    let (r, wc) = (nt.col_idx[k] as usize, nt.values[k]);
+                    let q = p.normals[r];
+                    let block = [
+                        q.x * q.x + t,
+                        q.x * q.y,
+                        q.x * q.z,
+                        q.y * q.x,
+                        q.y * q.y + t,
+                        q.y * q.z,
+                        q.z * q.x,
+                        q.z * q.y,
+                        q.z * q.z + t,
+                    ];
+                    for e in n.row_ptr[r]..n.row_ptr[r + 1] {
+                        let j = n.col_idx[e] as usize;
+                        if j >= c {
+                            add(j, wc * n.values[e], &block);
+                        }
+                    }
+                }
+                if let Some((l, lt)) = fair {
+                    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+                    for k in lt.row_ptr[c]..lt.row_ptr[c + 1] {
+                        let (r, wc) = (lt.col_idx[k] as usize, lt.values[k] * p.smoothing);
+                        for e in l.row_ptr[r]..l.row_ptr[r + 1] {
+                            let j = l.col_idx[e] as usize;
+                            if j >= c {
+                                add(j, wc * l.values[e], &identity);
+                            }
+                        }
+                    }
+                }
+                touched.sort_unstable();
+                let mut cols: [Column; 3] = Default::default();
+                for (qc, col) in cols.iter_mut().enumerate() {
+                    for &j in touched.iter() {
+                        // Lower triangle: in the diagonal block only rows >= the column.
+                        let first = if j == c { qc } else { 0 };
+                        for r in first..3 {
+                            col.0.push(3 * j + r);
+                            col.1.push(acc[j][3 * r + qc]);
+                        }
+                    }
+                }
+                for &j in touched.iter() {
+                    seen[j] = false;
+                    acc[j] = [0.0; 9];
+                }
+                cols
+            },
+        )
+        .collect();
+    let mut col_ptr = Vec::with_capacity(3 * m + 1);
+    col_ptr.push(0);
+    let (mut rows, mut vals) = (Vec::new(), Vec::new());
+    for cols in columns {
+        for (r, v) in cols {
+            rows.extend(r);
+            vals.extend(v);
+            col_ptr.push(rows.len());
+        }
+    }
+    let symbolic = SymbolicSparseColMat::new_checked(3 * m, 3 * m, col_ptr, None, rows);
+    let llt = SparseColMat::new(symbolic, vals)
+        .sp_cholesky(faer::Side::Lower)
+        .ok()?;
+    let mut wp = p.data.to_vec();
+    p.weigh(&mut wp);
+    let mut b = vec![DVec3::ZERO; m];
+    p.basis.mul_t_vec3(&wp, &mut b);
+    let mut rhs = faer::Mat::<f64>::from_fn(3 * m, 1, |i, _| b[i / 3][i % 3]);
+    llt.solve_in_place(rhs.as_mut());
+    let x: Vec<DVec3> = (0..m)
+        .map(|c| DVec3::new(rhs[(3 * c, 0)], rhs[(3 * c + 1, 0)], rhs[(3 * c + 2, 0)]))
+        .collect();
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,12 +414,19 @@ mod tests {
             }
         }
         let want = mat.cholesky().expect("definite").solve(&rhs);
+        let direct = solve_distance_direct(&p).expect("definite");
         for c in 0..m {
             for r in 0..3 {
                 assert!(
                     (x[c][r] - want[3 * c + r]).abs() < 1e-8,
                     "{} vs {}",
                     x[c][r],
+                    want[3 * c + r]
+                );
+                assert!(
+                    (direct[c][r] - want[3 * c + r]).abs() < 1e-10,
+                    "direct {} vs {}",
+                    direct[c][r],
                     want[3 * c + r]
                 );
             }
