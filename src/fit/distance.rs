@@ -37,7 +37,18 @@ impl DistanceProblem<'_> {
             .for_each(|(r, n)| *r = *n * n.dot(*r) + *r * t);
     }
 
-    /// M x = N^T W N x + s L^T L x.
+    /// N^T W p.
+    fn rhs(&self) -> Vec<DVec3> {
+        let mut wp = self.data.to_vec();
+        self.weigh(&mut wp);
+        let mut b = vec![DVec3::ZERO; self.basis.ncols()];
+        self.basis.mul_t_vec3(&wp, &mut b);
+        b
+    }
+
+    /// M x = N^T W N x + s L^T L x without assembling M: the reference the assembled
+    /// blocks are tested against.
+    #[cfg(test)]
     fn apply(&self, x: &[DVec3], scratch: &mut Vec<DVec3>, out: &mut [DVec3]) {
         scratch.resize(self.basis.nrows(), DVec3::ZERO);
         self.basis.mul_vec3(x, scratch);
@@ -55,57 +66,6 @@ impl DistanceProblem<'_> {
     }
 }
 
-/// The inverses of the 3x3 diagonal blocks of M (symmetric, stored as [xx, xy, xz, yy, yz,
-/// zz]); a block that cannot be inverted (no data, no fairness) becomes the identity.
-fn block_jacobi(p: &DistanceProblem) -> Vec<glam::DMat3> {
-    let nt = &p.basis.nt();
-    let t = p.tangential;
-    let fair_diag: Vec<f64> = match p.fairness.filter(|_| p.smoothing > 0.0) {
-        Some(l) => (0..l.nt().nrows)
-            .map(|c| {
-                let range = l.nt().row_ptr[c]..l.nt().row_ptr[c + 1];
-                l.nt().values[range].iter().map(|w| w * w).sum::<f64>() * p.smoothing
-            })
-            .collect(),
-        None => vec![0.0; nt.nrows],
-    };
-    (0..nt.nrows)
-        .into_par_iter()
-        .map(|c| {
-            let mut b = [0.0f64; 6];
-            for k in nt.row_ptr[c]..nt.row_ptr[c + 1] {
-                let w2 = nt.values[k] * nt.values[k];
-                let n = p.normals[nt.col_idx[k] as usize];
-                b[0] += w2 * (n.x * n.x + t);
-                b[1] += w2 * n.x * n.y;
-                b[2] += w2 * n.x * n.z;
-                b[3] += w2 * (n.y * n.y + t);
-                b[4] += w2 * n.y * n.z;
-                b[5] += w2 * (n.z * n.z + t);
-            }
-            let f = fair_diag.get(c).copied().unwrap_or(0.0);
-            let m = glam::DMat3::from_cols_array(&[
-                b[0] + f,
-                b[1],
-                b[2],
-                b[1],
-                b[3] + f,
-                b[4],
-                b[2],
-                b[4],
-                b[5] + f,
-            ]);
-            let scale = b[0].max(b[3]).max(b[5]) + f;
-            let det = m.determinant();
-            if scale > 0.0 && det.is_finite() && det > 1e-12 * scale * scale * scale {
-                m.inverse()
-            } else {
-                glam::DMat3::IDENTITY
-            }
-        })
-        .collect()
-}
-
 fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
     a.par_iter().zip(b.par_iter()).map(|(x, y)| x.dot(*y)).sum()
 }
@@ -120,15 +80,12 @@ pub fn solve_distance(
 ) -> (Vec<DVec3>, usize) {
     let m = start.len();
     let mut x = start;
-    let mut scratch = Vec::new();
-    let mut wp = p.data.to_vec();
-    p.weigh(&mut wp);
-    let mut b = vec![DVec3::ZERO; m];
-    p.basis.mul_t_vec3(&wp, &mut b);
+    let b = p.rhs();
+    let matrix = BlockMatrix::assemble(p, false);
     let mut mx = vec![DVec3::ZERO; m];
-    p.apply(&x, &mut scratch, &mut mx);
+    matrix.apply(&x, &mut mx);
     let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();
-    let precond = block_jacobi(p);
+    let precond = matrix.block_jacobi();
     let apply_precond = |r: &[DVec3], z: &mut Vec<DVec3>| {
         z.clear();
         z.par_extend(r.par_iter().zip(precond.par_iter()).map(|(r, m)| *m * *r));
@@ -143,7 +100,7 @@ pub fn solve_distance(
         if dot(&r, &r) <= stop {
             return (x, k);
         }
-        p.apply(&d, &mut scratch, &mut md);
+        matrix.apply(&d, &mut md);
         let dmd = dot(&d, &md);
         if dmd <= 0.0 || !dmd.is_finite() {
             return (x, k);
@@ -167,90 +124,23 @@ pub fn solve_distance(
 pub fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
     use faer::linalg::solvers::Solve;
     use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-    let (n, nt) = (p.basis.n(), p.basis.nt());
-    let m = n.ncols;
-    let t = p.tangential;
-    let fair = p
-        .fairness
-        .filter(|_| p.smoothing > 0.0)
-        .map(|l| (l.n(), l.nt()));
-    // Per control c the lower part of its three columns: blocks (j, c) for j >= c.
-    type Column = (Vec<usize>, Vec<f64>);
-    let columns: Vec<[Column; 3]> = (0..m)
-        .into_par_iter()
-        .map_init(
-            || (vec![[0.0f64; 9]; m], vec![false; m], Vec::<usize>::new()),
-            |(acc, seen, touched), c| {
-                touched.clear();
-                let mut add = |j: usize, w: f64, block: &[f64; 9]| {
-                    if !seen[j] {
-                        seen[j] = true;
-                        touched.push(j);
-                    }
-                    for (a, b) in acc[j].iter_mut().zip(block) {
-                        *a += w * b;
-                    }
-                };
-                for k in nt.row_ptr[c]..nt.row_ptr[c + 1] {
-                    let (r, wc) = (nt.col_idx[k] as usize, nt.values[k]);
-                    let q = p.normals[r];
-                    let block = [
-                        q.x * q.x + t,
-                        q.x * q.y,
-                        q.x * q.z,
-                        q.y * q.x,
-                        q.y * q.y + t,
-                        q.y * q.z,
-                        q.z * q.x,
-                        q.z * q.y,
-                        q.z * q.z + t,
-                    ];
-                    for e in n.row_ptr[r]..n.row_ptr[r + 1] {
-                        let j = n.col_idx[e] as usize;
-                        if j >= c {
-                            add(j, wc * n.values[e], &block);
-                        }
-                    }
-                }
-                if let Some((l, lt)) = fair {
-                    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
-                    for k in lt.row_ptr[c]..lt.row_ptr[c + 1] {
-                        let (r, wc) = (lt.col_idx[k] as usize, lt.values[k] * p.smoothing);
-                        for e in l.row_ptr[r]..l.row_ptr[r + 1] {
-                            let j = l.col_idx[e] as usize;
-                            if j >= c {
-                                add(j, wc * l.values[e], &identity);
-                            }
-                        }
-                    }
-                }
-                touched.sort_unstable();
-                let mut cols: [Column; 3] = Default::default();
-                for (qc, col) in cols.iter_mut().enumerate() {
-                    for &j in touched.iter() {
-                        // Lower triangle: in the diagonal block only rows >= the column.
-                        let first = if j == c { qc } else { 0 };
-                        for r in first..3 {
-                            col.0.push(3 * j + r);
-                            col.1.push(acc[j][3 * r + qc]);
-                        }
-                    }
-                }
-                for &j in touched.iter() {
-                    seen[j] = false;
-                    acc[j] = [0.0; 9];
-                }
-                cols
-            },
-        )
-        .collect();
+    let m = p.basis.ncols();
+    let lower = BlockMatrix::assemble(p, true);
     let mut col_ptr = Vec::with_capacity(3 * m + 1);
     col_ptr.push(0);
     let (mut rows, mut vals) = (Vec::new(), Vec::new());
-    for cols in columns {
-        for (r, v) in cols {
-            rows.extend(r);
-            vals.extend(v);
+    for c in 0..m {
+        let range = lower.ptr[c]..lower.ptr[c + 1];
+        for qc in 0..3 {
+            for k in range.clone() {
+                let j = lower.idx[k] as usize;
+                // Lower triangle: in the diagonal block only rows >= the column.
+                let first = if j == c { qc } else { 0 };
+                for r in first..3 {
+                    rows.push(3 * j + r);
+                    vals.push(lower.blocks[k][3 * r + qc]);
+                }
+            }
             col_ptr.push(rows.len());
         }
     }
@@ -258,16 +148,143 @@ pub fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
     let llt = SparseColMat::new(symbolic, vals)
         .sp_cholesky(faer::Side::Lower)
         .ok()?;
-    let mut wp = p.data.to_vec();
-    p.weigh(&mut wp);
-    let mut b = vec![DVec3::ZERO; m];
-    p.basis.mul_t_vec3(&wp, &mut b);
+    let b = p.rhs();
     let mut rhs = faer::Mat::<f64>::from_fn(3 * m, 1, |i, _| b[i / 3][i % 3]);
     llt.solve_in_place(rhs.as_mut());
     let x: Vec<DVec3> = (0..m)
         .map(|c| DVec3::new(rhs[(3 * c, 0)], rhs[(3 * c + 1, 0)], rhs[(3 * c + 2, 0)]))
         .collect();
     x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// M = N^T W N + s L^T L assembled as 3x3 blocks per pair of controls sharing a data point
+/// (or a fairness row): per control c its neighbours j and the blocks M_jc (symmetric, since
+/// every weight n n^T + t I is). A product with M then reads ~37 blocks per control instead
+/// of going through the data twice (N, then N^T), four to five times less work per CG step
+/// on a scan, for one assembly per solve.
+struct BlockMatrix {
+    ptr: Vec<usize>,
+    idx: Vec<u32>,
+    blocks: Vec<[f64; 9]>,
+}
+
+impl BlockMatrix {
+    /// `lower_only`: only the blocks with j >= c (for the factorisation).
+    fn assemble(p: &DistanceProblem, lower_only: bool) -> Self {
+        let (n, nt) = (p.basis.n(), p.basis.nt());
+        let m = n.ncols;
+        let t = p.tangential;
+        let fair = p
+            .fairness
+            .filter(|_| p.smoothing > 0.0)
+            .map(|l| (l.n(), l.nt()));
+        let columns: Vec<(Vec<u32>, Vec<[f64; 9]>)> = (0..m)
+            .into_par_iter()
+            .map_init(
+                || (vec![[0.0f64; 9]; m], vec![false; m], Vec::<usize>::new()),
+                |(acc, seen, touched), c| {
+                    touched.clear();
+                    let mut add = |j: usize, w: f64, block: &[f64; 9]| {
+                        if lower_only && j < c {
+                            return;
+                        }
+                        if !seen[j] {
+                            seen[j] = true;
+                            touched.push(j);
+                        }
+                        for (a, b) in acc[j].iter_mut().zip(block) {
+                            *a += w * b;
+                        }
+                    };
+                    for k in nt.row_ptr[c]..nt.row_ptr[c + 1] {
+                        let (r, wc) = (nt.col_idx[k] as usize, nt.values[k]);
+                        let q = p.normals[r];
+                        let block = [
+                            q.x * q.x + t,
+                            q.x * q.y,
+                            q.x * q.z,
+                            q.y * q.x,
+                            q.y * q.y + t,
+                            q.y * q.z,
+                            q.z * q.x,
+                            q.z * q.y,
+                            q.z * q.z + t,
+                        ];
+                        for e in n.row_ptr[r]..n.row_ptr[r + 1] {
+                            add(n.col_idx[e] as usize, wc * n.values[e], &block);
+                        }
+                    }
+                    if let Some((l, lt)) = fair {
+                        let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+                        for k in lt.row_ptr[c]..lt.row_ptr[c + 1] {
+                            let (r, wc) = (lt.col_idx[k] as usize, lt.values[k] * p.smoothing);
+                            for e in l.row_ptr[r]..l.row_ptr[r + 1] {
+                                add(l.col_idx[e] as usize, wc * l.values[e], &identity);
+                            }
+                        }
+                    }
+                    touched.sort_unstable();
+                    let idx: Vec<u32> = touched.iter().map(|&j| j as u32).collect();
+                    let blocks = touched
+                        .iter()
+                        .map(|&j| {
+                            seen[j] = false;
+                            std::mem::replace(&mut acc[j], [0.0; 9])
+                        })
+                        .collect();
+                    (idx, blocks)
+                },
+            )
+            .collect();
+        let mut ptr = Vec::with_capacity(m + 1);
+        ptr.push(0);
+        let (mut idx, mut blocks) = (Vec::new(), Vec::new());
+        for (i, b) in columns {
+            idx.extend(i);
+            blocks.extend(b);
+            ptr.push(idx.len());
+        }
+        Self { ptr, idx, blocks }
+    }
+
+    fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
+        out.par_iter_mut().enumerate().for_each(|(c, o)| {
+            let mut sum = DVec3::ZERO;
+            for k in self.ptr[c]..self.ptr[c + 1] {
+                let (b, v) = (&self.blocks[k], x[self.idx[k] as usize]);
+                sum += DVec3::new(
+                    b[0] * v.x + b[1] * v.y + b[2] * v.z,
+                    b[3] * v.x + b[4] * v.y + b[5] * v.z,
+                    b[6] * v.x + b[7] * v.y + b[8] * v.z,
+                );
+            }
+            *o = sum;
+        });
+    }
+
+    /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
+    /// becomes the identity.
+    fn block_jacobi(&self) -> Vec<glam::DMat3> {
+        (0..self.ptr.len() - 1)
+            .into_par_iter()
+            .map(|c| {
+                let range = self.ptr[c]..self.ptr[c + 1];
+                let Some(k) = range.clone().find(|&k| self.idx[k] as usize == c) else {
+                    return glam::DMat3::IDENTITY;
+                };
+                let b = self.blocks[k];
+                // Row-major storage of a symmetric block: the transpose is the same matrix.
+                let mat = glam::DMat3::from_cols_array(&b);
+                let scale = b[0].max(b[4]).max(b[8]);
+                let det = mat.determinant();
+                if scale > 0.0 && det.is_finite() && det > 1e-12 * scale * scale * scale {
+                    mat.inverse()
+                } else {
+                    glam::DMat3::IDENTITY
+                }
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
@@ -430,6 +447,56 @@ mod tests {
                     want[3 * c + r]
                 );
             }
+        }
+    }
+    /// The assembled blocks (with a fairness term) against the product through N and N^T.
+    #[test]
+    fn assembled_blocks_equal_the_product_through_the_data() {
+        let m = 8;
+        let rows: Vec<Vec<(u32, f64)>> = (0..50)
+            .map(|j| {
+                let a = (j % m) as u32;
+                vec![
+                    (a, 0.6),
+                    ((a + 2) % m as u32, 0.3),
+                    ((a + 5) % m as u32, 0.1),
+                ]
+            })
+            .collect();
+        let basis = Collocation::new(Csr::from_rows(m, rows.iter().map(|r| r.as_slice())));
+        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
+            .map(|i| {
+                vec![
+                    (i, 1.0),
+                    ((i + 1) % m as u32, -0.5),
+                    ((i + 7) % m as u32, -0.5),
+                ]
+            })
+            .collect();
+        let fairness = Collocation::new(Csr::from_rows(m, lap.iter().map(|r| r.as_slice())));
+        let data: Vec<DVec3> = (0..50).map(|j| DVec3::splat(j as f64)).collect();
+        let normals: Vec<DVec3> = (0..50)
+            .map(|j| DVec3::new((j as f64).cos(), 0.3, (j as f64).sin()).normalize())
+            .collect();
+        let p = DistanceProblem {
+            basis: &basis,
+            data: &data,
+            normals: &normals,
+            tangential: 0.05,
+            fairness: Some(&fairness),
+            smoothing: 0.7,
+        };
+        let x: Vec<DVec3> = (0..m)
+            .map(|c| DVec3::new(c as f64, (c * c) as f64 * 0.1, -(c as f64)))
+            .collect();
+        let (mut want, mut got) = (vec![DVec3::ZERO; m], vec![DVec3::ZERO; m]);
+        p.apply(&x, &mut Vec::new(), &mut want);
+        BlockMatrix::assemble(&p, false).apply(&x, &mut got);
+        for (a, b) in want.iter().zip(&got) {
+            assert!(
+                (*a - *b).length() < 1e-12 * a.length().max(1.0),
+                "{a} vs {b}"
+            );
         }
     }
 }
