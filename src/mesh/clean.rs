@@ -308,7 +308,7 @@ fn split_pinches(
 }
 
 /// An undirected edge as one hashable word.
-fn edge_key(a: u32, b: u32) -> u64 {
+pub fn edge_key(a: u32, b: u32) -> u64 {
     ((a.min(b) as u64) << 32) | a.max(b) as u64
 }
 

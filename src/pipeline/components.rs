@@ -2,6 +2,7 @@
 //! surface of their own. Range scans come in 8–28 pieces, most of them a few stray triangles
 //! at silhouettes; a fit of such a sliver is noise, so pieces are kept by size.
 
+use crate::mesh::clean::edge_key;
 use crate::mesh::stats::UnionFind;
 use crate::TriMesh;
 use glam::DVec3;
@@ -66,8 +67,7 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
     for (f, t) in mesh.triangles.iter().enumerate() {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-            match edge_face.entry(key) {
+            match edge_face.entry(edge_key(a, b)) {
                 Entry::Occupied(g) => uf.union(f, *g.get()),
                 Entry::Vacant(slot) => {
                     slot.insert(f);
