@@ -147,7 +147,7 @@ fn dot3<const F: bool>(a: &[f64], ys: &[f64]) -> [f64; 3] {
 }
 
 /// Whether this CPU has AVX2 and FMA (checked once; the answer cannot change).
-fn wide() -> bool {
+pub(crate) fn wide() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();

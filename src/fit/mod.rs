@@ -4,6 +4,7 @@ pub mod bezier_rows;
 pub mod budget;
 pub mod distance;
 pub mod engine;
+pub mod normal_matrix;
 pub mod sparse;
 
 pub use budget::{Budget, FitStatus, StepStats};

@@ -8,6 +8,9 @@ use glam::DVec3;
 /// usually within a small fraction of a face; a handful of steps reaches machine precision.
 const MAX_NEWTON_STEPS: usize = 8;
 
+/// Squared parameter step (in face units) below which the search has converged.
+const CONVERGED_STEP2: f64 = 1e-14;
+
 /// Returns the foot-point parameter and the surface's derivatives there (the distance is
 /// `|position - point|`). The distance never exceeds the distance at `start`: a step that
 /// does not reduce it is halved and finally refused.
@@ -43,6 +46,11 @@ pub fn foot_point(
         }
         let mut du = -(h[2] * g[0] - h[1] * g[1]) / det;
         let mut dv = -(h[0] * g[1] - h[1] * g[0]) / det;
+        // Newton converges quadratically: a step this short moves the point by under
+        // 1e-7 of a face, far below any tolerance, and is not worth another evaluation.
+        if du * du + dv * dv < CONVERGED_STEP2 {
+            break;
+        }
         let mut improved = false;
         for _ in 0..6 {
             let trial = surface.step(param, du, dv);
@@ -58,7 +66,7 @@ pub fn foot_point(
             du *= 0.5;
             dv *= 0.5;
         }
-        if !improved || (du * du + dv * dv) < 1e-24 {
+        if !improved {
             break;
         }
     }

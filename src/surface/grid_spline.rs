@@ -28,6 +28,9 @@ pub struct GridSpline {
     index: Vec<u32>,
     coords: Vec<(i64, i64)>,
     cells: Vec<Cell>,
+    /// Per cell slot (`cell_slot`): every stencil point exists. Foot-point searches ask
+    /// this at every step.
+    covered: Vec<bool>,
 }
 
 /// The 12 control vertices a cell's patch depends on, in `STENCIL` order.
@@ -87,7 +90,7 @@ impl GridSpline {
             index[k] = coords.len() as u32;
             coords.push((lo.0 + (k % width) as i64, lo.1 + (k / width) as i64));
         }
-        Self {
+        let mut grid = Self {
             i0: lo.0,
             j0: lo.1,
             width,
@@ -95,7 +98,18 @@ impl GridSpline {
             index,
             coords,
             cells,
-        }
+            covered: Vec::new(),
+        };
+        grid.covered = (0..2 * width * height)
+            .map(|k| {
+                let (row, column, down) = (k / 2 / width, k / 2 % width, k % 2 == 1);
+                let cell = (grid.i0 + column as i64, grid.j0 + row as i64, down);
+                cell_stencil(cell)
+                    .iter()
+                    .all(|&(a, b)| grid.control_at(a, b).is_some())
+            })
+            .collect();
+        grid
     }
 
     pub fn cells(&self) -> &[Cell] {
@@ -122,9 +136,7 @@ impl GridSpline {
             return false;
         }
         let (cell, _, _) = cell_at(x, y);
-        cell_stencil(cell)
-            .iter()
-            .all(|&(a, b)| self.control_at(a, b).is_some())
+        self.cell_slot(cell).is_some_and(|k| self.covered[k])
     }
 
     /// Every cell split into k x k sub-triangles, shared vertices merged: the vertices'

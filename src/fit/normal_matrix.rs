@@ -1,0 +1,823 @@
+//! Normal equations of weighted least-squares fits, assembled once per solve:
+//!     M = N^T W N + s L^T L,    b = N^T W p
+//! with W = I (point-to-point fits: M is the same scalar matrix for x, y and z) or, per
+//! data point, W_j = n_j n_j^T + t I (squared-distance rounds: M couples the coordinates in
+//! 3x3 blocks).
+//!
+//! Data rows with the same column pattern are summed first into one small dense matrix per
+//! pattern: on a grid spline every point of a cell has that cell's 12-control stencil, so a
+//! scan of 40k points has only a few thousand patterns. The per-point work is then a dense
+//! triangular update without index lookups, and each control gathers its row of M from the
+//! few dozen pattern matrices it appears in, in parallel and without write conflicts.
+//!
+//! Per control pair an entry keeps `K` sums: first the scalar part
+//! sum w_a w_b t + s (L^T L)_ab, then for blocks (K = 8) the six distinct entries of
+//! sum w_a w_b n n^T (the block is symmetric) and a zero that pads the entry to a whole
+//! number of AVX registers.
+
+use super::sparse::Csr;
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+use rustc_hash::FxHashMap;
+
+/// Index of the scalar part in an entry.
+const SCALAR: usize = 0;
+
+/// Control pairs of a pattern with k columns, a <= b, packed row by row.
+fn packed_len(k: usize) -> usize {
+    k * (k + 1) / 2
+}
+
+#[inline]
+fn packed_index(a: usize, b: usize, k: usize) -> usize {
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    // Rows 0..a hold k, k - 1, ..., k - a + 1 pairs.
+    a * k - a * a.saturating_sub(1) / 2 + (b - a)
+}
+
+/// Row-wise sparse storage of M: for control c its neighbours `idx[ptr[c]..ptr[c + 1]]`
+/// (sorted) and the sums of each pair.
+#[derive(Clone, Debug)]
+pub struct NormalMatrix<const K: usize> {
+    pub ptr: Vec<usize>,
+    pub idx: Vec<u32>,
+    pub entries: Vec<[f64; K]>,
+    /// b = N^T W p.
+    pub rhs: Vec<DVec3>,
+}
+
+/// Point-to-point: the same matrix for all three coordinates.
+pub type ScalarMatrix = NormalMatrix<1>;
+/// Squared distance: 3x3 blocks from six n n^T sums and a scalar part.
+pub type BlockMatrix = NormalMatrix<8>;
+
+/// The fairness term s L^T L: L by rows and by columns (its transpose).
+#[derive(Clone, Copy)]
+pub struct Fairness<'a> {
+    pub l: &'a Csr,
+    pub lt: &'a Csr,
+    pub smoothing: f64,
+}
+
+/// Rows of N grouped by identical column lists.
+struct Patterns<'a> {
+    columns: Vec<&'a [u32]>,
+    /// Rows of pattern g: `rows[start[g]..start[g + 1]]`.
+    start: Vec<usize>,
+    rows: Vec<u32>,
+}
+
+impl<'a> Patterns<'a> {
+    fn group(n: &'a Csr) -> Self {
+        let mut id: FxHashMap<&'a [u32], u32> = FxHashMap::default();
+        let mut columns = Vec::new();
+        let of_row: Vec<u32> = (0..n.nrows)
+            .map(|r| {
+                let cols = &n.col_idx[n.row_ptr[r]..n.row_ptr[r + 1]];
+                *id.entry(cols).or_insert_with(|| {
+                    columns.push(cols);
+                    (columns.len() - 1) as u32
+                })
+            })
+            .collect();
+        let mut start = vec![0usize; columns.len() + 1];
+        for &g in &of_row {
+            start[g as usize + 1] += 1;
+        }
+        for g in 0..columns.len() {
+            start[g + 1] += start[g];
+        }
+        let mut fill = start.clone();
+        let mut rows = vec![0u32; n.nrows];
+        for (r, &g) in of_row.iter().enumerate() {
+            rows[fill[g as usize]] = r as u32;
+            fill[g as usize] += 1;
+        }
+        Self {
+            columns,
+            start,
+            rows,
+        }
+    }
+}
+
+/// Sum over `rows` (all with pattern length k) of w w^T q and w (W p), packed.
+fn accumulate<const K: usize>(
+    n: &Csr,
+    rows: &[u32],
+    k: usize,
+    weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
+    pairs: &mut [[f64; K]],
+    rhs: &mut [DVec3],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if super::bezier_rows::wide() {
+        // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
+        unsafe { accumulate_wide(n, rows, k, weight, pairs, rhs) };
+        return;
+    }
+    accumulate_with(n, rows, k, weight, pairs, rhs)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn accumulate_wide<const K: usize>(
+    n: &Csr,
+    rows: &[u32],
+    k: usize,
+    weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
+    pairs: &mut [[f64; K]],
+    rhs: &mut [DVec3],
+) {
+    accumulate_with(n, rows, k, weight, pairs, rhs)
+}
+
+#[inline(always)]
+fn accumulate_with<const K: usize>(
+    n: &Csr,
+    rows: &[u32],
+    k: usize,
+    weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
+    pairs: &mut [[f64; K]],
+    rhs: &mut [DVec3],
+) {
+    for &r in rows {
+        let r = r as usize;
+        let w = &n.values[n.row_ptr[r]..n.row_ptr[r + 1]];
+        let (q, wp) = weight(r);
+        let mut pos = 0;
+        for a in 0..k {
+            let wa = w[a];
+            rhs[a] += wp * wa;
+            let wq = q.map(|x| x * wa);
+            for (e, &wb) in pairs[pos..pos + k - a].iter_mut().zip(&w[a..k]) {
+                for c in 0..K {
+                    e[c] += wq[c] * wb;
+                }
+            }
+            pos += k - a;
+        }
+    }
+}
+
+/// Above this many pair updates a pattern's rows are summed in parallel.
+const PARALLEL_PATTERN_WORK: usize = 1 << 20;
+
+fn assemble<const K: usize>(
+    n: &Csr,
+    weight: impl Fn(usize) -> ([f64; K], DVec3) + Sync,
+    fairness: Option<Fairness>,
+    lower_only: bool,
+) -> NormalMatrix<K> {
+    let m = n.ncols;
+    let patterns = Patterns::group(n);
+    let groups = patterns.columns.len();
+    let local: Vec<(Vec<[f64; K]>, Vec<DVec3>)> = (0..groups)
+        .into_par_iter()
+        .map(|g| {
+            let k = patterns.columns[g].len();
+            let rows = &patterns.rows[patterns.start[g]..patterns.start[g + 1]];
+            let zero = || (vec![[0.0; K]; packed_len(k)], vec![DVec3::ZERO; k]);
+            if rows.len() * packed_len(k) < PARALLEL_PATTERN_WORK {
+                let (mut pairs, mut rhs) = zero();
+                accumulate(n, rows, k, &weight, &mut pairs, &mut rhs);
+                (pairs, rhs)
+            } else {
+                // One pattern holding most rows (a single Bezier patch): split the rows.
+                rows.par_chunks(256)
+                    .fold(zero, |(mut pairs, mut rhs), chunk| {
+                        accumulate(n, chunk, k, &weight, &mut pairs, &mut rhs);
+                        (pairs, rhs)
+                    })
+                    .reduce(zero, |(mut pa, mut ra), (pb, rb)| {
+                        pa.iter_mut().zip(&pb).for_each(|(a, b)| {
+                            for c in 0..K {
+                                a[c] += b[c];
+                            }
+                        });
+                        ra.iter_mut().zip(&rb).for_each(|(a, b)| *a += *b);
+                        (pa, ra)
+                    })
+            }
+        })
+        .collect();
+
+    // Where each control appears: (pattern, position in it).
+    let mut start = vec![0usize; m + 1];
+    for cols in &patterns.columns {
+        for &c in *cols {
+            start[c as usize + 1] += 1;
+        }
+    }
+    for c in 0..m {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut incidence = vec![(0u32, 0u32); start[m]];
+    for (g, cols) in patterns.columns.iter().enumerate() {
+        for (a, &c) in cols.iter().enumerate() {
+            incidence[fill[c as usize]] = (g as u32, a as u32);
+            fill[c as usize] += 1;
+        }
+    }
+
+    let gather = Gather {
+        patterns: &patterns,
+        local: &local,
+        incidence: &incidence,
+        start: &start,
+        fairness: fairness.filter(|f| f.smoothing > 0.0),
+        lower_only,
+    };
+    // Controls in chunks, each with one scratch over all controls (zeroed once, reset
+    // entry by entry) and flat outputs.
+    let chunks: Vec<GatheredRows<K>> = (0..m)
+        .collect::<Vec<usize>>()
+        .par_chunks(GATHER_CHUNK)
+        .map(|controls| {
+            let mut scratch = (vec![[0.0f64; K]; m], vec![false; m], Vec::new());
+            let mut out = (
+                Vec::with_capacity(controls.len()),
+                Vec::new(),
+                Vec::new(),
+                Vec::new(),
+            );
+            for &c in controls {
+                let before = out.1.len();
+                let rhs = gather.row(c, &mut scratch, &mut out.1, &mut out.2);
+                out.0.push(out.1.len() - before);
+                out.3.push(rhs);
+            }
+            out
+        })
+        .collect();
+    let nnz = chunks.iter().map(|c| c.1.len()).sum();
+    let mut ptr = Vec::with_capacity(m + 1);
+    ptr.push(0);
+    let (mut idx, mut entries, mut rhs) = (
+        Vec::with_capacity(nnz),
+        Vec::with_capacity(nnz),
+        Vec::with_capacity(m),
+    );
+    for (lens, i, e, b) in chunks {
+        for len in lens {
+            ptr.push(ptr[ptr.len() - 1] + len);
+        }
+        idx.extend(i);
+        entries.extend(e);
+        rhs.extend(b);
+    }
+    NormalMatrix {
+        ptr,
+        idx,
+        entries,
+        rhs,
+    }
+}
+
+/// A chunk of gathered rows: row lengths, neighbours, entries and right-hand sides.
+type GatheredRows<const K: usize> = (Vec<usize>, Vec<u32>, Vec<[f64; K]>, Vec<DVec3>);
+
+/// Controls gathered per task.
+const GATHER_CHUNK: usize = 128;
+
+/// What a control's row of M is gathered from.
+struct Gather<'a, const K: usize> {
+    patterns: &'a Patterns<'a>,
+    local: &'a [(Vec<[f64; K]>, Vec<DVec3>)],
+    /// (pattern, position) of control c: `incidence[start[c]..start[c + 1]]`.
+    incidence: &'a [(u32, u32)],
+    start: &'a [usize],
+    fairness: Option<Fairness<'a>>,
+    lower_only: bool,
+}
+
+/// Per-thread accumulators over all controls, the touched flags and list.
+type GatherScratch<const K: usize> = (Vec<[f64; K]>, Vec<bool>, Vec<usize>);
+
+impl<const K: usize> Gather<'_, K> {
+    /// Appends control c's neighbours and entries (sorted) to `idx` and `entries`;
+    /// returns its b.
+    fn row(
+        &self,
+        c: usize,
+        scratch: &mut GatherScratch<K>,
+        idx: &mut Vec<u32>,
+        entries: &mut Vec<[f64; K]>,
+    ) -> DVec3 {
+        #[cfg(target_arch = "x86_64")]
+        if super::bezier_rows::wide() {
+            // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
+            return unsafe { self.row_wide(c, scratch, idx, entries) };
+        }
+        self.row_with(c, scratch, idx, entries)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn row_wide(
+        &self,
+        c: usize,
+        scratch: &mut GatherScratch<K>,
+        idx: &mut Vec<u32>,
+        entries: &mut Vec<[f64; K]>,
+    ) -> DVec3 {
+        self.row_with(c, scratch, idx, entries)
+    }
+
+    #[inline(always)]
+    fn row_with(
+        &self,
+        c: usize,
+        (acc, seen, touched): &mut GatherScratch<K>,
+        idx: &mut Vec<u32>,
+        entries: &mut Vec<[f64; K]>,
+    ) -> DVec3 {
+        touched.clear();
+        let mut rhs = DVec3::ZERO;
+        for &(g, a) in &self.incidence[self.start[c]..self.start[c + 1]] {
+            let (g, a) = (g as usize, a as usize);
+            let cols = self.patterns.columns[g];
+            let k = cols.len();
+            let (pairs, local_rhs) = &self.local[g];
+            rhs += local_rhs[a];
+            // Pair (a, b) is stored at (min, max): column a of the packed rows before a,
+            // then row a itself, contiguous.
+            let mut row_start = 0;
+            for (b, &j) in cols.iter().enumerate() {
+                let pos = if b < a {
+                    row_start + (a - b)
+                } else {
+                    packed_index(a, b, k)
+                };
+                row_start += k - b;
+                let j = j as usize;
+                if self.lower_only && j < c {
+                    continue;
+                }
+                if !seen[j] {
+                    seen[j] = true;
+                    touched.push(j);
+                }
+                for (s, v) in acc[j].iter_mut().zip(&pairs[pos]) {
+                    *s += v;
+                }
+            }
+        }
+        if let Some(f) = self.fairness {
+            for k in f.lt.row_ptr[c]..f.lt.row_ptr[c + 1] {
+                let (r, wc) = (f.lt.col_idx[k] as usize, f.lt.values[k] * f.smoothing);
+                for e in f.l.row_ptr[r]..f.l.row_ptr[r + 1] {
+                    let j = f.l.col_idx[e] as usize;
+                    if self.lower_only && j < c {
+                        continue;
+                    }
+                    if !seen[j] {
+                        seen[j] = true;
+                        touched.push(j);
+                    }
+                    acc[j][SCALAR] += wc * f.l.values[e];
+                }
+            }
+        }
+        touched.sort_unstable();
+        for &j in touched.iter() {
+            seen[j] = false;
+            idx.push(j as u32);
+            entries.push(std::mem::replace(&mut acc[j], [0.0; K]));
+        }
+        rhs
+    }
+}
+
+impl ScalarMatrix {
+    /// N^T N + s L^T L and N^T p.
+    pub fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
+        assemble::<1>(n, |r| ([1.0], data[r]), fairness, lower_only)
+    }
+
+    pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
+        out.par_iter_mut().enumerate().for_each(|(c, o)| {
+            let mut sum = DVec3::ZERO;
+            for k in self.ptr[c]..self.ptr[c + 1] {
+                sum += x[self.idx[k] as usize] * self.entries[k][SCALAR];
+            }
+            *o = sum;
+        });
+    }
+
+    /// Inverse diagonal (1 where a control has no term).
+    pub fn jacobi(&self) -> Vec<f64> {
+        (0..self.ptr.len() - 1)
+            .map(|c| {
+                let range = self.ptr[c]..self.ptr[c + 1];
+                range
+                    .clone()
+                    .find(|&k| self.idx[k] as usize == c)
+                    .map(|k| self.entries[k][SCALAR])
+                    .filter(|d| *d > 0.0)
+                    .map_or(1.0, |d| 1.0 / d)
+            })
+            .collect()
+    }
+}
+
+impl BlockMatrix {
+    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t I.
+    pub fn assemble(
+        n: &Csr,
+        data: &[DVec3],
+        normals: &[DVec3],
+        tangential: f64,
+        fairness: Option<Fairness>,
+        lower_only: bool,
+    ) -> Self {
+        let t = tangential;
+        let weight = |r: usize| {
+            let (q, p) = (normals[r], data[r]);
+            (
+                [
+                    t,
+                    q.x * q.x,
+                    q.x * q.y,
+                    q.x * q.z,
+                    q.y * q.y,
+                    q.y * q.z,
+                    q.z * q.z,
+                    0.0,
+                ],
+                q * q.dot(p) + p * t,
+            )
+        };
+        assemble::<8>(n, weight, fairness, lower_only)
+    }
+
+    /// The 3x3 block of an entry, row-major (symmetric, so also column-major).
+    #[inline]
+    pub fn block(e: &[f64; 8]) -> [f64; 9] {
+        let s = e[SCALAR];
+        [
+            e[1] + s,
+            e[2],
+            e[3],
+            e[2],
+            e[4] + s,
+            e[5],
+            e[3],
+            e[5],
+            e[6] + s,
+        ]
+    }
+
+    pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
+        out.par_iter_mut().enumerate().for_each(|(c, o)| {
+            let mut sum = DVec3::ZERO;
+            for k in self.ptr[c]..self.ptr[c + 1] {
+                let (e, v) = (&self.entries[k], x[self.idx[k] as usize]);
+                let s = e[SCALAR];
+                sum += DVec3::new(
+                    (e[1] + s) * v.x + e[2] * v.y + e[3] * v.z,
+                    e[2] * v.x + (e[4] + s) * v.y + e[5] * v.z,
+                    e[3] * v.x + e[5] * v.y + (e[6] + s) * v.z,
+                );
+            }
+            *o = sum;
+        });
+    }
+
+    /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
+    /// becomes the identity.
+    pub fn block_jacobi(&self) -> Vec<DMat3> {
+        (0..self.ptr.len() - 1)
+            .into_par_iter()
+            .map(|c| {
+                let range = self.ptr[c]..self.ptr[c + 1];
+                let Some(k) = range.clone().find(|&k| self.idx[k] as usize == c) else {
+                    return DMat3::IDENTITY;
+                };
+                let b = Self::block(&self.entries[k]);
+                let mat = DMat3::from_cols_array(&b);
+                let scale = b[0].max(b[4]).max(b[8]);
+                let det = mat.determinant();
+                if scale > 0.0 && det.is_finite() && det > 1e-12 * scale * scale * scale {
+                    mat.inverse()
+                } else {
+                    DMat3::IDENTITY
+                }
+            })
+            .collect()
+    }
+}
+
+fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
+    a.par_iter().zip(b.par_iter()).map(|(x, y)| x.dot(*y)).sum()
+}
+
+/// Preconditioned conjugate gradients on M x = b from `start` until the residual drops by
+/// `rel_tol` relative to b or `max_iter` steps; returns x and the steps taken.
+fn pcg(
+    apply: impl Fn(&[DVec3], &mut [DVec3]),
+    precondition: impl Fn(&[DVec3], &mut Vec<DVec3>),
+    b: &[DVec3],
+    start: Vec<DVec3>,
+    max_iter: usize,
+    rel_tol: f64,
+) -> (Vec<DVec3>, usize) {
+    let m = start.len();
+    let mut x = start;
+    let mut mx = vec![DVec3::ZERO; m];
+    apply(&x, &mut mx);
+    let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();
+    let mut z = Vec::with_capacity(m);
+    precondition(&r, &mut z);
+    let mut d = z.clone();
+    let mut rz = dot(&r, &z);
+    let stop = rel_tol * rel_tol * dot(b, b).max(1e-300);
+    let mut md = vec![DVec3::ZERO; m];
+    for k in 0..max_iter {
+        if dot(&r, &r) <= stop {
+            return (x, k);
+        }
+        apply(&d, &mut md);
+        let dmd = dot(&d, &md);
+        if dmd <= 0.0 || !dmd.is_finite() {
+            return (x, k);
+        }
+        let alpha = rz / dmd;
+        x.iter_mut().zip(&d).for_each(|(x, d)| *x += *d * alpha);
+        r.iter_mut().zip(&md).for_each(|(r, v)| *r -= *v * alpha);
+        precondition(&r, &mut z);
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        d.iter_mut().zip(&z).for_each(|(d, z)| *d = *z + *d * beta);
+    }
+    (x, max_iter)
+}
+
+/// Lower triangle of a symmetric matrix given by columns (the `lower_only` assembly).
+fn cholesky_solve(
+    size: usize,
+    col_ptr: Vec<usize>,
+    rows: Vec<usize>,
+    vals: Vec<f64>,
+    rhs: impl Fn(usize, usize) -> f64,
+    ncols_rhs: usize,
+) -> Option<faer::Mat<f64>> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+    let symbolic = SymbolicSparseColMat::new_checked(size, size, col_ptr, None, rows);
+    let llt = SparseColMat::new(symbolic, vals)
+        .sp_cholesky(faer::Side::Lower)
+        .ok()?;
+    let mut b = faer::Mat::<f64>::from_fn(size, ncols_rhs, rhs);
+    llt.solve_in_place(b.as_mut());
+    Some(b)
+}
+
+impl ScalarMatrix {
+    /// Jacobi-preconditioned CG.
+    pub fn solve_pcg(
+        &self,
+        start: Vec<DVec3>,
+        max_iter: usize,
+        rel_tol: f64,
+    ) -> (Vec<DVec3>, usize) {
+        let inv = self.jacobi();
+        let precondition = |r: &[DVec3], z: &mut Vec<DVec3>| {
+            z.clear();
+            z.par_extend(r.par_iter().zip(inv.par_iter()).map(|(r, d)| *r * *d));
+        };
+        pcg(
+            |x, out| self.apply(x, out),
+            precondition,
+            &self.rhs,
+            start,
+            max_iter,
+            rel_tol,
+        )
+    }
+
+    /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly; `None` when M is
+    /// not positive definite (controls no term holds) or the result is not finite.
+    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+        let m = self.rhs.len();
+        let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
+        let rows = self.idx.iter().map(|&j| j as usize).collect();
+        let b = cholesky_solve(m, self.ptr.clone(), rows, vals, |i, k| self.rhs[i][k], 3)?;
+        let x: Vec<DVec3> = (0..m)
+            .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
+            .collect();
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
+
+impl BlockMatrix {
+    /// CG preconditioned by the inverse 3x3 diagonal blocks: with a small tangential share
+    /// the system is much stiffer along the normals than along the surface, and the blocks,
+    /// which see each control's normal, take most of that spread out of the iteration.
+    pub fn solve_pcg(
+        &self,
+        start: Vec<DVec3>,
+        max_iter: usize,
+        rel_tol: f64,
+    ) -> (Vec<DVec3>, usize) {
+        let inv = self.block_jacobi();
+        let precondition = |r: &[DVec3], z: &mut Vec<DVec3>| {
+            z.clear();
+            z.par_extend(r.par_iter().zip(inv.par_iter()).map(|(r, m)| *m * *r));
+        };
+        pcg(
+            |x, out| self.apply(x, out),
+            precondition,
+            &self.rhs,
+            start,
+            max_iter,
+            rel_tol,
+        )
+    }
+
+    /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
+    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+        let m = self.rhs.len();
+        let mut col_ptr = Vec::with_capacity(3 * m + 1);
+        col_ptr.push(0);
+        let (mut rows, mut vals) = (Vec::new(), Vec::new());
+        for c in 0..m {
+            let range = self.ptr[c]..self.ptr[c + 1];
+            for qc in 0..3 {
+                for k in range.clone() {
+                    let j = self.idx[k] as usize;
+                    let block = Self::block(&self.entries[k]);
+                    // Lower triangle: in the diagonal block only rows >= the column.
+                    let first = if j == c { qc } else { 0 };
+                    for r in first..3 {
+                        rows.push(3 * j + r);
+                        vals.push(block[3 * r + qc]);
+                    }
+                }
+                col_ptr.push(rows.len());
+            }
+        }
+        let b = cholesky_solve(3 * m, col_ptr, rows, vals, |i, _| self.rhs[i / 3][i % 3], 1)?;
+        let x: Vec<DVec3> = (0..m)
+            .map(|c| DVec3::new(b[(3 * c, 0)], b[(3 * c + 1, 0)], b[(3 * c + 2, 0)]))
+            .collect();
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{DMatrix, DVector};
+
+    fn dense(n: &Csr) -> DMatrix<f64> {
+        let mut a = DMatrix::zeros(n.nrows, n.ncols);
+        for r in 0..n.nrows {
+            for k in n.row_ptr[r]..n.row_ptr[r + 1] {
+                a[(r, n.col_idx[k] as usize)] += n.values[k];
+            }
+        }
+        a
+    }
+
+    fn to_dense(m: &ScalarMatrix) -> DMatrix<f64> {
+        let size = m.rhs.len();
+        let mut d = DMatrix::zeros(size, size);
+        for c in 0..size {
+            for k in m.ptr[c]..m.ptr[c + 1] {
+                d[(c, m.idx[k] as usize)] = m.entries[k][0];
+            }
+        }
+        d
+    }
+
+    /// Rows repeating a few column patterns (one given in a different order, one with a
+    /// repeated column), weights varying per row, a fairness term: M, b and both solvers
+    /// against dense normal equations.
+    #[test]
+    fn scalar_assembly_and_solves_match_dense_normal_equations() {
+        let m = 10;
+        let patterns: [&[u32]; 4] = [&[0, 1, 2, 5], &[5, 2, 1, 0], &[3, 4, 4, 9], &[6, 7, 8]];
+        let rows: Vec<Vec<(u32, f64)>> = (0..300)
+            .map(|j| {
+                let pat = patterns[j % 4];
+                pat.iter()
+                    .enumerate()
+                    .map(|(k, &c)| (c, 0.1 + ((j * 7 + k * 3) % 11) as f64 * 0.05))
+                    .collect()
+            })
+            .collect();
+        let n = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
+        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
+            .map(|i| {
+                vec![
+                    (i, 1.0),
+                    ((i + 1) % m as u32, -0.5),
+                    ((i + 9) % m as u32, -0.5),
+                ]
+            })
+            .collect();
+        let l = Csr::from_rows(m, lap.iter().map(|r| r.as_slice()));
+        let lt = l.transpose();
+        let s = 0.3;
+        let fair = Some(Fairness {
+            l: &l,
+            lt: &lt,
+            smoothing: s,
+        });
+        let data: Vec<DVec3> = (0..300)
+            .map(|j| DVec3::new((j as f64 * 0.37).sin(), j as f64 * 0.01, (j % 13) as f64))
+            .collect();
+        let full = ScalarMatrix::assemble(&n, &data, fair, false);
+        let (a, ld) = (dense(&n), dense(&l));
+        let want = a.transpose() * &a + (ld.transpose() * &ld) * s;
+        let got = to_dense(&full);
+        assert!(
+            (&got - &want).amax() < 1e-12 * want.amax(),
+            "{got} vs {want}"
+        );
+        for axis in 0..3 {
+            let p = DVector::from_iterator(300, data.iter().map(|d| d[axis]));
+            let b = a.transpose() * &p;
+            let x = want.clone().cholesky().expect("definite").solve(&b);
+            let (pcg, steps) = full.solve_pcg(vec![DVec3::ZERO; m], 200, 1e-14);
+            let direct = ScalarMatrix::assemble(&n, &data, fair, true)
+                .solve_direct()
+                .expect("definite");
+            assert!(steps < 200);
+            for c in 0..m {
+                assert!((full.rhs[c][axis] - b[c]).abs() < 1e-12 * b.amax().max(1.0));
+                assert!(
+                    (pcg[c][axis] - x[c]).abs() < 1e-9,
+                    "{} vs {}",
+                    pcg[c][axis],
+                    x[c]
+                );
+                assert!((direct[c][axis] - x[c]).abs() < 1e-10);
+            }
+        }
+    }
+
+    /// One pattern shared by enough rows to be summed in parallel chunks (a single Bezier
+    /// patch), with normals: the blocks against the dense 3m x 3m matrix.
+    #[test]
+    fn one_large_pattern_summed_in_parallel_matches_dense_blocks() {
+        let m = 40;
+        let rows_count = 3000;
+        let rows: Vec<Vec<(u32, f64)>> = (0..rows_count)
+            .map(|j| {
+                (0..m as u32)
+                    .map(|c| (c, 1.0 + ((j * 31 + c as usize * 17) % 23) as f64 / 23.0))
+                    .collect()
+            })
+            .collect();
+        assert!(rows_count * packed_len(m) >= PARALLEL_PATTERN_WORK);
+        let n = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
+        let data: Vec<DVec3> = (0..rows_count)
+            .map(|j| DVec3::new(j as f64, (j as f64).cos(), 1.0))
+            .collect();
+        let normals: Vec<DVec3> = (0..rows_count)
+            .map(|j| DVec3::new((j as f64).sin(), 0.5, 1.0).normalize())
+            .collect();
+        let t = 0.05;
+        let blocks = BlockMatrix::assemble(&n, &data, &normals, t, None, false);
+        let mut want = DMatrix::<f64>::zeros(3 * m, 3 * m);
+        let mut rhs = DVector::<f64>::zeros(3 * m);
+        for (j, row) in rows.iter().enumerate() {
+            let q = normals[j];
+            let w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t;
+            let wp = w * data[j];
+            for &(a, wa) in row {
+                for r in 0..3 {
+                    rhs[3 * a as usize + r] += wa * wp[r];
+                }
+                for &(b, wb) in row {
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            want[(3 * a as usize + r, 3 * b as usize + c)] += wa * wb * w.col(c)[r];
+                        }
+                    }
+                }
+            }
+        }
+        let scale = want.amax();
+        for c in 0..m {
+            assert_eq!(blocks.ptr[c + 1] - blocks.ptr[c], m, "every pair present");
+            for k in blocks.ptr[c]..blocks.ptr[c + 1] {
+                let j = blocks.idx[k] as usize;
+                let b = BlockMatrix::block(&blocks.entries[k]);
+                for r in 0..3 {
+                    for q in 0..3 {
+                        let d = (b[3 * r + q] - want[(3 * c + r, 3 * j + q)]).abs();
+                        assert!(d < 1e-11 * scale, "block ({c},{j}) [{r},{q}] off by {d}");
+                    }
+                }
+            }
+            for r in 0..3 {
+                assert!((blocks.rhs[c][r] - rhs[3 * c + r]).abs() < 1e-11 * rhs.amax());
+            }
+        }
+    }
+}
