@@ -114,7 +114,7 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     let f = &fitted.fit;
     let coverage = fitted.scan.as_ref().map(|s| {
         Coverage::new(
-            &s.filled.triangles,
+            &s.hole_plan.covered,
             &f.params,
             &s.mapped_params,
             &s.near_fold,

@@ -74,6 +74,11 @@ pub struct FitArgs {
     /// vertices) are not fitted.
     #[arg(long, default_value_t = 0.05)]
     pub min_component_fraction: f64,
+    /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
+    /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
+    /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
+    #[arg(long, default_value_t = 1.5)]
+    pub hole_bridge_edges: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = 128)]
     pub tessellation: usize,
@@ -106,6 +111,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         components: args.components,
         min_component_vertices: args.min_component_vertices,
         min_component_fraction: args.min_component_fraction,
+        hole_bridge_edges: args.hole_bridge_edges,
     };
     let progress = Progress::new(cfg.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);

@@ -4,6 +4,7 @@
 pub mod components;
 pub mod domain;
 pub mod geometric;
+pub mod holes;
 pub mod lattice;
 pub mod output;
 pub mod scan;

@@ -61,6 +61,7 @@ pub fn surface_json(
         v["trim"] = json!({
             "space": "the surface's own parameters (barycentric (u, v) for bezier, grid (x, y) for loop)",
             "outer": s.trim.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
+            "holes": s.hole_trims.iter().map(|h| h.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>()).collect::<Vec<_>>(),
         });
     }
     v["fit"] = report["final"].clone();

@@ -8,6 +8,7 @@ use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
     plane_extent, spacing_for_target, GridFrame, InitialNet,
 };
+use super::holes::{plan_holes, HolePlan};
 use super::{
     collocation, collocation_rows, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind,
 };
@@ -44,6 +45,9 @@ pub struct ScanOptions {
     pub correction: Correction,
     /// The largest component must have at least this many vertices.
     pub min_component_vertices: usize,
+    /// Holes (and data triangles) with a bridging radius above this many median edge
+    /// lengths are trimmed out; narrower ones are bridged by the surface (`holes`).
+    pub hole_bridge_edges: f64,
 }
 
 /// What a correction round refits after moving the parameters to the foot points.
@@ -125,6 +129,12 @@ pub struct ScanFit {
     pub initial: InitialNet,
     /// Outer boundary of the data in parameter coordinates, ordered: the trim.
     pub trim: Vec<(f64, f64)>,
+    /// Which holes are bridged and which trimmed, and the triangles of `filled` that make
+    /// the covered region (all but the fills of trimmed holes).
+    pub hole_plan: HolePlan,
+    /// Rims of the trimmed holes and wide data triangles in parameter coordinates, ordered
+    /// like `trim`: what lies inside any of them is not part of the surface.
+    pub hole_trims: Vec<Vec<(f64, f64)>>,
     /// Geometric RMS after the first fit and after each correction round.
     pub correction_rms: Vec<f64>,
     pub parameterization_ms: f64,
@@ -176,6 +186,13 @@ pub fn fit_scan(
     };
     let map = planar_map(&patch, &frame).map_err(unsupported)?;
     let plane = &map.plane;
+    let hole_plan = plan_holes(
+        &map.mesh,
+        patch.real_vertices,
+        &patch.hole_loops,
+        &part.triangles,
+        scan.hole_bridge_edges * median_edge_length(&part),
+    );
     let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t1 = Instant::now();
@@ -392,14 +409,28 @@ pub fn fit_scan(
     outcome.iterations = outcome.steps.len().saturating_sub(1);
     let fit_ms = t2.elapsed().as_secs_f64() * 1e3;
 
-    let trim = patch
-        .outer
+    let loop_params = |rim: &[u32]| -> Vec<(f64, f64)> {
+        rim.iter()
+            .map(|&v| {
+                params
+                    .get(v as usize)
+                    .map_or_else(|| domain.param(plane[v as usize]), |q| (q.u, q.v))
+            })
+            .collect()
+    };
+    let trim = loop_params(&patch.outer);
+    let hole_trims = patch
+        .hole_loops
         .iter()
-        .map(|&v| {
-            params
-                .get(v as usize)
-                .map_or_else(|| domain.param(plane[v as usize]), |q| (q.u, q.v))
-        })
+        .zip(&hole_plan.bridged)
+        .filter(|(_, bridged)| !**bridged)
+        .map(|(rim, _)| loop_params(rim))
+        .chain(
+            hole_plan
+                .wide_triangles
+                .iter()
+                .map(|&k| loop_params(&map.mesh.triangles[k])),
+        )
         .collect();
     let mapped_params = plane
         .iter()
@@ -438,11 +469,38 @@ pub fn fit_scan(
         near_fold: map.near_fold,
         initial,
         trim,
+        hole_plan,
+        hole_trims,
         correction_rms,
         parameterization_ms,
         resample_ms,
         reused_controls: reused,
     })
+}
+
+/// Median edge length of a mesh, from at most ~30k edges spread over it: the data's
+/// sample spacing, the unit in which hole widths are judged.
+fn median_edge_length(mesh: &TriMesh) -> f64 {
+    let stride = (mesh.triangles.len() / 10_000).max(1);
+    let mut lengths: Vec<f64> = mesh
+        .triangles
+        .iter()
+        .step_by(stride)
+        .flat_map(|t| {
+            let p = t.map(|v| mesh.positions[v as usize]);
+            [
+                (p[1] - p[0]).length(),
+                (p[2] - p[1]).length(),
+                (p[0] - p[2]).length(),
+            ]
+        })
+        .filter(|l| l.is_finite())
+        .collect();
+    if lengths.is_empty() {
+        return 0.0;
+    }
+    let mid = lengths.len() / 2;
+    *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// Cells of the grid's bounding box times the 4^levels resampling triangles of each: a

@@ -64,6 +64,15 @@ pub struct WorkerConfig {
     /// largest are not fitted.
     #[serde(default = "default_min_component_fraction")]
     pub min_component_fraction: f64,
+    /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
+    /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
+    /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
+    #[serde(default = "default_hole_bridge_edges")]
+    pub hole_bridge_edges: f64,
+}
+
+fn default_hole_bridge_edges() -> f64 {
+    1.5
 }
 
 fn default_min_component_vertices() -> usize {
@@ -115,6 +124,7 @@ impl Default for WorkerConfig {
             components: ComponentMode::default(),
             min_component_vertices: default_min_component_vertices(),
             min_component_fraction: default_min_component_fraction(),
+            hole_bridge_edges: default_hole_bridge_edges(),
         }
     }
 }
@@ -254,6 +264,7 @@ pub fn fit_patch_with(
                 correction_rounds: cfg.correction_rounds,
                 correction: cfg.correction,
                 min_component_vertices: cfg.min_component_vertices,
+                hole_bridge_edges: cfg.hole_bridge_edges,
             };
             let warm = previous.map(|w| ScanWarm {
                 frame: w.frame,
@@ -308,7 +319,7 @@ pub fn run_patch_with(
     } = fit_patch_with(mesh, previous, cfg, on_step)?;
     let coverage = scan_info.as_ref().map(|s| {
         Coverage::new(
-            &s.filled.triangles,
+            &s.hole_plan.covered,
             &fitted.params,
             &s.mapped_params,
             &s.near_fold,
@@ -326,6 +337,14 @@ pub fn run_patch_with(
         report["components"] = json!(s.components);
         report["kept_vertices"] = json!(s.kept_vertices);
         report["holes_filled"] = json!(s.holes);
+        report["holes"] = json!({
+            "count": s.holes,
+            "bridged": s.holes - s.hole_plan.trimmed(),
+            "trimmed": s.hole_plan.trimmed(),
+            "wide_triangles_trimmed": s.hole_plan.wide_triangles.len(),
+            "max_bridge": s.hole_plan.max_bridge,
+            "largest_radius": s.hole_plan.radius.iter().cloned().fold(0.0, f64::max),
+        });
         report["parameterization"] = json!({
             "method": s.map_method,
             "folded_triangles": s.folds_projected,
