@@ -151,7 +151,10 @@ pub struct Locator<'a> {
     lo: DVec2,
     cell: f64,
     dim: usize,
-    buckets: Vec<Vec<u32>>,
+    /// Triangles of bucket b, in triangle order: `bucketed[start[b]..start[b + 1]]` (one
+    /// flat array: a scan's map has ~10^5 buckets, too many for a vector each).
+    start: Vec<usize>,
+    bucketed: Vec<u32>,
 }
 
 impl<'a> Locator<'a> {
@@ -170,20 +173,40 @@ impl<'a> Locator<'a> {
         lo -= DVec2::splat(extent * 1e-9);
         let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
         let cell = extent * (1.0 + 2e-9) / dim as f64;
-        let mut buckets = vec![Vec::new(); dim * dim];
-        for (f, t) in tris.iter().enumerate() {
-            let ps = [
-                plane[t[0] as usize],
-                plane[t[1] as usize],
-                plane[t[2] as usize],
-            ];
-            let mn = ps[0].min(ps[1]).min(ps[2]);
-            let mx = ps[0].max(ps[1]).max(ps[2]);
-            let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
-            let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
+        let ranges: Vec<[usize; 4]> = tris
+            .iter()
+            .map(|t| {
+                let ps = [
+                    plane[t[0] as usize],
+                    plane[t[1] as usize],
+                    plane[t[2] as usize],
+                ];
+                let mn = ps[0].min(ps[1]).min(ps[2]);
+                let mx = ps[0].max(ps[1]).max(ps[2]);
+                let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
+                let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
+                [x0, y0, x1, y1]
+            })
+            .collect();
+        let mut start = vec![0usize; dim * dim + 1];
+        for &[x0, y0, x1, y1] in &ranges {
             for y in y0..=y1 {
                 for x in x0..=x1 {
-                    buckets[y * dim + x].push(f as u32);
+                    start[y * dim + x + 1] += 1;
+                }
+            }
+        }
+        for b in 0..dim * dim {
+            start[b + 1] += start[b];
+        }
+        let mut fill = start.clone();
+        let mut bucketed = vec![0u32; start[dim * dim]];
+        for (f, &[x0, y0, x1, y1]) in ranges.iter().enumerate() {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let slot = &mut fill[y * dim + x];
+                    bucketed[*slot] = f as u32;
+                    *slot += 1;
                 }
             }
         }
@@ -193,8 +216,14 @@ impl<'a> Locator<'a> {
             lo,
             cell,
             dim,
-            buckets,
+            start,
+            bucketed,
         }
+    }
+
+    fn bucket(&self, x: usize, y: usize) -> &[u32] {
+        let b = y * self.dim + x;
+        &self.bucketed[self.start[b]..self.start[b + 1]]
     }
 
     fn cell_of(lo: DVec2, cell: f64, dim: usize, p: DVec2) -> (usize, usize) {
@@ -224,7 +253,7 @@ impl<'a> Locator<'a> {
     /// Whether `q` lies in (or within rounding of) a triangle.
     pub fn contains(&self, q: DVec2) -> bool {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
-        self.buckets[cy * self.dim + cx].iter().any(|&f| {
+        self.bucket(cx, cy).iter().any(|&f| {
             let b = self.bary(f, q);
             b[0].min(b[1]).min(b[2]) >= -1e-9
         })
@@ -242,7 +271,7 @@ impl<'a> Locator<'a> {
                     if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
                         continue;
                     }
-                    for &f in &self.buckets[y * self.dim + x] {
+                    for &f in self.bucket(x, y) {
                         let b = self.bary(f, q);
                         let worst = b[0].min(b[1]).min(b[2]);
                         if worst > best.0 {
