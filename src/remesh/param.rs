@@ -265,21 +265,15 @@ impl<'a> Locator<'a> {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
         let mut best = (f64::MIN, 0usize, [1.0, 0.0, 0.0]);
         for r in 0..self.dim {
-            for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
-                for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
-                    // Inner cells were searched at smaller r.
-                    if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
-                        continue;
-                    }
-                    for &f in self.bucket(x, y) {
-                        let b = self.bary(f, q);
-                        let worst = b[0].min(b[1]).min(b[2]);
-                        if worst > best.0 {
-                            best = (worst, f as usize, b);
-                        }
+            ring_cells(cx, cy, r, self.dim, |x, y| {
+                for &f in self.bucket(x, y) {
+                    let b = self.bary(f, q);
+                    let worst = b[0].min(b[1]).min(b[2]);
+                    if worst > best.0 {
+                        best = (worst, f as usize, b);
                     }
                 }
-            }
+            });
             if best.0 >= -1e-12 || (best.0 > f64::MIN && r >= 1) {
                 break;
             }
@@ -294,5 +288,32 @@ impl<'a> Locator<'a> {
                 [1.0 / 3.0; 3]
             },
         )
+    }
+}
+
+/// Visits the cells of a `dim` x `dim` bucket grid at Chebyshev distance exactly `r` from
+/// (cx, cy), row by row and left to right (the order of a scan of the whole square, which
+/// searches that break ties by the first hit rely on), without walking the square's inside.
+pub(crate) fn ring_cells(
+    cx: usize,
+    cy: usize,
+    r: usize,
+    dim: usize,
+    mut visit: impl FnMut(usize, usize),
+) {
+    let (x0, x1) = (cx.saturating_sub(r), (cx + r).min(dim - 1));
+    for y in cy.saturating_sub(r)..=(cy + r).min(dim - 1) {
+        if y.abs_diff(cy) == r {
+            for x in x0..=x1 {
+                visit(x, y);
+            }
+        } else {
+            if cx >= r {
+                visit(cx - r, y);
+            }
+            if cx + r < dim {
+                visit(cx + r, y);
+            }
+        }
     }
 }
