@@ -454,4 +454,46 @@ mod tests {
         assert!((s[0] - s[1]).abs() < 1e-9 && (s[1] - s[2]).abs() < 1e-9);
         assert!((tri[1] - tri[0]).perp_dot(tri[2] - tri[0]) > 0.0);
     }
+
+    #[test]
+    fn covered_cells_and_control_counts_match_the_grid_they_build() {
+        // A wavy fan of thin triangles: ranges of many shapes, some cells only grazed.
+        let mut plane = vec![DVec2::new(0.3, -0.2)];
+        let mut tris = Vec::new();
+        for k in 0..40 {
+            let a = k as f64 * 0.15;
+            plane.push(DVec2::new(a.cos(), a.sin()) * (2.0 + 0.7 * (3.0 * a).sin()));
+            if k > 0 {
+                tris.push([0, k as u32, k as u32 + 1]);
+            }
+        }
+        for spacing in [0.05, 0.13, 0.4, 1.7, 10.0] {
+            let frame = GridFrame { spacing };
+            let cells = covered_cells(&frame, &plane, &tris);
+            // The plain construction: every cell of every triangle's bounding box.
+            let mut expected = Vec::new();
+            for t in &tris {
+                let g = t.map(|v| frame.to_grid(plane[v as usize]));
+                let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
+                let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
+                let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
+                let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
+                for j in y0..=y1 {
+                    for i in x0..=x1 {
+                        expected.extend([(i, j, false), (i, j, true)]);
+                    }
+                }
+            }
+            expected.sort_unstable_by_key(|&(i, j, d)| (j, i, d));
+            expected.dedup();
+            assert_eq!(cells, expected, "spacing {spacing}");
+            let grid = GridSpline::new(cells);
+            let mask = CellMask::new(&cell_ranges(&frame, &plane, &tris)).expect("small mask");
+            assert_eq!(
+                mask.control_count(),
+                grid.control_count(),
+                "spacing {spacing}"
+            );
+        }
+    }
 }

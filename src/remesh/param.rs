@@ -155,6 +155,11 @@ pub struct Locator<'a> {
     /// flat array: a scan's map has ~10^5 buckets, too many for a vector each).
     start: Vec<usize>,
     bucketed: Vec<u32>,
+    /// Per bucket, the Chebyshev distance (in buckets) to the nearest non-empty one: a
+    /// point outside the map starts its ring search there instead of walking empty rings
+    /// (the rings skipped hold no triangle, so the result is the same). Built on first use:
+    /// `contains` never needs it.
+    empty_rings: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl<'a> Locator<'a> {
@@ -218,7 +223,62 @@ impl<'a> Locator<'a> {
             dim,
             start,
             bucketed,
+            empty_rings: std::sync::OnceLock::new(),
         }
+    }
+
+    /// Two-pass chessboard distance transform of the non-empty buckets.
+    fn empty_rings(&self) -> &[u32] {
+        self.empty_rings.get_or_init(|| {
+            let n = self.dim;
+            let mut d: Vec<u32> = (0..n * n)
+                .map(|b| {
+                    if self.start[b + 1] > self.start[b] {
+                        0
+                    } else {
+                        u32::MAX
+                    }
+                })
+                .collect();
+            let relax = |d: &mut [u32], k: usize, from: usize| {
+                d[k] = d[k].min(d[from].saturating_add(1));
+            };
+            for y in 0..n {
+                for x in 0..n {
+                    let k = y * n + x;
+                    if x > 0 {
+                        relax(&mut d, k, k - 1);
+                    }
+                    if y > 0 {
+                        relax(&mut d, k, k - n);
+                        if x > 0 {
+                            relax(&mut d, k, k - n - 1);
+                        }
+                        if x + 1 < n {
+                            relax(&mut d, k, k - n + 1);
+                        }
+                    }
+                }
+            }
+            for y in (0..n).rev() {
+                for x in (0..n).rev() {
+                    let k = y * n + x;
+                    if x + 1 < n {
+                        relax(&mut d, k, k + 1);
+                    }
+                    if y + 1 < n {
+                        relax(&mut d, k, k + n);
+                        if x + 1 < n {
+                            relax(&mut d, k, k + n + 1);
+                        }
+                        if x > 0 {
+                            relax(&mut d, k, k + n - 1);
+                        }
+                    }
+                }
+            }
+            d
+        })
     }
 
     fn bucket(&self, x: usize, y: usize) -> &[u32] {
@@ -264,7 +324,8 @@ impl<'a> Locator<'a> {
     pub fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
         let mut best = (f64::MIN, 0usize, [1.0, 0.0, 0.0]);
-        for r in 0..self.dim {
+        let first = (self.empty_rings()[cy * self.dim + cx] as usize).min(self.dim);
+        for r in first..self.dim {
             ring_cells(cx, cy, r, self.dim, |x, y| {
                 for &f in self.bucket(x, y) {
                     let b = self.bary(f, q);
@@ -315,5 +376,69 @@ pub(crate) fn ring_cells(
                 visit(cx + r, y);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ring_cells_visit_the_square_scan_in_its_order() {
+        for dim in [1usize, 2, 5, 9] {
+            for (cx, cy) in [(0, 0), (dim / 2, dim / 3), (dim - 1, dim - 1), (0, dim - 1)] {
+                for r in 0..dim + 1 {
+                    let mut scan = Vec::new();
+                    for y in cy.saturating_sub(r)..=(cy + r).min(dim - 1) {
+                        for x in cx.saturating_sub(r)..=(cx + r).min(dim - 1) {
+                            if x.abs_diff(cx).max(y.abs_diff(cy)) == r {
+                                scan.push((x, y));
+                            }
+                        }
+                    }
+                    let mut ring = Vec::new();
+                    ring_cells(cx, cy, r, dim, |x, y| ring.push((x, y)));
+                    assert_eq!(ring, scan, "dim {dim} centre ({cx}, {cy}) r {r}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn empty_rings_are_chessboard_distances_and_far_points_find_the_nearest_triangle() {
+        // Two triangles in opposite corners of a large empty box (a third, tiny and far away,
+        // stretches the bucket grid).
+        let plane = vec![
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 1.0),
+            DVec2::new(9.0, 9.0),
+            DVec2::new(10.0, 9.0),
+            DVec2::new(10.0, 10.0),
+            DVec2::new(0.0, 10.0),
+            DVec2::new(0.01, 10.0),
+            DVec2::new(0.0, 9.99),
+        ];
+        let tris = vec![[0, 1, 2], [3, 4, 5], [6, 8, 7]];
+        let loc = Locator::new(&tris, &plane);
+        let n = loc.dim;
+        let rings = loc.empty_rings();
+        for y in 0..n {
+            for x in 0..n {
+                let brute = (0..n * n)
+                    .filter(|&b| !loc.bucket(b % n, b / n).is_empty())
+                    .map(|b| (b % n).abs_diff(x).max((b / n).abs_diff(y)))
+                    .min()
+                    .map_or(u32::MAX, |d| d as u32);
+                assert_eq!(rings[y * n + x], brute, "bucket ({x}, {y})");
+            }
+        }
+        let (f, b) = loc.locate(DVec2::new(0.2, 0.2));
+        assert_eq!(f, 0);
+        assert!((b[0] - 0.6).abs() < 1e-12);
+        // Outside everything, near the second triangle: its nearest corner, clamped.
+        let (f, b) = loc.locate(DVec2::new(10.5, 10.5));
+        assert_eq!(f, 1);
+        assert!((b[2] - 1.0).abs() < 1e-12, "{b:?}");
     }
 }
