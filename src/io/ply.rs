@@ -662,7 +662,7 @@ mod tests {
             [0.0, 1.0, 0.0],
         ] {
             for c in p {
-                b.extend_from_slice(&(c as f32).to_le_bytes());
+                b.extend_from_slice(&c.to_le_bytes());
             }
         }
         for f in faces {
