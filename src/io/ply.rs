@@ -226,18 +226,84 @@ impl Body<'_> {
                     a[..n].reverse();
                 }
                 self.pos += n;
-                Ok(match ty {
-                    Scalar::I8 => a[0] as i8 as f64,
-                    Scalar::U8 => a[0] as f64,
-                    Scalar::I16 => i16::from_le_bytes([a[0], a[1]]) as f64,
-                    Scalar::U16 => u16::from_le_bytes([a[0], a[1]]) as f64,
-                    Scalar::I32 => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::U32 => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::F32 => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
-                    Scalar::F64 => f64::from_le_bytes(a),
-                })
+                Ok(decode_le(ty, a))
             }
         }
+    }
+
+    /// Binary little-endian elements made of scalars only, at fixed offsets with no
+    /// per-value dispatch (the common layout of scanner output). Returns false, having
+    /// consumed nothing, when a position is not finite: the general reader then reports it.
+    fn fast_vertices(&mut self, e: &Element, xyz: [usize; 3], out: &mut Vec<DVec3>) -> bool {
+        let mut offset = 0;
+        let mut at = [(0, Scalar::F32); 3];
+        for (k, p) in e.props.iter().enumerate() {
+            let Property::Scalar(_, t) = p else {
+                return false;
+            };
+            for (c, &i) in xyz.iter().enumerate() {
+                if i == k {
+                    at[c] = (offset, *t);
+                }
+            }
+            offset += t.size();
+        }
+        let stride = offset;
+        let Some(body) = self.bytes.get(self.pos..self.pos + stride * e.count) else {
+            return false;
+        };
+        let start = out.len();
+        for item in body.chunks_exact(stride.max(1)).take(e.count) {
+            let [x, y, z] = at.map(|(o, t)| {
+                let mut a = [0u8; 8];
+                a[..t.size()].copy_from_slice(&item[o..o + t.size()]);
+                decode_le(t, a)
+            });
+            let p = DVec3::new(x, y, z);
+            if !p.is_finite() {
+                out.truncate(start);
+                return false;
+            }
+            out.push(p);
+        }
+        self.pos += stride * e.count;
+        true
+    }
+
+    /// Binary little-endian faces that are only a `vertex_indices` list of 32-bit indices
+    /// with an 8-bit count, all triangles with indices in range. Returns false, having
+    /// consumed nothing, at anything else: the general reader then handles or reports it.
+    fn fast_triangles(&mut self, e: &Element, vertices: usize, out: &mut Vec<[u32; 3]>) -> bool {
+        let signed = match e.props.as_slice() {
+            [Property::List(_, Scalar::U8, Scalar::I32)] => true,
+            [Property::List(_, Scalar::U8, Scalar::U32)] => false,
+            _ => return false,
+        };
+        let Some(body) = self.bytes.get(self.pos..self.pos + 13 * e.count) else {
+            return false;
+        };
+        let start = out.len();
+        out.reserve(e.count);
+        for item in body.chunks_exact(13).take(e.count) {
+            let index = |k: usize| {
+                let b = [item[k], item[k + 1], item[k + 2], item[k + 3]];
+                let x = if signed {
+                    i64::from(i32::from_le_bytes(b))
+                } else {
+                    i64::from(u32::from_le_bytes(b))
+                };
+                (x >= 0 && (x as u64) < vertices as u64).then_some(x as u32)
+            };
+            match (item[0], index(1), index(5), index(9)) {
+                (3, Some(a), Some(b), Some(c)) => out.push([a, b, c]),
+                _ => {
+                    out.truncate(start);
+                    return false;
+                }
+            }
+        }
+        self.pos += 13 * e.count;
+        true
     }
 
     /// Smallest number of bytes an element can occupy: bounds declared counts.
@@ -252,6 +318,19 @@ impl Body<'_> {
             })
             .sum();
         per.max(1)
+    }
+}
+
+fn decode_le(ty: Scalar, a: [u8; 8]) -> f64 {
+    match ty {
+        Scalar::I8 => a[0] as i8 as f64,
+        Scalar::U8 => a[0] as f64,
+        Scalar::I16 => i16::from_le_bytes([a[0], a[1]]) as f64,
+        Scalar::U16 => u16::from_le_bytes([a[0], a[1]]) as f64,
+        Scalar::I32 => i32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        Scalar::U32 => u32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        Scalar::F32 => f32::from_le_bytes([a[0], a[1], a[2], a[3]]) as f64,
+        Scalar::F64 => f64::from_le_bytes(a),
     }
 }
 
@@ -290,6 +369,11 @@ pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, 
                     _ => return Err(body.error("vertex element lacks x, y or z")),
                 };
                 positions.reserve(e.count);
+                if body.encoding == Encoding::Little
+                    && body.fast_vertices(e, [ix, iy, iz], &mut positions)
+                {
+                    continue;
+                }
                 let mut vals = vec![0.0; e.props.len()];
                 for v in 0..e.count {
                     for (k, p) in e.props.iter().enumerate() {
@@ -318,6 +402,12 @@ pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, 
                     .ok_or_else(|| body.error(format!("element '{}' has no vertex_indices list", e.name)))?;
                 if e.name == "range_grid" {
                     grid_cells = Some(Vec::with_capacity(e.count));
+                }
+                if e.name == "face"
+                    && body.encoding == Encoding::Little
+                    && body.fast_triangles(e, positions.len(), &mut triangles)
+                {
+                    continue;
                 }
                 for item in 0..e.count {
                     for (k, p) in e.props.iter().enumerate() {
@@ -551,4 +641,63 @@ pub fn triangulate_range_grid(
         }
     }
     tris
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A binary little-endian file: three float vertices (one possibly not finite) and
+    /// faces given as index lists.
+    fn binary(z2: f32, faces: &[&[i32]]) -> Vec<u8> {
+        let mut b = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            faces.len()
+        )
+        .into_bytes();
+        for p in [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, z2],
+            [0.0, 1.0, 0.0],
+        ] {
+            for c in p {
+                b.extend_from_slice(&c.to_le_bytes());
+            }
+        }
+        for f in faces {
+            b.push(f.len() as u8);
+            for i in *f {
+                b.extend_from_slice(&i.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    #[test]
+    fn fixed_layout_reading_matches_the_general_reader_and_leaves_it_the_odd_cases() {
+        let opts = LoadOptions::default();
+        let tris = read_ply(&binary(0.5, &[&[0, 1, 2], &[0, 2, 3]]), "t.ply", &opts)
+            .expect("plain triangles");
+        assert_eq!(tris.mesh.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(tris.mesh.positions[2], DVec3::new(1.0, 1.0, 0.5));
+        // A quad is fanned by the general reader, after the fixed layout gave up.
+        let quad =
+            read_ply(&binary(0.5, &[&[0, 1, 2], &[0, 1, 2, 3]]), "q.ply", &opts).expect("a quad");
+        assert_eq!(quad.mesh.triangles, vec![[0, 1, 2], [0, 1, 2], [0, 2, 3]]);
+        // Errors name the place the general reader finds them at.
+        let e = read_ply(&binary(0.5, &[&[0, 1, 2], &[0, 9, 2]]), "r.ply", &opts)
+            .expect_err("index out of range");
+        assert!(
+            e.to_string()
+                .contains("face 1: vertex index 9 out of range"),
+            "{e}"
+        );
+        let e = read_ply(&binary(f32::NAN, &[&[0, 1, 2]]), "n.ply", &opts).expect_err("not finite");
+        assert!(
+            e.to_string()
+                .contains("vertex 2 has a non-finite coordinate"),
+            "{e}"
+        );
+    }
 }

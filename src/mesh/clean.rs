@@ -4,7 +4,7 @@
 use super::stats::UnionFind;
 use super::TriMesh;
 use glam::DVec3;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 #[derive(Clone, Debug, Default)]
 pub struct CleanOptions {
@@ -39,9 +39,7 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     report.welded_vertices = (0..nv).filter(|&v| rep[v] as usize != v).count();
     let mut positions = input.positions.clone();
     let mut origin: Vec<u32> = (0..nv as u32).collect();
-    // Degenerate and duplicate faces.
-    let mut seen = FxHashSet::default();
-    seen.reserve(input.triangles.len());
+    // Degenerate faces.
     let mut faces: Vec<[u32; 3]> = Vec::with_capacity(input.triangles.len());
     for t in &input.triangles {
         if t.iter().any(|&v| v as usize >= nv) {
@@ -56,23 +54,30 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
             report.degenerate_faces_removed += 1;
             continue;
         }
-        let mut key = t;
-        key.sort_unstable();
-        if !seen.insert(key) {
-            report.duplicate_faces_removed += 1;
-            continue;
-        }
         faces.push(t);
     }
+    // Duplicate faces (the same three vertices): the first in face order stays.
+    let duplicate = duplicate_faces(&faces, nv);
+    let before = faces.len();
+    let mut k = 0;
+    faces.retain(|_| {
+        k += 1;
+        !duplicate[k - 1]
+    });
+    report.duplicate_faces_removed = before - faces.len();
     // Non-manifold edges: the first two faces keep the edge; every further face gets its
     // own copies of the edge's endpoints (the pinch split below then tidies the fans).
-    let incidence = EdgeIncidence::new(&faces);
-    let split_edges = incidence.non_manifold();
-    report.non_manifold_edges_split = split_edges.len();
-    for ((a, b), fs) in split_edges {
-        for &f in &fs[2..] {
-            let f = f as usize;
-            for end in [a, b] {
+    // Edges come sorted by their endpoints, the faces of each in face order.
+    let incidence = EdgeTable::new(&faces, positions.len());
+    for e in 0..incidence.len() {
+        let hs = incidence.halves(e);
+        if hs.len() <= 2 {
+            continue;
+        }
+        report.non_manifold_edges_split += 1;
+        for &h in &hs[2..] {
+            let f = h as usize / 3;
+            for end in incidence.ends(e) {
                 let copy = positions.len() as u32;
                 positions.push(positions[end as usize]);
                 origin.push(origin[end as usize]);
@@ -84,12 +89,22 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
             }
         }
     }
-    report.faces_flipped = orient(&mut faces, &mut report.non_orientable_components);
+    // Splitting changed the faces; otherwise the table still describes them.
+    let incidence = if report.non_manifold_edges_split > 0 {
+        EdgeTable::new(&faces, positions.len())
+    } else {
+        incidence
+    };
+    report.faces_flipped = orient(
+        &mut faces,
+        &incidence,
+        &mut report.non_orientable_components,
+    );
     report.pinch_vertices_split = split_pinches(&mut faces, &mut positions, &mut origin);
     // Compact: drop vertices no face uses.
     let mut new_index = vec![u32::MAX; positions.len()];
-    let mut out_pos = Vec::new();
-    let mut out_origin = Vec::new();
+    let mut out_pos = Vec::with_capacity(positions.len());
+    let mut out_origin = Vec::with_capacity(positions.len());
     for t in faces.iter_mut() {
         for v in t.iter_mut() {
             if new_index[*v as usize] == u32::MAX {
@@ -100,28 +115,79 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
             *v = new_index[*v as usize];
         }
     }
-    // Keep the input's vertex order among survivors (readers promise file order).
-    let mut order: Vec<u32> = (0..out_pos.len() as u32).collect();
-    order.sort_by_key(|&i| (out_origin[i as usize], i));
-    let mut rank = vec![0u32; order.len()];
-    for (r, &i) in order.iter().enumerate() {
-        rank[i as usize] = r as u32;
+    // Keep the input's vertex order among survivors (readers promise file order): a
+    // counting sort by input vertex, stable in first-use order, so split copies of one
+    // input vertex keep the order in which they were first used.
+    let mut bucket = vec![0u32; nv + 1];
+    for &o in &out_origin {
+        bucket[o as usize + 1] += 1;
     }
-    let positions: Vec<DVec3> = order.iter().map(|&i| out_pos[i as usize]).collect();
-    let original_vertex: Vec<u32> = order.iter().map(|&i| out_origin[i as usize]).collect();
+    let kept_inputs = bucket.iter().filter(|&&c| c > 0).count();
+    for v in 0..nv {
+        bucket[v + 1] += bucket[v];
+    }
+    let mut rank = vec![0u32; out_pos.len()];
+    let mut positions = vec![DVec3::ZERO; out_pos.len()];
+    let mut original_vertex = vec![0u32; out_pos.len()];
+    for (i, &o) in out_origin.iter().enumerate() {
+        let r = bucket[o as usize];
+        bucket[o as usize] += 1;
+        rank[i] = r;
+        positions[r as usize] = out_pos[i];
+        original_vertex[r as usize] = o;
+    }
     for t in faces.iter_mut() {
         for v in t.iter_mut() {
             *v = rank[*v as usize];
         }
     }
-    let kept_inputs: FxHashSet<u32> = original_vertex.iter().copied().collect();
     report.unreferenced_vertices_removed =
-        (nv - report.welded_vertices).saturating_sub(kept_inputs.len());
+        (nv - report.welded_vertices).saturating_sub(kept_inputs);
     Cleaned {
         mesh: TriMesh::new(positions, faces),
         original_vertex,
         report,
     }
+}
+
+/// Which faces repeat the vertex set of an earlier face. Faces are grouped by their lowest
+/// vertex (a counting sort, no hashing) and each small group sorted by the other two.
+fn duplicate_faces(faces: &[[u32; 3]], vertex_count: usize) -> Vec<bool> {
+    let sorted = |t: &[u32; 3]| {
+        let mut key = *t;
+        key.sort_unstable();
+        key
+    };
+    let mut start = vec![0u32; vertex_count + 1];
+    for t in faces {
+        start[sorted(t)[0] as usize + 1] += 1;
+    }
+    for v in 0..vertex_count {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut entries = vec![(0u32, 0u32, 0u32); faces.len()];
+    for (f, t) in faces.iter().enumerate() {
+        let key = sorted(t);
+        let slot = &mut fill[key[0] as usize];
+        entries[*slot as usize] = (key[1], key[2], f as u32);
+        *slot += 1;
+    }
+    drop(fill);
+    let mut duplicate = vec![false; faces.len()];
+    for v in 0..vertex_count {
+        let group = &mut entries[start[v] as usize..start[v + 1] as usize];
+        if group.len() < 2 {
+            continue;
+        }
+        group.sort_unstable();
+        for k in 1..group.len() {
+            if (group[k].0, group[k].1) == (group[k - 1].0, group[k - 1].1) {
+                duplicate[group[k].2 as usize] = true;
+            }
+        }
+    }
+    duplicate
 }
 
 /// Representative of each vertex after welding (the lowest index of its cluster).
@@ -174,38 +240,40 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
 
 /// Breadth-first flips so that neighbours use each shared edge in opposite directions.
 /// Returns the number of faces flipped; counts components where that is impossible.
-fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
-    let incidence = EdgeIncidence::new(faces);
+fn orient(faces: &mut [[u32; 3]], incidence: &EdgeTable, non_orientable: &mut usize) -> usize {
+    let nbr = incidence.manifold_neighbours();
     let has_directed =
         |t: &[u32; 3], a: u32, b: u32| (0..3).any(|k| t[k] == a && t[(k + 1) % 3] == b);
-    let mut state = vec![0u8; faces.len()]; // 0 unvisited, 1 visited
+    // 0 unvisited, 1 visited as built, 2 visited and flipped: a flip swaps corners 1 and 2,
+    // so the face's edge k is then the table's edge 2 - k.
+    let mut state = vec![0u8; faces.len()];
     let mut flipped = 0;
+    let mut queue = std::collections::VecDeque::new();
     for seed in 0..faces.len() {
         if state[seed] != 0 {
             continue;
         }
         state[seed] = 1;
-        let mut queue = std::collections::VecDeque::from([seed]);
+        queue.push_back(seed);
         let mut conflict = false;
         while let Some(f) = queue.pop_front() {
             let t = faces[f];
             for k in 0..3 {
                 let (a, b) = (t[k], t[(k + 1) % 3]);
-                let Some(nbrs) = incidence.manifold(a, b) else {
+                let slot = if state[f] == 2 { 2 - k } else { k };
+                let g = nbr[3 * f + slot];
+                if g == u32::MAX {
                     continue;
-                };
-                let g = if nbrs[0] as usize == f {
-                    nbrs[1]
-                } else {
-                    nbrs[0]
-                } as usize;
+                }
+                let g = g as usize;
                 let consistent = has_directed(&faces[g], b, a);
                 if state[g] == 0 {
+                    state[g] = 1;
                     if !consistent {
                         faces[g].swap(1, 2);
                         flipped += 1;
+                        state[g] = 2;
                     }
-                    state[g] = 1;
                     queue.push_back(g);
                 } else if !consistent {
                     conflict = true;
@@ -220,6 +288,11 @@ fn orient(faces: &mut [[u32; 3]], non_orientable: &mut usize) -> usize {
 }
 
 /// Gives every fan of faces around a vertex after the first its own copy of the vertex.
+///
+/// Two faces around `v` are joined when they share a neighbour `w` that no other face
+/// around `v` has: the edge (v, w) is then manifold. Every face on an edge (v, w) is a face
+/// around `v`, and only the processing of `v` itself moves faces off `v`, so counting among
+/// the faces around `v` sees the same edge counts as a global table would, without one.
 fn split_pinches(
     faces: &mut [[u32; 3]],
     positions: &mut Vec<DVec3>,
@@ -227,7 +300,7 @@ fn split_pinches(
 ) -> usize {
     let nv = positions.len();
     // Faces around each vertex, as one flat array with offsets.
-    let mut start = vec![0usize; nv + 1];
+    let mut start = vec![0u32; nv + 1];
     for t in faces.iter() {
         for &v in t {
             start[v as usize + 1] += 1;
@@ -237,70 +310,82 @@ fn split_pinches(
         start[v + 1] += start[v];
     }
     let mut fill = start.clone();
-    let mut incident = vec![0usize; start[nv]];
+    let mut incident = vec![0u32; start[nv] as usize];
     for (f, t) in faces.iter().enumerate() {
         for &v in t {
-            incident[fill[v as usize]] = f;
+            incident[fill[v as usize] as usize] = f as u32;
             fill[v as usize] += 1;
         }
     }
-    let mut edge_count: FxHashMap<u64, u32> = FxHashMap::default();
-    edge_count.reserve(faces.len() * 3 / 2 + 16);
-    for t in faces.iter() {
-        for k in 0..3 {
-            *edge_count
-                .entry(edge_key(t[k], t[(k + 1) % 3]))
-                .or_insert(0) += 1;
+    drop(fill);
+    // Scratch reused for every vertex: (neighbour, local face), local union-find parents,
+    // (fan root, copy).
+    let mut others: Vec<(u32, u32)> = Vec::new();
+    let mut parent: Vec<u32> = Vec::new();
+    let mut copies: Vec<(u32, u32)> = Vec::new();
+    let find = |parent: &mut [u32], mut x: u32| {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
         }
-    }
+        x
+    };
     let mut split = 0;
     for v in 0..nv as u32 {
-        let fs = &incident[start[v as usize]..start[v as usize + 1]];
+        let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
         if fs.len() < 2 {
             continue;
         }
-        let mut uf = UnionFind::new(fs.len());
-        for i in 0..fs.len() {
-            for j in i + 1..fs.len() {
-                let shared = faces[fs[i]]
-                    .iter()
-                    .filter(|&&w| w != v && faces[fs[j]].contains(&w))
-                    .any(|&w| edge_count.get(&edge_key(v, w)) == Some(&2));
-                if shared {
-                    uf.union(i, j);
+        others.clear();
+        for (i, &f) in fs.iter().enumerate() {
+            for &w in &faces[f as usize] {
+                if w != v {
+                    others.push((w, i as u32));
                 }
             }
         }
-        let mut fan_copy: FxHashMap<usize, u32> = FxHashMap::default();
-        let first_root = uf.find(0);
-        for i in 0..fs.len() {
-            let root = uf.find(i);
+        others.sort_unstable();
+        parent.clear();
+        parent.extend(0..fs.len() as u32);
+        let mut k = 0;
+        while k < others.len() {
+            let mut e = k + 1;
+            while e < others.len() && others[e].0 == others[k].0 {
+                e += 1;
+            }
+            if e - k == 2 {
+                let (a, b) = (
+                    find(&mut parent, others[k].1),
+                    find(&mut parent, others[k + 1].1),
+                );
+                parent[a.max(b) as usize] = a.min(b);
+            }
+            k = e;
+        }
+        copies.clear();
+        let first_root = find(&mut parent, 0);
+        for (i, &f) in fs.iter().enumerate() {
+            let root = find(&mut parent, i as u32);
             if root == first_root {
                 continue;
             }
-            let copy = *fan_copy.entry(root).or_insert_with(|| {
-                positions.push(positions[v as usize]);
-                origin.push(origin[v as usize]);
-                (positions.len() - 1) as u32
-            });
-            let t = faces[fs[i]];
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                if a == v || b == v {
-                    let other = if a == v { b } else { a };
-                    if let Some(c) = edge_count.get_mut(&edge_key(v, other)) {
-                        *c -= 1;
-                    }
-                    *edge_count.entry(edge_key(copy, other)).or_insert(0) += 1;
+            let copy = match copies.iter().find(|c| c.0 == root) {
+                Some(&(_, c)) => c,
+                None => {
+                    let c = positions.len() as u32;
+                    positions.push(positions[v as usize]);
+                    origin.push(origin[v as usize]);
+                    copies.push((root, c));
+                    c
                 }
-            }
-            for w in faces[fs[i]].iter_mut() {
+            };
+            for w in faces[f as usize].iter_mut() {
                 if *w == v {
                     *w = copy;
                 }
             }
         }
-        if !fan_copy.is_empty() {
+        if !copies.is_empty() {
             split += 1;
         }
     }
@@ -312,62 +397,92 @@ pub fn edge_key(a: u32, b: u32) -> u64 {
     ((a.min(b) as u64) << 32) | a.max(b) as u64
 }
 
-/// Faces on each undirected edge: the first two in face order inline (most edges have at
-/// most two), further ones in a side list. Built with one hash entry per edge and no
-/// allocation per edge: cleaning runs on every input and must stay a small share of a fit.
-struct EdgeIncidence {
-    /// (first face, second face or u32::MAX, total count).
-    edges: FxHashMap<u64, (u32, u32, u32)>,
-    /// (edge, face) beyond the second, in face order.
-    more: Vec<(u64, u32)>,
+/// The undirected edges of a triangle list and the faces on each, built without hashing:
+/// half-edges are bucketed by their lower endpoint and each (small) bucket sorted. Edge
+/// ids follow the (lower, higher) endpoint order; each edge's faces come in face order.
+/// Cleaning runs on every input and must stay a small share of a fit.
+pub(crate) struct EdgeTable {
+    /// Half-edge count (3 per face; half-edge `3 f + k` runs from corner k of face f).
+    halfedges: usize,
+    /// Half-edges of edge e: `half[start[e]..start[e + 1]]` (face `h / 3`).
+    start: Vec<u32>,
+    half: Vec<u32>,
+    ends: Vec<[u32; 2]>,
 }
 
-impl EdgeIncidence {
-    fn new(faces: &[[u32; 3]]) -> Self {
-        let mut edges: FxHashMap<u64, (u32, u32, u32)> = FxHashMap::default();
-        edges.reserve(faces.len() * 3 / 2 + 16);
-        let mut more = Vec::new();
-        for (f, t) in faces.iter().enumerate() {
+impl EdgeTable {
+    /// Every index in `faces` must be below `vertex_count`.
+    pub(crate) fn new(faces: &[[u32; 3]], vertex_count: usize) -> Self {
+        let nh = faces.len() * 3;
+        let mut bucket = vec![0u32; vertex_count + 1];
+        for t in faces {
             for k in 0..3 {
-                let key = edge_key(t[k], t[(k + 1) % 3]);
-                let e = edges.entry(key).or_insert((f as u32, u32::MAX, 0));
-                match e.2 {
-                    0 => {}
-                    1 => e.1 = f as u32,
-                    _ => more.push((key, f as u32)),
-                }
-                e.2 += 1;
+                bucket[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
             }
         }
-        Self { edges, more }
-    }
-
-    /// The two faces of an edge that has exactly two.
-    fn manifold(&self, a: u32, b: u32) -> Option<[u32; 2]> {
-        match self.edges.get(&edge_key(a, b)) {
-            Some(&(f, g, 2)) => Some([f, g]),
-            _ => None,
+        for v in 0..vertex_count {
+            bucket[v + 1] += bucket[v];
+        }
+        // (higher endpoint, half-edge), grouped by lower endpoint.
+        let mut entries = vec![(0u32, 0u32); nh];
+        let mut fill = bucket.clone();
+        for (f, t) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let lo = a.min(b) as usize;
+                entries[fill[lo] as usize] = (a.max(b), (3 * f + k) as u32);
+                fill[lo] += 1;
+            }
+        }
+        drop(fill);
+        let mut start = Vec::with_capacity(nh / 2 + 2);
+        let mut half = Vec::with_capacity(nh);
+        let mut ends = Vec::with_capacity(nh / 2 + 1);
+        for v in 0..vertex_count {
+            let group = &mut entries[bucket[v] as usize..bucket[v + 1] as usize];
+            // Half-edges were filled in order, so this keeps face order within an edge.
+            group.sort_unstable();
+            for (k, &(hi, h)) in group.iter().enumerate() {
+                if k == 0 || group[k - 1].0 != hi {
+                    start.push(half.len() as u32);
+                    ends.push([v as u32, hi]);
+                }
+                half.push(h);
+            }
+        }
+        start.push(half.len() as u32);
+        Self {
+            halfedges: nh,
+            start,
+            half,
+            ends,
         }
     }
 
-    /// Edges with more than two faces and all their faces in face order, sorted by edge.
-    fn non_manifold(&self) -> Vec<((u32, u32), Vec<u32>)> {
-        // Grouped by edge (faces stay in face order: the sort is by (edge, face)).
-        let mut more = self.more.clone();
-        more.sort_unstable();
-        let mut out: Vec<((u32, u32), Vec<u32>)> = self
-            .edges
-            .iter()
-            .filter(|(_, e)| e.2 > 2)
-            .map(|(&key, e)| {
-                let mut fs = vec![e.0, e.1];
-                let from = more.partition_point(|m| m.0 < key);
-                let to = more.partition_point(|m| m.0 <= key);
-                fs.extend(more[from..to].iter().map(|m| m.1));
-                (((key >> 32) as u32, key as u32), fs)
-            })
-            .collect();
-        out.sort_unstable();
-        out
+    pub(crate) fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    /// The half-edges on edge e, in face order (half-edge h belongs to face h / 3).
+    pub(crate) fn halves(&self, e: usize) -> &[u32] {
+        &self.half[self.start[e] as usize..self.start[e + 1] as usize]
+    }
+
+    /// For every half-edge, the other face of its edge when the edge has exactly two
+    /// faces, else `u32::MAX`.
+    fn manifold_neighbours(&self) -> Vec<u32> {
+        let mut nbr = vec![u32::MAX; self.halfedges];
+        for e in 0..self.len() {
+            if let &[h, g] = self.halves(e) {
+                nbr[h as usize] = g / 3;
+                nbr[g as usize] = h / 3;
+            }
+        }
+        nbr
+    }
+
+    /// Lower endpoint first.
+    pub(crate) fn ends(&self, e: usize) -> [u32; 2] {
+        self.ends[e]
     }
 }

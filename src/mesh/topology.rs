@@ -69,42 +69,53 @@ impl Topology {
         }
         let src = |h: usize| triangles[h / 3][h % 3];
         let dst = |h: usize| triangles[h / 3][(h + 1) % 3];
-        // Bucket outgoing half-edges by source vertex.
+        // Bucket outgoing half-edges by source vertex, with their destinations alongside so
+        // that the twin search scans one contiguous run per vertex.
         let mut out_start = vec![0u32; vertex_count + 1];
-        for h in 0..nh {
-            out_start[src(h) as usize + 1] += 1;
+        for t in triangles {
+            for &v in t {
+                out_start[v as usize + 1] += 1;
+            }
         }
         for v in 0..vertex_count {
             out_start[v + 1] += out_start[v];
         }
         let mut fill = out_start.clone();
         let mut out = vec![0u32; nh];
-        for h in 0..nh {
-            let s = src(h) as usize;
-            out[fill[s] as usize] = h as u32;
-            fill[s] += 1;
-        }
-        let outgoing =
-            |v: u32| &out[out_start[v as usize] as usize..out_start[v as usize + 1] as usize];
-        let mut twin = vec![NONE; nh];
-        for (h, twin_h) in twin.iter_mut().enumerate() {
-            let (a, b) = (src(h), dst(h));
-            let same = outgoing(a)
-                .iter()
-                .filter(|&&g| dst(g as usize) == b)
-                .count();
-            let mut opposite = outgoing(b).iter().filter(|&&g| dst(g as usize) == a);
-            let first = opposite.next();
-            let more = opposite.next().is_some();
-            if same > 1 || more {
-                return Err(TopologyError::NonManifoldEdge {
-                    a: a.min(b),
-                    b: a.max(b),
-                    count: same + usize::from(first.is_some()) + usize::from(more),
-                });
+        let mut out_dst = vec![0u32; nh];
+        for (f, t) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let s = t[k] as usize;
+                out[fill[s] as usize] = (3 * f + k) as u32;
+                out_dst[fill[s] as usize] = t[(k + 1) % 3];
+                fill[s] += 1;
             }
-            if let Some(&g) = first {
-                *twin_h = g;
+        }
+        drop(fill);
+        let run = |v: u32| out_start[v as usize] as usize..out_start[v as usize + 1] as usize;
+        let outgoing = |v: u32| &out[run(v)];
+        let mut twin = vec![NONE; nh];
+        for (f, t) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                let same = out_dst[run(a)].iter().filter(|&&d| d == b).count();
+                let r = run(b);
+                let mut opposite = out_dst[r.clone()]
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, &d)| d == a);
+                let first = opposite.next().map(|(i, _)| out[r.start + i]);
+                let more = opposite.next().is_some();
+                if same > 1 || more {
+                    return Err(TopologyError::NonManifoldEdge {
+                        a: a.min(b),
+                        b: a.max(b),
+                        count: same + usize::from(first.is_some()) + usize::from(more),
+                    });
+                }
+                if let Some(g) = first {
+                    twin[3 * f + k] = g;
+                }
             }
         }
         // Ordered rings: rotate counter-clockwise with h -> twin(prev(h)).
@@ -122,19 +133,17 @@ impl Topology {
                 continue;
             }
             // A boundary vertex starts at the outgoing edge with no face on its right.
-            let starts: Vec<u32> = outs
-                .iter()
-                .copied()
-                .filter(|&h| twin[h as usize] == NONE)
-                .collect();
-            let is_boundary = !starts.is_empty();
-            if starts.len() > 1 {
+            let mut starts = outs.iter().copied().filter(|&h| twin[h as usize] == NONE);
+            let first_start = starts.next();
+            let is_boundary = first_start.is_some();
+            let more_starts = starts.count();
+            if more_starts > 0 {
                 return Err(TopologyError::PinchVertex {
                     vertex: v,
-                    fans: starts.len(),
+                    fans: 1 + more_starts,
                 });
             }
-            let start = if is_boundary { starts[0] } else { outs[0] };
+            let start = first_start.unwrap_or(outs[0]);
             let mut h = start;
             let mut visited = 0usize;
             loop {

@@ -2,12 +2,11 @@
 //! surface of their own. Range scans come in 8–28 pieces, most of them a few stray triangles
 //! at silhouettes; a fit of such a sliver is noise, so pieces are kept by size.
 
-use crate::mesh::clean::edge_key;
+use crate::mesh::clean::EdgeTable;
 use crate::mesh::stats::UnionFind;
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
-use std::collections::hash_map::Entry;
 
 /// Which components of an input get a surface.
 #[derive(
@@ -62,20 +61,14 @@ pub struct Split {
 /// go to the component whose first face comes first, so the order is deterministic.
 pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
     let mut uf = UnionFind::new(mesh.triangles.len());
-    let mut edge_face: FxHashMap<u64, usize> = FxHashMap::default();
-    edge_face.reserve(mesh.triangles.len() * 3 / 2 + 16);
-    for (f, t) in mesh.triangles.iter().enumerate() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            match edge_face.entry(edge_key(a, b)) {
-                Entry::Occupied(g) => uf.union(f, *g.get()),
-                Entry::Vacant(slot) => {
-                    slot.insert(f);
-                }
-            }
+    let edges = EdgeTable::new(&mesh.triangles, mesh.positions.len());
+    for e in 0..edges.len() {
+        let hs = edges.halves(e);
+        for &g in &hs[1..] {
+            uf.union(hs[0] as usize / 3, g as usize / 3);
         }
     }
-    let mut slot_of_root: FxHashMap<usize, usize> = FxHashMap::default();
+    let mut slot_of_root = vec![u32::MAX; mesh.triangles.len()];
     let mut parts: Vec<TriMesh> = Vec::new();
     // A vertex belongs to one component (faces sharing it are joined only through edges,
     // but a pinch vertex can sit in two): remember its index per (component, vertex).
@@ -83,10 +76,11 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
     let mut single = vec![(u32::MAX, u32::MAX); mesh.positions.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
         let root = uf.find(f);
-        let slot = *slot_of_root.entry(root).or_insert_with(|| {
+        if slot_of_root[root] == u32::MAX {
+            slot_of_root[root] = parts.len() as u32;
             parts.push(TriMesh::default());
-            parts.len() - 1
-        });
+        }
+        let slot = slot_of_root[root] as usize;
         let part = &mut parts[slot];
         let mut nt = [0u32; 3];
         for (k, &v) in t.iter().enumerate() {

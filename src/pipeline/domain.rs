@@ -11,11 +11,13 @@ use crate::mesh::inverse::{coarsen, InverseMethod};
 use crate::remesh::param::Locator;
 use crate::remesh::planar::doubled_area;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
-use crate::surface::grid_spline::{Cell, GridSpline};
+use crate::surface::grid_spline::{cell_stencil, Cell, GridSpline};
 use crate::surface::TriSurface;
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
-use std::collections::{HashSet, VecDeque};
+use rayon::prelude::*;
+use rustc_hash::FxHashSet;
+use std::collections::VecDeque;
 
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
 
@@ -47,23 +49,156 @@ pub fn plane_extent(points: &[DVec2]) -> DVec2 {
 
 /// Every cell whose parallelogram meets a triangle's bounding box (in grid coordinates).
 /// Conservative: a cell the patch only grazes is kept, never one it covers dropped.
+/// Sorted by (j, i, down), the order `GridSpline::new` keeps.
 pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> Vec<Cell> {
-    let mut seen: HashSet<(i64, i64)> = HashSet::new();
-    for t in tris {
-        let g = t.map(|v| frame.to_grid(plane[v as usize]));
-        let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
-        let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
-        let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
-        let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
-        for j in y0..=y1 {
-            for i in x0..=x1 {
-                seen.insert((i, j));
+    let ranges = cell_ranges(frame, plane, tris);
+    match CellMask::new(&ranges) {
+        Some(mask) => {
+            let mut cells = Vec::with_capacity(2 * mask.count());
+            for (i, j) in mask.cells() {
+                cells.extend([(i, j, false), (i, j, true)]);
             }
+            cells
+        }
+        None => {
+            let mut seen: FxHashSet<(i64, i64)> = FxHashSet::default();
+            for &[x0, x1, y0, y1] in &ranges {
+                for j in y0..=y1 {
+                    for i in x0..=x1 {
+                        seen.insert((i, j));
+                    }
+                }
+            }
+            let mut cells: Vec<Cell> = seen
+                .into_iter()
+                .flat_map(|(i, j)| [(i, j, false), (i, j, true)])
+                .collect();
+            cells.sort_unstable_by_key(|&(i, j, d)| (j, i, d));
+            cells
         }
     }
-    seen.into_iter()
-        .flat_map(|(i, j)| [(i, j, false), (i, j, true)])
+}
+
+/// Per triangle, the cell range `[x0, x1, y0, y1]` (inclusive) of its bounding box in grid
+/// coordinates. The grid coordinates are computed once per vertex (the same arithmetic as
+/// per corner, so the same values).
+fn cell_ranges(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> Vec<[i64; 4]> {
+    let grid: Vec<(f64, f64)> = plane.iter().map(|p| frame.to_grid(*p)).collect();
+    tris.iter()
+        .map(|t| {
+            let g = t.map(|v| grid[v as usize]);
+            let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
+            let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
+            let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
+            let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
+            [x0, x1, y0, y1]
+        })
         .collect()
+}
+
+/// Above this many cells in the ranges' bounding box a dense mask would cost more memory
+/// than a set of the covered cells.
+const MAX_MASK_CELLS: i128 = 1 << 28;
+
+/// The union of cell ranges as a dense row-major mask over their bounding box: covering
+/// is marking, with no hashing.
+struct CellMask {
+    i0: i64,
+    j0: i64,
+    width: usize,
+    mask: Vec<bool>,
+}
+
+impl CellMask {
+    /// `None` for no ranges or a bounding box too large for a dense mask.
+    fn new(ranges: &[[i64; 4]]) -> Option<Self> {
+        let (mut i0, mut i1, mut j0, mut j1) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
+        for &[x0, x1, y0, y1] in ranges {
+            if x0 > x1 || y0 > y1 {
+                continue;
+            }
+            (i0, i1, j0, j1) = (i0.min(x0), i1.max(x1), j0.min(y0), j1.max(y1));
+        }
+        if i0 > i1 {
+            return Some(Self {
+                i0: 0,
+                j0: 0,
+                width: 0,
+                mask: Vec::new(),
+            });
+        }
+        let (w, h) = (i1 as i128 - i0 as i128 + 1, j1 as i128 - j0 as i128 + 1);
+        if w * h > MAX_MASK_CELLS {
+            return None;
+        }
+        let width = w as usize;
+        let mut mask = vec![false; width * h as usize];
+        for &[x0, x1, y0, y1] in ranges {
+            if x0 > x1 {
+                continue;
+            }
+            for j in y0..=y1 {
+                let row = (j - j0) as usize * width;
+                mask[row + (x0 - i0) as usize..=row + (x1 - i0) as usize].fill(true);
+            }
+        }
+        Some(Self {
+            i0,
+            j0,
+            width,
+            mask,
+        })
+    }
+
+    fn count(&self) -> usize {
+        self.mask.iter().filter(|&&m| m).count()
+    }
+
+    /// Covered (i, j), row by row.
+    fn cells(&self) -> impl Iterator<Item = (i64, i64)> + '_ {
+        self.mask
+            .iter()
+            .enumerate()
+            .filter(|(_, &m)| m)
+            .map(|(k, _)| {
+                (
+                    self.i0 + (k % self.width) as i64,
+                    self.j0 + (k / self.width) as i64,
+                )
+            })
+    }
+
+    /// How many control points `GridSpline::new` gives the covered cells: the union of the
+    /// stencils of both cells of every covered (i, j), counted on a mask grown by the
+    /// stencil's reach.
+    fn control_count(&self) -> usize {
+        if self.mask.is_empty() {
+            return 0;
+        }
+        let mut offsets: Vec<(i64, i64)> = cell_stencil((0, 0, false))
+            .into_iter()
+            .chain(cell_stencil((0, 0, true)))
+            .collect();
+        offsets.sort_unstable();
+        offsets.dedup();
+        let (lo_i, hi_i) = offsets
+            .iter()
+            .fold((0, 0), |(l, h), o| (o.0.min(l), o.0.max(h)));
+        let (lo_j, hi_j) = offsets
+            .iter()
+            .fold((0, 0), |(l, h), o| (o.1.min(l), o.1.max(h)));
+        let height = self.mask.len() / self.width;
+        let w = self.width + (hi_i - lo_i) as usize;
+        let h = height + (hi_j - lo_j) as usize;
+        let mut used = vec![false; w * h];
+        for (k, _) in self.mask.iter().enumerate().filter(|(_, &m)| m) {
+            let (a, b) = ((k % self.width) as i64, (k / self.width) as i64);
+            for &(di, dj) in &offsets {
+                used[(b + dj - lo_j) as usize * w + (a + di - lo_i) as usize] = true;
+            }
+        }
+        used.iter().filter(|&&u| u).count()
+    }
 }
 
 /// The spacing whose covered cells carry about `target` control points (never more when a
@@ -80,9 +215,13 @@ pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> 
     let mut h = (area / (SQRT3_2 * target)).sqrt().max(floor);
     let mut best: Option<(f64, usize)> = None;
     for _ in 0..6 {
-        let count = GridSpline::new(covered_cells(&GridFrame { spacing: h }, plane, tris))
-            .control_count()
-            .max(1);
+        let frame = GridFrame { spacing: h };
+        let ranges = cell_ranges(&frame, plane, tris);
+        let count = match CellMask::new(&ranges) {
+            Some(mask) => mask.control_count(),
+            None => GridSpline::new(covered_cells(&frame, plane, tris)).control_count(),
+        }
+        .max(1);
         if count as f64 <= target && best.is_none_or(|(_, c)| count > c) {
             best = Some((h, count));
         }
@@ -167,7 +306,7 @@ pub fn bezier_initial_net(
         tri[0] * u + tri[1] * v + tri[2] * (1.0 - u - v)
     };
     let lattice: Vec<DVec3> = lattice_points(segments)
-        .into_iter()
+        .into_par_iter()
         .map(|(i, j)| sample(mesh, &locator, at(i, j, segments)))
         .collect();
     let resample_points = lattice.len();
@@ -208,8 +347,9 @@ pub fn grid_initial_net(
     let locator = Locator::new(&mesh.triangles, plane);
     let f = 1i64 << levels;
     let (coords, triangles) = grid.refined_lattice(f as usize);
+    // Each lattice point on its own: in parallel, in order.
     let positions: Vec<DVec3> = coords
-        .iter()
+        .par_iter()
         .map(|&(a, b)| {
             let q = frame.to_plane(a as f64 / f as f64, b as f64 / f as f64);
             sample(mesh, &locator, q)
@@ -313,5 +453,47 @@ mod tests {
         let s = [0, 1, 2].map(|k| (tri[(k + 1) % 3] - tri[k]).length());
         assert!((s[0] - s[1]).abs() < 1e-9 && (s[1] - s[2]).abs() < 1e-9);
         assert!((tri[1] - tri[0]).perp_dot(tri[2] - tri[0]) > 0.0);
+    }
+
+    #[test]
+    fn covered_cells_and_control_counts_match_the_grid_they_build() {
+        // A wavy fan of thin triangles: ranges of many shapes, some cells only grazed.
+        let mut plane = vec![DVec2::new(0.3, -0.2)];
+        let mut tris = Vec::new();
+        for k in 0..40 {
+            let a = k as f64 * 0.15;
+            plane.push(DVec2::new(a.cos(), a.sin()) * (2.0 + 0.7 * (3.0 * a).sin()));
+            if k > 0 {
+                tris.push([0, k as u32, k as u32 + 1]);
+            }
+        }
+        for spacing in [0.05, 0.13, 0.4, 1.7, 10.0] {
+            let frame = GridFrame { spacing };
+            let cells = covered_cells(&frame, &plane, &tris);
+            // The plain construction: every cell of every triangle's bounding box.
+            let mut expected = Vec::new();
+            for t in &tris {
+                let g = t.map(|v| frame.to_grid(plane[v as usize]));
+                let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
+                let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
+                let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
+                let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
+                for j in y0..=y1 {
+                    for i in x0..=x1 {
+                        expected.extend([(i, j, false), (i, j, true)]);
+                    }
+                }
+            }
+            expected.sort_unstable_by_key(|&(i, j, d)| (j, i, d));
+            expected.dedup();
+            assert_eq!(cells, expected, "spacing {spacing}");
+            let grid = GridSpline::new(cells);
+            let mask = CellMask::new(&cell_ranges(&frame, &plane, &tris)).expect("small mask");
+            assert_eq!(
+                mask.control_count(),
+                grid.control_count(),
+                "spacing {spacing}"
+            );
+        }
     }
 }

@@ -5,7 +5,7 @@ use super::geometric::error_colour;
 use super::scan::{ScanFit, SurfaceModel};
 use super::PatchFit;
 use crate::io::glb::{glb_bytes, GlbAttributes};
-use crate::remesh::param::Locator;
+use crate::remesh::param::{ring_cells, Locator};
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
@@ -212,22 +212,9 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
         .iter()
         .map(|(&face, (params, ids))| (face, (NearestParam::new(params), ids.as_slice())))
         .collect();
-    let colors: Vec<[f32; 4]> = tess
-        .params
-        .iter()
-        .map(|p| {
-            let e = nearest
-                .get(&p.face)
-                .and_then(|(n, ids)| n.nearest(p.u, p.v).map(|k| ids[k]))
-                .map_or(0.0, |k| f.geometric_errors[k]);
-            error_colour(e, tolerance)
-        })
-        .collect();
-    // Only the vertices the trimmed triangles use go into the file.
+    // Only the vertices the trimmed triangles use go into the file (and need a colour).
     let mut remap = vec![u32::MAX; tess.positions.len()];
-    let mut positions = Vec::new();
-    let mut normals = Vec::new();
-    let mut cols = Vec::new();
+    let mut used: Vec<u32> = Vec::new();
     let triangles: Vec<[u32; 3]> = tess
         .triangles
         .iter()
@@ -235,13 +222,25 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
             t.map(|v| {
                 let v = v as usize;
                 if remap[v] == u32::MAX {
-                    remap[v] = positions.len() as u32;
-                    positions.push(tess.positions[v]);
-                    normals.push(tess.normals[v]);
-                    cols.push(colors[v]);
+                    remap[v] = used.len() as u32;
+                    used.push(v as u32);
                 }
                 remap[v]
             })
+        })
+        .collect();
+    let positions: Vec<DVec3> = used.iter().map(|&v| tess.positions[v as usize]).collect();
+    let normals: Vec<DVec3> = used.iter().map(|&v| tess.normals[v as usize]).collect();
+    // Each vertex's nearest-parameter search on its own: in parallel, in order.
+    let cols: Vec<[f32; 4]> = used
+        .par_iter()
+        .map(|&v| {
+            let p = tess.params[v as usize];
+            let e = nearest
+                .get(&p.face)
+                .and_then(|(n, ids)| n.nearest(p.u, p.v).map(|k| ids[k]))
+                .map_or(0.0, |k| f.geometric_errors[k]);
+            error_colour(e, tolerance)
         })
         .collect();
     let mesh = TriMesh::new(positions, triangles);
@@ -261,7 +260,9 @@ struct NearestParam<'a> {
     lo: (f64, f64),
     cell: f64,
     dim: usize,
-    buckets: Vec<Vec<u32>>,
+    /// Parameters of bucket b, in order: `bucketed[start[b]..start[b + 1]]`.
+    start: Vec<u32>,
+    bucketed: Vec<u32>,
 }
 
 impl<'a> NearestParam<'a> {
@@ -273,19 +274,32 @@ impl<'a> NearestParam<'a> {
         }
         let dim = ((params.len() as f64).sqrt() as usize / 2).clamp(1, 1024);
         let cell = ((hi.0 - lo.0).max(hi.1 - lo.1) / dim as f64).max(1e-300);
-        let mut buckets = vec![Vec::new(); dim * dim];
         let mut s = Self {
             params,
             lo,
             cell,
             dim,
-            buckets: Vec::new(),
+            start: vec![0; dim * dim + 1],
+            bucketed: vec![0; params.len()],
         };
-        for (k, p) in params.iter().enumerate() {
-            let (x, y) = s.cell_of(p.u, p.v);
-            buckets[y * dim + x].push(k as u32);
+        let slots: Vec<usize> = params
+            .iter()
+            .map(|p| {
+                let (x, y) = s.cell_of(p.u, p.v);
+                y * dim + x
+            })
+            .collect();
+        for &b in &slots {
+            s.start[b + 1] += 1;
         }
-        s.buckets = buckets;
+        for b in 0..dim * dim {
+            s.start[b + 1] += s.start[b];
+        }
+        let mut fill = s.start.clone();
+        for (k, &b) in slots.iter().enumerate() {
+            s.bucketed[fill[b] as usize] = k as u32;
+            fill[b] += 1;
+        }
         s
     }
 
@@ -299,20 +313,16 @@ impl<'a> NearestParam<'a> {
         let (cx, cy) = self.cell_of(u, v);
         let mut best: Option<(f64, usize)> = None;
         for r in 0..self.dim {
-            for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
-                for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
-                    if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
-                        continue;
-                    }
-                    for &k in &self.buckets[y * self.dim + x] {
-                        let p = self.params[k as usize];
-                        let d = (p.u - u).powi(2) + (p.v - v).powi(2);
-                        if best.is_none_or(|b| d < b.0) {
-                            best = Some((d, k as usize));
-                        }
+            ring_cells(cx, cy, r, self.dim, |x, y| {
+                let b = y * self.dim + x;
+                for &k in &self.bucketed[self.start[b] as usize..self.start[b + 1] as usize] {
+                    let p = self.params[k as usize];
+                    let d = (p.u - u).powi(2) + (p.v - v).powi(2);
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, k as usize));
                     }
                 }
-            }
+            });
             // One more ring after the first hit: a nearer point can sit in the next ring.
             if let Some((d, _)) = best {
                 if (r as f64 * self.cell).powi(2) >= d {

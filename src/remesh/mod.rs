@@ -75,11 +75,20 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
     if loops.is_empty() {
         return Err(RemeshError::NotDisk("closed surface (no boundary)".into()));
     }
-    loops.sort_by(|a, b| {
-        loop_length(&mesh.positions, b).total_cmp(&loop_length(&mesh.positions, a))
-    });
+    // Longest first; equal lengths keep their order (a stable sort on cached lengths).
+    let lengths: Vec<f64> = loops
+        .iter()
+        .map(|l| loop_length(&mesh.positions, l))
+        .collect();
+    let mut order: Vec<usize> = (0..loops.len()).collect();
+    order.sort_by(|&a, &b| lengths[b].total_cmp(&lengths[a]));
+    let mut taken: Vec<Option<Vec<u32>>> = loops.into_iter().map(Some).collect();
+    loops = order.iter().filter_map(|&k| taken[k].take()).collect();
     let outer = loops[0].clone();
     let mut filled = mesh.clone();
+    let fan_faces: usize = loops[1..].iter().map(Vec::len).sum();
+    filled.positions.reserve(loops.len() - 1);
+    filled.triangles.reserve(fan_faces);
     for hole in &loops[1..] {
         let c = hole
             .iter()
@@ -94,12 +103,13 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
             filled.triangles.push([b, a, centre]);
         }
     }
+    // Counted rather than rebuilt: every boundary vertex of a manifold mesh without pinch
+    // vertices (which `Topology` refuses) lies on exactly one loop, once, so the fans add
+    // one vertex per hole, one spoke edge and one face per loop vertex, and turn each loop
+    // edge from boundary to interior without adding it again: the filled mesh is manifold
+    // and V - E + F grows by exactly the number of holes.
     let v = filled.positions.len() as i64;
-    let e = {
-        let t =
-            Topology::from_mesh(&filled).map_err(|e| RemeshError::NotManifold(e.to_string()))?;
-        t.edge_count() as i64
-    };
+    let e = (topo.edge_count() + fan_faces) as i64;
     let chi = v - e + filled.triangles.len() as i64;
     if chi != 1 {
         return Err(RemeshError::NotDisk(format!(

@@ -151,7 +151,15 @@ pub struct Locator<'a> {
     lo: DVec2,
     cell: f64,
     dim: usize,
-    buckets: Vec<Vec<u32>>,
+    /// Triangles of bucket b, in triangle order: `bucketed[start[b]..start[b + 1]]` (one
+    /// flat array: a scan's map has ~10^5 buckets, too many for a vector each).
+    start: Vec<usize>,
+    bucketed: Vec<u32>,
+    /// Per bucket, the Chebyshev distance (in buckets) to the nearest non-empty one: a
+    /// point outside the map starts its ring search there instead of walking empty rings
+    /// (the rings skipped hold no triangle, so the result is the same). Built on first use:
+    /// `contains` never needs it.
+    empty_rings: std::sync::OnceLock<Vec<u32>>,
 }
 
 impl<'a> Locator<'a> {
@@ -170,20 +178,40 @@ impl<'a> Locator<'a> {
         lo -= DVec2::splat(extent * 1e-9);
         let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
         let cell = extent * (1.0 + 2e-9) / dim as f64;
-        let mut buckets = vec![Vec::new(); dim * dim];
-        for (f, t) in tris.iter().enumerate() {
-            let ps = [
-                plane[t[0] as usize],
-                plane[t[1] as usize],
-                plane[t[2] as usize],
-            ];
-            let mn = ps[0].min(ps[1]).min(ps[2]);
-            let mx = ps[0].max(ps[1]).max(ps[2]);
-            let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
-            let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
+        let ranges: Vec<[usize; 4]> = tris
+            .iter()
+            .map(|t| {
+                let ps = [
+                    plane[t[0] as usize],
+                    plane[t[1] as usize],
+                    plane[t[2] as usize],
+                ];
+                let mn = ps[0].min(ps[1]).min(ps[2]);
+                let mx = ps[0].max(ps[1]).max(ps[2]);
+                let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
+                let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
+                [x0, y0, x1, y1]
+            })
+            .collect();
+        let mut start = vec![0usize; dim * dim + 1];
+        for &[x0, y0, x1, y1] in &ranges {
             for y in y0..=y1 {
                 for x in x0..=x1 {
-                    buckets[y * dim + x].push(f as u32);
+                    start[y * dim + x + 1] += 1;
+                }
+            }
+        }
+        for b in 0..dim * dim {
+            start[b + 1] += start[b];
+        }
+        let mut fill = start.clone();
+        let mut bucketed = vec![0u32; start[dim * dim]];
+        for (f, &[x0, y0, x1, y1]) in ranges.iter().enumerate() {
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    let slot = &mut fill[y * dim + x];
+                    bucketed[*slot] = f as u32;
+                    *slot += 1;
                 }
             }
         }
@@ -193,8 +221,69 @@ impl<'a> Locator<'a> {
             lo,
             cell,
             dim,
-            buckets,
+            start,
+            bucketed,
+            empty_rings: std::sync::OnceLock::new(),
         }
+    }
+
+    /// Two-pass chessboard distance transform of the non-empty buckets.
+    fn empty_rings(&self) -> &[u32] {
+        self.empty_rings.get_or_init(|| {
+            let n = self.dim;
+            let mut d: Vec<u32> = (0..n * n)
+                .map(|b| {
+                    if self.start[b + 1] > self.start[b] {
+                        0
+                    } else {
+                        u32::MAX
+                    }
+                })
+                .collect();
+            let relax = |d: &mut [u32], k: usize, from: usize| {
+                d[k] = d[k].min(d[from].saturating_add(1));
+            };
+            for y in 0..n {
+                for x in 0..n {
+                    let k = y * n + x;
+                    if x > 0 {
+                        relax(&mut d, k, k - 1);
+                    }
+                    if y > 0 {
+                        relax(&mut d, k, k - n);
+                        if x > 0 {
+                            relax(&mut d, k, k - n - 1);
+                        }
+                        if x + 1 < n {
+                            relax(&mut d, k, k - n + 1);
+                        }
+                    }
+                }
+            }
+            for y in (0..n).rev() {
+                for x in (0..n).rev() {
+                    let k = y * n + x;
+                    if x + 1 < n {
+                        relax(&mut d, k, k + 1);
+                    }
+                    if y + 1 < n {
+                        relax(&mut d, k, k + n);
+                        if x + 1 < n {
+                            relax(&mut d, k, k + n + 1);
+                        }
+                        if x > 0 {
+                            relax(&mut d, k, k + n - 1);
+                        }
+                    }
+                }
+            }
+            d
+        })
+    }
+
+    fn bucket(&self, x: usize, y: usize) -> &[u32] {
+        let b = y * self.dim + x;
+        &self.bucketed[self.start[b]..self.start[b + 1]]
     }
 
     fn cell_of(lo: DVec2, cell: f64, dim: usize, p: DVec2) -> (usize, usize) {
@@ -224,7 +313,7 @@ impl<'a> Locator<'a> {
     /// Whether `q` lies in (or within rounding of) a triangle.
     pub fn contains(&self, q: DVec2) -> bool {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
-        self.buckets[cy * self.dim + cx].iter().any(|&f| {
+        self.bucket(cx, cy).iter().any(|&f| {
             let b = self.bary(f, q);
             b[0].min(b[1]).min(b[2]) >= -1e-9
         })
@@ -235,22 +324,17 @@ impl<'a> Locator<'a> {
     pub fn locate(&self, q: DVec2) -> (usize, [f64; 3]) {
         let (cx, cy) = Self::cell_of(self.lo, self.cell, self.dim, q);
         let mut best = (f64::MIN, 0usize, [1.0, 0.0, 0.0]);
-        for r in 0..self.dim {
-            for y in cy.saturating_sub(r)..=(cy + r).min(self.dim - 1) {
-                for x in cx.saturating_sub(r)..=(cx + r).min(self.dim - 1) {
-                    // Inner cells were searched at smaller r.
-                    if x.abs_diff(cx).max(y.abs_diff(cy)) != r {
-                        continue;
-                    }
-                    for &f in &self.buckets[y * self.dim + x] {
-                        let b = self.bary(f, q);
-                        let worst = b[0].min(b[1]).min(b[2]);
-                        if worst > best.0 {
-                            best = (worst, f as usize, b);
-                        }
+        let first = (self.empty_rings()[cy * self.dim + cx] as usize).min(self.dim);
+        for r in first..self.dim {
+            ring_cells(cx, cy, r, self.dim, |x, y| {
+                for &f in self.bucket(x, y) {
+                    let b = self.bary(f, q);
+                    let worst = b[0].min(b[1]).min(b[2]);
+                    if worst > best.0 {
+                        best = (worst, f as usize, b);
                     }
                 }
-            }
+            });
             if best.0 >= -1e-12 || (best.0 > f64::MIN && r >= 1) {
                 break;
             }
@@ -265,5 +349,96 @@ impl<'a> Locator<'a> {
                 [1.0 / 3.0; 3]
             },
         )
+    }
+}
+
+/// Visits the cells of a `dim` x `dim` bucket grid at Chebyshev distance exactly `r` from
+/// (cx, cy), row by row and left to right (the order of a scan of the whole square, which
+/// searches that break ties by the first hit rely on), without walking the square's inside.
+pub(crate) fn ring_cells(
+    cx: usize,
+    cy: usize,
+    r: usize,
+    dim: usize,
+    mut visit: impl FnMut(usize, usize),
+) {
+    let (x0, x1) = (cx.saturating_sub(r), (cx + r).min(dim - 1));
+    for y in cy.saturating_sub(r)..=(cy + r).min(dim - 1) {
+        if y.abs_diff(cy) == r {
+            for x in x0..=x1 {
+                visit(x, y);
+            }
+        } else {
+            if cx >= r {
+                visit(cx - r, y);
+            }
+            if cx + r < dim {
+                visit(cx + r, y);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ring_cells_visit_the_square_scan_in_its_order() {
+        for dim in [1usize, 2, 5, 9] {
+            for (cx, cy) in [(0, 0), (dim / 2, dim / 3), (dim - 1, dim - 1), (0, dim - 1)] {
+                for r in 0..dim + 1 {
+                    let mut scan = Vec::new();
+                    for y in cy.saturating_sub(r)..=(cy + r).min(dim - 1) {
+                        for x in cx.saturating_sub(r)..=(cx + r).min(dim - 1) {
+                            if x.abs_diff(cx).max(y.abs_diff(cy)) == r {
+                                scan.push((x, y));
+                            }
+                        }
+                    }
+                    let mut ring = Vec::new();
+                    ring_cells(cx, cy, r, dim, |x, y| ring.push((x, y)));
+                    assert_eq!(ring, scan, "dim {dim} centre ({cx}, {cy}) r {r}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn empty_rings_are_chessboard_distances_and_far_points_find_the_nearest_triangle() {
+        // Two triangles in opposite corners of a large empty box (a third, tiny and far away,
+        // stretches the bucket grid).
+        let plane = vec![
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(0.0, 1.0),
+            DVec2::new(9.0, 9.0),
+            DVec2::new(10.0, 9.0),
+            DVec2::new(10.0, 10.0),
+            DVec2::new(0.0, 10.0),
+            DVec2::new(0.01, 10.0),
+            DVec2::new(0.0, 9.99),
+        ];
+        let tris = vec![[0, 1, 2], [3, 4, 5], [6, 8, 7]];
+        let loc = Locator::new(&tris, &plane);
+        let n = loc.dim;
+        let rings = loc.empty_rings();
+        for y in 0..n {
+            for x in 0..n {
+                let brute = (0..n * n)
+                    .filter(|&b| !loc.bucket(b % n, b / n).is_empty())
+                    .map(|b| (b % n).abs_diff(x).max((b / n).abs_diff(y)))
+                    .min()
+                    .map_or(u32::MAX, |d| d as u32);
+                assert_eq!(rings[y * n + x], brute, "bucket ({x}, {y})");
+            }
+        }
+        let (f, b) = loc.locate(DVec2::new(0.2, 0.2));
+        assert_eq!(f, 0);
+        assert!((b[0] - 0.6).abs() < 1e-12);
+        // Outside everything, near the second triangle: its nearest corner, clamped.
+        let (f, b) = loc.locate(DVec2::new(10.5, 10.5));
+        assert_eq!(f, 1);
+        assert!((b[2] - 1.0).abs() < 1e-12, "{b:?}");
     }
 }
