@@ -219,6 +219,13 @@ impl DaemonConfig {
                 "must be 0..=1",
             );
         }
+        if !(f.hole_bridge_edges > 0.0 && f.hole_bridge_edges.is_finite()) {
+            return bad(
+                "fit.hole_bridge_edges",
+                f.hole_bridge_edges.to_string(),
+                "must be a positive number",
+            );
+        }
         if f.min_component_vertices < 3 {
             return bad(
                 "fit.min_component_vertices",
