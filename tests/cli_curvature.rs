@@ -111,16 +111,20 @@ fn bspline_surface_of_sin_x_sin_y_has_the_known_regions() {
 fn triangular_kinds_written_by_fit() {
     let tmp = tempfile::tempdir().expect("tmp");
     let dome = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
-    for kind in ["bezier", "loop"] {
-        let fit = tmp.path().join(kind);
+    let single: &[&str] = &["--bezier-layout", "single"];
+    for (kind, extra) in [("bezier", &[][..]), ("bezier", single), ("loop", &[][..])] {
+        let name = format!("{kind}{}", extra.len());
+        let fit = tmp.path().join(&name);
         run_ok(
             bin()
                 .arg("fit")
                 .arg(&dome)
-                .args(["--surface", kind, "--out"])
+                .args(["--surface", kind])
+                .args(extra)
+                .arg("--out")
                 .arg(&fit),
         );
-        let out = tmp.path().join(format!("{kind}-curv"));
+        let out = tmp.path().join(format!("{name}-curv"));
         run_ok(
             bin()
                 .arg("curvature")
@@ -131,12 +135,13 @@ fn triangular_kinds_written_by_fit() {
         let r = check_outputs(&out);
         assert_eq!(r["surface_kind"], kind);
         let samples = r["samples"].as_u64().expect("samples");
-        if kind == "bezier" {
-            // The triangular lattice of 61 a side.
-            assert_eq!(samples, 61 * 62 / 2);
-        } else {
-            // Every grid cell of the scan's domain sampled at least 2 x 2: about 61 across.
+        if extra.is_empty() {
+            // A grid fit of the scan (bezier: one quartic patch per cell): every grid cell
+            // of the domain sampled at least 2 x 2, about 61 across.
             assert!((1000..20_000).contains(&samples), "{samples} samples");
+        } else {
+            // The single patch: the triangular lattice of 61 a side.
+            assert_eq!(samples, 61 * 62 / 2);
         }
         // The dome is one cap: a single convex or concave region covers nearly all of it.
         let total: u64 = ["convex", "concave", "saddle"]

@@ -1,15 +1,17 @@
 //! The real-scan path: planar maps, grid domains, distance correction, warm starts, and the
 //! quality goals on a Stanford range scan.
 
+use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::pipeline::output::{tessellate, Coverage};
+use trispline::pipeline::output::{surface_json, tessellate, Coverage};
 use trispline::pipeline::scan::Domain;
 use trispline::pipeline::worker::{fit_patch, run_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
 use trispline::remesh::planar::{folded_triangles, planar_map, MapMethod, PlaneFrame};
+use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
 
@@ -210,4 +212,92 @@ fn trimmed_stanford_surfaces_stay_within_a_millimetre_of_the_data() {
             assert!(bridged > 0, "{name}: narrow holes bridged");
         }
     }
+}
+
+/// `bezier` on a scan: one quartic Bezier patch per grid cell. Every patch, evaluated here
+/// from its 15 control points by the Bernstein formula, lies on the grid surface the same
+/// file describes in box-spline form (what the reader returns), at the point its corners
+/// map to; and the fit is as good as `loop`'s (it is the same fit).
+#[test]
+fn bezier_patches_of_a_scan_are_its_grid_surface_in_bezier_form() {
+    let mesh = height_field(40, 6, |x, y| {
+        DVec3::new(x, y, 0.1 * (2.0 * x).sin() * (1.3 * y).cos())
+    });
+    let fit_as = |surface| {
+        let cfg = WorkerConfig {
+            surface,
+            ..WorkerConfig::default()
+        };
+        fit_patch(&mesh, None, &cfg).expect("fits")
+    };
+    let bezier = fit_as(SurfaceKind::Bezier);
+    let looped = fit_as(SurfaceKind::Loop);
+    assert_eq!(bezier.fit.controls, looped.fit.controls);
+    let report = serde_json::json!({"final": {}, "status": "stalled"});
+    let value = surface_json(&bezier.fit, bezier.scan.as_ref(), &report);
+    assert_eq!(value["kind"], "bezier");
+    assert_eq!(value["layout"], "patches");
+    let bytes = serde_json::to_vec(&value).expect("serialises");
+    let SurfaceDescription::BezierPatches { surface, controls } =
+        parse_surface_json(&bytes, "bezier.json").expect("reads back")
+    else {
+        panic!("bezier patches read as the grid surface");
+    };
+    let patches = value["patches"].as_array().expect("patches");
+    assert_eq!(patches.len(), surface.cells().len());
+    let fact = |n: usize| (1..=n).product::<usize>() as f64;
+    let mut worst = 0.0f64;
+    for patch in patches {
+        let corner = |k: usize| {
+            let c = &patch["corners"][k];
+            (c[0].as_f64().expect("x"), c[1].as_f64().expect("y"))
+        };
+        let net: Vec<DVec3> = patch["control_points"]
+            .as_array()
+            .expect("net")
+            .iter()
+            .map(|p| {
+                DVec3::new(
+                    p[0].as_f64().unwrap_or(0.0),
+                    p[1].as_f64().unwrap_or(0.0),
+                    p[2].as_f64().unwrap_or(0.0),
+                )
+            })
+            .collect();
+        assert_eq!(net.len(), 15);
+        for (u, v) in [
+            (0.2f64, 0.3f64),
+            (0.6, 0.1),
+            (0.05, 0.9),
+            (1.0 / 3.0, 1.0 / 3.0),
+        ] {
+            let w = 1.0 - u - v;
+            let mut point = DVec3::ZERO;
+            for j in 0..=4usize {
+                for i in 0..=4 - j {
+                    let k = 4 - i - j;
+                    let b = fact(4) / (fact(i) * fact(j) * fact(k))
+                        * u.powi(i as i32)
+                        * v.powi(j as i32)
+                        * w.powi(k as i32);
+                    point += net[5 * j - j * j.saturating_sub(1) / 2 + i] * b;
+                }
+            }
+            let (c0, c1, c2) = (corner(0), corner(1), corner(2));
+            let x = w * c0.0 + u * c1.0 + v * c2.0;
+            let y = w * c0.1 + u * c1.1 + v * c2.1;
+            let on_grid = surface
+                .evaluate(
+                    &controls,
+                    SurfaceParam {
+                        face: 0,
+                        u: x,
+                        v: y,
+                    },
+                )
+                .position;
+            worst = worst.max((point - on_grid).length());
+        }
+    }
+    assert!(worst < 1e-12, "patch vs grid surface: {worst:e}");
 }

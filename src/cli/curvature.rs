@@ -108,6 +108,9 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<Loaded> {
         SurfaceDescription::LoopGrid { surface, controls } => {
             (Box::new(GridPatch { surface, controls }), "loop")
         }
+        SurfaceDescription::BezierPatches { surface, controls } => {
+            (Box::new(GridPatch { surface, controls }), "bezier")
+        }
         SurfaceDescription::LoopMesh { surface, controls } => {
             (Box::new(LoopMeshPatch::new(surface, controls)), "loop")
         }

@@ -74,6 +74,11 @@ pub struct FitArgs {
     /// vertices) are not fitted.
     #[arg(long, default_value_t = 0.05)]
     pub min_component_fraction: f64,
+    /// Scans with `--surface bezier`: `patches` (one quartic Bezier patch per grid cell,
+    /// the Bezier form of the grid fit) or `single` (one patch of degree `--lattice`, 16 by
+    /// default; implied by `--lattice`).
+    #[arg(long, value_enum, default_value = "patches")]
+    pub bezier_layout: crate::pipeline::scan::BezierLayout,
     /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
     /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
     /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
@@ -102,6 +107,11 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         within_tolerance_pct: args.within_tolerance_pct,
         max_time_ms: args.max_time_ms,
         lattice: args.lattice.unwrap_or(16),
+        // A degree given for `bezier` asks for one patch of that degree.
+        bezier_layout: match (args.surface, args.lattice) {
+            (SurfaceKind::Bezier, Some(_)) => crate::pipeline::scan::BezierLayout::Single,
+            _ => args.bezier_layout,
+        },
         grid_segments: args.lattice.filter(|_| args.surface == SurfaceKind::Loop),
         target_controls_pct: args.target_controls_pct,
         correction_rounds: args.corrections,

@@ -30,6 +30,13 @@ pub enum SurfaceDescription {
         surface: GridSpline,
         controls: Vec<DVec3>,
     },
+    /// Quartic Bezier patches over the cells of a grid (`bezier`, `layout: patches`): the
+    /// same surface as `LoopGrid`, read from the box-spline form the file carries beside
+    /// the patches.
+    BezierPatches {
+        surface: GridSpline,
+        controls: Vec<DVec3>,
+    },
     /// Loop limit surface of an arbitrary manifold control mesh (`layout: mesh`): the
     /// control faces are the domain faces. Shared, since the surface memoises its
     /// subdivision nodes and is not cheap to rebuild.
@@ -170,7 +177,7 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
     }
     let kind = field(&v, "kind", name)?.as_str().unwrap_or_default();
     match kind {
-        "bezier" => {
+        "bezier" if v.get("layout").and_then(Value::as_str) != Some("patches") => {
             let degree = uint(&v, "degree", name)?;
             if degree == 0 || degree > 64 {
                 return Err(IoError::new(
@@ -188,7 +195,13 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
             )?;
             Ok(SurfaceDescription::Bezier { degree, controls })
         }
-        "loop" if v.get("layout").and_then(Value::as_str) == Some("grid") => {
+        // Bezier patches carry the box-spline form of the same surface beside them.
+        "loop" | "bezier"
+            if matches!(
+                (kind, v.get("layout").and_then(Value::as_str)),
+                ("loop", Some("grid")) | ("bezier", Some("patches"))
+            ) =>
+        {
             let cells = int_rows::<3>(&v, "cells", name)?;
             let coords = int_rows::<2>(&v, "control_coords", name)?;
             let surface = GridSpline::new(cells.iter().map(|c| (c[0], c[1], c[2] != 0)));
@@ -212,7 +225,11 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
                 coords.len(),
                 "the grid's control list",
             )?;
-            Ok(SurfaceDescription::LoopGrid { surface, controls })
+            Ok(if kind == "bezier" {
+                SurfaceDescription::BezierPatches { surface, controls }
+            } else {
+                SurfaceDescription::LoopGrid { surface, controls }
+            })
         }
         "loop" if v.get("layout").and_then(Value::as_str) == Some("mesh") => {
             let controls = points(&v, name)?;

@@ -96,6 +96,18 @@ pub fn fit_subdivided(
     previous: Option<&[DVec3]>,
 ) -> Result<PatchFit, PipelineError> {
     let t0 = Instant::now();
+    // L levels of Loop subdivision multiply the face count by 4^L: most scans fail this
+    // count before a topology of all their faces is built.
+    let faces = mesh.triangles.len();
+    let per_coarse_face = u32::try_from(opts.levels)
+        .ok()
+        .and_then(|l| 4usize.checked_pow(l));
+    if per_coarse_face.is_none_or(|k| !faces.is_multiple_of(k)) {
+        return Err(PipelineError::NoSubdivision(format!(
+            "{faces} faces are not a multiple of 4^{} (what {} levels of Loop subdivision make)",
+            opts.levels, opts.levels
+        )));
+    }
     let topo = Topology::from_mesh(mesh)
         .map_err(|e| PipelineError::NoSubdivision(format!("not a manifold mesh: {e}")))?;
     let (hierarchy, why) = Hierarchy::detect(&topo, opts.levels);

@@ -31,6 +31,38 @@ pub fn surface_json(
             "domain": "reference triangle: barycentric (u, v, w = 1 - u - v)",
             "lattice_ordering": "control point P_{i,j,k} (i + j + k = degree) has weight degree!/(i! j! k!) u^i v^j w^k and sits at index j*(degree+1) - j*(j-1)/2 + i",
         }),
+        SurfaceModel::Grid(g) if f.surface == super::SurfaceKind::Bezier => {
+            let patches = g
+                .cells()
+                .iter()
+                .map(|&cell| {
+                    let (i, j, down) = cell;
+                    // Corners where w, u and v are 1 (see `grid_spline::cell_at`).
+                    let corners = if down {
+                        [[i + 1, j + 1], [i, j + 1], [i + 1, j]]
+                    } else {
+                        [[i, j], [i + 1, j], [i, j + 1]]
+                    };
+                    let net = g.cell_bezier_net(&f.controls, cell);
+                    json!({
+                        "cell": [i, j, i64::from(down)],
+                        "corners": corners,
+                        "control_points": net.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
+                    })
+                })
+                .collect::<Vec<_>>();
+            json!({
+                "kind": "bezier",
+                "layout": "patches",
+                "degree": 4,
+                "domain": "grid coordinates (x, y) of the regular three-direction grid; a patch's point (u, v, w = 1 - u - v) sits at w corners[0] + u corners[1] + v corners[2]",
+                "lattice_ordering": "in every patch, control point P_{i,j,k} (i + j + k = 4) has weight 4!/(i! j! k!) u^i v^j w^k and sits at index 5 j - j (j - 1) / 2 + i",
+                "basis": "one quartic triangular Bezier patch per grid cell, C2 across cells: the Bezier form of the quartic box spline whose 12-point stencils over `control_points` at `control_coords` give the same surface (layout grid of kind loop)",
+                "patches": patches,
+                "cells": g.cells().iter().map(|&(i, j, d)| [i, j, i64::from(d)]).collect::<Vec<_>>(),
+                "control_coords": g.control_coords().iter().map(|&(i, j)| [i, j]).collect::<Vec<_>>(),
+            })
+        }
         SurfaceModel::Grid(g) => json!({
             "kind": "loop",
             "layout": "grid",

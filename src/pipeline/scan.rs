@@ -29,10 +29,34 @@ use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 
+/// What `bezier` means on a scan.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum BezierLayout {
+    /// One quartic triangular Bezier patch per cell of the grid domain, C2 across cells:
+    /// the Bezier form of the grid fit (a single patch cannot follow a scan: degree 16 left
+    /// ~1 mm RMS on the Stanford scans, and 5 % control points would need degree ~60).
+    #[default]
+    Patches,
+    /// One triangular Bezier patch of degree `lattice` over the whole map.
+    Single,
+}
+
 #[derive(Clone, Debug)]
 pub struct ScanOptions {
-    /// Bezier: the degree (control-net segments per side).
+    /// Bezier, `Single` layout: the degree (control-net segments per side).
     pub lattice: usize,
+    pub bezier_layout: BezierLayout,
     /// Loop: grid cells across the longer side of the patch; when absent the spacing is
     /// chosen for `target_controls_pct`.
     pub grid_segments: Option<usize>,
@@ -198,8 +222,10 @@ pub fn fit_scan(
     let t1 = Instant::now();
     let real = patch.real_vertices;
     let data = &part.positions;
-    let (model, domain, initial, fairness_tris) = match opts.surface {
-        SurfaceKind::Bezier => {
+    let single_bezier =
+        opts.surface == SurfaceKind::Bezier && scan.bezier_layout == BezierLayout::Single;
+    let (model, domain, initial, fairness_tris) = match single_bezier {
+        true => {
             let n0 = scan.lattice.max(1);
             let segments = (n0 as f64) * 2f64.powi(opts.levels.min(60) as i32);
             if n0 > MAX_BEZIER_DEGREE || (segments + 1.0) * (segments + 2.0) / 2.0 > 1e8 {
@@ -228,7 +254,7 @@ pub fn fit_scan(
                 lattice_triangles(n0),
             )
         }
-        SurfaceKind::Loop => {
+        false => {
             let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
                 (_, Some(n)) => plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
                 (Some(Domain::Grid { spacing }), None) => *spacing,
@@ -240,7 +266,11 @@ pub fn fit_scan(
             let gf = GridFrame { spacing };
             check_grid_size(plane, spacing, opts.levels)?;
             let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
-            let initial = grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse);
+            let same_domain = warm.filter(|w| w.domain == Some(&Domain::Grid { spacing }));
+            let initial = match same_domain.and_then(|w| net_from_warm(&grid, w)) {
+                Some(net) => net,
+                None => grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse),
+            };
             let tris = grid.net_triangles();
             (
                 SurfaceModel::Grid(grid),
@@ -441,6 +471,7 @@ pub fn fit_scan(
         .collect();
     let degree = match &model {
         SurfaceModel::Bezier(b) => b.degree,
+        SurfaceModel::Grid(_) if opts.surface == SurfaceKind::Bezier => 4,
         SurfaceModel::Grid(_) | SurfaceModel::Mesh(_) => 0,
     };
     Ok(ScanFit {
@@ -475,6 +506,65 @@ pub fn fit_scan(
         parameterization_ms,
         resample_ms,
         reused_controls: reused,
+    })
+}
+
+/// Share of a grid's controls a previous version must provide for its net to replace the
+/// resampled initial net.
+const WARM_NET_MIN_SHARE: f64 = 0.9;
+
+/// The previous version's controls at the same grid points as the starting net, when they
+/// cover nearly all of `grid`: the rest take the mean of their known grid neighbours, ring
+/// by ring. Resampling and inverse subdivision would only make a start the rounds replace.
+fn net_from_warm(grid: &GridSpline, warm: &ScanWarm) -> Option<InitialNet> {
+    if warm.coords.len() != warm.controls.len() {
+        return None;
+    }
+    let m = grid.control_count();
+    let mut net: Vec<Option<DVec3>> = vec![None; m];
+    for (&(i, j), &p) in warm.coords.iter().zip(warm.controls) {
+        if let Some(k) = grid.control_at(i, j) {
+            net[k as usize] = Some(p);
+        }
+    }
+    let reused = net.iter().filter(|p| p.is_some()).count();
+    if (reused as f64) < WARM_NET_MIN_SHARE * m as f64 || reused == 0 {
+        return None;
+    }
+    const NEIGHBOURS: [(i64, i64); 6] = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, -1), (-1, 1)];
+    let coords = grid.control_coords();
+    loop {
+        let missing: Vec<usize> = (0..m).filter(|&k| net[k].is_none()).collect();
+        if missing.is_empty() {
+            break;
+        }
+        let filled: Vec<(usize, DVec3)> = missing
+            .iter()
+            .filter_map(|&k| {
+                let (i, j) = coords[k];
+                let known: Vec<DVec3> = NEIGHBOURS
+                    .iter()
+                    .filter_map(|(di, dj)| grid.control_at(i + di, j + dj))
+                    .filter_map(|n| net[n as usize])
+                    .collect();
+                (!known.is_empty())
+                    .then(|| (k, known.iter().copied().sum::<DVec3>() / known.len() as f64))
+            })
+            .collect();
+        if filled.is_empty() {
+            // Controls no known one reaches (a separate island of the grid).
+            return None;
+        }
+        for (k, p) in filled {
+            net[k] = Some(p);
+        }
+    }
+    Some(InitialNet {
+        controls: net.into_iter().map(|p| p.unwrap_or_default()).collect(),
+        resample_points: 0,
+        inverse: format!(
+            "none: {reused} of {m} controls from the previous version, the rest from their neighbours"
+        ),
     })
 }
 

@@ -3,7 +3,9 @@
 
 use super::components::{split_components, ComponentFilter, ComponentMode};
 use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
-use super::scan::{fit_scan, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel};
+use super::scan::{
+    fit_scan, BezierLayout, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel,
+};
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepHook, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
@@ -34,8 +36,12 @@ pub struct WorkerConfig {
     pub mean_error: Option<f64>,
     pub within_tolerance_pct: Option<f64>,
     pub max_time_ms: Option<u64>,
-    /// Scans, `bezier`: the degree (control-net segments per side).
+    /// Scans, `bezier` with the `single` layout: the degree (control-net segments per side).
     pub lattice: usize,
+    /// Scans with `bezier`: one quartic patch per grid cell, or one patch of degree
+    /// `lattice`.
+    #[serde(default)]
+    pub bezier_layout: BezierLayout,
     /// Scans, `loop`: grid cells across the patch's longer side; when absent the spacing
     /// follows `target_controls_pct`.
     #[serde(default)]
@@ -115,6 +121,7 @@ impl Default for WorkerConfig {
             within_tolerance_pct: None,
             max_time_ms: None,
             lattice: 16,
+            bezier_layout: BezierLayout::default(),
             grid_segments: None,
             target_controls_pct: default_target_controls_pct(),
             correction_rounds: default_correction_rounds(),
@@ -258,6 +265,7 @@ pub fn fit_patch_with(
             // No subdivision connectivity: remesh the scan onto a lattice.
             let scan = ScanOptions {
                 lattice: cfg.lattice,
+                bezier_layout: cfg.bezier_layout,
                 grid_segments: cfg.grid_segments,
                 target_controls_pct: cfg.target_controls_pct,
                 smoothing: cfg.smoothing,

@@ -270,6 +270,12 @@ impl<'a> GridEvaluator<'a> {
 }
 
 impl GridSpline {
+    /// The quartic Bezier net of `cell` for `controls` (lattice order of degree 4 over the
+    /// cell's local coordinates, see `cell_at`; missing stencil points count as zero).
+    pub fn cell_bezier_net(&self, controls: &[DVec3], cell: Cell) -> [DVec3; 15] {
+        GridEvaluator::net(self, controls, cell)
+    }
+
     fn cell_slot(&self, (i, j, down): Cell) -> Option<usize> {
         let (a, b) = (i - self.i0, j - self.j0);
         if a < 0 || b < 0 || a as usize >= self.width || b as usize >= self.height {
