@@ -301,3 +301,32 @@ fn bezier_patches_of_a_scan_are_its_grid_surface_in_bezier_form() {
     }
     assert!(worst < 1e-12, "patch vs grid surface: {worst:e}");
 }
+
+/// The budget's time cap stops the correction rounds (after the round that crossed it)
+/// and says so in the status.
+#[test]
+fn the_time_cap_stops_the_correction_rounds() {
+    // A real scan: its mapped parameters leave work for several rounds.
+    let Some(path) = shared_data("range_scans/bun000_tri.ply") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("reads")
+        .mesh;
+    let fit = |max_time_ms| {
+        let cfg = WorkerConfig {
+            surface: SurfaceKind::Loop,
+            max_time_ms,
+            ..WorkerConfig::default()
+        };
+        fit_patch(&mesh, None, &cfg).expect("fits")
+    };
+    let free = fit(None);
+    let capped = fit(Some(0));
+    let rounds = |f: &trispline::pipeline::worker::FittedPatch| {
+        f.scan.as_ref().expect("remeshed").correction_rms.len() - 1
+    };
+    assert!(rounds(&free) >= 2, "{} rounds uncapped", rounds(&free));
+    assert_eq!(rounds(&capped), 1);
+    assert_eq!(capped.fit.outcome.status, trispline::fit::FitStatus::Capped);
+}

@@ -428,6 +428,16 @@ pub fn fit_scan(
             outcome.status = FitStatus::Met;
             break;
         }
+        // The budget's time cap holds for the rounds as for the steps of a fit.
+        let elapsed_ms = t2.elapsed().as_secs_f64() * 1e3;
+        if opts
+            .budget
+            .max_time_ms
+            .is_some_and(|m| elapsed_ms >= m as f64)
+        {
+            outcome.status = FitStatus::Capped;
+            break;
+        }
         // Rounds converge: once one gains under 2 % the next would gain less (a warm start
         // from the previous version's surface usually stops here after one round).
         if after > (1.0 - ROUND_MIN_GAIN) * before {
