@@ -158,6 +158,18 @@ fn stanford_range_scan_quality_and_warm_start() {
     let cold = run_patch(&v2, None, &budget).expect("cold");
     let warm = run_patch(&v2, Some(&first.warm), &budget).expect("warm");
     assert_eq!(warm.report["warm_start"], true);
+    // The warm start's foot points begin where version 1's ended (from the parameters of
+    // the nearest version-1 points): its error before any round is version 1's, not the
+    // 2.5x of foot points searched from the mapped parameters.
+    let warm_begins = warm.report["parameter_correction_rms"][0]
+        .as_f64()
+        .expect("rms before the rounds");
+    assert!(
+        warm_begins < 1.2 * rms,
+        "warm start at {:.1} um, version 1 ended at {:.1} um",
+        warm_begins * 1e6,
+        rms * 1e6
+    );
     assert_eq!(cold.report["status"], "met");
     assert_eq!(warm.report["status"], "met");
     assert!(

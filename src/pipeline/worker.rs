@@ -5,6 +5,7 @@ use super::components::{split_components, ComponentFilter, ComponentMode};
 use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use super::scan::{
     fit_scan, BezierLayout, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel,
+    WarmFeet,
 };
 use super::{fit_subdivided, FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, Method, StepHook, StepStats};
@@ -162,6 +163,9 @@ pub struct WarmStart {
     /// Loop grid: grid coordinates of `controls`.
     #[serde(default)]
     pub coords: Vec<(i64, i64)>,
+    /// Remeshed scans on a grid: the data points and their final parameters.
+    #[serde(default)]
+    pub feet: Option<WarmFeet>,
     /// `components = "all"`: one warm start per fitted component (the fields above are then
     /// empty).
     #[serde(default)]
@@ -279,6 +283,7 @@ pub fn fit_patch_with(
                 domain: w.domain.as_ref(),
                 controls: &w.controls,
                 coords: &w.coords,
+                feet: w.feet.as_ref(),
             });
             let s = fit_scan(mesh, &opts, &scan, warm.as_ref()).map_err(|e| {
                 PipelineError::Unsupported(format!("{e} (and no subdivision connectivity: {why})"))
@@ -379,6 +384,7 @@ pub fn run_patch_with(
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
             SurfaceModel::Bezier(_) | SurfaceModel::Mesh(_) => Vec::new(),
         },
+        feet: scan_info.as_ref().and_then(WarmFeet::of),
         parts: Vec::new(),
     };
     Ok(PatchOutputs {
@@ -518,6 +524,7 @@ pub fn run_input_with(
             frame: None,
             domain: None,
             coords: Vec::new(),
+            feet: None,
             parts: warm_parts,
         },
     })
