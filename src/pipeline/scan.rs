@@ -221,7 +221,11 @@ fn params_from_previous(
     reach: f64,
     params: &mut [SurfaceParam],
 ) {
-    if feet.points.len() != feet.params.len() || feet.points.is_empty() || !(reach > 0.0) {
+    if feet.points.len() != feet.params.len()
+        || feet.points.is_empty()
+        || reach.is_nan()
+        || reach <= 0.0
+    {
         return;
     }
     let old: Vec<DVec3> = feet
