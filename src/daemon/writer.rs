@@ -152,7 +152,7 @@ impl Writer {
                     config_hash: done.cfg.output_hash(),
                     warm,
                 };
-                if let Err(e) = self.store.save(&a.id, &state) {
+                if let Err(e) = self.store.save(&a.id, state) {
                     tracing::warn!(error = %e, "cannot save warm-start state");
                 }
                 self.processed(a, done.cfg.output.processed);
