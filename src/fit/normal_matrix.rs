@@ -513,23 +513,52 @@ fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
     a.par_iter().zip(b.par_iter()).map(|(x, y)| x.dot(*y)).sum()
 }
 
-/// Preconditioned conjugate gradients on M x = b from `start` until the residual drops by
-/// `rel_tol` relative to b or `max_iter` steps; returns x and the steps taken.
+/// The product of either kind of normal matrix, for `pcg`.
+trait Apply {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]);
+    fn rhs(&self) -> &[DVec3];
+}
+
+impl Apply for ScalarMatrix {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
+        self.apply(x, out)
+    }
+    fn rhs(&self) -> &[DVec3] {
+        &self.rhs
+    }
+}
+
+impl Apply for BlockMatrix {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
+        self.apply(x, out)
+    }
+    fn rhs(&self) -> &[DVec3] {
+        &self.rhs
+    }
+}
+
+/// Preconditioned conjugate gradients on M x = b from `start` (`precondition(c, r_c)` is
+/// the preconditioner's block of control c applied to the residual there) until the
+/// residual drops by `rel_tol` relative to b or `max_iter` steps; returns x and the steps.
 fn pcg(
-    apply: impl Fn(&[DVec3], &mut [DVec3]),
-    precondition: impl Fn(&[DVec3], &mut Vec<DVec3>),
-    b: &[DVec3],
+    matrix: &impl Apply,
+    precondition: impl Fn(usize, DVec3) -> DVec3 + Sync,
     start: Vec<DVec3>,
     max_iter: usize,
     rel_tol: f64,
 ) -> (Vec<DVec3>, usize) {
+    let b = matrix.rhs();
+    let precondition_all = |r: &[DVec3], z: &mut Vec<DVec3>| {
+        z.clear();
+        z.par_extend(r.par_iter().enumerate().map(|(c, r)| precondition(c, *r)));
+    };
     let m = start.len();
     let mut x = start;
     let mut mx = vec![DVec3::ZERO; m];
-    apply(&x, &mut mx);
+    matrix.apply_to(&x, &mut mx);
     let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();
     let mut z = Vec::with_capacity(m);
-    precondition(&r, &mut z);
+    precondition_all(&r, &mut z);
     let mut d = z.clone();
     let mut rz = dot(&r, &z);
     let stop = rel_tol * rel_tol * dot(b, b).max(1e-300);
@@ -538,7 +567,7 @@ fn pcg(
         if dot(&r, &r) <= stop {
             return (x, k);
         }
-        apply(&d, &mut md);
+        matrix.apply_to(&d, &mut md);
         let dmd = dot(&d, &md);
         if dmd <= 0.0 || !dmd.is_finite() {
             return (x, k);
@@ -546,7 +575,7 @@ fn pcg(
         let alpha = rz / dmd;
         x.iter_mut().zip(&d).for_each(|(x, d)| *x += *d * alpha);
         r.iter_mut().zip(&md).for_each(|(r, v)| *r -= *v * alpha);
-        precondition(&r, &mut z);
+        precondition_all(&r, &mut z);
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
@@ -584,18 +613,8 @@ impl ScalarMatrix {
         rel_tol: f64,
     ) -> (Vec<DVec3>, usize) {
         let inv = self.jacobi();
-        let precondition = |r: &[DVec3], z: &mut Vec<DVec3>| {
-            z.clear();
-            z.par_extend(r.par_iter().zip(inv.par_iter()).map(|(r, d)| *r * *d));
-        };
-        pcg(
-            |x, out| self.apply(x, out),
-            precondition,
-            &self.rhs,
-            start,
-            max_iter,
-            rel_tol,
-        )
+        let precondition = |c: usize, r: DVec3| r * inv[c];
+        pcg(self, precondition, start, max_iter, rel_tol)
     }
 
     /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly; `None` when M is
@@ -623,18 +642,8 @@ impl BlockMatrix {
         rel_tol: f64,
     ) -> (Vec<DVec3>, usize) {
         let inv = self.block_jacobi();
-        let precondition = |r: &[DVec3], z: &mut Vec<DVec3>| {
-            z.clear();
-            z.par_extend(r.par_iter().zip(inv.par_iter()).map(|(r, m)| *m * *r));
-        };
-        pcg(
-            |x, out| self.apply(x, out),
-            precondition,
-            &self.rhs,
-            start,
-            max_iter,
-            rel_tol,
-        )
+        let precondition = |c: usize, r: DVec3| inv[c] * r;
+        pcg(self, precondition, start, max_iter, rel_tol)
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
