@@ -5,6 +5,7 @@ pub mod budget;
 pub mod distance;
 pub mod engine;
 pub mod normal_matrix;
+pub mod normal_solve;
 pub mod sparse;
 
 pub use budget::{Budget, FitStatus, StepStats};

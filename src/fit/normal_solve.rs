@@ -1,0 +1,174 @@
+//! Solving the assembled normal equations of `normal_matrix`: preconditioned conjugate
+//! gradients (Jacobi for the scalar matrix, inverse 3x3 diagonal blocks for the coupled
+//! one) and sparse Cholesky factorisations (faer, fill-reducing ordering).
+
+use super::normal_matrix::{BlockMatrix, ScalarMatrix, SCALAR};
+use glam::DVec3;
+use rayon::prelude::*;
+
+fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
+    a.par_iter().zip(b.par_iter()).map(|(x, y)| x.dot(*y)).sum()
+}
+
+/// The product of either kind of normal matrix, for `pcg`.
+trait Apply {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]);
+    fn rhs(&self) -> &[DVec3];
+}
+
+impl Apply for ScalarMatrix {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
+        self.apply(x, out)
+    }
+    fn rhs(&self) -> &[DVec3] {
+        &self.rhs
+    }
+}
+
+impl Apply for BlockMatrix {
+    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
+        self.apply(x, out)
+    }
+    fn rhs(&self) -> &[DVec3] {
+        &self.rhs
+    }
+}
+
+/// Preconditioned conjugate gradients on M x = b from `start` (`precondition(c, r_c)` is
+/// the preconditioner's block of control c applied to the residual there) until the
+/// residual drops by `rel_tol` relative to b or `max_iter` steps; returns x and the steps.
+fn pcg(
+    matrix: &impl Apply,
+    precondition: impl Fn(usize, DVec3) -> DVec3 + Sync,
+    start: Vec<DVec3>,
+    max_iter: usize,
+    rel_tol: f64,
+) -> (Vec<DVec3>, usize) {
+    let b = matrix.rhs();
+    let precondition_all = |r: &[DVec3], z: &mut Vec<DVec3>| {
+        z.clear();
+        z.par_extend(r.par_iter().enumerate().map(|(c, r)| precondition(c, *r)));
+    };
+    let m = start.len();
+    let mut x = start;
+    let mut mx = vec![DVec3::ZERO; m];
+    matrix.apply_to(&x, &mut mx);
+    let mut r: Vec<DVec3> = b.iter().zip(&mx).map(|(b, a)| *b - *a).collect();
+    let mut z = Vec::with_capacity(m);
+    precondition_all(&r, &mut z);
+    let mut d = z.clone();
+    let mut rz = dot(&r, &z);
+    let stop = rel_tol * rel_tol * dot(b, b).max(1e-300);
+    let mut md = vec![DVec3::ZERO; m];
+    for k in 0..max_iter {
+        if dot(&r, &r) <= stop {
+            return (x, k);
+        }
+        matrix.apply_to(&d, &mut md);
+        let dmd = dot(&d, &md);
+        if dmd <= 0.0 || !dmd.is_finite() {
+            return (x, k);
+        }
+        let alpha = rz / dmd;
+        x.iter_mut().zip(&d).for_each(|(x, d)| *x += *d * alpha);
+        r.iter_mut().zip(&md).for_each(|(r, v)| *r -= *v * alpha);
+        precondition_all(&r, &mut z);
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        d.iter_mut().zip(&z).for_each(|(d, z)| *d = *z + *d * beta);
+    }
+    (x, max_iter)
+}
+
+/// Lower triangle of a symmetric matrix given by columns (the `lower_only` assembly).
+fn cholesky_solve(
+    size: usize,
+    col_ptr: Vec<usize>,
+    rows: Vec<usize>,
+    vals: Vec<f64>,
+    rhs: impl Fn(usize, usize) -> f64,
+    ncols_rhs: usize,
+) -> Option<faer::Mat<f64>> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+    let symbolic = SymbolicSparseColMat::new_checked(size, size, col_ptr, None, rows);
+    let llt = SparseColMat::new(symbolic, vals)
+        .sp_cholesky(faer::Side::Lower)
+        .ok()?;
+    let mut b = faer::Mat::<f64>::from_fn(size, ncols_rhs, rhs);
+    llt.solve_in_place(b.as_mut());
+    Some(b)
+}
+
+impl ScalarMatrix {
+    /// Jacobi-preconditioned CG.
+    pub fn solve_pcg(
+        &self,
+        start: Vec<DVec3>,
+        max_iter: usize,
+        rel_tol: f64,
+    ) -> (Vec<DVec3>, usize) {
+        let inv = self.jacobi();
+        let precondition = |c: usize, r: DVec3| r * inv[c];
+        pcg(self, precondition, start, max_iter, rel_tol)
+    }
+
+    /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly; `None` when M is
+    /// not positive definite (controls no term holds) or the result is not finite.
+    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+        let m = self.rhs.len();
+        let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
+        let rows = self.idx.iter().map(|&j| j as usize).collect();
+        let b = cholesky_solve(m, self.ptr.clone(), rows, vals, |i, k| self.rhs[i][k], 3)?;
+        let x: Vec<DVec3> = (0..m)
+            .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
+            .collect();
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
+
+impl BlockMatrix {
+    /// CG preconditioned by the inverse 3x3 diagonal blocks: with a small tangential share
+    /// the system is much stiffer along the normals than along the surface, and the blocks,
+    /// which see each control's normal, take most of that spread out of the iteration.
+    pub fn solve_pcg(
+        &self,
+        start: Vec<DVec3>,
+        max_iter: usize,
+        rel_tol: f64,
+    ) -> (Vec<DVec3>, usize) {
+        let inv = self.block_jacobi();
+        let precondition = |c: usize, r: DVec3| inv[c] * r;
+        pcg(self, precondition, start, max_iter, rel_tol)
+    }
+
+    /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
+    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+        let m = self.rhs.len();
+        let mut col_ptr = Vec::with_capacity(3 * m + 1);
+        col_ptr.push(0);
+        let (mut rows, mut vals) = (Vec::new(), Vec::new());
+        for c in 0..m {
+            let range = self.ptr[c]..self.ptr[c + 1];
+            for qc in 0..3 {
+                for k in range.clone() {
+                    let j = self.idx[k] as usize;
+                    let block = Self::block(&self.entries[k]);
+                    // Lower triangle: in the diagonal block only rows >= the column.
+                    let first = if j == c { qc } else { 0 };
+                    for r in first..3 {
+                        rows.push(3 * j + r);
+                        vals.push(block[3 * r + qc]);
+                    }
+                }
+                col_ptr.push(rows.len());
+            }
+        }
+        let b = cholesky_solve(3 * m, col_ptr, rows, vals, |i, _| self.rhs[i / 3][i % 3], 1)?;
+        let x: Vec<DVec3> = (0..m)
+            .map(|c| DVec3::new(b[(3 * c, 0)], b[(3 * c + 1, 0)], b[(3 * c + 2, 0)]))
+            .collect();
+        x.iter().all(|v| v.is_finite()).then_some(x)
+    }
+}
