@@ -15,6 +15,9 @@
 use crate::TriMesh;
 use rustc_hash::{FxHashMap, FxHashSet};
 
+/// Rim vertices a hole's radius is measured against at most.
+const MAX_RIM_SAMPLES: usize = 256;
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct HolePlan {
     /// The largest bridging radius kept (input units).
@@ -102,11 +105,20 @@ pub fn plan_holes(
         .fold(0.0f64, f64::max)
         .sqrt()
     };
+    // Long rims are measured against every k-th vertex: the work per hole stays near
+    // linear, and the radius can only come out larger (such a hole is trimmed sooner).
+    let sampled: Vec<Vec<u32>> = hole_loops
+        .iter()
+        .map(|rim| {
+            let stride = rim.len().div_ceil(MAX_RIM_SAMPLES).max(1);
+            rim.iter().step_by(stride).copied().collect()
+        })
+        .collect();
     let mut radius = vec![0.0f64; hole_loops.len()];
     let mut wide_triangles = Vec::new();
     for (k, (t, h)) in mapped.triangles.iter().zip(&fills).enumerate() {
         match *h {
-            Some(h) => radius[h] = radius[h].max(reach(t, &hole_loops[h])),
+            Some(h) => radius[h] = radius[h].max(reach(t, &sampled[h])),
             None if reach(t, t) > max_bridge => wide_triangles.push(k),
             None => {}
         }

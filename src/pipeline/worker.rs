@@ -352,7 +352,7 @@ pub fn run_patch_with(
         report["holes_filled"] = json!(s.holes);
         report["holes"] = json!({
             "count": s.holes,
-            "bridged": s.holes - s.hole_plan.trimmed(),
+            "bridged": s.hole_plan.bridged.iter().filter(|b| **b).count(),
             "trimmed": s.hole_plan.trimmed(),
             "wide_triangles_trimmed": s.hole_plan.wide_triangles.len(),
             "max_bridge": s.hole_plan.max_bridge,
