@@ -60,6 +60,14 @@ pub struct FitArgs {
     /// or `parameters` (point-to-point again).
     #[arg(long, value_enum, default_value = "distance")]
     pub correction: crate::pipeline::scan::Correction,
+    /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
+    /// fraction.
+    #[arg(long, default_value_t = 0.02)]
+    pub correction_min_gain: f64,
+    /// Scans, distance rounds: share of the point-to-point term beside point-to-plane
+    /// (smaller: lower RMS, higher maximum errors).
+    #[arg(long, default_value_t = 0.02)]
+    pub correction_tangential: f64,
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = 1e-5)]
     pub smoothing: f64,
@@ -116,6 +124,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         target_controls_pct: args.target_controls_pct,
         correction_rounds: args.corrections,
         correction: args.correction,
+        correction_min_gain: args.correction_min_gain,
+        correction_tangential: args.correction_tangential,
         smoothing: args.smoothing,
         tessellation: args.tessellation,
         components: args.components,

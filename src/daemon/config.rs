@@ -233,6 +233,20 @@ impl DaemonConfig {
                 "must be at least 3",
             );
         }
+        if !(0.0..1.0).contains(&f.correction_min_gain) {
+            return bad(
+                "fit.correction_min_gain",
+                f.correction_min_gain.to_string(),
+                "must be in [0, 1)",
+            );
+        }
+        if !(f.correction_tangential > 0.0 && f.correction_tangential <= 1.0) {
+            return bad(
+                "fit.correction_tangential",
+                f.correction_tangential.to_string(),
+                "must be in (0, 1]",
+            );
+        }
         if f.correction_rounds > 100 {
             return bad(
                 "fit.correction_rounds",

@@ -69,6 +69,12 @@ pub struct ScanOptions {
     /// Rounds of correction after the first fit (data parameters moved to their foot points).
     pub correction_rounds: usize,
     pub correction: Correction,
+    /// Rounds stop once one lowers the geometric RMS by less than this fraction.
+    pub correction_min_gain: f64,
+    /// Share of the point-to-point term beside the point-to-plane one in distance rounds:
+    /// smaller converges further (lower RMS) but lets the surface slide more where data end
+    /// (higher maximum errors).
+    pub correction_tangential: f64,
     /// The largest component must have at least this many vertices.
     pub min_component_vertices: usize,
     /// Holes (and data triangles) with a bridging radius above this many median edge
@@ -88,14 +94,8 @@ pub enum Correction {
     Distance,
 }
 
-/// Relative geometric RMS gain below which correction rounds stop.
-const ROUND_MIN_GAIN: f64 = 0.02;
-
 /// Up to this many control points a distance round is solved by a sparse factorisation.
 const DIRECT_ROUND_MAX_CONTROLS: usize = 1000;
-
-/// Share of the point-to-point term in distance rounds.
-const DISTANCE_TANGENTIAL: f64 = 0.02;
 
 /// The surface model a fit lives on; `PatchFit` carries it for evaluation downstream.
 #[derive(Clone, Debug)]
@@ -396,7 +396,7 @@ pub fn fit_scan(
                     basis: &basis,
                     data,
                     normals: &feet.normals,
-                    tangential: DISTANCE_TANGENTIAL,
+                    tangential: scan.correction_tangential,
                     fairness: Some(&fairness),
                     smoothing,
                 };
@@ -458,7 +458,7 @@ pub fn fit_scan(
         }
         // Rounds converge: once one gains under 2 % the next would gain less (a warm start
         // from the previous version's surface usually stops here after one round).
-        if after > (1.0 - ROUND_MIN_GAIN) * before {
+        if after > (1.0 - scan.correction_min_gain) * before {
             outcome.status = FitStatus::Stalled;
             break;
         }

@@ -56,6 +56,13 @@ pub struct WorkerConfig {
     /// Scans: what a correction round refits.
     #[serde(default = "default_correction")]
     pub correction: Correction,
+    /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
+    /// fraction.
+    #[serde(default = "default_correction_min_gain")]
+    pub correction_min_gain: f64,
+    /// Scans, distance rounds: share of the point-to-point term beside point-to-plane.
+    #[serde(default = "default_correction_tangential")]
+    pub correction_tangential: f64,
     /// Scans: fairness weight relative to the data.
     pub smoothing: f64,
     /// Tessellation segments per side in the GLB.
@@ -98,6 +105,14 @@ fn default_target_controls_pct() -> f64 {
     5.0
 }
 
+fn default_correction_min_gain() -> f64 {
+    0.02
+}
+
+fn default_correction_tangential() -> f64 {
+    0.02
+}
+
 fn default_correction_rounds() -> usize {
     8
 }
@@ -126,6 +141,8 @@ impl Default for WorkerConfig {
             grid_segments: None,
             target_controls_pct: default_target_controls_pct(),
             correction_rounds: default_correction_rounds(),
+            correction_min_gain: default_correction_min_gain(),
+            correction_tangential: default_correction_tangential(),
             correction: default_correction(),
             smoothing: 1e-5,
             tessellation: 128,
@@ -275,6 +292,8 @@ pub fn fit_patch_with(
                 smoothing: cfg.smoothing,
                 correction_rounds: cfg.correction_rounds,
                 correction: cfg.correction,
+                correction_min_gain: cfg.correction_min_gain,
+                correction_tangential: cfg.correction_tangential,
                 min_component_vertices: cfg.min_component_vertices,
                 hole_bridge_edges: cfg.hole_bridge_edges,
             };
