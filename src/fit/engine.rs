@@ -2,6 +2,8 @@
 //! solve as ground truth. All minimise `|N P - p|^2 + s |L P|^2` (PIA only the first term).
 
 use super::budget::{Budget, FitStatus, StepStats};
+use super::normal_matrix::{Fairness, ScalarMatrix};
+use super::normal_solve::DirectFailure;
 use super::sparse::{Collocation, Csr};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -326,88 +328,25 @@ pub fn fit(
     finish(x, steps, status)
 }
 
-/// The lower triangle of `sum_k scale_k A_k^T A_k` as CSC columns (column c holds rows
-/// >= c, sorted), each `A_k` given with its transpose so a column is one sparse gather.
-fn normal_lower(nc: usize, terms: &[(&Csr, &Csr, f64)]) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
-    let columns: Vec<(Vec<usize>, Vec<f64>)> = (0..nc)
-        .into_par_iter()
-        .map_init(
-            || (vec![0.0f64; nc], vec![false; nc], Vec::<usize>::new()),
-            |(acc, seen, touched), c| {
-                touched.clear();
-                for &(a, at, scale) in terms {
-                    for k in at.row_ptr[c]..at.row_ptr[c + 1] {
-                        let (r, wc) = (at.col_idx[k] as usize, at.values[k] * scale);
-                        for m in a.row_ptr[r]..a.row_ptr[r + 1] {
-                            let j = a.col_idx[m] as usize;
-                            if j < c {
-                                continue;
-                            }
-                            if !seen[j] {
-                                seen[j] = true;
-                                touched.push(j);
-                            }
-                            acc[j] += wc * a.values[m];
-                        }
-                    }
-                }
-                touched.sort_unstable();
-                let vals = touched
-                    .iter()
-                    .map(|&j| {
-                        seen[j] = false;
-                        std::mem::take(&mut acc[j])
-                    })
-                    .collect();
-                (touched.clone(), vals)
-            },
-        )
-        .collect();
-    let mut col_ptr = Vec::with_capacity(nc + 1);
-    col_ptr.push(0);
-    let total = columns.iter().map(|c| c.0.len()).sum();
-    let (mut rows, mut vals) = (Vec::with_capacity(total), Vec::with_capacity(total));
-    for (r, v) in columns {
-        rows.extend(r);
-        vals.extend(v);
-        col_ptr.push(rows.len());
-    }
-    (col_ptr, rows, vals)
-}
-
-/// Sparse Cholesky (faer, fill-reducing ordering) of `N^T N + s L^T L`.
+/// Sparse Cholesky (faer, fill-reducing ordering) of `N^T N + s L^T L`, assembled as the
+/// scan fits assemble it (`normal_matrix`).
 fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
-    use faer::linalg::solvers::Solve;
-    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-    let basis = problem.basis;
-    let nc = basis.ncols();
-    let mut terms = vec![(basis.n(), basis.nt(), 1.0)];
-    if let Some(l) = problem.fairness.filter(|_| problem.smoothing > 0.0) {
-        terms.push((l.n(), l.nt(), problem.smoothing));
-    }
-    let (col_ptr, row_idx, values) = normal_lower(nc, &terms);
-    let symbolic = SymbolicSparseColMat::new_checked(nc, nc, col_ptr, None, row_idx);
-    let matrix = SparseColMat::new(symbolic, values);
-    let llt = matrix.sp_cholesky(faer::Side::Lower).map_err(|_| {
-        FitError::Direct(
-            "normal matrix is not positive definite: control points without data; add smoothing"
+    let fairness = problem.fairness.map(|l| Fairness {
+        l: l.n(),
+        lt: l.nt(),
+        smoothing: problem.smoothing,
+    });
+    ScalarMatrix::assemble(problem.basis.n(), problem.data, fairness, true)
+        .solve_direct()
+        .map_err(|failure| {
+            FitError::Direct(
+                match failure {
+                    DirectFailure::NotDefinite => "normal matrix is not positive definite: control points without data; add smoothing",
+                    DirectFailure::NotFinite => "the factorisation produced non-finite values (ill-conditioned normal matrix)",
+                }
                 .into(),
-        )
-    })?;
-    let mut rhs = vec![DVec3::ZERO; nc];
-    basis.mul_t_vec3(problem.data, &mut rhs);
-    let mut b = faer::Mat::<f64>::from_fn(nc, 3, |i, k| rhs[i][k]);
-    llt.solve_in_place(b.as_mut());
-    let x: Vec<DVec3> = (0..nc)
-        .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
-        .collect();
-    if x.iter().all(|p| p.is_finite()) {
-        Ok(x)
-    } else {
-        Err(FitError::Direct(
-            "the factorisation produced non-finite values (ill-conditioned normal matrix)".into(),
-        ))
-    }
+            )
+        })
 }
 
 /// Umbrella Laplacian of a control net: row i is `P_i - mean(neighbours)`.

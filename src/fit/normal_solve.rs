@@ -89,16 +89,33 @@ fn cholesky_solve(
     vals: Vec<f64>,
     rhs: impl Fn(usize, usize) -> f64,
     ncols_rhs: usize,
-) -> Option<faer::Mat<f64>> {
+) -> Result<faer::Mat<f64>, DirectFailure> {
     use faer::linalg::solvers::Solve;
     use faer::sparse::{SparseColMat, SymbolicSparseColMat};
     let symbolic = SymbolicSparseColMat::new_checked(size, size, col_ptr, None, rows);
     let llt = SparseColMat::new(symbolic, vals)
         .sp_cholesky(faer::Side::Lower)
-        .ok()?;
+        .map_err(|_| DirectFailure::NotDefinite)?;
     let mut b = faer::Mat::<f64>::from_fn(size, ncols_rhs, rhs);
     llt.solve_in_place(b.as_mut());
-    Some(b)
+    Ok(b)
+}
+
+/// Why a factorisation gave no solution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirectFailure {
+    /// M is not positive definite: controls no term holds.
+    NotDefinite,
+    /// The solve produced non-finite values (M is ill-conditioned).
+    NotFinite,
+}
+
+fn finite(x: Vec<DVec3>) -> Result<Vec<DVec3>, DirectFailure> {
+    if x.iter().all(|v| v.is_finite()) {
+        Ok(x)
+    } else {
+        Err(DirectFailure::NotFinite)
+    }
 }
 
 impl ScalarMatrix {
@@ -114,9 +131,8 @@ impl ScalarMatrix {
         pcg(self, precondition, start, max_iter, rel_tol)
     }
 
-    /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly; `None` when M is
-    /// not positive definite (controls no term holds) or the result is not finite.
-    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+    /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly.
+    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
         let rows = self.idx.iter().map(|&j| j as usize).collect();
@@ -124,7 +140,7 @@ impl ScalarMatrix {
         let x: Vec<DVec3> = (0..m)
             .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
             .collect();
-        x.iter().all(|v| v.is_finite()).then_some(x)
+        finite(x)
     }
 }
 
@@ -144,7 +160,7 @@ impl BlockMatrix {
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
-    pub fn solve_direct(&self) -> Option<Vec<DVec3>> {
+    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let mut col_ptr = Vec::with_capacity(3 * m + 1);
         col_ptr.push(0);
@@ -169,6 +185,6 @@ impl BlockMatrix {
         let x: Vec<DVec3> = (0..m)
             .map(|c| DVec3::new(b[(3 * c, 0)], b[(3 * c + 1, 0)], b[(3 * c + 2, 0)]))
             .collect();
-        x.iter().all(|v| v.is_finite()).then_some(x)
+        finite(x)
     }
 }

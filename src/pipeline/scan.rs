@@ -656,7 +656,11 @@ fn assembled_fit(
         smoothing,
     });
     let direct = (opts.method == Method::Direct)
-        .then(|| ScalarMatrix::assemble(&basis, data, fair, true).solve_direct())
+        .then(|| {
+            ScalarMatrix::assemble(&basis, data, fair, true)
+                .solve_direct()
+                .ok()
+        })
         .flatten();
     let (controls, k) = match direct {
         Some(x) => (x, 1),
