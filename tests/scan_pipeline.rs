@@ -15,6 +15,17 @@ use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
 
+/// A Stanford range scan from the shared data (`None`: the folder is absent and the test
+/// skips, which `shared_data` refuses under CI).
+fn range_scan(name: &str) -> Option<TriMesh> {
+    let path = shared_data(&format!("range_scans/{name}"))?;
+    Some(
+        read_mesh_file(&path, &LoadOptions::default())
+            .expect("reads")
+            .mesh,
+    )
+}
+
 /// A grid of (n+1)^2 points lifted by `f`, with a square hole of `hole` cells in the middle.
 fn height_field(n: usize, hole: usize, f: impl Fn(f64, f64) -> DVec3) -> TriMesh {
     let mut positions = Vec::new();
@@ -108,12 +119,9 @@ fn a_smooth_patch_is_fitted_on_a_grid_far_below_its_size() {
 /// 1.5x the scan noise), and a warm start from a first version needs fewer CG steps.
 #[test]
 fn stanford_range_scan_quality_and_warm_start() {
-    let Some(path) = shared_data("range_scans/bun000_range_grid.ply") else {
+    let Some(mesh) = range_scan("bun000_range_grid.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let cfg = WorkerConfig {
         surface: SurfaceKind::Loop,
         ..WorkerConfig::default()
@@ -187,12 +195,9 @@ fn stanford_range_scan_quality_and_warm_start() {
 #[test]
 fn trimmed_stanford_surfaces_stay_within_a_millimetre_of_the_data() {
     for name in ["bun045_tri.ply", "bun000_meshlab_triangulated.ply"] {
-        let Some(path) = shared_data(&format!("range_scans/{name}")) else {
+        let Some(mesh) = range_scan(name) else {
             return;
         };
-        let mesh = read_mesh_file(&path, &LoadOptions::default())
-            .expect("reads")
-            .mesh;
         let cfg = WorkerConfig {
             surface: SurfaceKind::Loop,
             ..WorkerConfig::default()
@@ -328,12 +333,9 @@ fn bezier_patches_of_a_scan_are_its_grid_surface_in_bezier_form() {
 #[test]
 fn the_time_cap_stops_the_correction_rounds() {
     // A real scan: its mapped parameters leave work for several rounds.
-    let Some(path) = shared_data("range_scans/bun000_tri.ply") else {
+    let Some(mesh) = range_scan("bun000_tri.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let fit = |max_time_ms| {
         let cfg = WorkerConfig {
             surface: SurfaceKind::Loop,
@@ -357,12 +359,9 @@ fn the_time_cap_stops_the_correction_rounds() {
 /// with the trimmed surface still within a millimetre of the data.
 #[test]
 fn correction_knobs_trade_maximum_for_rms_error() {
-    let Some(path) = shared_data("range_scans/chin_tri.ply") else {
+    let Some(mesh) = range_scan("chin_tri.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let base = WorkerConfig {
         surface: SurfaceKind::Loop,
         ..WorkerConfig::default()
