@@ -24,6 +24,10 @@ use trispline::remesh::planar::{planar_map, PlaneFrame};
 use trispline::surface::grid_spline::GridSpline;
 use trispline::TriMesh;
 
+// The allocator the `trispline` binary runs with, so that the figures are the binary's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     let root = std::env::args()
         .nth(1)

@@ -19,6 +19,10 @@ use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Cov
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 
+// The allocator the `trispline` binary runs with, so that the figures are the binary's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     let root = std::env::args()
         .nth(1)

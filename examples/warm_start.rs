@@ -38,6 +38,10 @@ fn second_version(mesh: &TriMesh) -> TriMesh {
     TriMesh::new(positions, triangles)
 }
 
+// The allocator the `trispline` binary runs with, so that the figures are the binary's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     let path = std::env::args()
         .nth(1)

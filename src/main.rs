@@ -2,6 +2,12 @@ use clap::{Parser, Subcommand};
 use std::process::ExitCode;
 use trispline::cli;
 
+// A fit allocates and frees tens of MB per round; glibc maps each large block fresh and
+// the kernel faults every page in again (38k page faults, ~30 % of a 40k-point scan's CPU
+// time on this machine). mimalloc keeps freed memory for reuse.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 /// Scan patches in, smooth triangular surfaces out.
 #[derive(Parser)]
 #[command(name = "trispline", version, about)]

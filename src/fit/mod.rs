@@ -7,6 +7,7 @@ pub mod engine;
 pub mod normal_matrix;
 pub mod normal_solve;
 pub mod sparse;
+pub mod stencil_matrix;
 
 pub use budget::{Budget, FitStatus, StepStats};
 pub use engine::{fit, FitError, FitOutcome, FitProblem, Method, StepHook};

@@ -24,12 +24,12 @@ use rustc_hash::FxHashMap;
 pub(super) const SCALAR: usize = 0;
 
 /// Control pairs of a pattern with k columns, a <= b, packed row by row.
-fn packed_len(k: usize) -> usize {
+pub(super) fn packed_len(k: usize) -> usize {
     k * (k + 1) / 2
 }
 
 #[inline]
-fn packed_index(a: usize, b: usize, k: usize) -> usize {
+pub(super) fn packed_index(a: usize, b: usize, k: usize) -> usize {
     let (a, b) = if a <= b { (a, b) } else { (b, a) };
     // Rows 0..a hold k, k - 1, ..., k - a + 1 pairs.
     a * k - a * a.saturating_sub(1) / 2 + (b - a)
@@ -101,9 +101,21 @@ impl<'a> Patterns<'a> {
     }
 }
 
+/// The weights of data row r (its columns are known to the caller).
+pub(super) trait RowValues: Sync {
+    fn values(&self, r: usize) -> &[f64];
+}
+
+impl RowValues for Csr {
+    #[inline(always)]
+    fn values(&self, r: usize) -> &[f64] {
+        &self.values[self.row_ptr[r]..self.row_ptr[r + 1]]
+    }
+}
+
 /// Sum over `rows` (all with pattern length k) of w w^T q and w (W p), packed.
-fn accumulate<const K: usize>(
-    n: &Csr,
+pub(super) fn accumulate<const K: usize>(
+    n: &(impl RowValues + ?Sized),
     rows: &[u32],
     k: usize,
     weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
@@ -122,7 +134,7 @@ fn accumulate<const K: usize>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn accumulate_wide<const K: usize>(
-    n: &Csr,
+    n: &(impl RowValues + ?Sized),
     rows: &[u32],
     k: usize,
     weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
@@ -134,7 +146,7 @@ fn accumulate_wide<const K: usize>(
 
 #[inline(always)]
 fn accumulate_with<const K: usize>(
-    n: &Csr,
+    n: &(impl RowValues + ?Sized),
     rows: &[u32],
     k: usize,
     weight: &(impl Fn(usize) -> ([f64; K], DVec3) + Sync),
@@ -143,7 +155,7 @@ fn accumulate_with<const K: usize>(
 ) {
     for &r in rows {
         let r = r as usize;
-        let w = &n.values[n.row_ptr[r]..n.row_ptr[r + 1]];
+        let w = n.values(r);
         let (q, wp) = weight(r);
         let mut pos = 0;
         for a in 0..k {
@@ -393,17 +405,25 @@ impl<const K: usize> Gather<'_, K> {
 impl ScalarMatrix {
     /// N^T N + s L^T L and N^T p.
     pub fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
-        assemble::<1>(n, |r| ([1.0], data[r]), fairness, lower_only)
+        assemble::<1>(n, Self::weight(data), fairness, lower_only)
+    }
+
+    /// Per data row: W = I.
+    pub(super) fn weight(data: &[DVec3]) -> impl Fn(usize) -> ([f64; 1], DVec3) + Sync + '_ {
+        |r| ([1.0], data[r])
     }
 
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut().enumerate().for_each(|(c, o)| {
-            let mut sum = DVec3::ZERO;
-            for k in self.ptr[c]..self.ptr[c + 1] {
-                sum += x[self.idx[k] as usize] * self.entries[k][SCALAR];
-            }
-            *o = sum;
-        });
+        out.par_iter_mut()
+            .enumerate()
+            .with_min_len(128)
+            .for_each(|(c, o)| {
+                let mut sum = DVec3::ZERO;
+                for k in self.ptr[c]..self.ptr[c + 1] {
+                    sum += x[self.idx[k] as usize] * self.entries[k][SCALAR];
+                }
+                *o = sum;
+            });
     }
 
     /// Inverse diagonal (1 where a control has no term).
@@ -432,8 +452,21 @@ impl BlockMatrix {
         fairness: Option<Fairness>,
         lower_only: bool,
     ) -> Self {
-        let t = tangential;
-        let weight = |r: usize| {
+        assemble::<8>(
+            n,
+            Self::weight(data, normals, tangential),
+            fairness,
+            lower_only,
+        )
+    }
+
+    /// Per data row: W = n n^T + t I, as the scalar part t and the six entries of n n^T.
+    pub(super) fn weight<'a>(
+        data: &'a [DVec3],
+        normals: &'a [DVec3],
+        t: f64,
+    ) -> impl Fn(usize) -> ([f64; 8], DVec3) + Sync + 'a {
+        move |r: usize| {
             let (q, p) = (normals[r], data[r]);
             (
                 [
@@ -448,8 +481,7 @@ impl BlockMatrix {
                 ],
                 q * q.dot(p) + p * t,
             )
-        };
-        assemble::<8>(n, weight, fairness, lower_only)
+        }
     }
 
     /// The 3x3 block of an entry, row-major (symmetric, so also column-major).
@@ -470,19 +502,22 @@ impl BlockMatrix {
     }
 
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut().enumerate().for_each(|(c, o)| {
-            let mut sum = DVec3::ZERO;
-            for k in self.ptr[c]..self.ptr[c + 1] {
-                let (e, v) = (&self.entries[k], x[self.idx[k] as usize]);
-                let s = e[SCALAR];
-                sum += DVec3::new(
-                    (e[1] + s) * v.x + e[2] * v.y + e[3] * v.z,
-                    e[2] * v.x + (e[4] + s) * v.y + e[5] * v.z,
-                    e[3] * v.x + e[5] * v.y + (e[6] + s) * v.z,
-                );
-            }
-            *o = sum;
-        });
+        out.par_iter_mut()
+            .enumerate()
+            .with_min_len(128)
+            .for_each(|(c, o)| {
+                let mut sum = DVec3::ZERO;
+                for k in self.ptr[c]..self.ptr[c + 1] {
+                    let (e, v) = (&self.entries[k], x[self.idx[k] as usize]);
+                    let s = e[SCALAR];
+                    sum += DVec3::new(
+                        (e[1] + s) * v.x + e[2] * v.y + e[3] * v.z,
+                        e[2] * v.x + (e[4] + s) * v.y + e[5] * v.z,
+                        e[3] * v.x + e[5] * v.y + (e[6] + s) * v.z,
+                    );
+                }
+                *o = sum;
+            });
     }
 
     /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)

@@ -6,7 +6,15 @@ use super::normal_matrix::{BlockMatrix, ScalarMatrix, SCALAR};
 use glam::DVec3;
 use rayon::prelude::*;
 
+/// Below this many controls a vector operation is cheaper on one thread than handing it to
+/// the pool (a 2000-control dot product takes ~2 us; a parallel one waits longer than that
+/// for the other thread).
+const PARALLEL_VECTOR_MIN: usize = 1 << 14;
+
 fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
+    if a.len() < PARALLEL_VECTOR_MIN {
+        return a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum();
+    }
     a.par_iter().zip(b.par_iter()).map(|(x, y)| x.dot(*y)).sum()
 }
 
@@ -47,7 +55,11 @@ fn pcg(
     let b = matrix.rhs();
     let precondition_all = |r: &[DVec3], z: &mut Vec<DVec3>| {
         z.clear();
-        z.par_extend(r.par_iter().enumerate().map(|(c, r)| precondition(c, *r)));
+        if r.len() < PARALLEL_VECTOR_MIN {
+            z.extend(r.iter().enumerate().map(|(c, r)| precondition(c, *r)));
+        } else {
+            z.par_extend(r.par_iter().enumerate().map(|(c, r)| precondition(c, *r)));
+        }
     };
     let m = start.len();
     let mut x = start;

@@ -8,6 +8,7 @@ pub mod holes;
 pub mod lattice;
 pub mod output;
 pub mod scan;
+mod scan_solve;
 pub mod scan_warm;
 pub mod worker;
 

@@ -9,15 +9,12 @@ use super::domain::{
     plane_extent, spacing_for_target, GridFrame, InitialNet,
 };
 use super::holes::{plan_holes, HolePlan};
+use super::scan_solve::{assembled_fit, foot_points, rms, run_fit, DistanceRound, GridStencils};
 pub use super::scan_warm::WarmFeet;
 use super::scan_warm::{net_from_warm, params_from_previous};
-use super::{
-    collocation, collocation_rows, geometric, FitOptions, PatchFit, PipelineError, SurfaceKind,
-};
-use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
+use super::{FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::engine::umbrella_laplacian;
-use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
-use crate::fit::{fit, Budget, Collocation, FitOutcome, FitProblem, FitStatus, Method, StepStats};
+use crate::fit::{Collocation, FitOutcome, FitStatus, Method, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::fill_holes;
 use crate::remesh::planar::{planar_map, MapMethod, PlaneFrame};
@@ -27,7 +24,6 @@ use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
-use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -93,9 +89,6 @@ pub enum Correction {
     /// Squared-distance minimisation (point-to-plane with a tangential share).
     Distance,
 }
-
-/// Up to this many control points a distance round is solved by a sparse factorisation.
-const DIRECT_ROUND_MAX_CONTROLS: usize = 1000;
 
 /// The surface model a fit lives on; `PatchFit` carries it for evaluation downstream.
 #[derive(Clone, Debug)]
@@ -334,6 +327,19 @@ pub fn fit_scan(
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t2 = Instant::now();
+    let stencils = match &model {
+        SurfaceModel::Grid(grid) => Some(GridStencils::new(grid, &fairness, smoothing)),
+        _ => None,
+    };
+    let round = DistanceRound {
+        surface,
+        stencils: stencils.as_ref(),
+        data,
+        fairness: &fairness,
+        smoothing,
+        tangential: scan.correction_tangential,
+        max_iterations: opts.budget.max_iterations,
+    };
     // A warm start that covers the domain already sits near the fit: its foot points are
     // better parameters than the projection, so it goes straight to the correction rounds.
     let warm_enough = scan.correction_rounds > 0
@@ -355,9 +361,16 @@ pub fn fit_scan(
         (outcome, feet)
     } else {
         let outcome = match opts.method {
-            Method::Cg | Method::Direct => {
-                assembled_fit(surface, &params, data, &fairness, smoothing, start, opts)
-            }
+            Method::Cg | Method::Direct => assembled_fit(
+                surface,
+                stencils.as_ref(),
+                &params,
+                data,
+                &fairness,
+                smoothing,
+                start,
+                opts,
+            ),
             Method::Pia | Method::Lspia => {
                 run_fit(surface, &params, data, &fairness, smoothing, start, opts)?
             }
@@ -390,32 +403,7 @@ pub fn fit_scan(
                 let n = next.steps.len().saturating_sub(1);
                 (next.controls, n)
             }
-            Correction::Distance => {
-                let basis = collocation_rows(surface, &params);
-                let problem = DistanceProblem {
-                    basis: &basis,
-                    data,
-                    normals: &feet.normals,
-                    tangential: scan.correction_tangential,
-                    fairness: Some(&fairness),
-                    smoothing,
-                };
-                // Small nets: one factorisation beats 25-45 preconditioned CG steps (camel
-                // head, 559 controls: fit 205 ms vs 428 ms); at ~2000 controls the
-                // factorisation is the slower (bun000: 736 ms vs 502 ms).
-                let direct = (surface.control_count() <= DIRECT_ROUND_MAX_CONTROLS)
-                    .then(|| solve_distance_direct(&problem))
-                    .flatten();
-                match direct {
-                    Some(x) => (x, 1),
-                    None => solve_distance(
-                        &problem,
-                        outcome.controls.clone(),
-                        opts.budget.max_iterations,
-                        1e-6,
-                    ),
-                }
-            }
+            Correction::Distance => round.solve(&params, &feet.normals, outcome.controls.clone()),
         };
         let mut trial = params.clone();
         let trial_feet = foot_points(surface, &controls, data, &mut trial);
@@ -581,144 +569,4 @@ fn check_grid_size(plane: &[DVec2], spacing: f64, levels: usize) -> Result<(), P
         )));
     }
     Ok(())
-}
-
-fn run_fit(
-    surface: &dyn TriSurface,
-    params: &[SurfaceParam],
-    data: &[DVec3],
-    fairness: &Collocation,
-    smoothing: f64,
-    start: Vec<DVec3>,
-    opts: &FitOptions,
-) -> Result<FitOutcome, PipelineError> {
-    let basis = collocation(surface, params);
-    let problem = FitProblem {
-        basis: &basis,
-        data,
-        smoothing,
-        fairness: Some(fairness),
-        pia_operator: None,
-        on_step: opts.on_step,
-    };
-    let budget: &Budget = &opts.budget;
-    Ok(fit(&problem, start, opts.method, budget)?)
-}
-
-/// Relative residual of the normal equations at which an assembled first fit stops.
-const FIRST_FIT_REL_TOL: f64 = 1e-6;
-
-/// The point-to-point fit of `cg` and `direct` through the assembled normal equations
-/// N^T N + s L^T L (one scalar matrix for x, y and z; Jacobi-preconditioned CG from the
-/// start net, or a sparse Cholesky): a CG step then reads ~37 entries per control instead
-/// of going through all data points twice, so converging costs a few ms where the
-/// engine's CGLS spent ~100 ms on a 40k-point scan. The budget is checked on the result
-/// (the engine checks it after every step): this fit is only the start of the rounds.
-fn assembled_fit(
-    surface: &dyn TriSurface,
-    params: &[SurfaceParam],
-    data: &[DVec3],
-    fairness: &Collocation,
-    smoothing: f64,
-    start: Vec<DVec3>,
-    opts: &FitOptions,
-) -> FitOutcome {
-    let t0 = Instant::now();
-    let basis = collocation_rows(surface, params);
-    let budget = &opts.budget;
-    let stats = |k: usize, x: &[DVec3]| {
-        let mut fitted = vec![DVec3::ZERO; data.len()];
-        basis.mul_vec3(x, &mut fitted);
-        fitted.iter_mut().zip(data).for_each(|(f, p)| *f = *p - *f);
-        let s = StepStats::from_residuals(
-            k,
-            &fitted,
-            budget.tolerance,
-            t0.elapsed().as_secs_f64() * 1e3,
-        );
-        if let Some(hook) = opts.on_step {
-            hook(&s);
-        }
-        s
-    };
-    let first = stats(0, &start);
-    if budget.met(&first) {
-        return FitOutcome {
-            controls: start,
-            steps: vec![first],
-            status: FitStatus::Met,
-            iterations: 0,
-        };
-    }
-    let fair = Some(Fairness {
-        l: fairness.n(),
-        lt: fairness.nt(),
-        smoothing,
-    });
-    let direct = (opts.method == Method::Direct)
-        .then(|| {
-            ScalarMatrix::assemble(&basis, data, fair, true)
-                .solve_direct()
-                .ok()
-        })
-        .flatten();
-    let (controls, k) = match direct {
-        Some(x) => (x, 1),
-        None => ScalarMatrix::assemble(&basis, data, fair, false).solve_pcg(
-            start,
-            budget.max_iterations.max(1),
-            FIRST_FIT_REL_TOL,
-        ),
-    };
-    let last = stats(k.max(1), &controls);
-    let status = if budget.met(&last) {
-        FitStatus::Met
-    } else if k >= budget.max_iterations {
-        FitStatus::Capped
-    } else {
-        FitStatus::Stalled
-    };
-    FitOutcome {
-        controls,
-        steps: vec![first, last],
-        status,
-        iterations: 1,
-    }
-}
-
-/// The data seen from their foot points: residual p - S(foot) and the unit surface normal.
-struct Feet {
-    residuals: Vec<DVec3>,
-    normals: Vec<DVec3>,
-}
-
-impl Feet {
-    fn distances(&self) -> Vec<f64> {
-        self.residuals.iter().map(|r| r.length()).collect()
-    }
-}
-
-/// Moves every parameter to its foot point; what a round needs of the surface there comes
-/// from the foot-point search's last evaluation.
-fn foot_points(
-    surface: &dyn TriSurface,
-    controls: &[DVec3],
-    data: &[DVec3],
-    params: &mut [SurfaceParam],
-) -> Feet {
-    let evaluate = surface.evaluator(controls);
-    let (residuals, normals) = data
-        .par_iter()
-        .zip(params.par_iter_mut())
-        .map(|(p, u)| {
-            let (foot, d) = geometric::foot_point(surface, &*evaluate, *p, *u);
-            *u = foot;
-            (*p - d.position, d.du.cross(d.dv).normalize_or_zero())
-        })
-        .unzip();
-    Feet { residuals, normals }
-}
-
-fn rms(e: &[f64]) -> f64 {
-    (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt()
 }

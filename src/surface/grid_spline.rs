@@ -276,6 +276,37 @@ impl GridSpline {
         GridEvaluator::net(self, controls, cell)
     }
 
+    /// Every covered cell's controls (`STENCIL` order), and per cell slot the index of its
+    /// stencil in that list (`u32::MAX` where the cell is not covered): what fits whose
+    /// rows are all cell stencils (`fit::stencil_matrix`) plan their assembly with.
+    pub fn stencil_table(&self) -> (Vec<[u32; 12]>, Vec<u32>) {
+        let mut stencils = Vec::new();
+        let of_slot = (0..self.covered.len())
+            .map(|k| {
+                if !self.covered[k] {
+                    return u32::MAX;
+                }
+                let (row, column, down) = (k / 2 / self.width, k / 2 % self.width, k % 2 == 1);
+                let cell = (self.i0 + column as i64, self.j0 + row as i64, down);
+                let ids = cell_stencil(cell).map(|(a, b)| self.control_at(a, b).unwrap_or(0));
+                stencils.push(ids);
+                (stencils.len() - 1) as u32
+            })
+            .collect();
+        (stencils, of_slot)
+    }
+
+    /// The stencil (index into `stencil_table`'s list, via its `of_slot`) and the 12 value
+    /// weights at p; `None` where p is not in a covered cell.
+    pub fn stencil_row(&self, of_slot: &[u32], p: SurfaceParam) -> Option<(u32, [f64; 12])> {
+        if !(p.u.is_finite() && p.v.is_finite()) {
+            return None;
+        }
+        let (cell, lu, lv) = cell_at(p.u, p.v);
+        let g = *of_slot.get(self.cell_slot(cell)?)?;
+        (g != u32::MAX).then(|| (g, stencil_values(lu, lv)))
+    }
+
     fn cell_slot(&self, (i, j, down): Cell) -> Option<usize> {
         let (a, b) = (i - self.i0, j - self.j0);
         if a < 0 || b < 0 || a as usize >= self.width || b as usize >= self.height {

@@ -1,0 +1,418 @@
+//! Normal equations of fits whose data rows all come from a fixed set of stencils: on a
+//! grid spline a point's row is its cell's 12 controls, and the cells are known before any
+//! point is placed. Where every pair of a stencil lands in M (and which entries the
+//! fairness term fills) is then the same in every round of a fit, so it is worked out once
+//! (`StencilPlan`); an assembly only sums the rows of each stencil into one packed dense
+//! matrix (as `normal_matrix` does per pattern) and adds those sums into place, without
+//! grouping rows by column lists, sorting neighbours or recomputing L^T L.
+//!
+//! The result is the same `NormalMatrix` as the general assembly's (same structure, same
+//! sums up to the order of floating-point additions), solved by the same code.
+
+use super::normal_matrix::{
+    accumulate, packed_index, packed_len, BlockMatrix, Fairness, NormalMatrix, RowValues,
+    ScalarMatrix, SCALAR,
+};
+use super::sparse::Csr;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Controls per stencil (a box-spline cell).
+pub const WIDTH: usize = 12;
+const PAIRS: usize = WIDTH * (WIDTH + 1) / 2;
+
+/// One data row per point: its stencil and the weights of the stencil's controls.
+#[derive(Clone, Debug, Default)]
+pub struct StencilRows {
+    pub stencil: Vec<u32>,
+    pub weights: Vec<[f64; WIDTH]>,
+}
+
+struct FixedRows<'a>(&'a [[f64; WIDTH]]);
+
+impl RowValues for FixedRows<'_> {
+    #[inline(always)]
+    fn values(&self, r: usize) -> &[f64] {
+        &self.0[r]
+    }
+}
+
+/// The fixed part of every assembly over a set of stencils.
+#[derive(Clone, Debug)]
+pub struct StencilPlan {
+    controls: usize,
+    stencils: Vec<[u32; WIDTH]>,
+    ptr: Vec<usize>,
+    idx: Vec<u32>,
+    /// Entry e of M sums the packed stencil pairs `pair_src[pair_ptr[e]..pair_ptr[e + 1]]`,
+    /// each given as `stencil * PAIRS + position`.
+    pair_ptr: Vec<usize>,
+    pair_src: Vec<u32>,
+    /// Control c's right-hand side sums `rhs_src[rhs_ptr[c]..rhs_ptr[c + 1]]`, each given
+    /// as `stencil * WIDTH + position`.
+    rhs_ptr: Vec<usize>,
+    rhs_src: Vec<u32>,
+    /// s (L^T L) of every entry.
+    fairness: Vec<f64>,
+}
+
+/// One control's row of the plan: neighbours, (entry, source) pairs, fairness per entry.
+type PlanRow = (Vec<u32>, Vec<(u32, u32)>, Vec<f64>);
+
+impl StencilPlan {
+    /// The plan for `controls` controls, the given stencils (each control at most once in
+    /// a stencil) and the fairness term, if any.
+    pub fn new(controls: usize, stencils: Vec<[u32; WIDTH]>, fairness: Option<Fairness>) -> Self {
+        let fairness = fairness.filter(|f| f.smoothing > 0.0);
+        let m = controls;
+        // Where each control appears: (stencil, position).
+        let mut rhs_ptr = vec![0usize; m + 1];
+        for s in &stencils {
+            for &c in s {
+                rhs_ptr[c as usize + 1] += 1;
+            }
+        }
+        for c in 0..m {
+            rhs_ptr[c + 1] += rhs_ptr[c];
+        }
+        let mut fill = rhs_ptr.clone();
+        let mut rhs_src = vec![0u32; rhs_ptr[m]];
+        for (g, s) in stencils.iter().enumerate() {
+            for (a, &c) in s.iter().enumerate() {
+                rhs_src[fill[c as usize]] = (g * WIDTH + a) as u32;
+                fill[c as usize] += 1;
+            }
+        }
+
+        let rows: Vec<PlanRow> = (0..m)
+            .into_par_iter()
+            .map_init(
+                || vec![u32::MAX; m],
+                |slot, c| {
+                    let sources = &rhs_src[rhs_ptr[c]..rhs_ptr[c + 1]];
+                    let mut idx: Vec<u32> = Vec::new();
+                    let mut mark = |j: u32, idx: &mut Vec<u32>| {
+                        if slot[j as usize] == u32::MAX {
+                            slot[j as usize] = 0;
+                            idx.push(j);
+                        }
+                    };
+                    for &src in sources {
+                        for &j in &stencils[src as usize / WIDTH] {
+                            mark(j, &mut idx);
+                        }
+                    }
+                    if let Some(f) = fairness {
+                        for k in f.lt.row_ptr[c]..f.lt.row_ptr[c + 1] {
+                            let r = f.lt.col_idx[k] as usize;
+                            for &j in &f.l.col_idx[f.l.row_ptr[r]..f.l.row_ptr[r + 1]] {
+                                mark(j, &mut idx);
+                            }
+                        }
+                    }
+                    idx.sort_unstable();
+                    for (k, &j) in idx.iter().enumerate() {
+                        slot[j as usize] = k as u32;
+                    }
+                    let mut pairs = Vec::with_capacity(sources.len() * WIDTH);
+                    for &src in sources {
+                        let (g, a) = (src as usize / WIDTH, src as usize % WIDTH);
+                        for (b, &j) in stencils[g].iter().enumerate() {
+                            let at = (g * PAIRS + packed_index(a, b, WIDTH)) as u32;
+                            pairs.push((slot[j as usize], at));
+                        }
+                    }
+                    pairs.sort_unstable();
+                    let mut fair = vec![0.0; idx.len()];
+                    if let Some(f) = fairness {
+                        for k in f.lt.row_ptr[c]..f.lt.row_ptr[c + 1] {
+                            let (r, wc) = (f.lt.col_idx[k] as usize, f.lt.values[k] * f.smoothing);
+                            for e in f.l.row_ptr[r]..f.l.row_ptr[r + 1] {
+                                fair[slot[f.l.col_idx[e] as usize] as usize] += wc * f.l.values[e];
+                            }
+                        }
+                    }
+                    for &j in &idx {
+                        slot[j as usize] = u32::MAX;
+                    }
+                    (idx, pairs, fair)
+                },
+            )
+            .collect();
+
+        let nnz = rows.iter().map(|r| r.0.len()).sum();
+        let mut plan = StencilPlan {
+            controls,
+            stencils,
+            ptr: Vec::with_capacity(m + 1),
+            idx: Vec::with_capacity(nnz),
+            pair_ptr: Vec::with_capacity(nnz + 1),
+            pair_src: Vec::new(),
+            rhs_ptr,
+            rhs_src,
+            fairness: Vec::with_capacity(nnz),
+        };
+        plan.ptr.push(0);
+        plan.pair_ptr.push(0);
+        for (idx, pairs, fair) in rows {
+            let mut next = pairs.iter().peekable();
+            for k in 0..idx.len() {
+                while let Some(&&(_, at)) = next.peek().filter(|(e, _)| *e as usize == k) {
+                    plan.pair_src.push(at);
+                    next.next();
+                }
+                plan.pair_ptr.push(plan.pair_src.len());
+            }
+            plan.idx.extend(idx);
+            plan.fairness.extend(fair);
+            plan.ptr.push(plan.idx.len());
+        }
+        plan
+    }
+
+    pub fn stencils(&self) -> &[[u32; WIDTH]] {
+        &self.stencils
+    }
+
+    /// N^T W N + s L^T L and N^T W p, with `weight(r)` giving row r's W (scalar part and,
+    /// for blocks, the six entries) and W p.
+    fn assemble<const K: usize>(
+        &self,
+        rows: &StencilRows,
+        weight: impl Fn(usize) -> ([f64; K], DVec3) + Sync,
+    ) -> NormalMatrix<K> {
+        let groups = self.stencils.len();
+        // Rows by stencil (counting sort).
+        let mut start = vec![0usize; groups + 1];
+        for &g in &rows.stencil {
+            start[g as usize + 1] += 1;
+        }
+        for g in 0..groups {
+            start[g + 1] += start[g];
+        }
+        let mut fill = start.clone();
+        let mut order = vec![0u32; rows.stencil.len()];
+        for (r, &g) in rows.stencil.iter().enumerate() {
+            order[fill[g as usize]] = r as u32;
+            fill[g as usize] += 1;
+        }
+
+        let values = FixedRows(&rows.weights);
+        let mut pairs = vec![[0.0f64; K]; groups * PAIRS];
+        let mut local_rhs = vec![DVec3::ZERO; groups * WIDTH];
+        pairs
+            .par_chunks_mut(PAIRS)
+            .zip(local_rhs.par_chunks_mut(WIDTH))
+            .enumerate()
+            .with_min_len(16)
+            .for_each(|(g, (p, b))| {
+                let members = &order[start[g]..start[g + 1]];
+                accumulate(&values, members, WIDTH, &weight, p, b);
+            });
+        debug_assert_eq!(packed_len(WIDTH), PAIRS);
+
+        let mut entries = vec![[0.0f64; K]; self.idx.len()];
+        entries
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(512)
+            .for_each(|(e, out)| {
+                out[SCALAR] = self.fairness[e];
+                for &at in &self.pair_src[self.pair_ptr[e]..self.pair_ptr[e + 1]] {
+                    let v = &pairs[at as usize];
+                    for c in 0..K {
+                        out[c] += v[c];
+                    }
+                }
+            });
+        let rhs = (0..self.controls)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|c| {
+                self.rhs_src[self.rhs_ptr[c]..self.rhs_ptr[c + 1]]
+                    .iter()
+                    .map(|&at| local_rhs[at as usize])
+                    .sum()
+            })
+            .collect();
+        NormalMatrix {
+            ptr: self.ptr.clone(),
+            idx: self.idx.clone(),
+            entries,
+            rhs,
+        }
+    }
+
+    /// N^T N + s L^T L and N^T p (point-to-point).
+    pub fn assemble_scalar(&self, rows: &StencilRows, data: &[DVec3]) -> ScalarMatrix {
+        self.assemble::<1>(rows, ScalarMatrix::weight(data))
+    }
+
+    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t I (squared distance).
+    pub fn assemble_blocks(
+        &self,
+        rows: &StencilRows,
+        data: &[DVec3],
+        normals: &[DVec3],
+        tangential: f64,
+    ) -> BlockMatrix {
+        self.assemble::<8>(rows, BlockMatrix::weight(data, normals, tangential))
+    }
+}
+
+impl StencilRows {
+    /// out_j = sum_k w_jk x[stencil_j[k]].
+    pub fn mul_vec3(&self, plan: &StencilPlan, x: &[DVec3], out: &mut [DVec3]) {
+        out.par_iter_mut()
+            .zip(self.stencil.par_iter().zip(&self.weights))
+            .with_min_len(1024)
+            .for_each(|(o, (&g, w))| {
+                *o = plan.stencils[g as usize]
+                    .iter()
+                    .zip(w)
+                    .map(|(&c, &wk)| x[c as usize] * wk)
+                    .sum();
+            });
+    }
+
+    /// The same rows as a general sparse matrix (zero weights dropped, as the general
+    /// collocation does).
+    pub fn to_csr(&self, plan: &StencilPlan) -> Csr {
+        let mut m = Csr {
+            nrows: self.stencil.len(),
+            ncols: plan.controls,
+            row_ptr: Vec::with_capacity(self.stencil.len() + 1),
+            col_idx: Vec::with_capacity(self.stencil.len() * WIDTH),
+            values: Vec::with_capacity(self.stencil.len() * WIDTH),
+        };
+        m.row_ptr.push(0);
+        for (&g, w) in self.stencil.iter().zip(&self.weights) {
+            for (&c, &wk) in plan.stencils[g as usize].iter().zip(w) {
+                if wk != 0.0 {
+                    m.col_idx.push(c);
+                    m.values.push(wk);
+                }
+            }
+            m.row_ptr.push(m.col_idx.len());
+        }
+        m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A small deterministic generator: the test needs varied numbers, not good ones.
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    fn dense<const K: usize>(m: &NormalMatrix<K>, n: usize) -> Vec<[f64; K]> {
+        let mut d = vec![[0.0; K]; n * n];
+        for c in 0..n {
+            for k in m.ptr[c]..m.ptr[c + 1] {
+                d[c * n + m.idx[k] as usize] = m.entries[k];
+            }
+        }
+        d
+    }
+
+    /// The planned assembly against the general one over the same rows (random stencils,
+    /// weights, normals and fairness): same matrix and right-hand side, scalar and blocks.
+    #[test]
+    fn planned_assembly_equals_the_general_assembly() {
+        let mut rng = Lcg(7);
+        let m = 41;
+        let stencils: Vec<[u32; WIDTH]> = (0..25)
+            .map(|g| std::array::from_fn(|k| ((g * 3 + k * 7) % m) as u32))
+            .collect();
+        for s in &stencils {
+            let mut sorted = s.to_vec();
+            sorted.sort_unstable();
+            sorted.dedup();
+            assert_eq!(sorted.len(), WIDTH, "distinct controls per stencil");
+        }
+        let points = 600;
+        // Some stencils get no rows, as cells without data do.
+        let rows = StencilRows {
+            stencil: (0..points).map(|j| ((j * 7) % 20) as u32).collect(),
+            weights: (0..points)
+                .map(|_| std::array::from_fn(|_| rng.next()))
+                .collect(),
+        };
+        let data: Vec<DVec3> = (0..points)
+            .map(|_| DVec3::new(rng.next(), rng.next(), rng.next()))
+            .collect();
+        let normals: Vec<DVec3> = (0..points)
+            .map(|_| DVec3::new(rng.next() - 0.5, rng.next() - 0.5, 1.0).normalize())
+            .collect();
+        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
+            .map(|i| {
+                vec![
+                    (i, 1.0),
+                    ((i + 1) % m as u32, -0.5),
+                    ((i + 9) % m as u32, -0.5),
+                ]
+            })
+            .collect();
+        let l = Csr::from_rows(m, lap.iter().map(|r| r.as_slice()));
+        let fairness = super::super::Collocation::new(l);
+        let fair = Fairness {
+            l: fairness.n(),
+            lt: fairness.nt(),
+            smoothing: 0.3,
+        };
+        let plan = StencilPlan::new(m, stencils, Some(fair));
+        let basis = rows.to_csr(&plan);
+
+        let (a, b) = (
+            plan.assemble_scalar(&rows, &data),
+            ScalarMatrix::assemble(&basis, &data, Some(fair), false),
+        );
+        let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * (1.0 + x.abs().max(y.abs()));
+        for (x, y) in dense(&a, m).iter().zip(&dense(&b, m)) {
+            assert!(close(x[0], y[0]), "{x:?} vs {y:?}");
+        }
+        for (x, y) in a.rhs.iter().zip(&b.rhs) {
+            assert!(
+                (*x - *y).length() < 1e-12 * (1.0 + x.length()),
+                "{x} vs {y}"
+            );
+        }
+
+        let (a, b) = (
+            plan.assemble_blocks(&rows, &data, &normals, 0.05),
+            BlockMatrix::assemble(&basis, &data, &normals, 0.05, Some(fair), false),
+        );
+        for (x, y) in dense(&a, m).iter().zip(&dense(&b, m)) {
+            for k in 0..8 {
+                assert!(close(x[k], y[k]), "{x:?} vs {y:?}");
+            }
+        }
+        for (x, y) in a.rhs.iter().zip(&b.rhs) {
+            assert!(
+                (*x - *y).length() < 1e-12 * (1.0 + x.length()),
+                "{x} vs {y}"
+            );
+        }
+
+        // And N x through the rows equals N x through the sparse matrix.
+        let x: Vec<DVec3> = (0..m)
+            .map(|_| DVec3::new(rng.next(), 1.0, -rng.next()))
+            .collect();
+        let (mut via_rows, mut via_csr) = (vec![DVec3::ZERO; points], vec![DVec3::ZERO; points]);
+        rows.mul_vec3(&plan, &x, &mut via_rows);
+        basis.mul_vec3(&x, &mut via_csr);
+        for (p, q) in via_rows.iter().zip(&via_csr) {
+            assert!((*p - *q).length() < 1e-12, "{p} vs {q}");
+        }
+    }
+}

@@ -1,0 +1,294 @@
+//! The solves of a scan fit: the first point-to-point fit, the squared-distance rounds'
+//! solves and the foot points between them. Grid fits assemble their normal equations
+//! through a `StencilPlan` of the grid's covered cells, built once per fit: every round then
+//! skips grouping rows, gathering neighbours and recomputing the fairness term.
+
+use super::{collocation, collocation_rows, geometric, FitOptions, PipelineError};
+use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
+use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
+use crate::fit::stencil_matrix::{StencilPlan, StencilRows};
+use crate::fit::{
+    fit, Budget, Collocation, Csr, FitOutcome, FitProblem, FitStatus, Method, StepStats,
+};
+use crate::surface::grid_spline::GridSpline;
+use crate::surface::{SurfaceParam, TriSurface};
+use glam::DVec3;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// A grid fit's assembly plan and where each cell slot's stencil sits in it.
+pub(super) struct GridStencils<'a> {
+    grid: &'a GridSpline,
+    of_slot: Vec<u32>,
+    plan: StencilPlan,
+}
+
+impl<'a> GridStencils<'a> {
+    pub(super) fn new(grid: &'a GridSpline, fairness: &Collocation, smoothing: f64) -> Self {
+        let (stencils, of_slot) = grid.stencil_table();
+        let fair = Fairness {
+            l: fairness.n(),
+            lt: fairness.nt(),
+            smoothing,
+        };
+        Self {
+            grid,
+            of_slot,
+            plan: StencilPlan::new(grid.control_count(), stencils, Some(fair)),
+        }
+    }
+
+    /// The data rows at `params`; `None` if one lies outside the covered cells (the
+    /// general assembly then takes over).
+    fn rows(&self, params: &[SurfaceParam]) -> Option<StencilRows> {
+        let rows: Vec<(u32, [f64; 12])> = params
+            .par_iter()
+            .with_min_len(1024)
+            .map(|p| self.grid.stencil_row(&self.of_slot, *p))
+            .collect::<Option<_>>()?;
+        let (stencil, weights) = rows.into_iter().unzip();
+        Some(StencilRows { stencil, weights })
+    }
+}
+
+/// Data rows as the general sparse matrix or as stencil rows of a plan.
+enum Rows<'a> {
+    General(Csr),
+    Stencil(StencilRows, &'a StencilPlan),
+}
+
+impl<'a> Rows<'a> {
+    fn at(
+        surface: &dyn TriSurface,
+        stencils: Option<&'a GridStencils>,
+        params: &[SurfaceParam],
+    ) -> Self {
+        match stencils.and_then(|s| Some((s.rows(params)?, &s.plan))) {
+            Some((rows, plan)) => Rows::Stencil(rows, plan),
+            None => Rows::General(collocation_rows(surface, params)),
+        }
+    }
+
+    fn mul_vec3(&self, x: &[DVec3], out: &mut [DVec3]) {
+        match self {
+            Rows::General(n) => n.mul_vec3(x, out),
+            Rows::Stencil(rows, plan) => rows.mul_vec3(plan, x, out),
+        }
+    }
+
+    fn general(&self) -> std::borrow::Cow<'_, Csr> {
+        match self {
+            Rows::General(n) => std::borrow::Cow::Borrowed(n),
+            Rows::Stencil(rows, plan) => std::borrow::Cow::Owned(rows.to_csr(plan)),
+        }
+    }
+}
+
+pub(super) fn run_fit(
+    surface: &dyn TriSurface,
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    fairness: &Collocation,
+    smoothing: f64,
+    start: Vec<DVec3>,
+    opts: &FitOptions,
+) -> Result<FitOutcome, PipelineError> {
+    let basis = collocation(surface, params);
+    let problem = FitProblem {
+        basis: &basis,
+        data,
+        smoothing,
+        fairness: Some(fairness),
+        pia_operator: None,
+        on_step: opts.on_step,
+    };
+    let budget: &Budget = &opts.budget;
+    Ok(fit(&problem, start, opts.method, budget)?)
+}
+
+/// Relative residual of the normal equations at which an assembled first fit stops.
+const FIRST_FIT_REL_TOL: f64 = 1e-6;
+
+/// The point-to-point fit of `cg` and `direct` through the assembled normal equations
+/// N^T N + s L^T L (one scalar matrix for x, y and z; Jacobi-preconditioned CG from the
+/// start net, or a sparse Cholesky): a CG step then reads ~37 entries per control instead
+/// of going through all data points twice, so converging costs a few ms where the
+/// engine's CGLS spent ~100 ms on a 40k-point scan. The budget is checked on the result
+/// (the engine checks it after every step): this fit is only the start of the rounds.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn assembled_fit(
+    surface: &dyn TriSurface,
+    stencils: Option<&GridStencils>,
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    fairness: &Collocation,
+    smoothing: f64,
+    start: Vec<DVec3>,
+    opts: &FitOptions,
+) -> FitOutcome {
+    let t0 = Instant::now();
+    let basis = Rows::at(surface, stencils, params);
+    let budget = &opts.budget;
+    let stats = |k: usize, x: &[DVec3]| {
+        let mut fitted = vec![DVec3::ZERO; data.len()];
+        basis.mul_vec3(x, &mut fitted);
+        fitted.iter_mut().zip(data).for_each(|(f, p)| *f = *p - *f);
+        let s = StepStats::from_residuals(
+            k,
+            &fitted,
+            budget.tolerance,
+            t0.elapsed().as_secs_f64() * 1e3,
+        );
+        if let Some(hook) = opts.on_step {
+            hook(&s);
+        }
+        s
+    };
+    let first = stats(0, &start);
+    if budget.met(&first) {
+        return FitOutcome {
+            controls: start,
+            steps: vec![first],
+            status: FitStatus::Met,
+            iterations: 0,
+        };
+    }
+    let fair = Some(Fairness {
+        l: fairness.n(),
+        lt: fairness.nt(),
+        smoothing,
+    });
+    let direct = (opts.method == Method::Direct)
+        .then(|| {
+            ScalarMatrix::assemble(&basis.general(), data, fair, true)
+                .solve_direct()
+                .ok()
+        })
+        .flatten();
+    let (controls, k) = match direct {
+        Some(x) => (x, 1),
+        None => {
+            let matrix = match &basis {
+                Rows::General(n) => ScalarMatrix::assemble(n, data, fair, false),
+                Rows::Stencil(rows, plan) => plan.assemble_scalar(rows, data),
+            };
+            matrix.solve_pcg(start, budget.max_iterations.max(1), FIRST_FIT_REL_TOL)
+        }
+    };
+    let last = stats(k.max(1), &controls);
+    let status = if budget.met(&last) {
+        FitStatus::Met
+    } else if k >= budget.max_iterations {
+        FitStatus::Capped
+    } else {
+        FitStatus::Stalled
+    };
+    FitOutcome {
+        controls,
+        steps: vec![first, last],
+        status,
+        iterations: 1,
+    }
+}
+
+/// Up to this many control points a distance round is solved by a sparse factorisation.
+const DIRECT_ROUND_MAX_CONTROLS: usize = 1000;
+
+/// Relative residual of the normal equations at which a distance round's CG stops: looser
+/// (1e-4) left bun000 at 80 um RMS and chin at 112 um instead of 66 and 83.
+const ROUND_REL_TOL: f64 = 1e-6;
+
+/// What a distance round solves at the current foot points.
+pub(super) struct DistanceRound<'a> {
+    pub surface: &'a dyn TriSurface,
+    pub stencils: Option<&'a GridStencils<'a>>,
+    pub data: &'a [DVec3],
+    pub fairness: &'a Collocation,
+    pub smoothing: f64,
+    pub tangential: f64,
+    pub max_iterations: usize,
+}
+
+impl DistanceRound<'_> {
+    /// The controls minimising the round's squared distances from `start`, and the CG
+    /// steps taken (1 for a factorisation).
+    pub(super) fn solve(
+        &self,
+        params: &[SurfaceParam],
+        normals: &[DVec3],
+        start: Vec<DVec3>,
+    ) -> (Vec<DVec3>, usize) {
+        let rows = Rows::at(self.surface, self.stencils, params);
+        // Small nets: one factorisation beats 25-45 preconditioned CG steps (camel head,
+        // 559 controls: fit 205 ms vs 428 ms); at ~2000 controls the factorisation is the
+        // slower (bun000: 736 ms vs 502 ms).
+        if self.surface.control_count() <= DIRECT_ROUND_MAX_CONTROLS {
+            let basis = rows.general();
+            let problem = DistanceProblem {
+                basis: &basis,
+                data: self.data,
+                normals,
+                tangential: self.tangential,
+                fairness: Some(self.fairness),
+                smoothing: self.smoothing,
+            };
+            return match solve_distance_direct(&problem) {
+                Some(x) => (x, 1),
+                None => solve_distance(&problem, start, self.max_iterations, ROUND_REL_TOL),
+            };
+        }
+        match &rows {
+            Rows::Stencil(r, plan) => plan
+                .assemble_blocks(r, self.data, normals, self.tangential)
+                .solve_pcg(start, self.max_iterations, ROUND_REL_TOL),
+            Rows::General(basis) => {
+                let problem = DistanceProblem {
+                    basis,
+                    data: self.data,
+                    normals,
+                    tangential: self.tangential,
+                    fairness: Some(self.fairness),
+                    smoothing: self.smoothing,
+                };
+                solve_distance(&problem, start, self.max_iterations, ROUND_REL_TOL)
+            }
+        }
+    }
+}
+
+/// The data seen from their foot points: residual p - S(foot) and the unit surface normal.
+pub(super) struct Feet {
+    pub(super) residuals: Vec<DVec3>,
+    pub(super) normals: Vec<DVec3>,
+}
+
+impl Feet {
+    pub(super) fn distances(&self) -> Vec<f64> {
+        self.residuals.iter().map(|r| r.length()).collect()
+    }
+}
+
+/// Moves every parameter to its foot point; what a round needs of the surface there comes
+/// from the foot-point search's last evaluation.
+pub(super) fn foot_points(
+    surface: &dyn TriSurface,
+    controls: &[DVec3],
+    data: &[DVec3],
+    params: &mut [SurfaceParam],
+) -> Feet {
+    let evaluate = surface.evaluator(controls);
+    let (residuals, normals) = data
+        .par_iter()
+        .zip(params.par_iter_mut())
+        .map(|(p, u)| {
+            let (foot, d) = geometric::foot_point(surface, &*evaluate, *p, *u);
+            *u = foot;
+            (*p - d.position, d.du.cross(d.dv).normalize_or_zero())
+        })
+        .unzip();
+    Feet { residuals, normals }
+}
+
+pub(super) fn rms(e: &[f64]) -> f64 {
+    (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt()
+}
