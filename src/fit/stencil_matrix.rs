@@ -44,20 +44,19 @@ pub struct StencilPlan {
     stencils: Vec<[u32; WIDTH]>,
     ptr: Vec<usize>,
     idx: Vec<u32>,
-    /// Entry e of M sums the packed stencil pairs `pair_src[pair_ptr[e]..pair_ptr[e + 1]]`,
-    /// each given as `stencil * PAIRS + position`.
-    pair_ptr: Vec<usize>,
-    pair_src: Vec<u32>,
-    /// Control c's right-hand side sums `rhs_src[rhs_ptr[c]..rhs_ptr[c + 1]]`, each given
-    /// as `stencil * WIDTH + position`.
-    rhs_ptr: Vec<usize>,
-    rhs_src: Vec<u32>,
+    /// The stencil memberships of control c: `members[member_ptr[c]..member_ptr[c + 1]]`,
+    /// each `stencil * WIDTH + position`. They feed c's row of M and its right-hand side.
+    member_ptr: Vec<usize>,
+    members: Vec<u32>,
+    /// Per membership (same order as `members`): for each control of that stencil, the
+    /// entry of c's row it adds into (counted from the row's start).
+    slots: Vec<[u32; WIDTH]>,
     /// s (L^T L) of every entry.
     fairness: Vec<f64>,
 }
 
-/// One control's row of the plan: neighbours, (entry, source) pairs, fairness per entry.
-type PlanRow = (Vec<u32>, Vec<(u32, u32)>, Vec<f64>);
+/// One control's row of the plan: neighbours, entry slots per membership, fairness.
+type PlanRow = (Vec<u32>, Vec<[u32; WIDTH]>, Vec<f64>);
 
 impl StencilPlan {
     /// The plan for `controls` controls, the given stencils (each control at most once in
@@ -65,31 +64,31 @@ impl StencilPlan {
     pub fn new(controls: usize, stencils: Vec<[u32; WIDTH]>, fairness: Option<Fairness>) -> Self {
         let fairness = fairness.filter(|f| f.smoothing > 0.0);
         let m = controls;
-        // Where each control appears: (stencil, position).
-        let mut rhs_ptr = vec![0usize; m + 1];
+        let mut member_ptr = vec![0usize; m + 1];
         for s in &stencils {
             for &c in s {
-                rhs_ptr[c as usize + 1] += 1;
+                member_ptr[c as usize + 1] += 1;
             }
         }
         for c in 0..m {
-            rhs_ptr[c + 1] += rhs_ptr[c];
+            member_ptr[c + 1] += member_ptr[c];
         }
-        let mut fill = rhs_ptr.clone();
-        let mut rhs_src = vec![0u32; rhs_ptr[m]];
+        let mut fill = member_ptr.clone();
+        let mut members = vec![0u32; member_ptr[m]];
         for (g, s) in stencils.iter().enumerate() {
             for (a, &c) in s.iter().enumerate() {
-                rhs_src[fill[c as usize]] = (g * WIDTH + a) as u32;
+                members[fill[c as usize]] = (g * WIDTH + a) as u32;
                 fill[c as usize] += 1;
             }
         }
 
         let rows: Vec<PlanRow> = (0..m)
             .into_par_iter()
+            .with_min_len(64)
             .map_init(
                 || vec![u32::MAX; m],
                 |slot, c| {
-                    let sources = &rhs_src[rhs_ptr[c]..rhs_ptr[c + 1]];
+                    let own = &members[member_ptr[c]..member_ptr[c + 1]];
                     let mut idx: Vec<u32> = Vec::new();
                     let mut mark = |j: u32, idx: &mut Vec<u32>| {
                         if slot[j as usize] == u32::MAX {
@@ -97,8 +96,8 @@ impl StencilPlan {
                             idx.push(j);
                         }
                     };
-                    for &src in sources {
-                        for &j in &stencils[src as usize / WIDTH] {
+                    for &member in own {
+                        for &j in &stencils[member as usize / WIDTH] {
                             mark(j, &mut idx);
                         }
                     }
@@ -114,15 +113,10 @@ impl StencilPlan {
                     for (k, &j) in idx.iter().enumerate() {
                         slot[j as usize] = k as u32;
                     }
-                    let mut pairs = Vec::with_capacity(sources.len() * WIDTH);
-                    for &src in sources {
-                        let (g, a) = (src as usize / WIDTH, src as usize % WIDTH);
-                        for (b, &j) in stencils[g].iter().enumerate() {
-                            let at = (g * PAIRS + packed_index(a, b, WIDTH)) as u32;
-                            pairs.push((slot[j as usize], at));
-                        }
-                    }
-                    pairs.sort_unstable();
+                    let slots = own
+                        .iter()
+                        .map(|&member| stencils[member as usize / WIDTH].map(|j| slot[j as usize]))
+                        .collect();
                     let mut fair = vec![0.0; idx.len()];
                     if let Some(f) = fairness {
                         for k in f.lt.row_ptr[c]..f.lt.row_ptr[c + 1] {
@@ -135,7 +129,7 @@ impl StencilPlan {
                     for &j in &idx {
                         slot[j as usize] = u32::MAX;
                     }
-                    (idx, pairs, fair)
+                    (idx, slots, fair)
                 },
             )
             .collect();
@@ -146,24 +140,15 @@ impl StencilPlan {
             stencils,
             ptr: Vec::with_capacity(m + 1),
             idx: Vec::with_capacity(nnz),
-            pair_ptr: Vec::with_capacity(nnz + 1),
-            pair_src: Vec::new(),
-            rhs_ptr,
-            rhs_src,
+            member_ptr,
+            members,
+            slots: Vec::with_capacity(fill.len()),
             fairness: Vec::with_capacity(nnz),
         };
         plan.ptr.push(0);
-        plan.pair_ptr.push(0);
-        for (idx, pairs, fair) in rows {
-            let mut next = pairs.iter().peekable();
-            for k in 0..idx.len() {
-                while let Some(&&(_, at)) = next.peek().filter(|(e, _)| *e as usize == k) {
-                    plan.pair_src.push(at);
-                    next.next();
-                }
-                plan.pair_ptr.push(plan.pair_src.len());
-            }
+        for (idx, slots, fair) in rows {
             plan.idx.extend(idx);
+            plan.slots.extend(slots);
             plan.fairness.extend(fair);
             plan.ptr.push(plan.idx.len());
         }
@@ -211,29 +196,29 @@ impl StencilPlan {
             });
         debug_assert_eq!(packed_len(WIDTH), PAIRS);
 
-        let mut entries = vec![[0.0f64; K]; self.idx.len()];
-        entries
+        // Each control adds its memberships' sums into its own row: rows are disjoint, so
+        // they are filled in parallel without conflicts.
+        let mut entries: Vec<[f64; K]> = self
+            .fairness
+            .iter()
+            .map(|&f| {
+                let mut e = [0.0; K];
+                e[SCALAR] = f;
+                e
+            })
+            .collect();
+        let mut row_slices = Vec::with_capacity(self.controls);
+        let mut rest = entries.as_mut_slice();
+        for c in 0..self.controls {
+            let (row, tail) = rest.split_at_mut(self.ptr[c + 1] - self.ptr[c]);
+            row_slices.push(row);
+            rest = tail;
+        }
+        let rhs = row_slices
             .par_iter_mut()
             .enumerate()
-            .with_min_len(512)
-            .for_each(|(e, out)| {
-                out[SCALAR] = self.fairness[e];
-                for &at in &self.pair_src[self.pair_ptr[e]..self.pair_ptr[e + 1]] {
-                    let v = &pairs[at as usize];
-                    for c in 0..K {
-                        out[c] += v[c];
-                    }
-                }
-            });
-        let rhs = (0..self.controls)
-            .into_par_iter()
-            .with_min_len(256)
-            .map(|c| {
-                self.rhs_src[self.rhs_ptr[c]..self.rhs_ptr[c + 1]]
-                    .iter()
-                    .map(|&at| local_rhs[at as usize])
-                    .sum()
-            })
+            .with_min_len(64)
+            .map(|(c, row)| self.gather_row(c, row, &pairs, &local_rhs))
             .collect();
         NormalMatrix {
             ptr: self.ptr.clone(),
@@ -241,6 +226,59 @@ impl StencilPlan {
             entries,
             rhs,
         }
+    }
+
+    /// Adds control c's stencil sums into its row of M; returns its right-hand side.
+    fn gather_row<const K: usize>(
+        &self,
+        c: usize,
+        row: &mut [[f64; K]],
+        pairs: &[[f64; K]],
+        local_rhs: &[DVec3],
+    ) -> DVec3 {
+        #[cfg(target_arch = "x86_64")]
+        if super::bezier_rows::wide() {
+            // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
+            return unsafe { self.gather_row_wide(c, row, pairs, local_rhs) };
+        }
+        self.gather_row_with(c, row, pairs, local_rhs)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn gather_row_wide<const K: usize>(
+        &self,
+        c: usize,
+        row: &mut [[f64; K]],
+        pairs: &[[f64; K]],
+        local_rhs: &[DVec3],
+    ) -> DVec3 {
+        self.gather_row_with(c, row, pairs, local_rhs)
+    }
+
+    #[inline(always)]
+    fn gather_row_with<const K: usize>(
+        &self,
+        c: usize,
+        row: &mut [[f64; K]],
+        pairs: &[[f64; K]],
+        local_rhs: &[DVec3],
+    ) -> DVec3 {
+        let mut b = DVec3::ZERO;
+        for s in self.member_ptr[c]..self.member_ptr[c + 1] {
+            let member = self.members[s] as usize;
+            let (g, a) = (member / WIDTH, member % WIDTH);
+            b += local_rhs[member];
+            let sums = &pairs[g * PAIRS..(g + 1) * PAIRS];
+            for (bi, &k) in self.slots[s].iter().enumerate() {
+                let v = &sums[packed_index(a, bi, WIDTH)];
+                let e = &mut row[k as usize];
+                for q in 0..K {
+                    e[q] += v[q];
+                }
+            }
+        }
+        b
     }
 
     /// N^T N + s L^T L and N^T p (point-to-point).

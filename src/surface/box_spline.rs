@@ -166,14 +166,27 @@ pub fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 1
 /// need no derivatives.
 pub fn stencil_values(lu: f64, lv: f64) -> [f64; 12] {
     let m = bezier_from_stencil();
-    let bern = quartic_bernstein(lu, lv);
+    let bern = quartic_bernstein_values(lu, lv);
     let mut out = [0.0; 12];
     for (row, b) in m.iter().zip(&bern) {
         for (o, c) in out.iter_mut().zip(row) {
-            *o += c * b[0];
+            *o += c * b;
         }
     }
     out
+}
+
+/// The values alone of `quartic_bernstein`: collocation rows are built for every data point
+/// in every round.
+fn quartic_bernstein_values(u: f64, v: f64) -> [f64; 15] {
+    let w = 1.0 - u - v;
+    let pow = |x: f64| [1.0, x, x * x, x * x * x, x * x * x * x];
+    let (pu, pv, pw) = (pow(u), pow(v), pow(w));
+    const FACT: [f64; 5] = [1.0, 1.0, 2.0, 6.0, 24.0];
+    QUARTIC_LATTICE.map(|(i, j)| {
+        let k = 4 - i - j;
+        24.0 / (FACT[i] * FACT[j] * FACT[k]) * pu[i] * pv[j] * pw[k]
+    })
 }
 
 /// The 15 Bezier ordinates (lattice order of degree 4) of the patch over the up triangle
@@ -373,6 +386,20 @@ impl TriSurface for LatticeSpline {
 
 #[cfg(test)]
 mod tests {
+    /// The value-only weights are the value column of the weights with derivatives, and
+    /// they sum to one (the box spline reproduces constants).
+    #[test]
+    fn stencil_values_are_the_value_part_of_the_stencil_weights() {
+        for (lu, lv) in [(0.0, 0.0), (1.0, 0.0), (0.2, 0.3), (0.6, 0.1), (0.33, 0.66)] {
+            let values = super::stencil_values(lu, lv);
+            let full = super::stencil_weights(lu, lv, false, 1.0);
+            for (v, w) in values.iter().zip(&full) {
+                assert!((v - w[0]).abs() < 1e-15, "{v} vs {}", w[0]);
+            }
+            assert!((values.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+        }
+    }
+
     #[test]
     fn de_casteljau_evaluation_equals_the_bernstein_sums() {
         use glam::DVec3;
