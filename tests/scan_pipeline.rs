@@ -188,6 +188,79 @@ fn stanford_range_scan_quality_and_warm_start() {
     );
 }
 
+/// A rescan of an unchanged surface (the same points with ~7 um of noise) is fitted by the
+/// previous surface within the rounds' minimum gain: no round runs. A version with a moved
+/// region is not, and its rounds run.
+#[test]
+fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
+    let Some(mesh) = range_scan("bun000_range_grid.ply") else {
+        return;
+    };
+    let cfg = WorkerConfig {
+        surface: SurfaceKind::Loop,
+        ..WorkerConfig::default()
+    };
+    let first = run_patch(&mesh, None, &cfg).expect("fits");
+    let v1_rms = first.report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("rms");
+    let rounds = |o: &trispline::pipeline::worker::PatchOutputs| {
+        o.report["parameter_correction_rms"]
+            .as_array()
+            .expect("rounds")
+            .len()
+            - 1
+    };
+    let jitter = |amplitude: f64, moved: &dyn Fn(DVec3) -> bool| {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let positions = mesh
+            .positions
+            .iter()
+            .map(|p| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let n = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+                let lift = if moved(*p) { 1e-3 } else { 0.0 };
+                *p + DVec3::new(0.0, 0.0, n * amplitude + lift)
+            })
+            .collect();
+        TriMesh::new(positions, mesh.triangles.clone())
+    };
+    let rescan = jitter(24e-6, &|_| false);
+    let warm = run_patch(&rescan, Some(&first.warm), &cfg).expect("warm");
+    assert_eq!(warm.report["warm_start"], true);
+    assert_eq!(
+        rounds(&warm),
+        0,
+        "{}",
+        warm.report["parameter_correction_rms"]
+    );
+    assert_eq!(warm.report["status"], "stalled");
+    let warm_rms = warm.report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("rms");
+    assert!(
+        warm_rms <= (1.0 + 0.02) * v1_rms,
+        "{:.1} um vs {:.1} um",
+        warm_rms * 1e6,
+        v1_rms * 1e6
+    );
+
+    // The quarter with the largest x lifted by 1 mm: the previous surface misses it.
+    let mut xs: Vec<f64> = mesh.positions.iter().map(|p| p.x).collect();
+    let quarter = xs.len() * 3 / 4;
+    let x_cut = *xs.select_nth_unstable_by(quarter, f64::total_cmp).1;
+    let changed = jitter(24e-6, &|p| p.x > x_cut);
+    let warm = run_patch(&changed, Some(&first.warm), &cfg).expect("warm");
+    assert_eq!(warm.report["warm_start"], true);
+    assert!(
+        rounds(&warm) >= 1,
+        "{}",
+        warm.report["parameter_correction_rms"]
+    );
+}
+
 /// Issue goal: the trimmed surface stays within 1 mm of the data everywhere. bun045 has
 /// holes whose smooth continuation leaves the flat fill by millimetres, MeshLab's
 /// triangulation spans gaps with triangles many samples wide: both are trimmed out, the

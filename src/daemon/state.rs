@@ -84,16 +84,51 @@ impl StateStore {
     }
 }
 
-/// FNV-1a 64: stable across runs and platforms, enough to tell versions apart.
+/// FNV-1a 64 over little-endian 8-byte words (then the tail bytes), each step rotated so that
+/// the multiplication's carries, which only run upwards, reach the low bits of later steps:
+/// stable across runs and platforms, enough to tell versions apart, and 8x fewer
+/// multiplications than byte-wise FNV (hashing a 1.7 MB scan took ~2 ms of every job's
+/// latency).
 pub fn content_hash(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xcbf2_9ce4_8422_2325u64, |h, &b| {
-        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
-    })
+    const PRIME: u64 = 0x0100_0000_01b3;
+    let mut words = bytes.chunks_exact(8);
+    let mut h = words.by_ref().fold(0xcbf2_9ce4_8422_2325u64, |h, w| {
+        let mut word = [0u8; 8];
+        word.copy_from_slice(w);
+        (h ^ u64::from_le_bytes(word))
+            .wrapping_mul(PRIME)
+            .rotate_left(29)
+    });
+    for &b in words.remainder() {
+        h = (h ^ b as u64).wrapping_mul(PRIME).rotate_left(29);
+    }
+    h
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Any one changed byte, a dropped or an appended zero byte changes the hash; the
+    /// same bytes hash the same.
+    #[test]
+    fn content_hash_tells_every_small_change_apart() {
+        let base: Vec<u8> = (0..1000u32).map(|i| (i * 7 % 251) as u8).collect();
+        let h = content_hash(&base);
+        assert_eq!(h, content_hash(&base.clone()));
+        let mut seen = std::collections::HashSet::new();
+        seen.insert(h);
+        for k in 0..base.len() {
+            let mut changed = base.clone();
+            changed[k] ^= 1;
+            assert!(seen.insert(content_hash(&changed)), "byte {k}");
+        }
+        let mut longer = base.clone();
+        longer.push(0);
+        assert!(seen.insert(content_hash(&longer)));
+        assert!(seen.insert(content_hash(&base[..999])));
+        assert!(seen.insert(content_hash(&[])));
+    }
     use crate::pipeline::SurfaceKind;
 
     fn state(version: &str) -> PatchState {

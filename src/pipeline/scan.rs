@@ -327,30 +327,36 @@ pub fn fit_scan(
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t2 = Instant::now();
-    let stencils = match &model {
-        SurfaceModel::Grid(grid) => Some(GridStencils::new(grid, &fairness, smoothing)),
-        _ => None,
-    };
-    let round = DistanceRound {
-        surface,
-        stencils: stencils.as_ref(),
-        data,
-        fairness: &fairness,
-        smoothing,
-        tangential: scan.correction_tangential,
-        max_iterations: opts.budget.max_iterations,
+    // Built on first use: a warm start the previous surface already fits needs no solve.
+    let stencils = std::cell::OnceCell::new();
+    let grid_stencils = || {
+        stencils
+            .get_or_init(|| match &model {
+                SurfaceModel::Grid(grid) => Some(GridStencils::new(grid, &fairness, smoothing)),
+                _ => None,
+            })
+            .as_ref()
     };
     // A warm start that covers the domain already sits near the fit: its foot points are
     // better parameters than the projection, so it goes straight to the correction rounds.
     let warm_enough = scan.correction_rounds > 0
         && scan.correction == Correction::Distance
         && reused as f64 >= 0.9 * start.len() as f64;
+    let mut warm_fits_already = false;
     let (mut outcome, mut feet) = if warm_enough {
         let feet = foot_points(surface, &start, data, &mut params);
         let stats = StepStats::from_residuals(0, &feet.residuals, opts.budget.tolerance, 0.0);
+        // The previous surface fits the new version within the rounds' minimum gain of the
+        // error it ended at on its own data (a rescan of an unchanged surface): a round
+        // would gain less than that, as a stalled fit's next round would.
+        let previous_rms = previous_feet.map_or(0.0, |f| f.rms);
+        warm_fits_already = previous_rms > 0.0
+            && rms(&feet.distances()) <= (1.0 + scan.correction_min_gain) * previous_rms;
         let outcome = FitOutcome {
             status: if opts.budget.met(&stats) {
                 FitStatus::Met
+            } else if warm_fits_already {
+                FitStatus::Stalled
             } else {
                 FitStatus::Capped
             },
@@ -363,7 +369,7 @@ pub fn fit_scan(
         let outcome = match opts.method {
             Method::Cg | Method::Direct => assembled_fit(
                 surface,
-                stencils.as_ref(),
+                grid_stencils(),
                 &params,
                 data,
                 &fairness,
@@ -383,10 +389,19 @@ pub fn fit_scan(
     let mut correction_rms = vec![rms(&errors)];
     // Foot-point distances never exceed the distances at the parameters, so a budget met by
     // the first fit holds geometrically too: no correction needed.
-    let rounds = if outcome.status == FitStatus::Met {
+    let rounds = if outcome.status == FitStatus::Met || warm_fits_already {
         0
     } else {
         scan.correction_rounds
+    };
+    let round = DistanceRound {
+        surface,
+        stencils: if rounds > 0 { grid_stencils() } else { None },
+        data,
+        fairness: &fairness,
+        smoothing,
+        tangential: scan.correction_tangential,
+        max_iterations: opts.budget.max_iterations,
     };
     for _ in 0..rounds {
         let (controls, cg_steps) = match scan.correction {

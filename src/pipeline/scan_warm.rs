@@ -21,6 +21,10 @@ use rayon::prelude::*;
 pub struct WarmFeet {
     pub points: Vec<[f32; 3]>,
     pub params: Vec<[f32; 2]>,
+    /// The geometric RMS error the previous version's fit ended at (0: unknown, states
+    /// written before it was kept).
+    #[serde(default)]
+    pub rms: f64,
 }
 
 impl WarmFeet {
@@ -38,6 +42,10 @@ impl WarmFeet {
                 .iter()
                 .map(|q| [q.u as f32, q.v as f32])
                 .collect(),
+            rms: {
+                let e = &fit.fit.geometric_errors;
+                (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt()
+            },
         })
     }
 }
