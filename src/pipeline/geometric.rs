@@ -9,7 +9,7 @@ use glam::DVec3;
 const MAX_NEWTON_STEPS: usize = 8;
 
 /// Squared parameter step (in face units) below which the search has converged.
-const CONVERGED_STEP2: f64 = 1e-14;
+const CONVERGED_STEP2: f64 = 1e-12;
 
 /// Returns the foot-point parameter and the surface's derivatives there (the distance is
 /// `|position - point|`). The distance never exceeds the distance at `start`: a step that
@@ -47,7 +47,10 @@ pub fn foot_point(
         let mut du = -(h[2] * g[0] - h[1] * g[1]) / det;
         let mut dv = -(h[0] * g[1] - h[1] * g[0]) / det;
         // Newton converges quadratically: a step this short moves the point by under
-        // 1e-7 of a face, far below any tolerance, and is not worth another evaluation.
+        // 1e-6 of a face (~1 nm on a 40k-point scan), and the distance, stationary at the
+        // foot, by far less; not worth another evaluation (1e-7 of a face: 3.4 evaluations
+        // per point, 1e-6: 3.2 for the same fits; 1e-5 (3.0) already moved one Stanford
+        // fit's rounds elsewhere).
         if du * du + dv * dv < CONVERGED_STEP2 {
             break;
         }

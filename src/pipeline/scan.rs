@@ -344,7 +344,7 @@ pub fn fit_scan(
         && reused as f64 >= 0.9 * start.len() as f64;
     let mut warm_fits_already = false;
     let (mut outcome, mut feet) = if warm_enough {
-        let feet = foot_points(surface, &start, data, &mut params);
+        let feet = foot_points(surface, None, &start, data, &mut params);
         let stats = StepStats::from_residuals(0, &feet.residuals, opts.budget.tolerance, 0.0);
         // The previous surface fits the new version within the rounds' minimum gain of the
         // error it ended at on its own data (a rescan of an unchanged surface): a round
@@ -381,7 +381,13 @@ pub fn fit_scan(
                 run_fit(surface, &params, data, &fairness, smoothing, start, opts)?
             }
         };
-        let feet = foot_points(surface, &outcome.controls, data, &mut params);
+        let feet = foot_points(
+            surface,
+            grid_stencils(),
+            &outcome.controls,
+            data,
+            &mut params,
+        );
         (outcome, feet)
     };
     let mut steps = outcome.steps.clone();
@@ -418,10 +424,15 @@ pub fn fit_scan(
                 let n = next.steps.len().saturating_sub(1);
                 (next.controls, n)
             }
-            Correction::Distance => round.solve(&params, &feet.normals, outcome.controls.clone()),
+            Correction::Distance => round.solve(
+                &params,
+                feet.rows.take(),
+                &feet.normals,
+                outcome.controls.clone(),
+            ),
         };
         let mut trial = params.clone();
-        let trial_feet = foot_points(surface, &controls, data, &mut trial);
+        let trial_feet = foot_points(surface, round.stencils, &controls, data, &mut trial);
         let e = trial_feet.distances();
         // A round that does not lower the geometric error is dropped.
         let (before, after) = (rms(&errors), rms(&e));

@@ -212,13 +212,18 @@ pub(super) struct DistanceRound<'a> {
 impl DistanceRound<'_> {
     /// The controls minimising the round's squared distances from `start`, and the CG
     /// steps taken (1 for a factorisation).
+    /// `rows`: the stencil rows at `params` when the foot-point pass made them.
     pub(super) fn solve(
         &self,
         params: &[SurfaceParam],
+        rows: Option<StencilRows>,
         normals: &[DVec3],
         start: Vec<DVec3>,
     ) -> (Vec<DVec3>, usize) {
-        let rows = Rows::at(self.surface, self.stencils, params);
+        let rows = match (rows, self.stencils) {
+            (Some(rows), Some(s)) => Rows::Stencil(rows, &s.plan),
+            _ => Rows::at(self.surface, self.stencils, params),
+        };
         // Small nets: one factorisation beats 25-45 preconditioned CG steps (camel head,
         // 559 controls: fit 205 ms vs 428 ms); at ~2000 controls the factorisation is the
         // slower (bun000: 736 ms vs 502 ms).
@@ -256,10 +261,12 @@ impl DistanceRound<'_> {
     }
 }
 
-/// The data seen from their foot points: residual p - S(foot) and the unit surface normal.
+/// The data seen from their foot points: residual p - S(foot) and the unit surface normal,
+/// and for grid fits the collocation rows there (the next round's solve needs them).
 pub(super) struct Feet {
     pub(super) residuals: Vec<DVec3>,
     pub(super) normals: Vec<DVec3>,
+    pub(super) rows: Option<StencilRows>,
 }
 
 impl Feet {
@@ -269,24 +276,35 @@ impl Feet {
 }
 
 /// Moves every parameter to its foot point; what a round needs of the surface there comes
-/// from the foot-point search's last evaluation.
+/// from the foot-point search's last evaluation, and the rows from the same pass.
 pub(super) fn foot_points(
     surface: &dyn TriSurface,
+    stencils: Option<&GridStencils>,
     controls: &[DVec3],
     data: &[DVec3],
     params: &mut [SurfaceParam],
 ) -> Feet {
     let evaluate = surface.evaluator(controls);
-    let (residuals, normals) = data
+    let outside = (u32::MAX, [0.0; 12]);
+    let (residuals, (normals, (stencil, weights))): (Vec<_>, (Vec<_>, (Vec<_>, Vec<_>))) = data
         .par_iter()
         .zip(params.par_iter_mut())
         .map(|(p, u)| {
             let (foot, d) = geometric::foot_point(surface, &*evaluate, *p, *u);
             *u = foot;
-            (*p - d.position, d.du.cross(d.dv).normalize_or_zero())
+            let row = stencils.map_or(outside, |s| {
+                s.grid.stencil_row(&s.of_slot, foot).unwrap_or(outside)
+            });
+            (*p - d.position, (d.du.cross(d.dv).normalize_or_zero(), row))
         })
         .unzip();
-    Feet { residuals, normals }
+    let rows = (stencils.is_some() && stencil.iter().all(|&g| g != u32::MAX))
+        .then_some(StencilRows { stencil, weights });
+    Feet {
+        residuals,
+        normals,
+        rows,
+    }
 }
 
 pub(super) fn rms(e: &[f64]) -> f64 {
