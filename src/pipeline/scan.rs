@@ -208,13 +208,6 @@ pub fn fit_scan(
     let map = planar_map(&patch, &frame).map_err(unsupported)?;
     let plane = &map.plane;
     let edge_length = median_edge_length(&part);
-    let hole_plan = plan_holes(
-        &map.mesh,
-        patch.real_vertices,
-        &patch.hole_loops,
-        &part.triangles,
-        scan.hole_bridge_edges * edge_length,
-    );
     let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t1 = Instant::now();
@@ -222,62 +215,77 @@ pub fn fit_scan(
     let data = &part.positions;
     let single_bezier =
         opts.surface == SurfaceKind::Bezier && scan.bezier_layout == BezierLayout::Single;
-    let (model, domain, initial, fairness_tris) = match single_bezier {
-        true => {
-            let n0 = scan.lattice.max(1);
-            let segments = (n0 as f64) * 2f64.powi(opts.levels.min(60) as i32);
-            if n0 > MAX_BEZIER_DEGREE || (segments + 1.0) * (segments + 2.0) / 2.0 > 1e8 {
-                return Err(PipelineError::Unsupported(format!(
+    // The hole plan decides only what is trimmed afterwards: it runs beside the resampling.
+    let plan_hole_trims = || {
+        plan_holes(
+            &map.mesh,
+            patch.real_vertices,
+            &patch.hole_loops,
+            &part.triangles,
+            scan.hole_bridge_edges * edge_length,
+        )
+    };
+    let (hole_plan, resampled) = rayon::join(plan_hole_trims, || -> Result<_, PipelineError> {
+        Ok(match single_bezier {
+            true => {
+                let n0 = scan.lattice.max(1);
+                let segments = (n0 as f64) * 2f64.powi(opts.levels.min(60) as i32);
+                if n0 > MAX_BEZIER_DEGREE || (segments + 1.0) * (segments + 2.0) / 2.0 > 1e8 {
+                    return Err(PipelineError::Unsupported(format!(
                     "Bezier degree {n0} with {} levels: the degree must be at most {MAX_BEZIER_DEGREE} and the resampled lattice ({segments} segments) at most 1e8 points",
                     opts.levels
                 )));
+                }
+                let corners = match warm.and_then(|w| w.domain) {
+                    Some(Domain::Triangle { corners })
+                        if plane.iter().all(|p| {
+                            let (u, v) = barycentric(corners, *p);
+                            u >= 0.0 && v >= 0.0 && u + v <= 1.0
+                        }) =>
+                    {
+                        *corners
+                    }
+                    _ => enclosing_triangle(plane, 0.01),
+                };
+                let initial =
+                    bezier_initial_net(&map.mesh, plane, &corners, n0, opts.levels, opts.inverse);
+                (
+                    SurfaceModel::Bezier(BezierTriangle::new(n0)),
+                    Domain::Triangle { corners },
+                    initial,
+                    lattice_triangles(n0),
+                )
             }
-            let corners = match warm.and_then(|w| w.domain) {
-                Some(Domain::Triangle { corners })
-                    if plane.iter().all(|p| {
-                        let (u, v) = barycentric(corners, *p);
-                        u >= 0.0 && v >= 0.0 && u + v <= 1.0
-                    }) =>
-                {
-                    *corners
-                }
-                _ => enclosing_triangle(plane, 0.01),
-            };
-            let initial =
-                bezier_initial_net(&map.mesh, plane, &corners, n0, opts.levels, opts.inverse);
-            (
-                SurfaceModel::Bezier(BezierTriangle::new(n0)),
-                Domain::Triangle { corners },
-                initial,
-                lattice_triangles(n0),
-            )
-        }
-        false => {
-            let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
-                (_, Some(n)) => plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
-                (Some(Domain::Grid { spacing }), None) => *spacing,
-                _ => {
-                    let target = (scan.target_controls_pct / 100.0 * real as f64).round();
-                    spacing_for_target(plane, &map.mesh.triangles, target as usize)
-                }
-            };
-            let gf = GridFrame { spacing };
-            check_grid_size(plane, spacing, opts.levels)?;
-            let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
-            let same_domain = warm.filter(|w| w.domain == Some(&Domain::Grid { spacing }));
-            let initial = match same_domain.and_then(|w| net_from_warm(&grid, w)) {
-                Some(net) => net,
-                None => grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse),
-            };
-            let tris = grid.net_triangles();
-            (
-                SurfaceModel::Grid(grid),
-                Domain::Grid { spacing },
-                initial,
-                tris,
-            )
-        }
-    };
+            false => {
+                let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
+                    (_, Some(n)) => plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
+                    (Some(Domain::Grid { spacing }), None) => *spacing,
+                    _ => {
+                        let target = (scan.target_controls_pct / 100.0 * real as f64).round();
+                        spacing_for_target(plane, &map.mesh.triangles, target as usize)
+                    }
+                };
+                let gf = GridFrame { spacing };
+                check_grid_size(plane, spacing, opts.levels)?;
+                let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
+                let same_domain = warm.filter(|w| w.domain == Some(&Domain::Grid { spacing }));
+                let initial = match same_domain.and_then(|w| net_from_warm(&grid, w)) {
+                    Some(net) => net,
+                    None => {
+                        grid_initial_net(&map.mesh, plane, &gf, &grid, opts.levels, opts.inverse)
+                    }
+                };
+                let tris = grid.net_triangles();
+                (
+                    SurfaceModel::Grid(grid),
+                    Domain::Grid { spacing },
+                    initial,
+                    tris,
+                )
+            }
+        })
+    });
+    let (model, domain, initial, fairness_tris) = resampled?;
     let resample_ms = t1.elapsed().as_secs_f64() * 1e3;
     let surface = model.as_surface();
 

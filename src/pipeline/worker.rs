@@ -357,14 +357,50 @@ pub fn run_patch_with(
             &s.near_fold,
         )
     });
-    let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
-    let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
-    let mut report = report_json(cfg, &fitted, &budget, wall.elapsed().as_secs_f64() * 1e3);
+    // The shown surface and the written descriptions need nothing of each other.
+    let (glb, (mut report, surface, warm)) = rayon::join(
+        || {
+            let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
+            tessellated_glb(&fitted, &tess, budget.tolerance)
+        },
+        || {
+            describe(
+                cfg,
+                &fitted,
+                scan_info.as_ref(),
+                &budget,
+                levels,
+                &refinement,
+                wall,
+            )
+        },
+    );
+    report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
+    Ok(PatchOutputs {
+        surface,
+        report,
+        glb,
+        warm,
+        status: fitted.outcome.status,
+    })
+}
+
+/// The report, surface.json and warm-start state of a fitted patch.
+fn describe(
+    cfg: &WorkerConfig,
+    fitted: &PatchFit,
+    scan_info: Option<&ScanFit>,
+    budget: &Budget,
+    levels: usize,
+    refinement: &[serde_json::Value],
+    wall: Instant,
+) -> (serde_json::Value, serde_json::Value, WarmStart) {
+    let mut report = report_json(cfg, fitted, budget, wall.elapsed().as_secs_f64() * 1e3);
     report["levels"] = json!(levels);
     if !refinement.is_empty() {
         report["refinement"] = json!(refinement);
     }
-    if let Some(s) = &scan_info {
+    if let Some(s) = scan_info {
         report["remeshed"] = json!(true);
         report["components"] = json!(s.components);
         report["kept_vertices"] = json!(s.kept_vertices);
@@ -392,27 +428,20 @@ pub fn run_patch_with(
         report["parameterization_ms"] = json!(s.parameterization_ms);
         report["resample_ms"] = json!(s.resample_ms);
     }
-    report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
-    let surface = surface_json(&fitted, scan_info.as_ref(), &report);
+    let surface = surface_json(fitted, scan_info, &report);
     let warm = WarmStart {
         surface: fitted.surface,
         controls: fitted.controls.clone(),
-        frame: scan_info.as_ref().map(|s| s.frame),
-        domain: scan_info.as_ref().map(|s| s.domain.clone()),
+        frame: scan_info.map(|s| s.frame),
+        domain: scan_info.map(|s| s.domain.clone()),
         coords: match &fitted.model {
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
             SurfaceModel::Bezier(_) | SurfaceModel::Mesh(_) => Vec::new(),
         },
-        feet: scan_info.as_ref().and_then(WarmFeet::of),
+        feet: scan_info.and_then(WarmFeet::of),
         parts: Vec::new(),
     };
-    Ok(PatchOutputs {
-        surface,
-        report,
-        glb,
-        warm,
-        status: fitted.outcome.status,
-    })
+    (report, surface, warm)
 }
 
 /// One fitted surface of an input: the whole patch (`suffix` empty) or one component
