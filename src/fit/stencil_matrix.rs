@@ -10,8 +10,7 @@
 //! sums up to the order of floating-point additions), solved by the same code.
 
 use super::normal_matrix::{
-    accumulate, packed_index, packed_len, BlockMatrix, Fairness, NormalMatrix, RowValues,
-    ScalarMatrix, SCALAR,
+    accumulate, packed_index, BlockMatrix, Fairness, NormalMatrix, RowValues, ScalarMatrix, SCALAR,
 };
 use super::sparse::Csr;
 use glam::DVec3;
@@ -155,10 +154,6 @@ impl StencilPlan {
         plan
     }
 
-    pub fn stencils(&self) -> &[[u32; WIDTH]] {
-        &self.stencils
-    }
-
     /// N^T W N + s L^T L and N^T W p, with `weight(r)` giving row r's W (scalar part and,
     /// for blocks, the six entries) and W p.
     fn assemble<const K: usize>(
@@ -194,7 +189,6 @@ impl StencilPlan {
                 let members = &order[start[g]..start[g + 1]];
                 accumulate(&values, members, WIDTH, &weight, p, b);
             });
-        debug_assert_eq!(packed_len(WIDTH), PAIRS);
 
         // Each control adds its memberships' sums into its own row: rows are disjoint, so
         // they are filled in parallel without conflicts.

@@ -16,11 +16,13 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// A grid fit's assembly plan and where each cell slot's stencil sits in it.
+/// A grid fit's assembly plan and where each cell slot's stencil sits in it. The plan
+/// carries the fairness term with its weight: solves through it must use that `smoothing`.
 pub(super) struct GridStencils<'a> {
     grid: &'a GridSpline,
     of_slot: Vec<u32>,
     plan: StencilPlan,
+    smoothing: f64,
 }
 
 impl<'a> GridStencils<'a> {
@@ -35,6 +37,7 @@ impl<'a> GridStencils<'a> {
             grid,
             of_slot,
             plan: StencilPlan::new(grid.control_count(), stencils, Some(fair)),
+            smoothing,
         }
     }
 
@@ -62,7 +65,9 @@ impl<'a> Rows<'a> {
         surface: &dyn TriSurface,
         stencils: Option<&'a GridStencils>,
         params: &[SurfaceParam],
+        smoothing: f64,
     ) -> Self {
+        debug_assert!(stencils.is_none_or(|s| s.smoothing == smoothing));
         match stencils.and_then(|s| Some((s.rows(params)?, &s.plan))) {
             Some((rows, plan)) => Rows::Stencil(rows, plan),
             None => Rows::General(collocation_rows(surface, params)),
@@ -127,7 +132,7 @@ pub(super) fn assembled_fit(
     opts: &FitOptions,
 ) -> FitOutcome {
     let t0 = Instant::now();
-    let basis = Rows::at(surface, stencils, params);
+    let basis = Rows::at(surface, stencils, params, smoothing);
     let budget = &opts.budget;
     let stats = |k: usize, x: &[DVec3]| {
         let mut fitted = vec![DVec3::ZERO; data.len()];
@@ -221,8 +226,11 @@ impl DistanceRound<'_> {
         start: Vec<DVec3>,
     ) -> (Vec<DVec3>, usize) {
         let rows = match (rows, self.stencils) {
-            (Some(rows), Some(s)) => Rows::Stencil(rows, &s.plan),
-            _ => Rows::at(self.surface, self.stencils, params),
+            (Some(rows), Some(s)) => {
+                debug_assert_eq!(s.smoothing, self.smoothing);
+                Rows::Stencil(rows, &s.plan)
+            }
+            _ => Rows::at(self.surface, self.stencils, params, self.smoothing),
         };
         // Small nets: one factorisation beats 25-45 preconditioned CG steps (camel head,
         // 559 controls: fit 205 ms vs 428 ms); at ~2000 controls the factorisation is the
