@@ -89,6 +89,8 @@ impl<'a> Rows<'a> {
     }
 }
 
+/// The point-to-point fit of `pia` and `lspia` (and of `parameters` correction rounds)
+/// through the engine, step by step with the budget checked after each.
 pub(super) fn run_fit(
     surface: &dyn TriSurface,
     params: &[SurfaceParam],
