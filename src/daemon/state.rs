@@ -75,12 +75,24 @@ impl StateStore {
         Some(state)
     }
 
-    /// Written to the file first; only a state on disk is served from memory.
+    /// Served from memory at once; `persist` writes it to its file. Until then (or if that
+    /// fails) a restart finds the previous file and refits the input: nothing is lost.
+    pub fn remember(&self, id: &str, state: PatchState) -> Arc<PatchState> {
+        let state = Arc::new(state);
+        self.recent().insert(id, Arc::clone(&state));
+        state
+    }
+
+    /// Writes a state to its file (atomically).
+    pub fn persist(&self, id: &str, state: &PatchState) -> Result<(), crate::io::IoError> {
+        let bytes = serde_json::to_vec(state).unwrap_or_default();
+        write_atomic(&self.path(id), &bytes)
+    }
+
+    /// `remember` and `persist`.
     pub fn save(&self, id: &str, state: PatchState) -> Result<(), crate::io::IoError> {
-        let bytes = serde_json::to_vec(&state).unwrap_or_default();
-        write_atomic(&self.path(id), &bytes)?;
-        self.recent().insert(id, Arc::new(state));
-        Ok(())
+        let state = self.remember(id, state);
+        self.persist(id, &state)
     }
 }
 
@@ -170,5 +182,21 @@ mod tests {
         assert_eq!(again.warm.controls, first.warm.controls);
         let restarted = StateStore::new(dir.path().to_path_buf());
         assert_eq!(restarted.load("p3").expect("from disk").version, "p");
+    }
+
+    /// A remembered state is served before its file exists (a newer version starts from it
+    /// while the writer is still writing); a restart before `persist` finds the old file.
+    #[test]
+    fn a_remembered_state_serves_at_once_and_reaches_disk_on_persist() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let store = StateStore::new(dir.path().to_path_buf());
+        store.save("a", state("a@1")).expect("saves");
+        let newer = store.remember("a", state("a@2"));
+        assert_eq!(store.load("a").expect("memory").version, "a@2");
+        let restarted = StateStore::new(dir.path().to_path_buf());
+        assert_eq!(restarted.load("a").expect("disk").version, "a@1");
+        store.persist("a", &newer).expect("writes");
+        let restarted = StateStore::new(dir.path().to_path_buf());
+        assert_eq!(restarted.load("a").expect("disk").version, "a@2");
     }
 }

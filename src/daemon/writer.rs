@@ -70,10 +70,17 @@ impl Writer {
             match msg {
                 WriterMsg::Done(done) => {
                     let id = done.arrival.id.clone();
-                    self.finish(done);
+                    let state = self.finish(done);
                     // The scheduler keeps the patch busy until here, so a newer version
-                    // starts from this fit's saved state.
-                    let _ = self.acks.send(Msg::Written(id));
+                    // starts from this fit's state; the state store serves it from memory
+                    // already, and its file (~2 MB for a 40k-point scan) is written while
+                    // that version fits.
+                    let _ = self.acks.send(Msg::Written(id.clone()));
+                    if let Some(state) = state {
+                        if let Err(e) = self.store.persist(&id, &state) {
+                            tracing::warn!(patch = %id, error = %e, "cannot save warm-start state");
+                        }
+                    }
                 }
                 WriterMsg::Superseded { loser, by } => {
                     tracing::info!(patch = %loser.id, input = %loser.label, by = %by, "superseded");
@@ -95,7 +102,9 @@ impl Writer {
         self.summary
     }
 
-    fn finish(&mut self, done: JobDone) {
+    /// Handles a finished job; returns the state to write to the store's file when the
+    /// outputs of a fit were written (it is already served from memory).
+    fn finish(&mut self, done: JobDone) -> Option<Arc<PatchState>> {
         let a = &done.arrival;
         let span = tracing::info_span!("patch", patch = %a.id, version = %a.version);
         let _guard = span.enter();
@@ -106,6 +115,7 @@ impl Writer {
                     Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
                 };
                 self.reject(&a.id, &a.label, keep, &reason);
+                None
             }
             Outcome::Unchanged { .. } => {
                 tracing::info!("unchanged since the last fit; skipped");
@@ -113,6 +123,7 @@ impl Writer {
                 self.metrics.unchanged.fetch_add(1, Ordering::Relaxed);
                 // Its content was fitted, so the processed-file policy applies.
                 self.processed(a, done.cfg.output.processed);
+                None
             }
             Outcome::Fitted { outputs, hash } => {
                 let start = Instant::now();
@@ -144,18 +155,19 @@ impl Writer {
                 }
                 if !written_all {
                     // Keep the old state: the next start refits this input.
-                    return;
+                    return None;
                 }
-                let state = PatchState {
-                    version: a.version.clone(),
-                    input_hash: hash,
-                    config_hash: done.cfg.output_hash(),
-                    warm,
-                };
-                if let Err(e) = self.store.save(&a.id, state) {
-                    tracing::warn!(error = %e, "cannot save warm-start state");
-                }
+                let state = self.store.remember(
+                    &a.id,
+                    PatchState {
+                        version: a.version.clone(),
+                        input_hash: hash,
+                        config_hash: done.cfg.output_hash(),
+                        warm,
+                    },
+                );
                 self.processed(a, done.cfg.output.processed);
+                Some(state)
             }
         }
     }
