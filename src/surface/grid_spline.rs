@@ -297,6 +297,7 @@ impl GridSpline {
                 }
                 let (row, column, down) = (k / 2 / self.width, k / 2 % self.width, k % 2 == 1);
                 let cell = (self.i0 + column as i64, self.j0 + row as i64, down);
+                // Covered: every stencil point is a control, so the fallback never applies.
                 let ids = cell_stencil(cell).map(|(a, b)| self.control_at(a, b).unwrap_or(0));
                 stencils.push(ids);
                 (stencils.len() - 1) as u32
