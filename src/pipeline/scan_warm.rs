@@ -3,6 +3,7 @@
 
 use super::domain::InitialNet;
 use super::scan::{Domain, ScanFit, ScanWarm};
+use super::scan_solve::rms;
 use crate::remesh::planar::PlaneFrame;
 use crate::surface::grid_spline::GridSpline;
 use crate::surface::{SurfaceParam, TriSurface};
@@ -47,10 +48,7 @@ impl WarmFeet {
                 .iter()
                 .map(|q| [q.u as f32, q.v as f32])
                 .collect(),
-            rms: {
-                let e = &fit.fit.geometric_errors;
-                (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt()
-            },
+            rms: rms(&fit.fit.geometric_errors),
         })
     }
 }
