@@ -7,7 +7,7 @@ use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellate, Coverage};
 use trispline::pipeline::scan::Domain;
-use trispline::pipeline::worker::{fit_patch, run_patch, WorkerConfig};
+use trispline::pipeline::worker::{fit_patch, run_patch, PatchOutputs, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
 use trispline::remesh::planar::{folded_triangles, planar_map, MapMethod, PlaneFrame};
@@ -24,6 +24,20 @@ fn range_scan(name: &str) -> Option<TriMesh> {
             .expect("reads")
             .mesh,
     )
+}
+
+/// The geometric RMS error a fit reports.
+fn geometric_rms(o: &PatchOutputs) -> f64 {
+    o.report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("rms")
+}
+
+/// The x coordinate below which `fraction` of the mesh's vertices lie.
+fn x_quantile(mesh: &TriMesh, fraction: f64) -> f64 {
+    let mut xs: Vec<f64> = mesh.positions.iter().map(|p| p.x).collect();
+    let k = ((xs.len() as f64 * fraction) as usize).min(xs.len() - 1);
+    *xs.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
 /// A grid of (n+1)^2 points lifted by `f`, with a square hole of `hole` cells in the middle.
@@ -134,15 +148,11 @@ fn stanford_range_scan_quality_and_warm_start() {
         controls <= 0.05 * data,
         "{controls} controls for {data} points"
     );
-    let rms = report["final"]["geometric_rms_error"]
-        .as_f64()
-        .expect("rms");
+    let rms = geometric_rms(&first);
     assert!(rms < 75e-6, "geometric rms {:.1} um", rms * 1e6);
 
     // Version 2: the 20% lowest-x vertices cut away.
-    let mut xs: Vec<f64> = mesh.positions.iter().map(|p| p.x).collect();
-    let fifth = xs.len() / 5;
-    let cut = *xs.select_nth_unstable_by(fifth, f64::total_cmp).1;
+    let cut = x_quantile(&mesh, 0.2);
     let v2 = TriMesh::new(
         mesh.positions.clone(),
         mesh.triangles
@@ -156,7 +166,7 @@ fn stanford_range_scan_quality_and_warm_start() {
         max_iterations: 1000,
         ..cfg
     };
-    let cg_steps = |o: &trispline::pipeline::worker::PatchOutputs| {
+    let cg_steps = |o: &PatchOutputs| {
         o.report["iterations"]
             .as_array()
             .and_then(|a| a.last())
@@ -201,10 +211,8 @@ fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
         ..WorkerConfig::default()
     };
     let first = run_patch(&mesh, None, &cfg).expect("fits");
-    let v1_rms = first.report["final"]["geometric_rms_error"]
-        .as_f64()
-        .expect("rms");
-    let rounds = |o: &trispline::pipeline::worker::PatchOutputs| {
+    let v1_rms = geometric_rms(&first);
+    let rounds = |o: &PatchOutputs| {
         o.report["parameter_correction_rms"]
             .as_array()
             .expect("rounds")
@@ -237,9 +245,7 @@ fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
         warm.report["parameter_correction_rms"]
     );
     assert_eq!(warm.report["status"], "stalled");
-    let warm_rms = warm.report["final"]["geometric_rms_error"]
-        .as_f64()
-        .expect("rms");
+    let warm_rms = geometric_rms(&warm);
     assert!(
         warm_rms <= (1.0 + 0.02) * v1_rms,
         "{:.1} um vs {:.1} um",
@@ -248,9 +254,7 @@ fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
     );
 
     // The quarter with the largest x lifted by 1 mm: the previous surface misses it.
-    let mut xs: Vec<f64> = mesh.positions.iter().map(|p| p.x).collect();
-    let quarter = xs.len() * 3 / 4;
-    let x_cut = *xs.select_nth_unstable_by(quarter, f64::total_cmp).1;
+    let x_cut = x_quantile(&mesh, 0.75);
     let changed = jitter(24e-6, &|p| p.x > x_cut);
     let warm = run_patch(&changed, Some(&first.warm), &cfg).expect("warm");
     assert_eq!(warm.report["warm_start"], true);

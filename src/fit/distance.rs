@@ -264,16 +264,7 @@ mod tests {
             })
             .collect();
         let basis = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
-            .map(|i| {
-                vec![
-                    (i, 1.0),
-                    ((i + 1) % m as u32, -0.5),
-                    ((i + 7) % m as u32, -0.5),
-                ]
-            })
-            .collect();
-        let fairness = Collocation::new(Csr::from_rows(m, lap.iter().map(|r| r.as_slice())));
+        let fairness = Collocation::new(crate::fit::sparse::ring_laplacian(m, 7));
         let data: Vec<DVec3> = (0..50).map(|j| DVec3::splat(j as f64)).collect();
         let normals: Vec<DVec3> = (0..50)
             .map(|j| DVec3::new((j as f64).cos(), 0.3, (j as f64).sin()).normalize())

@@ -587,16 +587,7 @@ mod tests {
             })
             .collect();
         let n = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
-            .map(|i| {
-                vec![
-                    (i, 1.0),
-                    ((i + 1) % m as u32, -0.5),
-                    ((i + 9) % m as u32, -0.5),
-                ]
-            })
-            .collect();
-        let l = Csr::from_rows(m, lap.iter().map(|r| r.as_slice()));
+        let l = crate::fit::sparse::ring_laplacian(m, 9);
         let lt = l.transpose();
         let s = 0.3;
         let fair = Some(Fairness {

@@ -278,3 +278,19 @@ impl Collocation {
         }
     }
 }
+
+/// A test fairness operator: row i is control i minus half of each of two neighbours on a
+/// ring of m controls, at offsets 1 and `far`.
+#[cfg(test)]
+pub(crate) fn ring_laplacian(m: usize, far: u32) -> Csr {
+    let rows: Vec<Vec<(u32, f64)>> = (0..m as u32)
+        .map(|i| {
+            vec![
+                (i, 1.0),
+                ((i + 1) % m as u32, -0.5),
+                ((i + far) % m as u32, -0.5),
+            ]
+        })
+        .collect();
+    Csr::from_rows(m, rows.iter().map(|r| r.as_slice()))
+}

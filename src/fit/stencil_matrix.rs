@@ -386,16 +386,7 @@ mod tests {
         let normals: Vec<DVec3> = (0..points)
             .map(|_| DVec3::new(rng.next() - 0.5, rng.next() - 0.5, 1.0).normalize())
             .collect();
-        let lap: Vec<Vec<(u32, f64)>> = (0..m as u32)
-            .map(|i| {
-                vec![
-                    (i, 1.0),
-                    ((i + 1) % m as u32, -0.5),
-                    ((i + 9) % m as u32, -0.5),
-                ]
-            })
-            .collect();
-        let l = Csr::from_rows(m, lap.iter().map(|r| r.as_slice()));
+        let l = crate::fit::sparse::ring_laplacian(m, 9);
         let fairness = super::super::Collocation::new(l);
         let fair = Fairness {
             l: fairness.n(),
