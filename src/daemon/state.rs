@@ -152,6 +152,7 @@ mod tests {
                 surface: SurfaceKind::Loop,
                 controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],
                 frame: None,
+                warp: None,
                 domain: None,
                 coords: Vec::new(),
                 feet: None,

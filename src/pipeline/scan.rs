@@ -17,7 +17,8 @@ use crate::fit::engine::umbrella_laplacian;
 use crate::fit::{Collocation, FitOutcome, FitStatus, Method, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::fill_holes;
-use crate::remesh::planar::{planar_map, MapMethod, PlaneFrame};
+use crate::remesh::planar::{evened_out, planar_map, MapMethod, PlaneFrame};
+use crate::remesh::warp::PlaneWarp;
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};
 use crate::surface::grid_spline::GridSpline;
 use crate::surface::loop_limit::LoopLimitSurface;
@@ -136,6 +137,8 @@ pub struct ScanFit {
     pub kept_vertices: usize,
     pub holes: usize,
     pub frame: PlaneFrame,
+    /// The warp of the projection plane, if the map is a warped projection.
+    pub warp: Option<PlaneWarp>,
     pub domain: Domain,
     pub map_method: MapMethod,
     pub folds_projected: usize,
@@ -166,6 +169,7 @@ pub struct ScanFit {
 #[derive(Clone, Debug, Default)]
 pub struct ScanWarm<'a> {
     pub frame: Option<PlaneFrame>,
+    pub warp: Option<&'a PlaneWarp>,
     pub domain: Option<&'a Domain>,
     pub controls: &'a [DVec3],
     /// Grid coordinates of `controls` (Loop grid).
@@ -205,7 +209,11 @@ pub fn fit_scan(
         None => PlaneFrame::fit_least_folds(&part)
             .ok_or_else(|| PipelineError::Unsupported("degenerate patch: no mean normal".into()))?,
     };
-    let map = planar_map(&patch, &frame).map_err(unsupported)?;
+    let map = evened_out(
+        planar_map(&patch, &frame).map_err(unsupported)?,
+        &patch,
+        warm.and_then(|w| w.warp),
+    );
     let plane = &map.plane;
     let edge_length = median_edge_length(&part);
     let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -545,6 +553,7 @@ pub fn fit_scan(
         domain,
         map_method: map.method,
         folds_projected: map.folds_projected,
+        warp: map.warp.clone(),
         filled: map.mesh,
         mapped_params,
         near_fold: map.near_fold,

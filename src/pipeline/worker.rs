@@ -12,6 +12,7 @@ use crate::fit::{Budget, FitStatus, Method, StepHook, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::remesh::planar::PlaneFrame;
+use crate::remesh::warp::PlaneWarp;
 use crate::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -175,6 +176,9 @@ pub struct WarmStart {
     /// new version's parameters line up with the previous controls.
     #[serde(default)]
     pub frame: Option<PlaneFrame>,
+    /// ... and the warp of that plane (warped projections).
+    #[serde(default)]
+    pub warp: Option<PlaneWarp>,
     #[serde(default)]
     pub domain: Option<Domain>,
     /// Loop grid: grid coordinates of `controls`.
@@ -299,6 +303,7 @@ pub fn fit_patch_with(
             };
             let warm = previous.map(|w| ScanWarm {
                 frame: w.frame,
+                warp: w.warp.as_ref(),
                 domain: w.domain.as_ref(),
                 controls: &w.controls,
                 coords: &w.coords,
@@ -416,6 +421,7 @@ fn describe(
         report["parameterization"] = json!({
             "method": s.map_method,
             "folded_triangles": s.folds_projected,
+            "warp_blend": s.warp.as_ref().map(|w| w.blend),
         });
         report["initial_net"] = json!({
             "resampled_points": s.initial.resample_points,
@@ -433,6 +439,7 @@ fn describe(
         surface: fitted.surface,
         controls: fitted.controls.clone(),
         frame: scan_info.map(|s| s.frame),
+        warp: scan_info.and_then(|s| s.warp.clone()),
         domain: scan_info.map(|s| s.domain.clone()),
         coords: match &fitted.model {
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
@@ -570,6 +577,7 @@ pub fn run_input_with(
             surface: cfg.surface,
             controls: Vec::new(),
             frame: None,
+            warp: None,
             domain: None,
             coords: Vec::new(),
             feet: None,

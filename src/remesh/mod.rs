@@ -4,6 +4,7 @@
 
 pub mod param;
 pub mod planar;
+pub mod warp;
 
 use crate::mesh::topology::{Topology, NONE};
 use crate::mesh::TriMesh;

@@ -12,6 +12,7 @@
 //! provably bijective, and verified to have no triangle of non-positive area.
 
 use super::param::mean_value_disk;
+use super::warp::PlaneWarp;
 use super::{FilledPatch, RemeshError};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
@@ -157,6 +158,8 @@ pub struct PlanarMap {
     pub folds_projected: usize,
     /// Vertices of those folded triangles: where the map is not to be trusted.
     pub near_fold: Vec<bool>,
+    /// The warp applied after the projection (`evened_out`), if any.
+    pub warp: Option<PlaneWarp>,
 }
 
 /// Twice the signed area of a triangle in the map (positive counter-clockwise).
@@ -237,6 +240,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
             method: MapMethod::Projection,
             folds_projected,
             near_fold,
+            warp: None,
         });
     }
     // Not a height field over any plane: the provably bijective map.
@@ -265,7 +269,63 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         plane: disk,
         method: MapMethod::MeanValueDisk,
         folds_projected,
+        warp: None,
     })
+}
+
+/// Lattice triangles of the warp over a patch's data: ~1 per control point at the default
+/// 5 % controls of a 40k-point scan. Measured on the Stanford scans: 1000 leaves chin at
+/// 74.7 um, 2000 at 72.9; the warp costs ~10 ms either way.
+const WARP_LATTICE_TRIANGLES: usize = 2000;
+const WARP_ITERATIONS: usize = 5;
+
+/// A projection map composed with a `PlaneWarp` that evens out its stretch (see
+/// `warp`): the previous version's warp when it covers this version's points (the
+/// parameters of the two versions then agree), else a new one. Maps of other kinds come
+/// back unchanged. Triangles the warp folds join the projection's folds: left out of the
+/// mapped mesh, their vertices marked.
+pub fn evened_out(
+    mut map: PlanarMap,
+    patch: &FilledPatch,
+    previous: Option<&PlaneWarp>,
+) -> PlanarMap {
+    if map.method != MapMethod::Projection {
+        return map;
+    }
+    let real = &patch.mesh.triangles[..patch.real_triangles];
+    let warp = match previous.filter(|w| w.covers(&map.plane)) {
+        Some(w) => Some(w.clone()),
+        None => PlaneWarp::build(
+            &patch.mesh.positions,
+            &map.plane,
+            real,
+            WARP_LATTICE_TRIANGLES,
+            WARP_ITERATIONS,
+        ),
+    };
+    let Some(warp) = warp else {
+        return map;
+    };
+    for p in &mut map.plane {
+        *p = warp.apply(*p);
+    }
+    let folds = folded_triangles(&map.mesh.triangles, &map.plane);
+    if !folds.is_empty() {
+        let mut drop = vec![false; map.mesh.triangles.len()];
+        for f in folds {
+            drop[f] = true;
+            for v in map.mesh.triangles[f] {
+                map.near_fold[v as usize] = true;
+            }
+        }
+        let mut k = 0;
+        map.mesh.triangles.retain(|_| {
+            k += 1;
+            !drop[k - 1]
+        });
+    }
+    map.warp = Some(warp);
+    map
 }
 
 fn ring_length(points: impl Iterator<Item = DVec3>) -> f64 {
