@@ -265,13 +265,20 @@ fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
     );
 }
 
-/// Issue goal: the trimmed surface stays within 1 mm of the data everywhere. bun045 has
-/// holes whose smooth continuation leaves the flat fill by millimetres, MeshLab's
-/// triangulation spans gaps with triangles many samples wide: both are trimmed out, the
-/// narrow holes bridged.
+/// Issue goals on every Stanford scan with the defaults: RMS geometric error under 75 um
+/// with at most 5 % control points, and the trimmed surface within 1 mm of the data
+/// everywhere. bun045 has holes whose smooth continuation leaves the flat fill by
+/// millimetres, MeshLab's triangulation spans gaps with triangles many samples wide: both
+/// are trimmed out, the narrow holes bridged.
 #[test]
-fn trimmed_stanford_surfaces_stay_within_a_millimetre_of_the_data() {
-    for name in ["bun045_tri.ply", "bun000_meshlab_triangulated.ply"] {
+fn stanford_scans_meet_the_quality_goals() {
+    for name in [
+        "bun000_tri.ply",
+        "bun045_tri.ply",
+        "chin_tri.ply",
+        "bun000_meshlab_triangulated.ply",
+        "bun000_range_grid.ply",
+    ] {
         let Some(mesh) = range_scan(name) else {
             return;
         };
@@ -280,6 +287,10 @@ fn trimmed_stanford_surfaces_stay_within_a_millimetre_of_the_data() {
             ..WorkerConfig::default()
         };
         let fitted = fit_patch(&mesh, None, &cfg).expect("fits");
+        let rms = fitted.fit.geometric_rms();
+        assert!(rms < 75e-6, "{name}: rms {:.1} um", rms * 1e6);
+        let (controls, points) = (fitted.fit.controls.len(), fitted.fit.data.len());
+        assert!(20 * controls <= points, "{name}: {controls} controls, {points} points");
         let scan = fitted.scan.as_ref().expect("remeshed scan");
         let coverage = Coverage::new(
             &scan.hole_plan.covered,
@@ -301,7 +312,9 @@ fn trimmed_stanford_surfaces_stay_within_a_millimetre_of_the_data() {
             scan.hole_plan.bridged.iter().filter(|b| **b).count(),
             scan.hole_plan.trimmed() + scan.hole_plan.wide_triangles.len(),
         );
-        assert!(trimmed > 0, "{name}: something was too wide to bridge");
+        if name.starts_with("bun045") || name.contains("meshlab") {
+            assert!(trimmed > 0, "{name}: something was too wide to bridge");
+        }
         if name.starts_with("bun045") {
             assert!(bridged > 0, "{name}: narrow holes bridged");
         }
@@ -432,8 +445,7 @@ fn the_time_cap_stops_the_correction_rounds() {
 }
 
 /// The correction knobs: a smaller tangential share and rounds until they gain under 1 %
-/// take the chin scan (the hardest of the Stanford five) from 83 um to under 76 um RMS,
-/// with the trimmed surface still within a millimetre of the data.
+/// take the chin scan (the hardest of the Stanford five) from 72.9 um to 70.1 um RMS.
 #[test]
 fn correction_knobs_trade_maximum_for_rms_error() {
     let Some(mesh) = range_scan("chin_tri.ply") else {
@@ -456,7 +468,7 @@ fn correction_knobs_trade_maximum_for_rms_error() {
         tuned_fit.fit.geometric_rms(),
     );
     assert!(
-        t < 76e-6 && t < 0.95 * d,
+        t < 0.98 * d,
         "rms {:.1} um tuned vs {:.1} um",
         t * 1e6,
         d * 1e6

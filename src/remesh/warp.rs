@@ -53,7 +53,7 @@ impl PlaneWarp {
         iterations: usize,
     ) -> Option<Self> {
         let area: f64 = tris.iter().map(|t| plane_area(plane, t).max(0.0)).sum();
-        if !(area > 0.0) || lattice_triangles == 0 {
+        if area.is_nan() || area <= 0.0 || lattice_triangles == 0 {
             return None;
         }
         let spacing = (4.0 * area / (3f64.sqrt() * lattice_triangles as f64)).sqrt();
@@ -178,7 +178,7 @@ impl PlaneWarp {
             let [a, b, c] = t.map(|v| v as usize);
             let (u1, u2) = (plane[b] - plane[a], plane[c] - plane[a]);
             let det = u1.perp_dot(u2);
-            if !(det > 0.0) {
+            if det.is_nan() || det <= 0.0 {
                 continue;
             }
             let (x1, x2) = (positions[b] - positions[a], positions[c] - positions[a]);
@@ -283,10 +283,10 @@ fn relax(
     // A weak pull toward the identity fixes the free translation.
     let pin = 1e-6;
     let mut triplets = Vec::with_capacity(12 * cells + n);
-    for c in 0..cells {
+    for (c, w) in weights.iter().enumerate() {
         let t = lattice.triangle(c);
-        for k in 0..3 {
-            let (i, j, w) = (t[(k + 1) % 3], t[(k + 2) % 3], weights[c][k]);
+        for (k, &w) in w.iter().enumerate() {
+            let (i, j) = (t[(k + 1) % 3], t[(k + 2) % 3]);
             triplets.extend([
                 Triplet::new(i, i, w),
                 Triplet::new(j, j, w),
@@ -301,20 +301,20 @@ fn relax(
     let mut image = rest.to_vec();
     for _ in 0..iterations {
         let mut rhs = [faer::Mat::<f64>::zeros(n, 1), faer::Mat::<f64>::zeros(n, 1)];
-        for c in 0..cells {
+        for (c, (shape, w)) in shapes.iter().zip(&weights).enumerate() {
             let t = lattice.triangle(c);
             let mut cov = DMat2::ZERO;
-            for k in 0..3 {
+            for (k, &wk) in w.iter().enumerate() {
                 let (i, j) = ((k + 1) % 3, (k + 2) % 3);
                 let du = image[t[i]] - image[t[j]];
-                let dx = shapes[c][i] - shapes[c][j];
-                cov += DMat2::from_cols(du * dx.x, du * dx.y) * weights[c][k];
+                let dx = shape[i] - shape[j];
+                cov += DMat2::from_cols(du * dx.x, du * dx.y) * wk;
             }
             let rotation =
                 DMat2::from_angle((cov.x_axis.y - cov.y_axis.x).atan2(cov.x_axis.x + cov.y_axis.y));
-            for k in 0..3 {
+            for (k, &wk) in w.iter().enumerate() {
                 let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-                let d = rotation * (shapes[c][i] - shapes[c][j]) * weights[c][k];
+                let d = rotation * (shape[i] - shape[j]) * wk;
                 rhs[0][(t[i], 0)] += d.x;
                 rhs[1][(t[i], 0)] += d.y;
                 rhs[0][(t[j], 0)] -= d.x;
@@ -406,4 +406,102 @@ fn capped([a, b, c]: [f64; 3]) -> [f64; 3] {
         m1 * v.x * v.y + m2 * w.x * w.y,
         m1 * v.y * v.y + m2 * w.y * w.y,
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A height field z = h(x, y) over the unit square, sampled n x n, as (positions,
+    /// projection, triangles).
+    fn height_field(n: usize, h: impl Fn(f64, f64) -> f64) -> (Vec<DVec3>, Vec<DVec2>, Vec<[u32; 3]>) {
+        let mut positions = Vec::new();
+        let mut plane = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (i as f64 / (n - 1) as f64, j as f64 / (n - 1) as f64);
+                positions.push(DVec3::new(x, y, h(x, y)));
+                plane.push(DVec2::new(x, y));
+            }
+        }
+        let mut tris = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = |i: usize, j: usize| (i + j * n) as u32;
+                tris.push([v(i, j), v(i + 1, j), v(i + 1, j + 1)]);
+                tris.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
+            }
+        }
+        (positions, plane, tris)
+    }
+
+    #[test]
+    fn a_flat_patch_is_left_as_it_is() {
+        let (positions, plane, tris) = height_field(40, |_, _| 0.25);
+        let warp = PlaneWarp::build(&positions, &plane, &tris, 500, 5).expect("warp");
+        assert_eq!(warp.blend, 1.0);
+        let moved = plane
+            .iter()
+            .map(|p| (warp.apply(*p) - *p).length())
+            .fold(0.0, f64::max);
+        assert!(moved < 1e-9, "moved {moved}");
+    }
+
+    #[test]
+    fn a_steep_part_gets_more_of_the_plane_one_to_one_and_capped() {
+        // Flat for x < 0.5, then rising at slope 3 (stretch sqrt(10) = 3.2 along x).
+        let (positions, plane, tris) = height_field(60, |x, _| 3.0 * (x - 0.5).max(0.0));
+        let warp = PlaneWarp::build(&positions, &plane, &tris, 800, 5).expect("warp");
+        assert!(warp.covers(&plane));
+        assert!(!warp.covers(&[DVec2::new(5.0, 5.0)]));
+        let image: Vec<DVec2> = plane.iter().map(|p| warp.apply(*p)).collect();
+        let width = |x0: f64, x1: f64| {
+            let at = |x: f64| warp.apply(DVec2::new(x, 0.5)).x;
+            at(x1) - at(x0)
+        };
+        // Away from the crease the steep strip is stretched toward the cap, the flat one
+        // is not (the total grows: nothing holds the outer boundary).
+        let (flat, steep) = (width(0.1, 0.35), width(0.65, 0.9));
+        assert!(steep > 1.6 * flat, "flat {flat}, steep {steep}");
+        assert!(steep < 2.05 * flat, "beyond the cap: flat {flat}, steep {steep}");
+        // Across y (no slope) nothing is stretched.
+        let height = warp.apply(DVec2::new(0.2, 0.9)).y - warp.apply(DVec2::new(0.2, 0.1)).y;
+        assert!((height - 0.8).abs() < 0.08, "height {height}");
+        // No data triangle turns over.
+        let folded = tris
+            .iter()
+            .filter(|t| {
+                let [a, b, c] = t.map(|v| image[v as usize]);
+                (b - a).perp_dot(c - a) <= 0.0
+            })
+            .count();
+        assert_eq!(folded, 0);
+    }
+
+    #[test]
+    fn simple_polygons_are_told_from_self_crossing_ones() {
+        let square = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        assert!(simple_polygon(&square));
+        let bow_tie = [square[0], square[1], square[3], square[2]];
+        assert!(!simple_polygon(&bow_tie));
+    }
+
+    #[test]
+    fn the_metric_cap_keeps_directions_and_limits_lengths() {
+        // Stretch 4 along (1, 1) / sqrt(2), none across.
+        let v = DVec2::new(1.0, 1.0).normalize();
+        let g = |l: f64| [1.0 + (l - 1.0) * v.x * v.x, (l - 1.0) * v.x * v.y, 1.0 + (l - 1.0) * v.y * v.y];
+        let [a, b, c] = capped(g(16.0));
+        let along = a * v.x * v.x + 2.0 * b * v.x * v.y + c * v.y * v.y;
+        let w = v.perp();
+        let across = a * w.x * w.x + 2.0 * b * w.x * w.y + c * w.y * w.y;
+        let cap = MAX_DIRECTIONAL_STRETCH * MAX_DIRECTIONAL_STRETCH;
+        assert!((along - cap).abs() < 1e-12 && (across - 1.0).abs() < 1e-12);
+        assert_eq!(capped(g(2.0)), g(2.0));
+    }
 }
