@@ -90,6 +90,12 @@ pub fn surface_json(
             "domain": s.domain,
             "map": s.map_method,
         });
+        if let Some(w) = &s.warp {
+            v["parameter_frame"]["warp"] = json!({
+                "about": "the projection (s, t) is warped before the domain applies: lattice vertex (i, j), 0 <= i < columns, 0 <= j < rows, sits at origin + spacing (i + j / 2, j sqrt(3) / 2) and moves to image[i + j columns]; between vertices the warp is linear on the triangles (i,j),(i+1,j),(i,j+1) and (i+1,j),(i+1,j+1),(i,j+1)",
+                "lattice": w,
+            });
+        }
         v["trim"] = json!({
             "space": "the surface's own parameters (barycentric (u, v) for bezier, grid (x, y) for loop)",
             "outer": s.trim.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
