@@ -290,7 +290,10 @@ fn stanford_scans_meet_the_quality_goals() {
         let rms = fitted.fit.geometric_rms();
         assert!(rms < 75e-6, "{name}: rms {:.1} um", rms * 1e6);
         let (controls, points) = (fitted.fit.controls.len(), fitted.fit.data.len());
-        assert!(20 * controls <= points, "{name}: {controls} controls, {points} points");
+        assert!(
+            20 * controls <= points,
+            "{name}: {controls} controls, {points} points"
+        );
         let scan = fitted.scan.as_ref().expect("remeshed scan");
         let coverage = Coverage::new(
             &scan.hole_plan.covered,

@@ -414,7 +414,10 @@ mod tests {
 
     /// A height field z = h(x, y) over the unit square, sampled n x n, as (positions,
     /// projection, triangles).
-    fn height_field(n: usize, h: impl Fn(f64, f64) -> f64) -> (Vec<DVec3>, Vec<DVec2>, Vec<[u32; 3]>) {
+    fn height_field(
+        n: usize,
+        h: impl Fn(f64, f64) -> f64,
+    ) -> (Vec<DVec3>, Vec<DVec2>, Vec<[u32; 3]>) {
         let mut positions = Vec::new();
         let mut plane = Vec::new();
         for j in 0..n {
@@ -463,7 +466,10 @@ mod tests {
         // is not (the total grows: nothing holds the outer boundary).
         let (flat, steep) = (width(0.1, 0.35), width(0.65, 0.9));
         assert!(steep > 1.6 * flat, "flat {flat}, steep {steep}");
-        assert!(steep < 2.05 * flat, "beyond the cap: flat {flat}, steep {steep}");
+        assert!(
+            steep < 2.05 * flat,
+            "beyond the cap: flat {flat}, steep {steep}"
+        );
         // Across y (no slope) nothing is stretched.
         let height = warp.apply(DVec2::new(0.2, 0.9)).y - warp.apply(DVec2::new(0.2, 0.1)).y;
         assert!((height - 0.8).abs() < 0.08, "height {height}");
@@ -495,7 +501,13 @@ mod tests {
     fn the_metric_cap_keeps_directions_and_limits_lengths() {
         // Stretch 4 along (1, 1) / sqrt(2), none across.
         let v = DVec2::new(1.0, 1.0).normalize();
-        let g = |l: f64| [1.0 + (l - 1.0) * v.x * v.x, (l - 1.0) * v.x * v.y, 1.0 + (l - 1.0) * v.y * v.y];
+        let g = |l: f64| {
+            [
+                1.0 + (l - 1.0) * v.x * v.x,
+                (l - 1.0) * v.x * v.y,
+                1.0 + (l - 1.0) * v.y * v.y,
+            ]
+        };
         let [a, b, c] = capped(g(16.0));
         let along = a * v.x * v.x + 2.0 * b * v.x * v.y + c * v.y * v.y;
         let w = v.perp();

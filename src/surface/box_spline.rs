@@ -214,22 +214,12 @@ pub fn evaluate_ordinates(
     // and the linear ones the first derivatives and the value (blossoming), in a quarter of
     // the operations of summing 15 Bernstein values with their derivatives.
     let lw = 1.0 - lu - lv;
-    let row = |m: usize, j: usize| j * (m + 1) - j * j.saturating_sub(1) / 2;
-    let reduce = |from: &[DVec3], m: usize, to: &mut [DVec3]| {
-        for j in 0..m {
-            for i in 0..m - j {
-                to[row(m - 1, j) + i] = from[row(m, j) + i + 1] * lu
-                    + from[row(m, j + 1) + i] * lv
-                    + from[row(m, j) + i] * lw;
-            }
-        }
-    };
     let mut cubic = [DVec3::ZERO; 10];
-    reduce(net, 4, &mut cubic);
+    casteljau_step::<4>(net, &mut cubic, lu, lv, lw);
     let mut quad = [DVec3::ZERO; 6];
-    reduce(&cubic, 3, &mut quad);
+    casteljau_step::<3>(&cubic, &mut quad, lu, lv, lw);
     let mut lin = [DVec3::ZERO; 3];
-    reduce(&quad, 2, &mut lin);
+    casteljau_step::<2>(&quad, &mut lin, lu, lv, lw);
     // Quadratic points in lattice order: (0,0) w^2, (1,0) uw, (2,0) u^2, (0,1) vw, (1,1) uv,
     // (0,2) v^2; linear: (0,0) w, (1,0) u, (0,1) v.
     let (c002, c101, c200, c011, c110, c020) =
@@ -244,6 +234,21 @@ pub fn evaluate_ordinates(
         duu: (c200 + c002 - c101 * 2.0) * (12.0 * s2),
         duv: (c002 + c110 - c101 - c011) * (12.0 * s2),
         dvv: (c020 + c002 - c011 * 2.0) * (12.0 * s2),
+    }
+}
+
+/// One de Casteljau step from degree M to M - 1 on triangular lattices in lattice order
+/// (row j holds M + 1 - j points). M is a constant so that the loops unroll: this runs
+/// three times per surface evaluation, millions of times per fit.
+#[inline(always)]
+fn casteljau_step<const M: usize>(from: &[DVec3], to: &mut [DVec3], lu: f64, lv: f64, lw: f64) {
+    let row = |m: usize, j: usize| j * (m + 1) - j * j.saturating_sub(1) / 2;
+    for j in 0..M {
+        for i in 0..M - j {
+            to[row(M - 1, j) + i] = from[row(M, j) + i + 1] * lu
+                + from[row(M, j + 1) + i] * lv
+                + from[row(M, j) + i] * lw;
+        }
     }
 }
 
