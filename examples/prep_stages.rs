@@ -20,7 +20,7 @@ use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Cov
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
-use trispline::remesh::planar::{planar_map, PlaneFrame};
+use trispline::remesh::planar::{evened_out, planar_map, PlaneFrame};
 use trispline::surface::grid_spline::GridSpline;
 use trispline::TriMesh;
 
@@ -82,6 +82,9 @@ fn main() {
         let Ok(map) = stage("planar_map", repeats, || planar_map(&patch, &frame)) else {
             continue;
         };
+        let map = stage("evened_out", repeats, || {
+            evened_out(map.clone(), &patch, None)
+        });
         let plane_bits: Vec<[u64; 2]> = map
             .plane
             .iter()

@@ -16,6 +16,7 @@ use super::warp::PlaneWarp;
 use super::{FilledPatch, RemeshError};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
+use rayon::prelude::*;
 
 /// An orthonormal frame of the parameter plane, in the input's coordinates. Kept in the
 /// warm-start state so that a new version of a patch is projected the same way.
@@ -306,9 +307,10 @@ pub fn evened_out(
     let Some(warp) = warp else {
         return map;
     };
-    for p in &mut map.plane {
-        *p = warp.apply(*p);
-    }
+    map.plane
+        .par_iter_mut()
+        .with_min_len(4096)
+        .for_each(|p| *p = warp.apply(*p));
     let folds = folded_triangles(&map.mesh.triangles, &map.plane);
     if !folds.is_empty() {
         let mut drop = vec![false; map.mesh.triangles.len()];

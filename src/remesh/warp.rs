@@ -15,8 +15,12 @@
 //! checked; failing that, the warp is blended toward the identity until they hold.
 
 use glam::{DMat2, DVec2, DVec3};
+use rayon::prelude::*;
 
 const SQRT3_2: f64 = 0.866_025_403_784_438_6;
+
+/// Data triangles per parallel task of the metric sums.
+const METRIC_CHUNK: usize = 16_384;
 
 /// The most a lattice triangle is stretched toward the surface's size, per direction. The
 /// line of sight meets grazing walls and silhouettes at stretches of 3-5 and more; there the
@@ -173,26 +177,39 @@ impl PlaneWarp {
         plane: &[DVec2],
         tris: &[[u32; 3]],
     ) -> Vec<[f64; 3]> {
-        let mut sum = vec![[0.0; 4]; self.cell_count()];
-        for t in tris {
-            let [a, b, c] = t.map(|v| v as usize);
-            let (u1, u2) = (plane[b] - plane[a], plane[c] - plane[a]);
-            let det = u1.perp_dot(u2);
-            if det.is_nan() || det <= 0.0 {
-                continue;
+        // Fixed chunks summed in order: the same bits whatever the threads do.
+        let partial = |chunk: &[[u32; 3]]| {
+            let mut sum = vec![[0.0; 4]; self.cell_count()];
+            for t in chunk {
+                let [a, b, c] = t.map(|v| v as usize);
+                let (u1, u2) = (plane[b] - plane[a], plane[c] - plane[a]);
+                let det = u1.perp_dot(u2);
+                if det.is_nan() || det <= 0.0 {
+                    continue;
+                }
+                let (x1, x2) = (positions[b] - positions[a], positions[c] - positions[a]);
+                // Jacobian columns d/du, d/dv of the linear map sending u1 -> x1, u2 -> x2.
+                let ju = (x1 * u2.y - x2 * u1.y) / det;
+                let jv = (x2 * u1.x - x1 * u2.x) / det;
+                let centroid = (plane[a] + plane[b] + plane[c]) / 3.0;
+                if let Some((c, _)) = self.locate(centroid) {
+                    let w = 0.5 * det;
+                    let s = &mut sum[c];
+                    s[0] += w * ju.dot(ju);
+                    s[1] += w * ju.dot(jv);
+                    s[2] += w * jv.dot(jv);
+                    s[3] += w;
+                }
             }
-            let (x1, x2) = (positions[b] - positions[a], positions[c] - positions[a]);
-            // Jacobian columns d/du, d/dv of the linear map sending u1 -> x1, u2 -> x2.
-            let ju = (x1 * u2.y - x2 * u1.y) / det;
-            let jv = (x2 * u1.x - x1 * u2.x) / det;
-            let centroid = (plane[a] + plane[b] + plane[c]) / 3.0;
-            if let Some((c, _)) = self.locate(centroid) {
-                let w = 0.5 * det;
-                let s = &mut sum[c];
-                s[0] += w * ju.dot(ju);
-                s[1] += w * ju.dot(jv);
-                s[2] += w * jv.dot(jv);
-                s[3] += w;
+            sum
+        };
+        let partials: Vec<Vec<[f64; 4]>> = tris.par_chunks(METRIC_CHUNK).map(partial).collect();
+        let mut sum = vec![[0.0; 4]; self.cell_count()];
+        for p in partials {
+            for (s, q) in sum.iter_mut().zip(p) {
+                for k in 0..4 {
+                    s[k] += q[k];
+                }
             }
         }
         let cell_area = 3f64.sqrt() / 4.0 * self.spacing * self.spacing;
@@ -260,8 +277,6 @@ fn relax(
     metrics: &[[f64; 3]],
     iterations: usize,
 ) -> Option<Vec<DVec2>> {
-    use faer::linalg::solvers::Solve;
-    use faer::sparse::{SparseColMat, Triplet};
     let n = rest.len();
     let cells = lattice.cell_count();
     let mut shapes: Vec<[DVec2; 3]> = Vec::with_capacity(cells);
@@ -282,25 +297,32 @@ fn relax(
     }
     // A weak pull toward the identity fixes the free translation.
     let pin = 1e-6;
-    let mut triplets = Vec::with_capacity(12 * cells + n);
+    // Lattice neighbours differ by 1, columns - 1 or columns in index (rows - 1 or rows
+    // when numbered column by column): a band matrix along the shorter side.
+    let (columns, rows) = (lattice.columns, lattice.rows);
+    let by_columns = rows < columns;
+    let order = |v: usize| match by_columns {
+        true => (v / columns) + (v % columns) * rows,
+        false => v,
+    };
+    let mut system = BandMatrix::new(n, if by_columns { rows } else { columns });
     for (c, w) in weights.iter().enumerate() {
         let t = lattice.triangle(c);
         for (k, &w) in w.iter().enumerate() {
-            let (i, j) = (t[(k + 1) % 3], t[(k + 2) % 3]);
-            triplets.extend([
-                Triplet::new(i, i, w),
-                Triplet::new(j, j, w),
-                Triplet::new(i, j, -w),
-                Triplet::new(j, i, -w),
-            ]);
+            system.add_edge(order(t[(k + 1) % 3]), order(t[(k + 2) % 3]), w);
         }
     }
-    triplets.extend((0..n).map(|k| Triplet::new(k, k, pin)));
-    let system = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).ok()?;
-    let llt = system.sp_cholesky(faer::Side::Lower).ok()?;
+    for k in 0..n {
+        system.add_edge(k, k, pin);
+    }
+    let factor = system.cholesky()?;
     let mut image = rest.to_vec();
+    let (mut bx, mut by) = (vec![0.0; n], vec![0.0; n]);
     for _ in 0..iterations {
-        let mut rhs = [faer::Mat::<f64>::zeros(n, 1), faer::Mat::<f64>::zeros(n, 1)];
+        for (k, r) in rest.iter().enumerate() {
+            bx[order(k)] = pin * r.x;
+            by[order(k)] = pin * r.y;
+        }
         for (c, (shape, w)) in shapes.iter().zip(&weights).enumerate() {
             let t = lattice.triangle(c);
             let mut cov = DMat2::ZERO;
@@ -313,30 +335,124 @@ fn relax(
             let rotation =
                 DMat2::from_angle((cov.x_axis.y - cov.y_axis.x).atan2(cov.x_axis.x + cov.y_axis.y));
             for (k, &wk) in w.iter().enumerate() {
-                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-                let d = rotation * (shape[i] - shape[j]) * wk;
-                rhs[0][(t[i], 0)] += d.x;
-                rhs[1][(t[i], 0)] += d.y;
-                rhs[0][(t[j], 0)] -= d.x;
-                rhs[1][(t[j], 0)] -= d.y;
+                let (i, j) = (order(t[(k + 1) % 3]), order(t[(k + 2) % 3]));
+                let d = rotation * (shape[(k + 1) % 3] - shape[(k + 2) % 3]) * wk;
+                bx[i] += d.x;
+                by[i] += d.y;
+                bx[j] -= d.x;
+                by[j] -= d.y;
             }
         }
-        for (k, r) in rest.iter().enumerate() {
-            rhs[0][(k, 0)] += pin * r.x;
-            rhs[1][(k, 0)] += pin * r.y;
-        }
-        // One column at a time: faer's multi-column sparse solve runs far slower here.
-        for b in &mut rhs {
-            llt.solve_in_place(b.as_mut());
-        }
+        factor.solve(&mut bx);
+        factor.solve(&mut by);
         for (k, p) in image.iter_mut().enumerate() {
-            *p = DVec2::new(rhs[0][(k, 0)], rhs[1][(k, 0)]);
+            *p = DVec2::new(bx[order(k)], by[order(k)]);
         }
     }
     if !image.iter().all(|p| p.is_finite()) {
         return None;
     }
     Some(aligned(&image, rest))
+}
+
+/// A symmetric positive definite matrix with nonzeros only within `band` of the diagonal:
+/// row i keeps entries i - band ..= i, stored contiguously so that the factorisation's
+/// inner products run over slices.
+struct BandMatrix {
+    band: usize,
+    rows: Vec<f64>,
+}
+
+impl BandMatrix {
+    fn new(n: usize, band: usize) -> Self {
+        Self {
+            band,
+            rows: vec![0.0; n * (band + 1)],
+        }
+    }
+
+    fn at(&mut self, i: usize, j: usize) -> &mut f64 {
+        debug_assert!(j <= i && i - j <= self.band);
+        &mut self.rows[i * (self.band + 1) + self.band + j - i]
+    }
+
+    /// Adds w (x_i - x_j)^2 to the quadratic form (w x_i^2 for i == j).
+    fn add_edge(&mut self, i: usize, j: usize, w: f64) {
+        if i == j {
+            *self.at(i, i) += w;
+            return;
+        }
+        let (hi, lo) = (i.max(j), i.min(j));
+        *self.at(hi, hi) += w;
+        *self.at(lo, lo) += w;
+        *self.at(hi, lo) -= w;
+    }
+
+    /// L with L L^T = self, in the same band layout; `None` if not positive definite.
+    fn cholesky(mut self) -> Option<Self> {
+        let (b, width) = (self.band, self.band + 1);
+        let n = self.rows.len() / width;
+        for i in 0..n {
+            let first = i.saturating_sub(b);
+            for j in first..=i {
+                // L_ij = (A_ij - sum_{m < j} L_im L_jm) / L_jj over the columns both keep.
+                let from = first.max(j.saturating_sub(b));
+                let (row_i, row_j) = (i * width + b - i, j * width + b - j);
+                let dot = dot(
+                    &self.rows[row_i + from..row_i + j],
+                    &self.rows[row_j + from..row_j + j],
+                );
+                let a = self.rows[row_i + j] - dot;
+                if i == j {
+                    if a.is_nan() || a <= 0.0 {
+                        return None;
+                    }
+                    self.rows[row_i + j] = a.sqrt();
+                } else {
+                    self.rows[row_i + j] = a / self.rows[row_j + j];
+                }
+            }
+        }
+        Some(self)
+    }
+
+    /// Solves L L^T x = b in place (self factored).
+    fn solve(&self, x: &mut [f64]) {
+        let (b, width) = (self.band, self.band + 1);
+        let n = x.len();
+        for i in 0..n {
+            let row = i * width + b - i;
+            let first = i.saturating_sub(b);
+            let dot = dot(&self.rows[row + first..row + i], &x[first..i]);
+            x[i] = (x[i] - dot) / self.rows[row + i];
+        }
+        for i in (0..n).rev() {
+            let row = i * width + b - i;
+            x[i] /= self.rows[row + i];
+            let (xi, first) = (x[i], i.saturating_sub(b));
+            for (xm, l) in x[first..i].iter_mut().zip(&self.rows[row + first..row + i]) {
+                *xm -= l * xi;
+            }
+        }
+    }
+}
+
+/// Inner product in four independent sums (vectorisable, unlike one running sum).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut lanes = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            lanes[k] += x[k] * y[k];
+        }
+    }
+    (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]) + tail
 }
 
 /// `image` moved rigidly onto `rest` in the least-squares sense, so that the warp does not
@@ -515,5 +631,56 @@ mod tests {
         let cap = MAX_DIRECTIONAL_STRETCH * MAX_DIRECTIONAL_STRETCH;
         assert!((along - cap).abs() < 1e-12 && (across - 1.0).abs() < 1e-12);
         assert_eq!(capped(g(2.0)), g(2.0));
+    }
+}
+
+#[cfg(test)]
+mod band_tests {
+    use super::BandMatrix;
+
+    #[test]
+    fn band_cholesky_solves_a_weighted_path_laplacian() {
+        // Edges (i, i + 1) and (i, i + 3) with varied weights, plus a diagonal pull.
+        let n = 40;
+        let mut m = BandMatrix::new(n, 3);
+        let mut dense = vec![vec![0.0; n]; n];
+        let mut add = |i: usize, j: usize, w: f64| {
+            m.add_edge(i, j, w);
+            dense[i][i] += w;
+            if i != j {
+                dense[j][j] += w;
+                dense[i][j] -= w;
+                dense[j][i] -= w;
+            }
+        };
+        for i in 0..n {
+            add(i, i, 0.01 + 0.001 * i as f64);
+            if i + 1 < n {
+                add(i, i + 1, 1.0 + (i % 5) as f64);
+            }
+            if i + 3 < n {
+                add(i + 3, i, 0.5);
+            }
+        }
+        let x_true: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut b: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|j| dense[i][j] * x_true[j]).sum())
+            .collect();
+        m.cholesky().expect("definite").solve(&mut b);
+        let err = b
+            .iter()
+            .zip(&x_true)
+            .map(|(a, e)| (a - e).abs())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-9, "error {err}");
+    }
+
+    #[test]
+    fn band_cholesky_refuses_an_indefinite_matrix() {
+        let mut m = BandMatrix::new(3, 1);
+        m.add_edge(1, 0, 1.0);
+        m.add_edge(2, 1, 1.0);
+        // A pure Laplacian is singular: no pull on any vertex.
+        assert!(m.cholesky().is_none());
     }
 }
