@@ -11,7 +11,7 @@ use crate::mesh::inverse::{coarsen, InverseMethod};
 use crate::remesh::param::Locator;
 use crate::remesh::planar::doubled_area;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
-use crate::surface::grid_spline::{cell_stencil, Cell, GridSpline};
+use crate::surface::grid_spline::{cell_stencil, floor_i64, Cell, GridSpline};
 use crate::surface::TriSurface;
 use crate::TriMesh;
 use glam::{DVec2, DVec3};
@@ -83,14 +83,19 @@ pub fn covered_cells(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> V
 /// coordinates. The grid coordinates are computed once per vertex (the same arithmetic as
 /// per corner, so the same values).
 fn cell_ranges(frame: &GridFrame, plane: &[DVec2], tris: &[[u32; 3]]) -> Vec<[i64; 4]> {
-    let grid: Vec<(f64, f64)> = plane.iter().map(|p| frame.to_grid(*p)).collect();
-    tris.iter()
+    let grid: Vec<(f64, f64)> = plane
+        .par_iter()
+        .with_min_len(4096)
+        .map(|p| frame.to_grid(*p))
+        .collect();
+    tris.par_iter()
+        .with_min_len(4096)
         .map(|t| {
             let g = t.map(|v| grid[v as usize]);
-            let x0 = g.iter().map(|p| p.0).fold(f64::MAX, f64::min).floor() as i64;
-            let x1 = g.iter().map(|p| p.0).fold(f64::MIN, f64::max).floor() as i64;
-            let y0 = g.iter().map(|p| p.1).fold(f64::MAX, f64::min).floor() as i64;
-            let y1 = g.iter().map(|p| p.1).fold(f64::MIN, f64::max).floor() as i64;
+            let x0 = floor_i64(g.iter().map(|p| p.0).fold(f64::MAX, f64::min));
+            let x1 = floor_i64(g.iter().map(|p| p.0).fold(f64::MIN, f64::max));
+            let y0 = floor_i64(g.iter().map(|p| p.1).fold(f64::MAX, f64::min));
+            let y1 = floor_i64(g.iter().map(|p| p.1).fold(f64::MIN, f64::max));
             [x0, x1, y0, y1]
         })
         .collect()
