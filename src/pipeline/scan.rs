@@ -137,8 +137,10 @@ pub struct ScanFit {
     pub kept_vertices: usize,
     pub holes: usize,
     pub frame: PlaneFrame,
-    /// The warp of the projection plane, if the map is a warped projection.
+    /// The warp of the projection plane, if the map is a warped projection, and the
+    /// triangles it folded (left out of `filled` with the projection's folds).
     pub warp: Option<PlaneWarp>,
+    pub folds_warped: usize,
     pub domain: Domain,
     pub map_method: MapMethod,
     pub folds_projected: usize,
@@ -562,6 +564,7 @@ pub fn fit_scan(
         map_method: map.method,
         folds_projected: map.folds_projected,
         warp: map.warp.clone(),
+        folds_warped: map.folds_warped,
         filled: map.mesh,
         mapped_params,
         near_fold: map.near_fold,

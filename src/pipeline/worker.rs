@@ -422,6 +422,7 @@ fn describe(
             "method": s.map_method,
             "folded_triangles": s.folds_projected,
             "warp_blend": s.warp.as_ref().map(|w| w.blend),
+            "warp_folded_triangles": s.folds_warped,
         });
         report["initial_net"] = json!({
             "resampled_points": s.initial.resample_points,

@@ -159,8 +159,10 @@ pub struct PlanarMap {
     pub folds_projected: usize,
     /// Vertices of those folded triangles: where the map is not to be trusted.
     pub near_fold: Vec<bool>,
-    /// The warp applied after the projection (`evened_out`), if any.
+    /// The warp applied after the projection (`evened_out`), if any...
     pub warp: Option<PlaneWarp>,
+    /// ... and the triangles it folded besides the projection's (left out like those).
+    pub folds_warped: usize,
 }
 
 /// Twice the signed area of a triangle in the map (positive counter-clockwise).
@@ -242,6 +244,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
             folds_projected,
             near_fold,
             warp: None,
+            folds_warped: 0,
         });
     }
     // Not a height field over any plane: the provably bijective map.
@@ -271,6 +274,7 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
         method: MapMethod::MeanValueDisk,
         folds_projected,
         warp: None,
+        folds_warped: 0,
     })
 }
 
@@ -312,6 +316,7 @@ pub fn evened_out(
         .with_min_len(4096)
         .for_each(|p| *p = warp.apply(*p));
     let folds = folded_triangles(&map.mesh.triangles, &map.plane);
+    map.folds_warped = folds.len();
     if !folds.is_empty() {
         let mut drop = vec![false; map.mesh.triangles.len()];
         for f in folds {
