@@ -2,6 +2,7 @@
 //! (virtual faces, never data), the least-fold projection (`planar`) and its bijective
 //! fallback, Floater's mean-value map onto a disk (`param`), and point location in the map.
 
+mod band;
 pub mod param;
 pub mod planar;
 pub mod warp;
