@@ -103,9 +103,17 @@ impl PlaneWarp {
         warp.made_injective(&rest)
     }
 
-    /// Whether every point lies inside the lattice (where the warp is what it was built as).
+    /// Whether the warp is well formed (one read back from a state file may not be) and
+    /// every point lies inside its lattice, where it is what it was built as.
     pub fn covers(&self, points: &[DVec2]) -> bool {
-        points.iter().all(|p| self.locate(*p).is_some())
+        let well_formed = self.columns >= 2
+            && self.rows >= 2
+            && self.columns.checked_mul(self.rows) == Some(self.image.len())
+            && self.spacing.is_finite()
+            && self.spacing > 0.0
+            && self.origin.is_finite()
+            && self.image.iter().all(|p| p.is_finite());
+        well_formed && points.iter().all(|p| self.locate(*p).is_some())
     }
 
     /// Where the lattice puts point `p`.
@@ -535,6 +543,22 @@ mod tests {
             })
             .count();
         assert_eq!(folded, 0);
+    }
+
+    #[test]
+    fn a_malformed_warp_covers_nothing() {
+        let (positions, plane, tris) = height_field(20, |x, _| x * x);
+        let warp = PlaneWarp::build(&positions, &plane, &tris, 200, 3).expect("warp");
+        assert!(warp.covers(&plane));
+        let mut short = warp.clone();
+        short.image.pop();
+        assert!(!short.covers(&plane));
+        let mut flat = warp.clone();
+        flat.rows = 1;
+        assert!(!flat.covers(&plane));
+        let mut broken = warp;
+        broken.image[0].x = f64::NAN;
+        assert!(!broken.covers(&plane));
     }
 
     #[test]
