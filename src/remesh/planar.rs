@@ -224,19 +224,8 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
     if (folds.len() as f64) <= MAX_FOLD_FRACTION * mesh.triangles.len() as f64 {
         // A few folds at grazing silhouettes: leave them out of the mapped mesh (they only
         // serve point location); their vertices keep their projected parameters as data.
-        let mut drop = vec![false; mesh.triangles.len()];
         let mut near_fold = vec![false; plane.len()];
-        for f in folds {
-            drop[f] = true;
-            for v in mesh.triangles[f] {
-                near_fold[v as usize] = true;
-            }
-        }
-        let mut k = 0;
-        mesh.triangles.retain(|_| {
-            k += 1;
-            !drop[k - 1]
-        });
+        leave_out_folds(&mut mesh.triangles, &folds, &mut near_fold);
         return Ok(PlanarMap {
             mesh,
             plane,
@@ -317,22 +306,29 @@ pub fn evened_out(
         .for_each(|p| *p = warp.apply(*p));
     let folds = folded_triangles(&map.mesh.triangles, &map.plane);
     map.folds_warped = folds.len();
-    if !folds.is_empty() {
-        let mut drop = vec![false; map.mesh.triangles.len()];
-        for f in folds {
-            drop[f] = true;
-            for v in map.mesh.triangles[f] {
-                map.near_fold[v as usize] = true;
-            }
-        }
-        let mut k = 0;
-        map.mesh.triangles.retain(|_| {
-            k += 1;
-            !drop[k - 1]
-        });
-    }
+    leave_out_folds(&mut map.mesh.triangles, &folds, &mut map.near_fold);
     map.warp = Some(warp);
     map
+}
+
+/// Removes the triangles `folds` (indices, increasing) from `tris` and marks their
+/// vertices in `near_fold`.
+fn leave_out_folds(tris: &mut Vec<[u32; 3]>, folds: &[usize], near_fold: &mut [bool]) {
+    if folds.is_empty() {
+        return;
+    }
+    let mut drop = vec![false; tris.len()];
+    for &f in folds {
+        drop[f] = true;
+        for v in tris[f] {
+            near_fold[v as usize] = true;
+        }
+    }
+    let mut k = 0;
+    tris.retain(|_| {
+        k += 1;
+        !drop[k - 1]
+    });
 }
 
 fn ring_length(points: impl Iterator<Item = DVec3>) -> f64 {

@@ -15,6 +15,7 @@
 //! checked; failing that, the warp is blended toward the identity until they hold.
 
 use super::band::BandMatrix;
+use super::planar::doubled_area;
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -57,7 +58,10 @@ impl PlaneWarp {
         lattice_triangles: usize,
         iterations: usize,
     ) -> Option<Self> {
-        let area: f64 = tris.iter().map(|t| plane_area(plane, t).max(0.0)).sum();
+        let area: f64 = tris
+            .iter()
+            .map(|t| 0.5 * doubled_area(plane, t).max(0.0))
+            .sum();
         if area.is_nan() || area <= 0.0 || lattice_triangles == 0 {
             return None;
         }
@@ -271,11 +275,6 @@ impl PlaneWarp {
         ring.extend((1..r - 1).rev().map(|j| at(0, j)));
         ring
     }
-}
-
-fn plane_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
-    let [a, b, c] = t.map(|v| plane[v as usize]);
-    0.5 * (b - a).perp_dot(c - a)
 }
 
 /// Local/global ARAP on the lattice: each triangle's rest shape is its plane shape under
