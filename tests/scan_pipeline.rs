@@ -199,7 +199,8 @@ fn stanford_range_scan_quality_and_warm_start() {
 }
 
 /// A rescan of an unchanged surface (the same points with ~7 um of noise) is fitted by the
-/// previous surface within the rounds' minimum gain: no round runs. A version with a moved
+/// previous surface within the rounds' minimum gain, allowing for the fresh noise: no round
+/// runs. A version with a moved
 /// region is not, and its rounds run.
 #[test]
 fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
