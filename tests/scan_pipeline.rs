@@ -448,10 +448,11 @@ fn the_time_cap_stops_the_correction_rounds() {
     assert_eq!(capped.fit.outcome.status, trispline::fit::FitStatus::Capped);
 }
 
-/// The correction knobs: a smaller tangential share and rounds until they gain under 1 %
-/// take the chin scan (the hardest of the Stanford five) from 72.9 um to 70.1 um RMS.
+/// The rounds knobs: rounds until they gain under 1 % (default 4 %) trade time for RMS
+/// error: they take the chin scan (the hardest of the Stanford five) from 71.9 um after 6
+/// rounds to 67.7 um after 10.
 #[test]
-fn correction_knobs_trade_maximum_for_rms_error() {
+fn more_correction_rounds_lower_the_rms_error() {
     let Some(mesh) = range_scan("chin_tri.ply") else {
         return;
     };
@@ -460,7 +461,6 @@ fn correction_knobs_trade_maximum_for_rms_error() {
         ..WorkerConfig::default()
     };
     let tuned = WorkerConfig {
-        correction_tangential: 0.01,
         correction_min_gain: 0.01,
         correction_rounds: 16,
         ..base.clone()
@@ -472,9 +472,51 @@ fn correction_knobs_trade_maximum_for_rms_error() {
         tuned_fit.fit.geometric_rms(),
     );
     assert!(
-        t < 0.98 * d,
+        t < 0.96 * d,
         "rms {:.1} um tuned vs {:.1} um",
         t * 1e6,
         d * 1e6
+    );
+}
+
+/// Distance rounds let the surface slide freely inside the data and keep it stiff within
+/// half a control spacing of the data's edges. On chin, with the default rounds: the
+/// band's 71.9 um RMS against 75.9 um with the edge share everywhere, and a 0.74 mm largest
+/// error against 1.45 mm with the interior share everywhere (the surface slides past the
+/// last points).
+#[test]
+fn the_edge_band_lowers_the_rms_without_raising_the_maximum() {
+    let Some(mesh) = range_scan("chin_tri.ply") else {
+        return;
+    };
+    let band = WorkerConfig {
+        surface: SurfaceKind::Loop,
+        ..WorkerConfig::default()
+    };
+    let (inner, edge) = (band.correction_tangential, band.correction_tangential_edge);
+    assert!(inner < edge);
+    let uniform = |t: f64| WorkerConfig {
+        correction_tangential: t,
+        correction_tangential_edge: t,
+        ..band.clone()
+    };
+    let fit = |cfg: &WorkerConfig| {
+        let f = fit_patch(&mesh, None, cfg).expect("fits");
+        (f.fit.geometric_rms(), f.fit.geometric_max())
+    };
+    let (band_rms, band_max) = fit(&band);
+    let (stiff_rms, _) = fit(&uniform(edge));
+    let (_, loose_max) = fit(&uniform(inner));
+    assert!(
+        band_rms < 0.97 * stiff_rms,
+        "rms {:.1} um with the band vs {:.1} um stiff everywhere",
+        band_rms * 1e6,
+        stiff_rms * 1e6
+    );
+    assert!(
+        band_max < 0.75 * loose_max,
+        "max {:.0} um with the band vs {:.0} um loose everywhere",
+        band_max * 1e6,
+        loose_max * 1e6
     );
 }

@@ -5,7 +5,7 @@ use crate::fit::Method;
 use crate::io::{read_mesh_file, write_atomic, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::components::ComponentMode;
-use crate::pipeline::worker::{run_input_with, PatchOutputs, WorkerConfig};
+use crate::pipeline::worker::{self, run_input_with, PatchOutputs, WorkerConfig};
 use crate::pipeline::{PipelineError, SurfaceKind};
 use anyhow::Context;
 use serde_json::json;
@@ -51,10 +51,10 @@ pub struct FitArgs {
     #[arg(long)]
     pub lattice: Option<usize>,
     /// Scans, `loop`: control points as a percentage of the data points.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = worker::default_target_controls_pct())]
     pub target_controls_pct: f64,
     /// Scans: rounds of parameter correction (data parameters moved to foot points).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = worker::default_correction_rounds())]
     pub corrections: usize,
     /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
     /// or `parameters` (point-to-point again).
@@ -62,12 +62,16 @@ pub struct FitArgs {
     pub correction: crate::pipeline::scan::Correction,
     /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
     /// fraction.
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = worker::default_correction_min_gain())]
     pub correction_min_gain: f64,
     /// Scans, distance rounds: share of the point-to-point term beside point-to-plane
-    /// (smaller: lower RMS, higher maximum errors).
-    #[arg(long, default_value_t = 0.02)]
+    /// inside the data (smaller: rounds converge faster and further)...
+    #[arg(long, default_value_t = worker::default_correction_tangential())]
     pub correction_tangential: f64,
+    /// ... and within half a control spacing of the data's edges (smaller: the surface
+    /// slides past the last points, higher maximum errors).
+    #[arg(long, default_value_t = worker::default_correction_tangential_edge())]
+    pub correction_tangential_edge: f64,
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = 1e-5)]
     pub smoothing: f64,
@@ -126,6 +130,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         correction: args.correction,
         correction_min_gain: args.correction_min_gain,
         correction_tangential: args.correction_tangential,
+        correction_tangential_edge: args.correction_tangential_edge,
         smoothing: args.smoothing,
         tessellation: args.tessellation,
         components: args.components,

@@ -240,12 +240,16 @@ impl DaemonConfig {
                 "must be in [0, 1)",
             );
         }
-        if !(f.correction_tangential > 0.0 && f.correction_tangential <= 1.0) {
-            return bad(
-                "fit.correction_tangential",
-                f.correction_tangential.to_string(),
-                "must be in (0, 1]",
-            );
+        for (key, value) in [
+            ("fit.correction_tangential", f.correction_tangential),
+            (
+                "fit.correction_tangential_edge",
+                f.correction_tangential_edge,
+            ),
+        ] {
+            if !(value > 0.0 && value <= 1.0) {
+                return bad(key, value.to_string(), "must be in (0, 1]");
+            }
         }
         if f.correction_rounds > 100 {
             return bad(

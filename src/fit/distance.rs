@@ -1,11 +1,12 @@
 //! Squared-distance minimisation (point-to-plane with a tangential share) at fixed foot
 //! points: minimise
-//!     sum_j (n_j . (S(u_j) - p_j))^2 + t |S(u_j) - p_j|^2  +  s |L P|^2
+//!     sum_j (n_j . (S(u_j) - p_j))^2 + t_j |S(u_j) - p_j|^2  +  s |L P|^2
 //! over the control points P, where u_j are foot points of the data on the current surface
 //! and n_j the surface normals there. Unlike point-to-point fitting with parameter
 //! correction, the surface may slide along itself at no cost, so a few rounds reach what
-//! many rounds of parameter correction approach slowly. `t` keeps the system definite
-//! where the normals alone leave a direction free (flat regions, no data).
+//! many rounds of parameter correction approach slowly. `t_j` keeps the system definite
+//! where the normals alone leave a direction free (flat regions, no data), and sets how
+//! freely the surface slides at point j (`pipeline::edge_band` picks it per point).
 //!
 //! Solved by conjugate gradients on the (symmetric positive definite) normal equations,
 //! with the three coordinates coupled through n_j n_j^T, preconditioned by the 3x3 diagonal
@@ -23,8 +24,8 @@ pub struct DistanceProblem<'a> {
     pub data: &'a [DVec3],
     /// Unit surface normals at the foot points, one per data point.
     pub normals: &'a [DVec3],
-    /// Weight of the full point-to-point term beside the point-to-plane one.
-    pub tangential: f64,
+    /// Per data point: weight of the full point-to-point term beside the point-to-plane one.
+    pub tangential: &'a [f64],
     pub fairness: Option<&'a Collocation>,
     pub smoothing: f64,
 }
@@ -50,12 +51,12 @@ impl DistanceProblem<'_> {
     /// blocks are tested against.
     #[cfg(test)]
     fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        let t = self.tangential;
         let mut nx = vec![DVec3::ZERO; self.basis.nrows];
         self.basis.mul_vec3(x, &mut nx);
         nx.iter_mut()
             .zip(self.normals)
-            .for_each(|(r, n)| *r = *n * n.dot(*r) + *r * t);
+            .zip(self.tangential)
+            .for_each(|((r, n), t)| *r = *n * n.dot(*r) + *r * *t);
         Collocation::new(self.basis.clone()).mul_t_vec3(&nx, out);
         if let Some(l) = self.fairness.filter(|_| self.smoothing > 0.0) {
             let mut lx = vec![DVec3::ZERO; l.nrows()];
@@ -115,7 +116,7 @@ mod tests {
             basis: &basis,
             data: &data,
             normals: &normals,
-            tangential: 1.0,
+            tangential: &[1.0; 40],
             fairness: None,
             smoothing: 0.0,
         };
@@ -159,7 +160,7 @@ mod tests {
             basis: &basis,
             data: &data,
             normals: &normals,
-            tangential: 0.0,
+            tangential: &[0.0; 20],
             fairness: None,
             smoothing: 0.0,
         };
@@ -200,12 +201,12 @@ mod tests {
         let normals: Vec<DVec3> = (0..60)
             .map(|j| DVec3::new(0.3 * (j as f64).sin(), 0.2, 1.0).normalize())
             .collect();
-        let t = 0.02;
+        let t: Vec<f64> = (0..60).map(|j| [0.02, 0.002][j % 2]).collect();
         let p = DistanceProblem {
             basis: &basis,
             data: &data,
             normals: &normals,
-            tangential: t,
+            tangential: &t,
             fairness: None,
             smoothing: 0.0,
         };
@@ -215,7 +216,8 @@ mod tests {
         let mut rhs = nalgebra::DVector::<f64>::zeros(3 * m);
         for (j, row) in rows.iter().enumerate() {
             let n = normals[j];
-            let w = glam::DMat3::from_cols(n * n.x, n * n.y, n * n.z) + glam::DMat3::IDENTITY * t;
+            let w =
+                glam::DMat3::from_cols(n * n.x, n * n.y, n * n.z) + glam::DMat3::IDENTITY * t[j];
             let wp = w * data[j];
             for &(a, wa) in row {
                 for r in 0..3 {
@@ -273,7 +275,7 @@ mod tests {
             basis: &basis,
             data: &data,
             normals: &normals,
-            tangential: 0.05,
+            tangential: &(0..50).map(|j| 0.01 * (j % 5) as f64).collect::<Vec<_>>(),
             fairness: Some(&fairness),
             smoothing: 0.7,
         };

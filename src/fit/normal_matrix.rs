@@ -443,12 +443,13 @@ impl ScalarMatrix {
 }
 
 impl BlockMatrix {
-    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t I.
+    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (`tangential`: t_j per
+    /// data row).
     pub fn assemble(
         n: &Csr,
         data: &[DVec3],
         normals: &[DVec3],
-        tangential: f64,
+        tangential: &[f64],
         fairness: Option<Fairness>,
         lower_only: bool,
     ) -> Self {
@@ -464,10 +465,10 @@ impl BlockMatrix {
     pub(super) fn weight<'a>(
         data: &'a [DVec3],
         normals: &'a [DVec3],
-        t: f64,
+        tangential: &'a [f64],
     ) -> impl Fn(usize) -> ([f64; 8], DVec3) + Sync + 'a {
         move |r: usize| {
-            let (q, p) = (normals[r], data[r]);
+            let (q, p, t) = (normals[r], data[r], tangential[r]);
             (
                 [
                     t,
@@ -649,13 +650,14 @@ mod tests {
         let normals: Vec<DVec3> = (0..rows_count)
             .map(|j| DVec3::new((j as f64).sin(), 0.5, 1.0).normalize())
             .collect();
-        let t = 0.05;
-        let blocks = BlockMatrix::assemble(&n, &data, &normals, t, None, false);
+        // Each row its own tangential share, as near and far from the data's edges.
+        let t: Vec<f64> = (0..rows_count).map(|j| [0.005, 0.05][j % 2]).collect();
+        let blocks = BlockMatrix::assemble(&n, &data, &normals, &t, None, false);
         let mut want = DMatrix::<f64>::zeros(3 * m, 3 * m);
         let mut rhs = DVector::<f64>::zeros(3 * m);
         for (j, row) in rows.iter().enumerate() {
             let q = normals[j];
-            let w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t;
+            let w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t[j];
             let wp = w * data[j];
             for &(a, wa) in row {
                 for r in 0..3 {

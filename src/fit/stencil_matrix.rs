@@ -280,13 +280,13 @@ impl StencilPlan {
         self.assemble::<1>(rows, ScalarMatrix::weight(data))
     }
 
-    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t I (squared distance).
+    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (squared distance).
     pub fn assemble_blocks(
         &self,
         rows: &StencilRows,
         data: &[DVec3],
         normals: &[DVec3],
-        tangential: f64,
+        tangential: &[f64],
     ) -> BlockMatrix {
         self.assemble::<8>(rows, BlockMatrix::weight(data, normals, tangential))
     }
@@ -411,9 +411,10 @@ mod tests {
             );
         }
 
+        let tangential: Vec<f64> = (0..points).map(|j| [0.005, 0.05][j % 2]).collect();
         let (a, b) = (
-            plan.assemble_blocks(&rows, &data, &normals, 0.05),
-            BlockMatrix::assemble(&basis, &data, &normals, 0.05, Some(fair), false),
+            plan.assemble_blocks(&rows, &data, &normals, &tangential),
+            BlockMatrix::assemble(&basis, &data, &normals, &tangential, Some(fair), false),
         );
         for (x, y) in dense(&a, m).iter().zip(&dense(&b, m)) {
             for k in 0..8 {

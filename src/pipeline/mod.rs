@@ -3,6 +3,7 @@
 
 pub mod components;
 pub mod domain;
+pub mod edge_band;
 pub mod geometric;
 pub mod holes;
 pub mod lattice;

@@ -8,6 +8,7 @@ use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
     plane_extent, spacing_for_target, GridFrame, InitialNet,
 };
+use super::edge_band::near_edges;
 use super::holes::{plan_holes, HolePlan};
 use super::scan_solve::{assembled_fit, foot_points, rms, run_fit, DistanceRound, GridStencils};
 pub use super::scan_warm::WarmFeet;
@@ -27,6 +28,27 @@ use crate::TriMesh;
 use glam::{DVec2, DVec3};
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Width of the band along the data's edges where distance rounds keep the larger
+/// tangential share, in control spacings. Measured on the five Stanford scans (band as
+/// ~3 rings of samples, about half a spacing): interior share 0.005 against a uniform
+/// 0.02 took chin from 72.9 to 70.8 um RMS in 7 rounds instead of 8, with the largest
+/// error 720 um instead of 734; the interior share alone everywhere stalled chin at 73 um
+/// with a 1.8 mm maximum.
+const EDGE_BAND_SPACINGS: f64 = 0.5;
+
+/// The distance between neighbouring control points in the plane of the map.
+fn control_spacing(domain: &Domain, degree: usize) -> f64 {
+    match domain {
+        Domain::Grid { spacing } => *spacing,
+        Domain::Triangle { corners } => {
+            let sides: f64 = (0..3)
+                .map(|k| corners[k].distance(corners[(k + 1) % 3]))
+                .sum();
+            sides / 3.0 / degree.max(1) as f64
+        }
+    }
+}
 
 /// What `bezier` means on a scan.
 #[derive(
@@ -68,10 +90,14 @@ pub struct ScanOptions {
     pub correction: Correction,
     /// Rounds stop once one lowers the geometric RMS by less than this fraction.
     pub correction_min_gain: f64,
-    /// Share of the point-to-point term beside the point-to-plane one in distance rounds:
-    /// smaller converges further (lower RMS) but lets the surface slide more where data end
-    /// (higher maximum errors).
+    /// Share of the point-to-point term beside the point-to-plane one in distance rounds,
+    /// inside the data: smaller lets the surface slide more freely, so rounds converge
+    /// faster and further (lower RMS).
     pub correction_tangential: f64,
+    /// The same share within half a control spacing of the data's edges (outer rim and
+    /// holes): sliding there pulls the surface past the last points (higher maximum
+    /// errors), so it stays stiffer.
+    pub correction_tangential_edge: f64,
     /// The largest component must have at least this many vertices.
     pub min_component_vertices: usize,
     /// Holes (and data triangles) with a bridging radius above this many median edge
@@ -426,13 +452,28 @@ pub fn fit_scan(
     } else {
         scan.correction_rounds
     };
+    let tangential: Vec<f64> = if rounds > 0 {
+        let rims: Vec<&[u32]> = std::iter::once(patch.outer.as_slice())
+            .chain(patch.hole_loops.iter().map(|h| h.as_slice()))
+            .collect();
+        let radius = EDGE_BAND_SPACINGS * control_spacing(&domain, scan.lattice);
+        near_edges(&part, &plane[..real], &rims, radius)
+            .iter()
+            .map(|&near| match near {
+                true => scan.correction_tangential_edge,
+                false => scan.correction_tangential,
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     let round = DistanceRound {
         surface,
         stencils: if rounds > 0 { grid_stencils() } else { None },
         data,
         fairness: &fairness,
         smoothing,
-        tangential: scan.correction_tangential,
+        tangential: &tangential,
         max_iterations: opts.budget.max_iterations,
     };
     for _ in 0..rounds {

@@ -212,7 +212,8 @@ pub(super) struct DistanceRound<'a> {
     pub data: &'a [DVec3],
     pub fairness: &'a Collocation,
     pub smoothing: f64,
-    pub tangential: f64,
+    /// Per data point (`edge_band`: larger along the data's edges).
+    pub tangential: &'a [f64],
     pub max_iterations: usize,
 }
 

@@ -61,9 +61,13 @@ pub struct WorkerConfig {
     /// fraction.
     #[serde(default = "default_correction_min_gain")]
     pub correction_min_gain: f64,
-    /// Scans, distance rounds: share of the point-to-point term beside point-to-plane.
+    /// Scans, distance rounds: share of the point-to-point term beside point-to-plane,
+    /// inside the data...
     #[serde(default = "default_correction_tangential")]
     pub correction_tangential: f64,
+    /// ... and within half a control spacing of the data's edges.
+    #[serde(default = "default_correction_tangential_edge")]
+    pub correction_tangential_edge: f64,
     /// Scans: fairness weight relative to the data.
     pub smoothing: f64,
     /// Tessellation segments per side in the GLB.
@@ -102,19 +106,23 @@ fn default_min_levels() -> usize {
     1
 }
 
-fn default_target_controls_pct() -> f64 {
+pub fn default_target_controls_pct() -> f64 {
     5.0
 }
 
-fn default_correction_min_gain() -> f64 {
+pub fn default_correction_min_gain() -> f64 {
+    0.04
+}
+
+pub fn default_correction_tangential() -> f64 {
+    0.005
+}
+
+pub fn default_correction_tangential_edge() -> f64 {
     0.02
 }
 
-fn default_correction_tangential() -> f64 {
-    0.02
-}
-
-fn default_correction_rounds() -> usize {
+pub fn default_correction_rounds() -> usize {
     8
 }
 
@@ -144,6 +152,7 @@ impl Default for WorkerConfig {
             correction_rounds: default_correction_rounds(),
             correction_min_gain: default_correction_min_gain(),
             correction_tangential: default_correction_tangential(),
+            correction_tangential_edge: default_correction_tangential_edge(),
             correction: default_correction(),
             smoothing: 1e-5,
             tessellation: 128,
@@ -298,6 +307,7 @@ pub fn fit_patch_with(
                 correction: cfg.correction,
                 correction_min_gain: cfg.correction_min_gain,
                 correction_tangential: cfg.correction_tangential,
+                correction_tangential_edge: cfg.correction_tangential_edge,
                 min_component_vertices: cfg.min_component_vertices,
                 hole_bridge_edges: cfg.hole_bridge_edges,
             };
