@@ -36,6 +36,15 @@ impl RowValues for FixedRows<'_> {
     }
 }
 
+/// What an assembly sums per stencil: the rows' values and weights, and the rows of each
+/// stencil (`order[start[g]..start[g + 1]]`).
+struct StencilSums<'a, W> {
+    values: &'a FixedRows<'a>,
+    weight: &'a W,
+    order: &'a [u32],
+    start: &'a [usize],
+}
+
 /// The fixed part of every assembly over a set of stencils.
 #[derive(Clone, Debug)]
 pub struct StencilPlan {
@@ -43,13 +52,19 @@ pub struct StencilPlan {
     stencils: Vec<[u32; WIDTH]>,
     ptr: Vec<usize>,
     idx: Vec<u32>,
-    /// The stencil memberships of control c: `members[member_ptr[c]..member_ptr[c + 1]]`,
-    /// each `stencil * WIDTH + position`. They feed c's row of M and its right-hand side.
-    member_ptr: Vec<usize>,
-    members: Vec<u32>,
-    /// Per membership (same order as `members`): for each control of that stencil, the
-    /// entry of c's row it adds into (counted from the row's start).
+    /// Per membership of a control in a stencil (by control, then stencil): for each
+    /// control of that stencil, the entry of c's row it adds into (counted from the row's
+    /// start)...
     slots: Vec<[u32; WIDTH]>,
+    /// ... and for stencil g's control at position a, that membership: `g * WIDTH + a`.
+    member_at: Vec<u32>,
+    /// The stencils by band: band b holds the stencils whose smallest control lies in
+    /// `b * band_width..(b + 1) * band_width`, `band_stencils[bands[b]..bands[b + 1]]`. No
+    /// stencil spans `band_width` controls, so a band's stencils touch only controls
+    /// `b * band_width..(b + 2) * band_width`, and bands two apart touch disjoint rows.
+    band_width: usize,
+    bands: Vec<usize>,
+    band_stencils: Vec<u32>,
     /// s (L^T L) of every entry.
     fairness: Vec<f64>,
 }
@@ -133,15 +148,46 @@ impl StencilPlan {
             )
             .collect();
 
+        let mut member_at = vec![0u32; stencils.len() * WIDTH];
+        for (s, &member) in members.iter().enumerate() {
+            member_at[member as usize] = s as u32;
+        }
+        let span = |s: &[u32; WIDTH]| {
+            let (lo, hi) = (s.iter().min(), s.iter().max());
+            (*lo.unwrap_or(&0) as usize, *hi.unwrap_or(&0) as usize)
+        };
+        let band_width = stencils
+            .iter()
+            .map(|s| span(s).1 - span(s).0 + 1)
+            .max()
+            .unwrap_or(1);
+        let band_of = |s: &[u32; WIDTH]| span(s).0 / band_width;
+        let band_count = m.div_ceil(band_width).max(1);
+        let mut bands = vec![0usize; band_count + 1];
+        for s in &stencils {
+            bands[band_of(s) + 1] += 1;
+        }
+        for b in 0..band_count {
+            bands[b + 1] += bands[b];
+        }
+        let mut band_fill = bands.clone();
+        let mut band_stencils = vec![0u32; stencils.len()];
+        for (g, s) in stencils.iter().enumerate() {
+            band_stencils[band_fill[band_of(s)]] = g as u32;
+            band_fill[band_of(s)] += 1;
+        }
+
         let nnz = rows.iter().map(|r| r.0.len()).sum();
         let mut plan = StencilPlan {
             controls,
             stencils,
             ptr: Vec::with_capacity(m + 1),
             idx: Vec::with_capacity(nnz),
-            member_ptr,
-            members,
-            slots: Vec::with_capacity(fill.len()),
+            slots: Vec::with_capacity(members.len()),
+            member_at,
+            band_width,
+            bands,
+            band_stencils,
             fairness: Vec::with_capacity(nnz),
         };
         plan.ptr.push(0);
@@ -177,21 +223,6 @@ impl StencilPlan {
             fill[g as usize] += 1;
         }
 
-        let values = FixedRows(&rows.weights);
-        let mut pairs = vec![[0.0f64; K]; groups * PAIRS];
-        let mut local_rhs = vec![DVec3::ZERO; groups * WIDTH];
-        pairs
-            .par_chunks_mut(PAIRS)
-            .zip(local_rhs.par_chunks_mut(WIDTH))
-            .enumerate()
-            .with_min_len(16)
-            .for_each(|(g, (p, b))| {
-                let members = &order[start[g]..start[g + 1]];
-                accumulate(&values, members, WIDTH, &weight, p, b);
-            });
-
-        // Each control adds its memberships' sums into its own row: rows are disjoint, so
-        // they are filled in parallel without conflicts.
         let mut entries: Vec<[f64; K]> = self
             .fairness
             .iter()
@@ -201,19 +232,35 @@ impl StencilPlan {
                 e
             })
             .collect();
-        let mut row_slices = Vec::with_capacity(self.controls);
-        let mut rest = entries.as_mut_slice();
-        for c in 0..self.controls {
-            let (row, tail) = rest.split_at_mut(self.ptr[c + 1] - self.ptr[c]);
-            row_slices.push(row);
-            rest = tail;
+        let mut rhs = vec![DVec3::ZERO; self.controls];
+        let values = FixedRows(&rows.weights);
+        let work = StencilSums {
+            values: &values,
+            weight: &weight,
+            order: &order,
+            start: &start,
+        };
+        // Bands two apart touch disjoint controls: the even bands add into their rows in
+        // parallel, then the odd ones.
+        for parity in 0..2 {
+            let mut pieces = Vec::new();
+            let (mut entries_rest, mut rhs_rest) = (entries.as_mut_slice(), rhs.as_mut_slice());
+            let mut first = 0;
+            for band in (parity..self.bands.len() - 1).step_by(2) {
+                let (lo, hi) = self.band_controls(band);
+                let (_, e) = entries_rest.split_at_mut(self.ptr[lo] - self.ptr[first]);
+                let (piece_e, e) = e.split_at_mut(self.ptr[hi] - self.ptr[lo]);
+                let (_, r) = rhs_rest.split_at_mut(lo - first);
+                let (piece_r, r) = r.split_at_mut(hi - lo);
+                pieces.push((band, lo, piece_e, piece_r));
+                (entries_rest, rhs_rest, first) = (e, r, hi);
+            }
+            pieces
+                .into_par_iter()
+                .for_each(|(band, lo, piece_e, piece_r)| {
+                    self.add_band(band, lo, piece_e, piece_r, &work)
+                });
         }
-        let rhs = row_slices
-            .par_iter_mut()
-            .enumerate()
-            .with_min_len(64)
-            .map(|(c, row)| self.gather_row(c, row, &pairs, &local_rhs))
-            .collect();
         NormalMatrix {
             ptr: self.ptr.clone(),
             idx: self.idx.clone(),
@@ -222,57 +269,86 @@ impl StencilPlan {
         }
     }
 
-    /// Adds control c's stencil sums into its row of M; returns its right-hand side.
-    fn gather_row<const K: usize>(
+    /// The controls band `b`'s stencils touch: `lo..hi`.
+    fn band_controls(&self, b: usize) -> (usize, usize) {
+        let lo = (self.band_width * b).min(self.controls);
+        let hi = (self.band_width * (b + 2)).min(self.controls);
+        (lo, hi)
+    }
+
+    /// Sums each stencil of band `band` over its rows and adds the sums into the rows of
+    /// its controls (`entries` and `rhs` start at control `lo`).
+    fn add_band<const K: usize>(
         &self,
-        c: usize,
-        row: &mut [[f64; K]],
-        pairs: &[[f64; K]],
-        local_rhs: &[DVec3],
-    ) -> DVec3 {
+        band: usize,
+        lo: usize,
+        entries: &mut [[f64; K]],
+        rhs: &mut [DVec3],
+        work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
+    ) {
         #[cfg(target_arch = "x86_64")]
         if super::bezier_rows::wide() {
             // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
-            return unsafe { self.gather_row_wide(c, row, pairs, local_rhs) };
+            return unsafe { self.add_band_wide(band, lo, entries, rhs, work) };
         }
-        self.gather_row_with(c, row, pairs, local_rhs)
+        self.add_band_with(band, lo, entries, rhs, work)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn gather_row_wide<const K: usize>(
+    fn add_band_wide<const K: usize>(
         &self,
-        c: usize,
-        row: &mut [[f64; K]],
-        pairs: &[[f64; K]],
-        local_rhs: &[DVec3],
-    ) -> DVec3 {
-        self.gather_row_with(c, row, pairs, local_rhs)
+        band: usize,
+        lo: usize,
+        entries: &mut [[f64; K]],
+        rhs: &mut [DVec3],
+        work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
+    ) {
+        self.add_band_with(band, lo, entries, rhs, work)
     }
 
     #[inline(always)]
-    fn gather_row_with<const K: usize>(
+    fn add_band_with<const K: usize>(
         &self,
-        c: usize,
-        row: &mut [[f64; K]],
-        pairs: &[[f64; K]],
-        local_rhs: &[DVec3],
-    ) -> DVec3 {
-        let mut b = DVec3::ZERO;
-        for s in self.member_ptr[c]..self.member_ptr[c + 1] {
-            let member = self.members[s] as usize;
-            let (g, a) = (member / WIDTH, member % WIDTH);
-            b += local_rhs[member];
-            let sums = &pairs[g * PAIRS..(g + 1) * PAIRS];
-            for (bi, &k) in self.slots[s].iter().enumerate() {
-                let v = &sums[packed_index(a, bi, WIDTH)];
-                let e = &mut row[k as usize];
-                for q in 0..K {
-                    e[q] += v[q];
+        band: usize,
+        lo: usize,
+        entries: &mut [[f64; K]],
+        rhs: &mut [DVec3],
+        work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
+    ) {
+        let row_base = self.ptr[lo];
+        let mut sums = [[0.0f64; K]; PAIRS];
+        let mut local_rhs = [DVec3::ZERO; WIDTH];
+        for &g in &self.band_stencils[self.bands[band]..self.bands[band + 1]] {
+            let g = g as usize;
+            let members = &work.order[work.start[g]..work.start[g + 1]];
+            if members.is_empty() {
+                continue;
+            }
+            sums.iter_mut().for_each(|e| *e = [0.0; K]);
+            local_rhs.iter_mut().for_each(|b| *b = DVec3::ZERO);
+            accumulate(
+                work.values,
+                members,
+                WIDTH,
+                work.weight,
+                &mut sums,
+                &mut local_rhs,
+            );
+            for (a, &c) in self.stencils[g].iter().enumerate() {
+                let c = c as usize;
+                rhs[c - lo] += local_rhs[a];
+                let row = &mut entries[self.ptr[c] - row_base..self.ptr[c + 1] - row_base];
+                let slots = &self.slots[self.member_at[g * WIDTH + a] as usize];
+                for (b, &k) in slots.iter().enumerate() {
+                    let v = &sums[packed_index(a, b, WIDTH)];
+                    let e = &mut row[k as usize];
+                    for q in 0..K {
+                        e[q] += v[q];
+                    }
                 }
             }
         }
-        b
     }
 
     /// N^T N + s L^T L and N^T p (point-to-point).
