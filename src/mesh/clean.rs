@@ -4,6 +4,7 @@
 use super::stats::UnionFind;
 use super::TriMesh;
 use glam::DVec3;
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 #[derive(Clone, Debug, Default)]
@@ -318,11 +319,10 @@ fn split_pinches(
         }
     }
     drop(fill);
-    // Scratch reused for every vertex: (neighbour, local face), local union-find parents,
-    // (fan root, copy).
-    let mut others: Vec<(u32, u32)> = Vec::new();
-    let mut parent: Vec<u32> = Vec::new();
-    let mut copies: Vec<(u32, u32)> = Vec::new();
+    // Which faces around each vertex leave its first fan: worked out for all vertices at
+    // once on the faces as they are. Splitting a vertex w cannot change another vertex v's
+    // fans: two faces around v joined through w share the edge (v, w), so they are joined
+    // at w too (through v) and keep the same copy of w.
     let find = |parent: &mut [u32], mut x: u32| {
         while parent[x as usize] != x {
             parent[x as usize] = parent[parent[x as usize] as usize];
@@ -330,45 +330,59 @@ fn split_pinches(
         }
         x
     };
-    let mut split = 0;
-    for v in 0..nv as u32 {
-        let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
-        if fs.len() < 2 {
-            continue;
-        }
-        others.clear();
-        for (i, &f) in fs.iter().enumerate() {
-            for &w in &faces[f as usize] {
-                if w != v {
-                    others.push((w, i as u32));
+    let faces_now: &[[u32; 3]] = faces;
+    // Per pinch vertex: (local face index, fan root) of each face outside the first fan.
+    let pinches: Vec<(u32, Vec<(u32, u32)>)> = (0..nv as u32)
+        .into_par_iter()
+        .with_min_len(4096)
+        .map_init(
+            || (Vec::<(u32, u32)>::new(), Vec::<u32>::new()),
+            |(others, parent), v| {
+                let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
+                if fs.len() < 2 {
+                    return None;
                 }
-            }
-        }
-        others.sort_unstable();
-        parent.clear();
-        parent.extend(0..fs.len() as u32);
-        let mut k = 0;
-        while k < others.len() {
-            let mut e = k + 1;
-            while e < others.len() && others[e].0 == others[k].0 {
-                e += 1;
-            }
-            if e - k == 2 {
-                let (a, b) = (
-                    find(&mut parent, others[k].1),
-                    find(&mut parent, others[k + 1].1),
-                );
-                parent[a.max(b) as usize] = a.min(b);
-            }
-            k = e;
-        }
+                others.clear();
+                for (i, &f) in fs.iter().enumerate() {
+                    for &w in &faces_now[f as usize] {
+                        if w != v {
+                            others.push((w, i as u32));
+                        }
+                    }
+                }
+                others.sort_unstable();
+                parent.clear();
+                parent.extend(0..fs.len() as u32);
+                let mut k = 0;
+                while k < others.len() {
+                    let mut e = k + 1;
+                    while e < others.len() && others[e].0 == others[k].0 {
+                        e += 1;
+                    }
+                    if e - k == 2 {
+                        let (a, b) = (find(parent, others[k].1), find(parent, others[k + 1].1));
+                        parent[a.max(b) as usize] = a.min(b);
+                    }
+                    k = e;
+                }
+                let first_root = find(parent, 0);
+                let moved: Vec<(u32, u32)> = (0..fs.len() as u32)
+                    .filter_map(|i| {
+                        let root = find(parent, i);
+                        (root != first_root).then_some((i, root))
+                    })
+                    .collect();
+                (!moved.is_empty()).then_some((v, moved))
+            },
+        )
+        .flatten()
+        .collect();
+    let mut copies: Vec<(u32, u32)> = Vec::new();
+    for (v, moved) in &pinches {
+        let v = *v;
+        let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
         copies.clear();
-        let first_root = find(&mut parent, 0);
-        for (i, &f) in fs.iter().enumerate() {
-            let root = find(&mut parent, i as u32);
-            if root == first_root {
-                continue;
-            }
+        for &(i, root) in moved {
             let copy = match copies.iter().find(|c| c.0 == root) {
                 Some(&(_, c)) => c,
                 None => {
@@ -379,17 +393,14 @@ fn split_pinches(
                     c
                 }
             };
-            for w in faces[f as usize].iter_mut() {
+            for w in faces[fs[i as usize] as usize].iter_mut() {
                 if *w == v {
                     *w = copy;
                 }
             }
         }
-        if !copies.is_empty() {
-            split += 1;
-        }
     }
-    split
+    pinches.len()
 }
 
 /// An undirected edge as one hashable word.

@@ -87,6 +87,25 @@ impl PatchFit {
     }
 }
 
+/// A face that no manifold mesh with Loop subdivision connectivity (one level or more) can
+/// have: each of its faces has at least two vertices that subdivision put on an edge of the
+/// coarser mesh, and those lie on 6 faces (inner edge) or 3 (boundary edge). Scans fail
+/// this within their first irregular faces, before a topology of the whole mesh is built.
+fn face_without_two_edge_vertices(mesh: &TriMesh) -> Option<usize> {
+    let mut faces_at = vec![0u32; mesh.positions.len()];
+    for t in &mesh.triangles {
+        for &v in t {
+            if let Some(count) = faces_at.get_mut(v as usize) {
+                *count += 1;
+            }
+        }
+    }
+    let on_edge = |v: u32| matches!(faces_at.get(v as usize), Some(3 | 6));
+    mesh.triangles
+        .iter()
+        .position(|t| t.iter().filter(|&&v| on_edge(v)).count() < 2)
+}
+
 /// Fits a mesh that has Loop subdivision connectivity at depth `levels`: the coarse net
 /// from inverse subdivision is the control net, every fine vertex has its exact parameter
 /// (coarse face, dyadic barycentric) from the hierarchy. `loop` fits the exact Loop limit
@@ -110,6 +129,13 @@ pub fn fit_subdivided(
             "{faces} faces are not a multiple of 4^{} (what {} levels of Loop subdivision make)",
             opts.levels, opts.levels
         )));
+    }
+    if opts.levels > 0 {
+        if let Some(face) = face_without_two_edge_vertices(mesh) {
+            return Err(PipelineError::NoSubdivision(format!(
+                "face {face} has fewer than two corners with 3 or 6 faces, as every face of a Loop-subdivided mesh has (the vertices subdivision adds on edges)"
+            )));
+        }
     }
     let topo = Topology::from_mesh(mesh)
         .map_err(|e| PipelineError::NoSubdivision(format!("not a manifold mesh: {e}")))?;
@@ -301,4 +327,41 @@ pub fn geometric_errors(
                 .length()
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::loop_subdiv::subdivide;
+
+    /// A fan of `n` triangles around a centre, closed (n >= 3) into a disk with an
+    /// irregular centre when n != 6.
+    fn fan(n: usize) -> TriMesh {
+        let mut positions = vec![DVec3::ZERO];
+        let mut triangles = Vec::new();
+        for k in 0..n {
+            let a = k as f64 / n as f64 * std::f64::consts::TAU;
+            positions.push(DVec3::new(a.cos(), a.sin(), 0.0));
+            triangles.push([0, 1 + k as u32, 1 + ((k + 1) % n) as u32]);
+        }
+        TriMesh::new(positions, triangles)
+    }
+
+    #[test]
+    fn subdivided_meshes_pass_the_quick_face_test_and_irregular_ones_fail_it() {
+        for n in [3, 5, 7] {
+            let coarse = fan(n);
+            for levels in 1..=3 {
+                let fine = subdivide(&coarse, levels).expect("manifold");
+                assert_eq!(
+                    face_without_two_edge_vertices(&fine),
+                    None,
+                    "fan {n}, {levels} levels"
+                );
+            }
+            // The coarse fan itself: its faces have one corner (the centre) not on 3 or 6
+            // faces and rim corners on 2 faces.
+            assert!(face_without_two_edge_vertices(&coarse).is_some());
+        }
+    }
 }
