@@ -2,6 +2,10 @@
 //! half-edges by their source vertex (no global sort or hash of edges).
 
 use super::TriMesh;
+use rayon::prelude::*;
+
+/// Half-edges (twins) and vertices (rings) per parallel task.
+const PARALLEL_MIN: usize = 1 << 12;
 
 pub const NONE: u32 = u32::MAX;
 
@@ -94,43 +98,45 @@ impl Topology {
         drop(fill);
         let run = |v: u32| out_start[v as usize] as usize..out_start[v as usize + 1] as usize;
         let outgoing = |v: u32| &out[run(v)];
-        let mut twin = vec![NONE; nh];
-        for (f, t) in triangles.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                let same = out_dst[run(a)].iter().filter(|&&d| d == b).count();
-                let r = run(b);
-                let mut opposite = out_dst[r.clone()]
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, &d)| d == a);
-                let first = opposite.next().map(|(i, _)| out[r.start + i]);
-                let more = opposite.next().is_some();
-                if same > 1 || more {
-                    return Err(TopologyError::NonManifoldEdge {
-                        a: a.min(b),
-                        b: a.max(b),
-                        count: same + usize::from(first.is_some()) + usize::from(more),
-                    });
-                }
-                if let Some(g) = first {
-                    twin[3 * f + k] = g;
-                }
-            }
+        // Per half-edge a -> b: the opposite half-edge, if any, and whether the edge is used
+        // twice in one direction or has more than two faces.
+        let twin_of = |h: usize| -> (u32, usize, bool) {
+            let (a, b) = (src(h), dst(h));
+            let same = out_dst[run(a)].iter().filter(|&&d| d == b).count();
+            let r = run(b);
+            let mut opposite = out_dst[r.clone()]
+                .iter()
+                .enumerate()
+                .filter(|(_, &d)| d == a);
+            let first = opposite.next().map(|(i, _)| out[r.start + i]);
+            let more = opposite.next().is_some();
+            let count = same + usize::from(first.is_some()) + usize::from(more);
+            (first.unwrap_or(NONE), count, same > 1 || more)
+        };
+        // Half-edge ids stay below NONE - 1 (a mesh that large cannot be read).
+        const NON_MANIFOLD: u32 = NONE - 1;
+        let twin: Vec<u32> = (0..nh)
+            .into_par_iter()
+            .with_min_len(PARALLEL_MIN)
+            .map(|h| match twin_of(h) {
+                (_, _, true) => NON_MANIFOLD,
+                (t, _, false) => t,
+            })
+            .collect();
+        if let Some(h) = twin.iter().position(|&t| t == NON_MANIFOLD) {
+            let (a, b) = (src(h), dst(h));
+            return Err(TopologyError::NonManifoldEdge {
+                a: a.min(b),
+                b: a.max(b),
+                count: twin_of(h).1,
+            });
         }
-        // Ordered rings: rotate counter-clockwise with h -> twin(prev(h)).
-        let mut ring_start = Vec::with_capacity(vertex_count + 1);
-        let mut ring = Vec::with_capacity(nh + vertex_count);
-        let mut ring_halfedge = Vec::with_capacity(nh + vertex_count);
-        let mut boundary = vec![false; vertex_count];
-        let mut face_valence = vec![0u32; vertex_count];
-        ring_start.push(0u32);
-        for v in 0..vertex_count as u32 {
+        // Ordered rings: rotate counter-clockwise with h -> twin(prev(h)). Vertex ranges
+        // are walked in parallel and joined in order; the first error in vertex order wins.
+        let ring_of = |v: u32, ring: &mut Vec<u32>, ring_halfedge: &mut Vec<u32>| {
             let outs = outgoing(v);
-            face_valence[v as usize] = outs.len() as u32;
             if outs.is_empty() {
-                ring_start.push(ring.len() as u32);
-                continue;
+                return Ok(false);
             }
             // A boundary vertex starts at the outgoing edge with no face on its right.
             let mut starts = outs.iter().copied().filter(|&h| twin[h as usize] == NONE);
@@ -168,9 +174,39 @@ impl Topology {
             if visited != outs.len() {
                 return Err(TopologyError::PinchVertex { vertex: v, fans: 2 });
             }
-            boundary[v as usize] = is_boundary;
-            ring_start.push(ring.len() as u32);
+            Ok(is_boundary)
+        };
+        type Rings = (Vec<u32>, Vec<u32>, Vec<u32>, Vec<bool>);
+        let chunks: Vec<Result<Rings, TopologyError>> = (0..vertex_count.div_ceil(PARALLEL_MIN))
+            .into_par_iter()
+            .map(|c| {
+                let vs = c * PARALLEL_MIN..((c + 1) * PARALLEL_MIN).min(vertex_count);
+                let (mut ring, mut ring_halfedge) = (Vec::new(), Vec::new());
+                let mut ends = Vec::with_capacity(vs.len());
+                let mut boundary = Vec::with_capacity(vs.len());
+                for v in vs {
+                    boundary.push(ring_of(v as u32, &mut ring, &mut ring_halfedge)?);
+                    ends.push(ring.len() as u32);
+                }
+                Ok((ring, ring_halfedge, ends, boundary))
+            })
+            .collect();
+        let mut ring_start = Vec::with_capacity(vertex_count + 1);
+        let mut ring = Vec::with_capacity(nh + vertex_count);
+        let mut ring_halfedge = Vec::with_capacity(nh + vertex_count);
+        let mut boundary = Vec::with_capacity(vertex_count);
+        ring_start.push(0u32);
+        for chunk in chunks {
+            let (r, rh, ends, b) = chunk?;
+            let base = ring.len() as u32;
+            ring_start.extend(ends.iter().map(|e| base + e));
+            ring.extend(r);
+            ring_halfedge.extend(rh);
+            boundary.extend(b);
         }
+        let face_valence = (0..vertex_count as u32)
+            .map(|v| outgoing(v).len() as u32)
+            .collect();
         Ok(Topology {
             vertex_count,
             triangles: triangles.to_vec(),
@@ -236,5 +272,68 @@ impl Topology {
     pub fn opposite(&self, h: u32) -> u32 {
         let f = (h / 3) as usize;
         self.triangles[f][((h % 3 + 2) % 3) as usize]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A k x k grid of squares split along one diagonal: vertex (i, j) at j * (k + 1) + i.
+    fn grid(k: usize) -> Vec<[u32; 3]> {
+        let at = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+        let mut t = Vec::new();
+        for j in 0..k {
+            for i in 0..k {
+                t.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+                t.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+            }
+        }
+        t
+    }
+
+    /// Large enough for several parallel ranges of half-edges and vertices.
+    #[test]
+    fn rings_of_a_large_grid_match_its_half_edges_and_boundary() {
+        let k = 90;
+        let n = (k + 1) * (k + 1);
+        assert!(n > 2 * PARALLEL_MIN);
+        let topo = Topology::build(n, &grid(k)).expect("manifold");
+        for v in 0..n as u32 {
+            let (i, j) = (v as usize % (k + 1), v as usize / (k + 1));
+            let on_rim = i == 0 || j == 0 || i == k || j == k;
+            assert_eq!(topo.is_boundary(v), on_rim, "vertex ({i}, {j})");
+            if !on_rim {
+                assert_eq!(topo.valence(v), 6);
+            }
+            // Every ring entry is reached by its half-edge (but a boundary ring's last).
+            for (&w, &h) in topo.ring(v).iter().zip(topo.ring_halfedges(v)) {
+                if h != NONE {
+                    let t = topo.triangles[h as usize / 3];
+                    assert_eq!((t[h as usize % 3], t[(h as usize + 1) % 3]), (v, w));
+                }
+            }
+        }
+        assert_eq!(topo.edge_count(), 3 * k * k + 2 * k);
+    }
+
+    #[test]
+    fn non_manifold_edges_and_pinch_vertices_are_named() {
+        // Three faces on the edge (0, 1).
+        let fin = [[0, 1, 2], [1, 0, 3], [0, 1, 4]];
+        assert_eq!(
+            Topology::build(5, &fin).err(),
+            Some(TopologyError::NonManifoldEdge {
+                a: 0,
+                b: 1,
+                count: 3
+            })
+        );
+        // Two triangles touching at vertex 0 only.
+        let bowtie = [[0, 1, 2], [0, 3, 4]];
+        assert!(matches!(
+            Topology::build(5, &bowtie),
+            Err(TopologyError::PinchVertex { vertex: 0, .. })
+        ));
     }
 }
