@@ -13,7 +13,8 @@
 //! nearest corner) is trimmed out too.
 
 use crate::TriMesh;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rayon::prelude::*;
+use rustc_hash::FxHashSet;
 
 /// Rim vertices a hole's radius is measured against at most.
 const MAX_RIM_SAMPLES: usize = 256;
@@ -48,12 +49,21 @@ pub fn plan_holes(
     data_triangles: &[[u32; 3]],
     max_bridge: f64,
 ) -> HolePlan {
-    let mut hole_of: FxHashMap<u32, usize> = FxHashMap::default();
+    // The hole whose rim a real vertex lies on (u32::MAX: none).
+    let mut hole_at = vec![u32::MAX; real_vertices];
     for (h, rim) in hole_loops.iter().enumerate() {
         for &v in rim {
-            hole_of.insert(v, h);
+            if let Some(slot) = hole_at.get_mut(v as usize) {
+                *slot = h as u32;
+            }
         }
     }
+    let hole_of = |v: &u32| -> Option<usize> {
+        hole_at
+            .get(*v as usize)
+            .filter(|&&h| h != u32::MAX)
+            .map(|&h| h as usize)
+    };
     let sorted = |t: &[u32; 3]| {
         let mut s = *t;
         s.sort_unstable();
@@ -62,7 +72,7 @@ pub fn plan_holes(
     // Only data triangles whose corners all lie on rims can be mistaken for fills.
     let data_on_rims: FxHashSet<[u32; 3]> = data_triangles
         .iter()
-        .filter(|t| t.iter().all(|v| hole_of.contains_key(v)))
+        .filter(|t| t.iter().all(|v| hole_of(v).is_some()))
         .map(sorted)
         .collect();
     let fill_hole = |t: &[u32; 3]| -> Option<usize> {
@@ -73,14 +83,19 @@ pub fn plan_holes(
         // Every real corner on the rim of one hole.
         let mut h = None;
         for &v in t.iter().filter(|&&v| (v as usize) < real_vertices) {
-            let g = *hole_of.get(&v)?;
+            let g = hole_of(&v)?;
             if *h.get_or_insert(g) != g {
                 return None;
             }
         }
         h
     };
-    let fills: Vec<Option<usize>> = mapped.triangles.iter().map(fill_hole).collect();
+    let fills: Vec<Option<usize>> = mapped
+        .triangles
+        .par_iter()
+        .with_min_len(4096)
+        .map(fill_hole)
+        .collect();
     let at = |v: u32| mapped.positions[v as usize];
     // Largest distance from a sample of the triangle (centroid, edge midpoints, corners)
     // to the nearest of `rim`.
@@ -115,14 +130,18 @@ pub fn plan_holes(
         })
         .collect();
     let mut radius = vec![0.0f64; hole_loops.len()];
-    let mut wide_triangles = Vec::new();
-    for (k, (t, h)) in mapped.triangles.iter().zip(&fills).enumerate() {
-        match *h {
-            Some(h) => radius[h] = radius[h].max(reach(t, &sampled[h])),
-            None if reach(t, t) > max_bridge => wide_triangles.push(k),
-            None => {}
+    for (t, h) in mapped.triangles.iter().zip(&fills) {
+        if let Some(h) = *h {
+            radius[h] = radius[h].max(reach(t, &sampled[h]));
         }
     }
+    let wide_triangles: Vec<usize> = (0..mapped.triangles.len())
+        .into_par_iter()
+        .with_min_len(4096)
+        .filter(|&k| {
+            fills[k].is_none() && reach(&mapped.triangles[k], &mapped.triangles[k]) > max_bridge
+        })
+        .collect();
     let bridged: Vec<bool> = radius.iter().map(|r| *r <= max_bridge).collect();
     let mut keep: Vec<bool> = fills.iter().map(|h| h.is_none_or(|h| bridged[h])).collect();
     for &k in &wide_triangles {

@@ -146,7 +146,7 @@ impl Coverage {
             .map(|(v, m)| corrected.get(v).map_or(*m, |q| DVec2::new(q.u, q.v)))
             .collect();
         let triangles = triangles
-            .iter()
+            .par_iter()
             .copied()
             .filter(|t| !t.iter().any(|&v| untrusted.get(v as usize) == Some(&true)))
             .filter(|t| {
@@ -241,10 +241,15 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
     // of the same face (one face for Bezier and grid surfaces).
     let mut by_face: rustc_hash::FxHashMap<u32, (Vec<SurfaceParam>, Vec<usize>)> =
         Default::default();
-    for (k, p) in f.params.iter().enumerate() {
-        let entry = by_face.entry(p.face).or_default();
-        entry.0.push(*p);
-        entry.1.push(k);
+    if f.params.iter().all(|p| p.face == 0) {
+        // Bezier and grid surfaces: one face, no grouping.
+        by_face.insert(0, (f.params.clone(), (0..f.params.len()).collect()));
+    } else {
+        for (k, p) in f.params.iter().enumerate() {
+            let entry = by_face.entry(p.face).or_default();
+            entry.0.push(*p);
+            entry.1.push(k);
+        }
     }
     let nearest: rustc_hash::FxHashMap<u32, (NearestParam, &[usize])> = by_face
         .iter()

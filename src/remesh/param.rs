@@ -4,6 +4,7 @@
 
 use super::{FilledPatch, RemeshError, DOMAIN};
 use glam::{DVec2, DVec3};
+use rayon::prelude::*;
 
 /// Outer boundary on the circle by arc length (starting at the boundary vertex farthest
 /// from the boundary's centroid), interior by mean-value weights, solved by sparse LU.
@@ -155,7 +156,8 @@ impl<'a> Locator<'a> {
         let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
         let cell = extent * (1.0 + 2e-9) / dim as f64;
         let ranges: Vec<[usize; 4]> = tris
-            .iter()
+            .par_iter()
+            .with_min_len(4096)
             .map(|t| {
                 let ps = [
                     plane[t[0] as usize],
