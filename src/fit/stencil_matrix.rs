@@ -10,7 +10,7 @@
 //! sums up to the order of floating-point additions), solved by the same code.
 
 use super::normal_matrix::{
-    accumulate, packed_index, BlockMatrix, Fairness, NormalMatrix, RowValues, ScalarMatrix, SCALAR,
+    packed_index, BlockMatrix, Fairness, NormalMatrix, RowValues, ScalarMatrix, SCALAR,
 };
 use super::sparse::Csr;
 use glam::DVec3;
@@ -33,6 +33,36 @@ impl RowValues for FixedRows<'_> {
     #[inline(always)]
     fn values(&self, r: usize) -> &[f64] {
         &self.0[r]
+    }
+}
+
+/// `normal_matrix::accumulate` for rows of exactly WIDTH values: with the width a constant
+/// the pair loops unroll (the general version takes the width at run time).
+#[inline(always)]
+fn accumulate_stencil<const K: usize>(
+    values: &FixedRows,
+    rows: &[u32],
+    weight: &impl Fn(usize) -> ([f64; K], DVec3),
+    pairs: &mut [[f64; K]; PAIRS],
+    rhs: &mut [DVec3; WIDTH],
+) {
+    for &r in rows {
+        let r = r as usize;
+        let w = &values.0[r];
+        let (q, wp) = weight(r);
+        let mut pos = 0;
+        for a in 0..WIDTH {
+            let wa = w[a];
+            rhs[a] += wp * wa;
+            let wq = q.map(|x| x * wa);
+            for b in a..WIDTH {
+                let e = &mut pairs[pos + b - a];
+                for c in 0..K {
+                    e[c] += wq[c] * w[b];
+                }
+            }
+            pos += WIDTH - a;
+        }
     }
 }
 
@@ -327,14 +357,7 @@ impl StencilPlan {
             }
             sums.iter_mut().for_each(|e| *e = [0.0; K]);
             local_rhs.iter_mut().for_each(|b| *b = DVec3::ZERO);
-            accumulate(
-                work.values,
-                members,
-                WIDTH,
-                work.weight,
-                &mut sums,
-                &mut local_rhs,
-            );
+            accumulate_stencil(work.values, members, work.weight, &mut sums, &mut local_rhs);
             for (a, &c) in self.stencils[g].iter().enumerate() {
                 let c = c as usize;
                 rhs[c - lo] += local_rhs[a];
