@@ -13,6 +13,7 @@ use super::box_spline::{
 };
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// A grid cell: lower-left vertex (i, j) and whether it is the down triangle.
 pub type Cell = (i64, i64, bool);
@@ -257,13 +258,19 @@ pub struct GridEvaluator<'a> {
 impl<'a> GridEvaluator<'a> {
     pub fn new(grid: &'a GridSpline, controls: &'a [DVec3]) -> Self {
         let mut slot = vec![u32::MAX; 2 * grid.width * grid.height];
-        let mut nets = Vec::with_capacity(grid.cells.len());
-        for &cell in &grid.cells {
-            if let Some(k) = grid.cell_slot(cell) {
-                slot[k] = nets.len() as u32;
-                nets.push(Self::net(grid, controls, cell));
-            }
+        let listed: Vec<(usize, Cell)> = grid
+            .cells
+            .iter()
+            .filter_map(|&cell| Some((grid.cell_slot(cell)?, cell)))
+            .collect();
+        for (n, &(k, _)) in listed.iter().enumerate() {
+            slot[k] = n as u32;
         }
+        let nets = listed
+            .par_iter()
+            .with_min_len(256)
+            .map(|&(_, cell)| Self::net(grid, controls, cell))
+            .collect();
         Self {
             grid,
             controls,
