@@ -29,6 +29,7 @@ use trispline::TriMesh;
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
+    trispline::allocator::keep_freed_memory();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

@@ -24,6 +24,7 @@ use trispline::pipeline::SurfaceKind;
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
+    trispline::allocator::keep_freed_memory();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

@@ -43,6 +43,7 @@ fn second_version(mesh: &TriMesh) -> TriMesh {
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
+    trispline::allocator::keep_freed_memory();
     let path = std::env::args()
         .nth(1)
         .unwrap_or_else(|| "../shared/data/range_scans/bun000_tri.ply".into());

@@ -3,6 +3,7 @@
 //! Layering (see ARCHITECTURE.md): `io` is the only module that knows file formats;
 //! `mesh`, `surface` and `fit` are pure geometry on `f64`.
 
+pub mod allocator;
 pub mod bspline;
 pub mod cli;
 pub mod curvature;

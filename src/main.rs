@@ -4,7 +4,8 @@ use trispline::cli;
 
 // A fit allocates and frees tens of MB per round; glibc maps each large block fresh and
 // the kernel faults every page in again (38k page faults, ~30 % of a 40k-point scan's CPU
-// time on this machine). mimalloc keeps freed memory for reuse.
+// time on this machine). mimalloc keeps freed memory for reuse (never purged: see
+// `trispline::allocator`).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
@@ -35,6 +36,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    trispline::allocator::keep_freed_memory();
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Inspect(a) => cli::mesh_tools::inspect(a),
