@@ -275,22 +275,24 @@ impl Topology {
     }
 }
 
+/// A k x k grid of unit squares, each split along one diagonal: vertex (i, j) at index
+/// j * (k + 1) + i (a test mesh for the modules that walk meshes).
+#[cfg(test)]
+pub(crate) fn grid_triangles(k: usize) -> Vec<[u32; 3]> {
+    let at = |i: usize, j: usize| (j * (k + 1) + i) as u32;
+    let mut t = Vec::new();
+    for j in 0..k {
+        for i in 0..k {
+            t.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            t.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A k x k grid of squares split along one diagonal: vertex (i, j) at j * (k + 1) + i.
-    fn grid(k: usize) -> Vec<[u32; 3]> {
-        let at = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-        let mut t = Vec::new();
-        for j in 0..k {
-            for i in 0..k {
-                t.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                t.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        t
-    }
 
     /// Large enough for several parallel ranges of half-edges and vertices.
     #[test]
@@ -298,7 +300,7 @@ mod tests {
         let k = 90;
         let n = (k + 1) * (k + 1);
         assert!(n > 2 * PARALLEL_MIN);
-        let topo = Topology::build(n, &grid(k)).expect("manifold");
+        let topo = Topology::build(n, &grid_triangles(k)).expect("manifold");
         for v in 0..n as u32 {
             let (i, j) = (v as usize % (k + 1), v as usize / (k + 1));
             let on_rim = i == 0 || j == 0 || i == k || j == k;

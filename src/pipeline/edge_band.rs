@@ -91,30 +91,16 @@ impl Ord for Ordered {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::topology::grid_triangles;
     use glam::DVec3;
 
-    /// A k x k grid of unit squares, each split into two triangles; vertex (i, j) at
-    /// index j * (k + 1) + i.
+    /// `grid_triangles(k)` with its vertices in the plane and in space (z = 0).
     fn grid(k: usize) -> (TriMesh, Vec<DVec2>) {
-        let at = |i: usize, j: usize| (j * (k + 1) + i) as u32;
-        let mut triangles = Vec::new();
-        for j in 0..k {
-            for i in 0..k {
-                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
         let plane: Vec<DVec2> = (0..=k)
             .flat_map(|j| (0..=k).map(move |i| DVec2::new(i as f64, j as f64)))
             .collect();
         let positions = plane.iter().map(|p| DVec3::new(p.x, p.y, 0.0)).collect();
-        (
-            TriMesh {
-                positions,
-                triangles,
-            },
-            plane,
-        )
+        (TriMesh::new(positions, grid_triangles(k)), plane)
     }
 
     #[test]

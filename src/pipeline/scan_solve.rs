@@ -113,11 +113,11 @@ pub(super) fn run_fit(
     Ok(fit(&problem, start, opts.method, budget)?)
 }
 
-/// Relative residual of the normal equations at which an assembled first fit stops. The
-/// first fit only starts the rounds: on the Stanford scans 1e-5 takes ~2/3 of the CG steps
-/// of 1e-6 and ends the rounds at the same RMS (within 1 um); 1e-4 raised meshlab's
-/// largest error from 0.84 to 1.7 mm.
-const FIRST_FIT_REL_TOL: f64 = 1e-5;
+/// Relative residual of the normal equations at which an assembled first fit stops. Not
+/// looser: at 1e-5 the controls over sparse gaps, held only by the fairness term (CG's
+/// slowest modes), stayed off and bun045's shown surface bulged 2.1 mm from the data
+/// (0.39 mm at 1e-6) though every RMS was the same.
+const FIRST_FIT_REL_TOL: f64 = 1e-6;
 
 /// The point-to-point fit of `cg` and `direct` through the assembled normal equations
 /// N^T N + s L^T L (one scalar matrix for x, y and z; Jacobi-preconditioned CG from the
@@ -204,11 +204,12 @@ pub(super) fn assembled_fit(
 /// Up to this many control points a distance round is solved by a sparse factorisation.
 const DIRECT_ROUND_MAX_CONTROLS: usize = 1000;
 
-/// Relative residual of the normal equations at which a distance round's CG stops. On the
-/// five Stanford scans 3e-6 ends in the same rounds and RMS (within 0.4 um) as 1e-6 with
-/// ~40 % fewer CG steps; 1e-5 already changed the rounds (bun045 took one more), and 1e-4
-/// once left bun000 at 80 um RMS and chin at 112 um instead of 66 and 83.
-const ROUND_REL_TOL: f64 = 3e-6;
+/// Relative residual of the normal equations at which a distance round's CG stops. At
+/// 3e-6 the five Stanford scans end in the same rounds and RMS (within 0.4 um) with ~40 %
+/// fewer steps, but the least-held controls (over sparse gaps) converge last: meshlab's
+/// shown surface then stood 0.59 mm from the data instead of 0.45 mm. 1e-4 once left
+/// bun000 at 80 um RMS and chin at 112 um instead of 66 and 83.
+const ROUND_REL_TOL: f64 = 1e-6;
 
 /// What a distance round solves at the current foot points.
 pub(super) struct DistanceRound<'a> {
