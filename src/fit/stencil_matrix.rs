@@ -10,7 +10,7 @@
 //! sums up to the order of floating-point additions), solved by the same code.
 
 use super::normal_matrix::{
-    packed_index, BlockMatrix, Fairness, NormalMatrix, RowValues, ScalarMatrix, SCALAR,
+    packed_index, BlockMatrix, Fairness, NormalMatrix, ScalarMatrix, SCALAR,
 };
 use super::sparse::Csr;
 use glam::DVec3;
@@ -27,20 +27,11 @@ pub struct StencilRows {
     pub weights: Vec<[f64; WIDTH]>,
 }
 
-struct FixedRows<'a>(&'a [[f64; WIDTH]]);
-
-impl RowValues for FixedRows<'_> {
-    #[inline(always)]
-    fn values(&self, r: usize) -> &[f64] {
-        &self.0[r]
-    }
-}
-
 /// `normal_matrix::accumulate` for rows of exactly WIDTH values: with the width a constant
 /// the pair loops unroll (the general version takes the width at run time).
 #[inline(always)]
 fn accumulate_stencil<const K: usize>(
-    values: &FixedRows,
+    values: &[[f64; WIDTH]],
     rows: &[u32],
     weight: &impl Fn(usize) -> ([f64; K], DVec3),
     pairs: &mut [[f64; K]; PAIRS],
@@ -48,7 +39,7 @@ fn accumulate_stencil<const K: usize>(
 ) {
     for &r in rows {
         let r = r as usize;
-        let w = &values.0[r];
+        let w = &values[r];
         let (q, wp) = weight(r);
         let mut pos = 0;
         for a in 0..WIDTH {
@@ -69,7 +60,7 @@ fn accumulate_stencil<const K: usize>(
 /// What an assembly sums per stencil: the rows' values and weights, and the rows of each
 /// stencil (`order[start[g]..start[g + 1]]`).
 struct StencilSums<'a, W> {
-    values: &'a FixedRows<'a>,
+    values: &'a [[f64; WIDTH]],
     weight: &'a W,
     order: &'a [u32],
     start: &'a [usize],
@@ -263,9 +254,8 @@ impl StencilPlan {
             })
             .collect();
         let mut rhs = vec![DVec3::ZERO; self.controls];
-        let values = FixedRows(&rows.weights);
         let work = StencilSums {
-            values: &values,
+            values: &rows.weights,
             weight: &weight,
             order: &order,
             start: &start,
