@@ -5,8 +5,8 @@
 
 use super::components::connected_components;
 use super::domain::{
-    barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_initial_net,
-    plane_extent, spacing_for_target, GridFrame, InitialNet,
+    barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_for_target,
+    grid_initial_net, plane_extent, GridFrame, InitialNet,
 };
 use super::edge_band::near_edges;
 use super::holes::{plan_holes, HolePlan};
@@ -293,17 +293,23 @@ pub fn fit_scan(
                 )
             }
             false => {
-                let spacing = match (warm.and_then(|w| w.domain), scan.grid_segments) {
-                    (_, Some(n)) => plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
-                    (Some(Domain::Grid { spacing }), None) => *spacing,
+                let (spacing, cells) = match (warm.and_then(|w| w.domain), scan.grid_segments) {
+                    (_, Some(n)) => (
+                        plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
+                        None,
+                    ),
+                    (Some(Domain::Grid { spacing }), None) => (*spacing, None),
                     _ => {
                         let target = (scan.target_controls_pct / 100.0 * real as f64).round();
-                        spacing_for_target(plane, &map.mesh.triangles, target as usize)
+                        let (h, cells) =
+                            grid_for_target(plane, &map.mesh.triangles, target as usize);
+                        (h, Some(cells))
                     }
                 };
                 let gf = GridFrame { spacing };
                 check_grid_size(plane, spacing, opts.levels)?;
-                let grid = GridSpline::new(covered_cells(&gf, plane, &map.mesh.triangles));
+                let cells = cells.unwrap_or_else(|| covered_cells(&gf, plane, &map.mesh.triangles));
+                let grid = GridSpline::new(cells);
                 let same_domain = warm.filter(|w| w.domain == Some(&Domain::Grid { spacing }));
                 let initial = match same_domain.and_then(|w| net_from_warm(&grid, w)) {
                     Some(net) => net,
