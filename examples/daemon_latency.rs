@@ -164,7 +164,9 @@ impl Daemon {
             if Instant::now() > deadline {
                 return Err("timed out waiting for surface.json".into());
             }
-            std::thread::sleep(Duration::from_micros(200));
+            // Every millisecond: the e2e figures are late by up to 1 ms, and the polling
+            // takes well under 1 % of a core from the daemon (at 0.2 ms it took a few %).
+            std::thread::sleep(Duration::from_millis(1));
         }
     }
 
