@@ -51,12 +51,19 @@ pub fn inverse_weights(l: usize) -> (f64, f64) {
 
 /// The exact inverse of one level as an operator from fine to coarse vertices.
 pub fn exact_inverse_operator(fine: &Topology, level: &Level) -> SparseOperator {
+    exact_inverse_rows(fine, &level.coarse_to_fine)
+}
+
+/// `exact_inverse_operator` for a fine mesh whose coarse vertices are known without
+/// detection (a resampling lattice's): `coarse_to_fine` maps each coarse vertex to its
+/// even fine vertex. The rule reads only that vertex's ring in `fine`.
+pub fn exact_inverse_rows(fine: &Topology, coarse_to_fine: &[u32]) -> SparseOperator {
     let mut op = SparseOperator {
         input_len: fine.vertex_count,
         row_start: vec![0],
         ..Default::default()
     };
-    for &a in &level.coarse_to_fine {
+    for &a in coarse_to_fine {
         let ring = fine.ring(a);
         if ring.is_empty() || fine.is_corner(a) {
             op.cols.push(a);

@@ -7,6 +7,7 @@
 //! Both resample the patch on a lattice with Loop subdivision connectivity by construction
 //! and inverse-subdivide it for the initial control net.
 
+use super::grid_inverse::LatticeLadder;
 use crate::mesh::inverse::{coarsen, InverseMethod};
 use crate::remesh::param::Locator;
 use crate::remesh::planar::doubled_area;
@@ -373,18 +374,85 @@ pub fn grid_initial_net(
     levels: usize,
     method: InverseMethod,
 ) -> InitialNet {
-    let locator = Locator::new(&mesh.triangles, plane);
     let f = 1i64 << levels;
     let (coords, triangles) = grid.refined_lattice(f as usize);
-    // Each lattice point on its own: in parallel, in order.
-    let positions: Vec<DVec3> = coords
-        .par_iter()
-        .map(|&(a, b)| {
-            let q = frame.to_plane(a as f64 / f as f64, b as f64 / f as f64);
-            sample(mesh, &locator, q)
-        })
-        .collect();
+    // The exact inverse runs on the lattice's own hierarchy, whose topologies need only the
+    // cells: built beside the sampling. The least-squares inverse detects it (`coarsen`).
+    let (positions, ladder) = rayon::join(
+        || {
+            let locator = Locator::new(&mesh.triangles, plane);
+            // Each lattice point on its own: in parallel, in order.
+            coords
+                .par_iter()
+                .map(|&(a, b)| {
+                    let q = frame.to_plane(a as f64 / f as f64, b as f64 / f as f64);
+                    sample(mesh, &locator, q)
+                })
+                .collect::<Vec<DVec3>>()
+        },
+        || {
+            (method == InverseMethod::Exact)
+                .then(|| LatticeLadder::new(grid, levels, &coords, &triangles))
+        },
+    );
     let resample_points = positions.len();
+    let (mut net, inverse) = match ladder {
+        Some(Ok(ladder)) => (
+            lattice_inverse(grid, &ladder, &positions),
+            "exact".to_string(),
+        ),
+        Some(Err(e)) => (
+            vec![None; grid.control_count()],
+            format!("sampled directly ({e})"),
+        ),
+        None => detected_inverse(grid, levels, method, &coords, positions.clone(), triangles),
+    };
+    if net.iter().all(Option::is_none) {
+        for (k, &(a, b)) in coords.iter().enumerate() {
+            if a.rem_euclid(f) == 0 && b.rem_euclid(f) == 0 {
+                if let Some(ctl) = grid.control_at(a / f, b / f) {
+                    net[ctl as usize] = Some(positions[k]);
+                }
+            }
+        }
+    }
+    InitialNet {
+        controls: fill_nearest(grid, net),
+        resample_points,
+        inverse,
+    }
+}
+
+/// The control points the lattice ladder's exact inverse gives (grid points only).
+fn lattice_inverse(
+    grid: &GridSpline,
+    ladder: &LatticeLadder,
+    positions: &[DVec3],
+) -> Vec<Option<DVec3>> {
+    let mut net = vec![None; grid.control_count()];
+    for (&(i, j), p) in ladder
+        .coarsest_coords()
+        .iter()
+        .zip(ladder.invert(positions))
+    {
+        if let Some(ctl) = grid.control_at(i, j) {
+            net[ctl as usize] = Some(p);
+        }
+    }
+    net
+}
+
+/// The control points of `coarsen` on the sampled lattice, whose hierarchy it detects; all
+/// `None` when that is not the grid's own (then the caller samples the net directly).
+fn detected_inverse(
+    grid: &GridSpline,
+    levels: usize,
+    method: InverseMethod,
+    coords: &[(i64, i64)],
+    positions: Vec<DVec3>,
+    triangles: Vec<[u32; 3]>,
+) -> (Vec<Option<DVec3>>, String) {
+    let f = 1i64 << levels;
     let mut net: Vec<Option<DVec3>> = vec![None; grid.control_count()];
     let fine = TriMesh::new(positions, triangles);
     let inverse = match coarsen(&fine, levels, method) {
@@ -411,20 +479,7 @@ pub fn grid_initial_net(
         }
         Err(e) => format!("sampled directly ({e})"),
     };
-    if net.iter().all(Option::is_none) {
-        for (k, &(a, b)) in coords.iter().enumerate() {
-            if a.rem_euclid(f) == 0 && b.rem_euclid(f) == 0 {
-                if let Some(ctl) = grid.control_at(a / f, b / f) {
-                    net[ctl as usize] = Some(fine.positions[k]);
-                }
-            }
-        }
-    }
-    InitialNet {
-        controls: fill_nearest(grid, net),
-        resample_points,
-        inverse,
-    }
+    (net, inverse)
 }
 
 /// Breadth-first over grid neighbours from every known control point.
@@ -533,6 +588,58 @@ mod tests {
         let s = [0, 1, 2].map(|k| (tri[(k + 1) % 3] - tri[k]).length());
         assert!((s[0] - s[1]).abs() < 1e-9 && (s[1] - s[2]).abs() < 1e-9);
         assert!((tri[1] - tri[0]).perp_dot(tri[2] - tri[0]) > 0.0);
+    }
+
+    #[test]
+    fn the_lattice_ladder_inverts_as_the_detected_hierarchy_does() {
+        let (plane, tris) = disk_map(60);
+        let mesh = TriMesh::new(
+            plane
+                .iter()
+                .map(|p| DVec3::new(p.x, p.y, (2.0 * p.x).sin() * (1.5 * p.y).cos()))
+                .collect(),
+            tris.clone(),
+        );
+        let locator = Locator::new(&tris, &plane);
+        let mut compared = 0;
+        for (spacing, levels) in [(0.3, 1), (0.2, 2), (0.45, 3)] {
+            let frame = GridFrame { spacing };
+            let grid = GridSpline::new(covered_cells(&frame, &plane, &tris));
+            let f = 1i64 << levels;
+            let (coords, triangles) = grid.refined_lattice(f as usize);
+            let positions: Vec<DVec3> = coords
+                .iter()
+                .map(|&(a, b)| {
+                    let q = frame.to_plane(a as f64 / f as f64, b as f64 / f as f64);
+                    sample(&mesh, &locator, q)
+                })
+                .collect();
+            let ladder = LatticeLadder::new(&grid, levels, &coords, &triangles).expect("ladder");
+            let own = lattice_inverse(&grid, &ladder, &positions);
+            let (detected, how) = detected_inverse(
+                &grid,
+                levels,
+                InverseMethod::Exact,
+                &coords,
+                positions.clone(),
+                triangles,
+            );
+            assert_eq!(how, "exact", "spacing {spacing}, {levels} levels");
+            assert_eq!(own.len(), detected.len());
+            for (a, b) in own.iter().zip(&detected) {
+                match (a, b) {
+                    (Some(a), Some(b)) => {
+                        assert!((*a - *b).length() < 1e-12, "{a} vs {b}");
+                        compared += 1;
+                    }
+                    (None, None) => {}
+                    _ => panic!("spacing {spacing}: the paths set different controls"),
+                }
+            }
+            let full = grid_initial_net(&mesh, &plane, &frame, &grid, levels, InverseMethod::Exact);
+            assert_eq!(full.inverse, "exact");
+        }
+        assert!(compared > 100, "{compared}");
     }
 
     #[test]

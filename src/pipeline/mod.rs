@@ -5,6 +5,7 @@ pub mod components;
 pub mod domain;
 pub mod edge_band;
 pub mod geometric;
+pub mod grid_inverse;
 pub mod holes;
 pub mod lattice;
 pub mod output;
