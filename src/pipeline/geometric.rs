@@ -64,8 +64,9 @@ pub fn foot_point(
         if step2 < CONVERGED_STEP2 {
             break;
         }
-        if step2 < TAYLOR_STEP2 {
-            taylor_step(surface, &mut param, &mut d, &mut dist2, point, du, dv);
+        if step2 < TAYLOR_STEP2
+            && taylor_step(surface, &mut param, &mut d, &mut dist2, point, du, dv)
+        {
             break;
         }
         let mut improved = false;
@@ -91,9 +92,10 @@ pub fn foot_point(
 }
 
 /// The last, short Newton step on the expansion at `param`: position to second order,
-/// first derivatives to first order (the second derivatives stay). Refused where the
-/// domain clips the step or the expansion does not come nearer `point`, so the distance
-/// still never grows.
+/// first derivatives to first order (the second derivatives stay). Refused (false) where
+/// the step leaves the face's coordinates (clipped by the domain, or onto another face of
+/// a mesh surface) or the expansion does not come nearer `point`: the caller then takes
+/// the step with an evaluation, as any other.
 fn taylor_step(
     surface: &dyn TriSurface,
     param: &mut SurfaceParam,
@@ -102,23 +104,24 @@ fn taylor_step(
     point: DVec3,
     du: f64,
     dv: f64,
-) {
+) -> bool {
     let trial = surface.step(*param, du, dv);
-    if trial.u != param.u + du || trial.v != param.v + dv {
-        return;
+    if trial.face != param.face || trial.u != param.u + du || trial.v != param.v + dv {
+        return false;
     }
     let first = d.du * du + d.dv * dv;
     let second = d.duu * (du * du) + d.duv * (2.0 * du * dv) + d.dvv * (dv * dv);
     let position = d.position + first + second * 0.5;
     let t2 = (position - point).length_squared();
     if t2 > *dist2 {
-        return;
+        return false;
     }
     *param = trial;
     *dist2 = t2;
     d.position = position;
     d.du += d.duu * du + d.duv * dv;
     d.dv += d.duv * du + d.dvv * dv;
+    true
 }
 
 /// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
