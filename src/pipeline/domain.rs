@@ -503,28 +503,18 @@ fn fill_nearest(grid: &GridSpline, mut net: Vec<Option<DVec3>>) -> Vec<DVec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::topology::grid_triangles;
 
-    /// A planar disk of radius 1 cut from a regular triangulation with `n` squares across.
+    /// A planar disk of radius 1 cut from `grid_triangles(n)` scaled onto [-1, 1]^2.
     fn disk_map(n: usize) -> (Vec<DVec2>, Vec<[u32; 3]>) {
-        let at = |i: usize, j: usize| DVec2::new(i as f64, j as f64) * (2.0 / n as f64) - 1.0;
         let plane: Vec<DVec2> = (0..=n)
-            .flat_map(|j| (0..=n).map(move |i| at(i, j)))
+            .flat_map(|j| (0..=n).map(move |i| DVec2::new(i as f64, j as f64)))
+            .map(|p| p * (2.0 / n as f64) - 1.0)
             .collect();
-        let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        let mut tris = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                for t in [
-                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                ] {
-                    let c = t.iter().map(|&v| plane[v as usize]).sum::<DVec2>() / 3.0;
-                    if c.length() < 1.0 {
-                        tris.push(t);
-                    }
-                }
-            }
-        }
+        let tris = grid_triangles(n)
+            .into_iter()
+            .filter(|t| (t.iter().map(|&v| plane[v as usize]).sum::<DVec2>() / 3.0).length() < 1.0)
+            .collect();
         (plane, tris)
     }
 

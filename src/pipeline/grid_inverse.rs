@@ -7,21 +7,15 @@
 //! they are built while the lattice is being sampled.
 
 use crate::mesh::inverse::exact_inverse_rows;
+use crate::mesh::loop_subdiv::SparseOperator;
 use crate::mesh::topology::{Topology, TopologyError};
 use crate::surface::grid_spline::GridSpline;
 use glam::DVec3;
 
-/// One inverse step: the finer lattice's topology and where each vertex of the coarser
-/// lattice sits in it.
-struct Step {
-    fine: Topology,
-    coarse_to_fine: Vec<u32>,
-}
-
-/// The inverse steps from `refined_lattice(2^levels)` (given as `coords`, `triangles`) down
+/// The exact inverse steps (each from a finer lattice to the next coarser one) from `refined_lattice(2^levels)` (given as `coords`, `triangles`) down
 /// to `refined_lattice(1)`, and that coarsest lattice's vertex coordinates (grid points).
 pub struct LatticeLadder {
-    steps: Vec<Step>,
+    steps: Vec<SparseOperator>,
     coarsest: Vec<(i64, i64)>,
 }
 
@@ -59,10 +53,7 @@ impl LatticeLadder {
                         .ok_or(LadderError::MissingEven(a, b))
                 })
                 .collect::<Result<Vec<u32>, _>>()?;
-            steps.push(Step {
-                fine,
-                coarse_to_fine,
-            });
+            steps.push(exact_inverse_rows(&fine, &coarse_to_fine));
             fine_coords = coarse_coords;
             fine_triangles = Some(coarse_triangles);
         }
@@ -75,11 +66,11 @@ impl LatticeLadder {
     /// The exact inverse of `positions` (one per vertex of the finest lattice): the
     /// coarsest lattice's points, in the order of `coarsest_coords`.
     pub fn invert(&self, positions: &[DVec3]) -> Vec<DVec3> {
-        let mut x = positions.to_vec();
-        for step in &self.steps {
-            x = exact_inverse_rows(&step.fine, &step.coarse_to_fine).apply(&x);
-        }
-        x
+        let Some((first, rest)) = self.steps.split_first() else {
+            return positions.to_vec();
+        };
+        rest.iter()
+            .fold(first.apply(positions), |x, step| step.apply(&x))
     }
 
     pub fn coarsest_coords(&self) -> &[(i64, i64)] {
