@@ -16,3 +16,22 @@ pub fn keep_freed_memory() {
     // whether to purge, and any value (-1: never) is valid at any time.
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) };
 }
+
+/// Asks the kernel for small (4 KiB) pages only in this process: mimalloc marks its arenas
+/// `MADV_HUGEPAGE`, and each 2 MiB huge page a fit touches first must be a free 2 MiB block
+/// of the guest. On the 2-core test VM (virtio-balloon with free page reporting) such blocks
+/// are handed back to the host within seconds of idle, and touching one again costs the
+/// host's fault and zeroing: a cold chin fit run after 4 s of idle took 378 ms (median of
+/// 6, report wall) with huge pages against 256 ms without, its system time 0.21 against
+/// 0.06 s. Run back to back (memory the host still backs) huge pages win, 205 against 249
+/// ms, from ~16k small-page faults; a scanner's fits arrive after idle, and the daemon keeps
+/// its memory after the first fit (`keep_freed_memory`), so small pages are the default.
+/// `TRISPLINE_HUGE_PAGES=1` keeps the system's setting.
+pub fn small_pages_only() {
+    if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
+        return;
+    }
+    // SAFETY: PR_SET_THP_DISABLE takes one integer flag and sets a per-process bit the
+    // kernel consults at page-fault time; it touches no memory of this process.
+    unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) };
+}

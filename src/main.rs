@@ -36,6 +36,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    trispline::allocator::small_pages_only();
     trispline::allocator::keep_freed_memory();
     let cli = Cli::parse();
     let result = match &cli.command {
