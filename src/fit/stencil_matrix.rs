@@ -9,16 +9,13 @@
 //! The result is the same `NormalMatrix` as the general assembly's (same structure, same
 //! sums up to the order of floating-point additions), solved by the same code.
 
-use super::normal_matrix::{
-    packed_index, BlockMatrix, Fairness, NormalMatrix, ScalarMatrix, SCALAR,
-};
+use super::normal_matrix::{BlockMatrix, Fairness, NormalMatrix, ScalarMatrix, SCALAR};
 use super::sparse::Csr;
 use glam::DVec3;
 use rayon::prelude::*;
 
 /// Controls per stencil (a box-spline cell).
 pub const WIDTH: usize = 12;
-const PAIRS: usize = WIDTH * (WIDTH + 1) / 2;
 
 /// One data row per point: its stencil and the weights of the stencil's controls.
 #[derive(Clone, Debug, Default)]
@@ -27,32 +24,52 @@ pub struct StencilRows {
     pub weights: Vec<[f64; WIDTH]>,
 }
 
-/// `normal_matrix::accumulate` for rows of exactly WIDTH values: with the width a constant
-/// the pair loops unroll (the general version takes the width at run time).
+/// Pair sums are formed four columns at a time: the four sums of a row of the 12 x 12
+/// block stay in registers over all of a stencil's rows, so a row costs its multiplies
+/// and two loads instead of a load and a store of every sum (the 78 sums of a stencil do
+/// not fit the registers; summed pair by pair the assembly was bound by those stores).
+const BLOCK: usize = 4;
+const BLOCKS: usize = WIDTH / BLOCK;
+
+/// The pair sums of one stencil, `sums[a][b]` for `b >= a` (rounded down to a block of
+/// four: entries left of the diagonal inside a block are computed and never read).
+type PairSums<const K: usize> = [[[f64; K]; WIDTH]; WIDTH];
+
+/// `normal_matrix::accumulate` for rows of exactly WIDTH values. `staged` holds the rows'
+/// weights and values while the pairs are summed; the sums per pair run over the rows in
+/// the same order as the general assembly's.
 #[inline(always)]
 fn accumulate_stencil<const K: usize>(
     values: &[[f64; WIDTH]],
     rows: &[u32],
     weight: &impl Fn(usize) -> ([f64; K], DVec3),
-    pairs: &mut [[f64; K]; PAIRS],
+    staged: &mut Vec<([f64; K], [f64; WIDTH])>,
+    sums: &mut PairSums<K>,
     rhs: &mut [DVec3; WIDTH],
 ) {
+    staged.clear();
     for &r in rows {
         let r = r as usize;
-        let w = &values[r];
+        let w = values[r];
         let (q, wp) = weight(r);
-        let mut pos = 0;
         for a in 0..WIDTH {
-            let wa = w[a];
-            rhs[a] += wp * wa;
-            let wq = q.map(|x| x * wa);
-            for b in a..WIDTH {
-                let e = &mut pairs[pos + b - a];
-                for c in 0..K {
-                    e[c] += wq[c] * w[b];
+            rhs[a] += wp * w[a];
+        }
+        staged.push((q, w));
+    }
+    for a in 0..WIDTH {
+        for block in a / BLOCK..BLOCKS {
+            let mut acc = [[0.0f64; K]; BLOCK];
+            for (q, w) in staged.iter() {
+                let wq = q.map(|x| x * w[a]);
+                for (j, acc) in acc.iter_mut().enumerate() {
+                    let wb = w[block * BLOCK + j];
+                    for c in 0..K {
+                        acc[c] += wq[c] * wb;
+                    }
                 }
             }
-            pos += WIDTH - a;
+            sums[a][block * BLOCK..(block + 1) * BLOCK].copy_from_slice(&acc);
         }
     }
 }
@@ -337,7 +354,8 @@ impl StencilPlan {
         work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
     ) {
         let row_base = self.ptr[lo];
-        let mut sums = [[0.0f64; K]; PAIRS];
+        let mut sums: PairSums<K> = [[[0.0f64; K]; WIDTH]; WIDTH];
+        let mut staged = Vec::new();
         let mut local_rhs = [DVec3::ZERO; WIDTH];
         for &g in &self.band_stencils[self.bands[band]..self.bands[band + 1]] {
             let g = g as usize;
@@ -345,16 +363,22 @@ impl StencilPlan {
             if members.is_empty() {
                 continue;
             }
-            sums.iter_mut().for_each(|e| *e = [0.0; K]);
             local_rhs.iter_mut().for_each(|b| *b = DVec3::ZERO);
-            accumulate_stencil(work.values, members, work.weight, &mut sums, &mut local_rhs);
+            accumulate_stencil(
+                work.values,
+                members,
+                work.weight,
+                &mut staged,
+                &mut sums,
+                &mut local_rhs,
+            );
             for (a, &c) in self.stencils[g].iter().enumerate() {
                 let c = c as usize;
                 rhs[c - lo] += local_rhs[a];
                 let row = &mut entries[self.ptr[c] - row_base..self.ptr[c + 1] - row_base];
                 let slots = &self.slots[self.member_at[g * WIDTH + a] as usize];
                 for (b, &k) in slots.iter().enumerate() {
-                    let v = &sums[packed_index(a, b, WIDTH)];
+                    let v = &sums[a.min(b)][a.max(b)];
                     let e = &mut row[k as usize];
                     for q in 0..K {
                         e[q] += v[q];
