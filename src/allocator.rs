@@ -35,3 +35,17 @@ pub fn small_pages_only() {
     // kernel consults at page-fault time; it touches no memory of this process.
     unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) };
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn small_pages_only_turns_huge_pages_off_for_the_process() {
+        if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
+            return;
+        }
+        super::small_pages_only();
+        // SAFETY: PR_GET_THP_DISABLE only reads the process's flag.
+        let disabled = unsafe { libc::prctl(libc::PR_GET_THP_DISABLE, 0, 0, 0, 0) };
+        assert_eq!(disabled, 1);
+    }
+}

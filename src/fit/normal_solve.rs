@@ -221,7 +221,13 @@ impl BlockMatrix {
     ) -> (Vec<DVec3>, usize) {
         let inv = self.block_jacobi();
         let precondition = |c: usize, r: DVec3| inv[c] * r;
-        pcg(&PackedBlocks::new(self), precondition, start, max_iter, rel_tol)
+        pcg(
+            &PackedBlocks::new(self),
+            precondition,
+            start,
+            max_iter,
+            rel_tol,
+        )
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
