@@ -10,7 +10,8 @@ const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 /// ~20 % of the CPU time of repeated 40k-point fits in one process on the 2-core test
 /// machine (task-clock 3.74 -> 3.00 s over 12 cold fits). The price: a long-running
 /// daemon keeps its high-water mark (about one fit's working set per worker: ten 40k-point
-/// fits in one process peak at ~110 MB resident with mimalloc v2, ~180 MB with v3).
+/// fits in one process peak at ~110 MB resident with mimalloc v2, ~180 MB with v3, both on
+/// huge pages; ~95 MB with v2 on small pages, see `small_pages_only`).
 pub fn keep_freed_memory() {
     // SAFETY: sets one integer option of the allocator; mimalloc reads it when deciding
     // whether to purge, and any value (-1: never) is valid at any time.
