@@ -502,23 +502,28 @@ impl BlockMatrix {
         ]
     }
 
+    /// M x. Repeated products (CG) keep the packed form (`packed`) instead.
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut()
-            .enumerate()
-            .with_min_len(128)
-            .for_each(|(c, o)| {
-                let mut sum = DVec3::ZERO;
-                for k in self.ptr[c]..self.ptr[c + 1] {
-                    let (e, v) = (&self.entries[k], x[self.idx[k] as usize]);
-                    let s = e[SCALAR];
-                    sum += DVec3::new(
-                        (e[1] + s) * v.x + e[2] * v.y + e[3] * v.z,
-                        e[2] * v.x + (e[4] + s) * v.y + e[5] * v.z,
-                        e[3] * v.x + e[5] * v.y + (e[6] + s) * v.z,
-                    );
-                }
-                *o = sum;
-            });
+        self.packed().apply(x, out)
+    }
+
+    /// The entries as `PackedBlocks`.
+    pub fn packed(&self) -> PackedBlocks<'_> {
+        let blocks = self
+            .entries
+            .par_iter()
+            .with_min_len(4096)
+            .map(|e| {
+                let s = e[SCALAR];
+                [e[1] + s, e[2], e[3], e[4] + s, e[5], e[6] + s]
+            })
+            .collect();
+        PackedBlocks {
+            ptr: &self.ptr,
+            idx: &self.idx,
+            blocks,
+            rhs: &self.rhs,
+        }
     }
 
     /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
@@ -542,6 +547,36 @@ impl BlockMatrix {
                 }
             })
             .collect()
+    }
+}
+
+/// A block matrix's entries as the six distinct values of each symmetric 3x3 block, the
+/// scalar part added in: a product reads 48 bytes per entry instead of 64 (CG on bun000:
+/// 21.6 -> 19.9 ms per fit).
+pub struct PackedBlocks<'a> {
+    ptr: &'a [usize],
+    idx: &'a [u32],
+    blocks: Vec<[f64; 6]>,
+    pub(super) rhs: &'a [DVec3],
+}
+
+impl PackedBlocks<'_> {
+    pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
+        out.par_iter_mut()
+            .enumerate()
+            .with_min_len(128)
+            .for_each(|(c, o)| {
+                let mut sum = DVec3::ZERO;
+                for k in self.ptr[c]..self.ptr[c + 1] {
+                    let (e, v) = (&self.blocks[k], x[self.idx[k] as usize]);
+                    sum += DVec3::new(
+                        e[0] * v.x + e[1] * v.y + e[2] * v.z,
+                        e[1] * v.x + e[3] * v.y + e[4] * v.z,
+                        e[2] * v.x + e[4] * v.y + e[5] * v.z,
+                    );
+                }
+                *o = sum;
+            });
     }
 }
 

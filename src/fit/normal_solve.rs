@@ -2,7 +2,7 @@
 //! gradients (Jacobi for the scalar matrix, inverse 3x3 diagonal blocks for the coupled
 //! one) and sparse Cholesky factorisations (faer, fill-reducing ordering).
 
-use super::normal_matrix::{BlockMatrix, ScalarMatrix, SCALAR};
+use super::normal_matrix::{BlockMatrix, PackedBlocks, ScalarMatrix, SCALAR};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -33,62 +33,9 @@ impl Apply for ScalarMatrix {
     }
 }
 
-impl Apply for BlockMatrix {
-    fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
-        self.apply(x, out)
-    }
-    fn rhs(&self) -> &[DVec3] {
-        &self.rhs
-    }
-}
-
-/// A block matrix's entries as the six distinct values of each symmetric 3x3 block (the
-/// scalar part added in): the products of CG read 48 bytes per entry instead of 64, and the
-/// sums are those of `BlockMatrix::apply`, bit for bit.
-struct PackedBlocks<'a> {
-    ptr: &'a [usize],
-    idx: &'a [u32],
-    blocks: Vec<[f64; 6]>,
-    rhs: &'a [DVec3],
-}
-
-impl<'a> PackedBlocks<'a> {
-    fn new(m: &'a BlockMatrix) -> Self {
-        let blocks = m
-            .entries
-            .par_iter()
-            .with_min_len(4096)
-            .map(|e| {
-                let s = e[SCALAR];
-                [e[1] + s, e[2], e[3], e[4] + s, e[5], e[6] + s]
-            })
-            .collect();
-        PackedBlocks {
-            ptr: &m.ptr,
-            idx: &m.idx,
-            blocks,
-            rhs: &m.rhs,
-        }
-    }
-}
-
 impl Apply for PackedBlocks<'_> {
     fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut()
-            .enumerate()
-            .with_min_len(128)
-            .for_each(|(c, o)| {
-                let mut sum = DVec3::ZERO;
-                for k in self.ptr[c]..self.ptr[c + 1] {
-                    let (e, v) = (&self.blocks[k], x[self.idx[k] as usize]);
-                    sum += DVec3::new(
-                        e[0] * v.x + e[1] * v.y + e[2] * v.z,
-                        e[1] * v.x + e[3] * v.y + e[4] * v.z,
-                        e[2] * v.x + e[4] * v.y + e[5] * v.z,
-                    );
-                }
-                *o = sum;
-            });
+        self.apply(x, out)
     }
     fn rhs(&self) -> &[DVec3] {
         self.rhs
@@ -221,13 +168,7 @@ impl BlockMatrix {
     ) -> (Vec<DVec3>, usize) {
         let inv = self.block_jacobi();
         let precondition = |c: usize, r: DVec3| inv[c] * r;
-        pcg(
-            &PackedBlocks::new(self),
-            precondition,
-            start,
-            max_iter,
-            rel_tol,
-        )
+        pcg(&self.packed(), precondition, start, max_iter, rel_tol)
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
