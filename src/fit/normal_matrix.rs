@@ -414,16 +414,9 @@ impl ScalarMatrix {
     }
 
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut()
-            .enumerate()
-            .with_min_len(128)
-            .for_each(|(c, o)| {
-                let mut sum = DVec3::ZERO;
-                for k in self.ptr[c]..self.ptr[c + 1] {
-                    sum += x[self.idx[k] as usize] * self.entries[k][SCALAR];
-                }
-                *o = sum;
-            });
+        row_products(&self.ptr, &self.idx, x, out, |k, v| {
+            v * self.entries[k][SCALAR]
+        });
     }
 
     /// Inverse diagonal (1 where a control has no term).
@@ -562,22 +555,36 @@ pub struct PackedBlocks<'a> {
 
 impl PackedBlocks<'_> {
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        out.par_iter_mut()
-            .enumerate()
-            .with_min_len(128)
-            .for_each(|(c, o)| {
-                let mut sum = DVec3::ZERO;
-                for k in self.ptr[c]..self.ptr[c + 1] {
-                    let (e, v) = (&self.blocks[k], x[self.idx[k] as usize]);
-                    sum += DVec3::new(
-                        e[0] * v.x + e[1] * v.y + e[2] * v.z,
-                        e[1] * v.x + e[3] * v.y + e[4] * v.z,
-                        e[2] * v.x + e[4] * v.y + e[5] * v.z,
-                    );
-                }
-                *o = sum;
-            });
+        row_products(self.ptr, self.idx, x, out, |k, v| {
+            let e = &self.blocks[k];
+            DVec3::new(
+                e[0] * v.x + e[1] * v.y + e[2] * v.z,
+                e[1] * v.x + e[3] * v.y + e[4] * v.z,
+                e[2] * v.x + e[4] * v.y + e[5] * v.z,
+            )
+        });
     }
+}
+
+/// out_c = sum over c's entries k of `term(k, x[idx[k]])`, rows in parallel.
+#[inline(always)]
+fn row_products(
+    ptr: &[usize],
+    idx: &[u32],
+    x: &[DVec3],
+    out: &mut [DVec3],
+    term: impl Fn(usize, DVec3) -> DVec3 + Sync,
+) {
+    out.par_iter_mut()
+        .enumerate()
+        .with_min_len(128)
+        .for_each(|(c, o)| {
+            let mut sum = DVec3::ZERO;
+            for k in ptr[c]..ptr[c + 1] {
+                sum += term(k, x[idx[k] as usize]);
+            }
+            *o = sum;
+        });
 }
 
 #[cfg(test)]
