@@ -27,19 +27,23 @@ pub fn keep_freed_memory() {
 /// 0.06 s. Run back to back (memory the host still backs) huge pages win, 205 against 249
 /// ms, from ~16k small-page faults; a scanner's fits arrive after idle, and the daemon keeps
 /// its memory after the first fit (`keep_freed_memory`), so small pages are the default.
-/// `TRISPLINE_HUGE_PAGES=1` keeps the system's setting.
+/// `TRISPLINE_HUGE_PAGES=1` keeps the system's setting. Linux only; elsewhere it does nothing.
 pub fn small_pages_only() {
     if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
         return;
     }
     // SAFETY: PR_SET_THP_DISABLE takes one integer flag and sets a per-process bit the
     // kernel consults at page-fault time; it touches no memory of this process.
-    unsafe { libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0) };
+    #[cfg(target_os = "linux")]
+    unsafe {
+        libc::prctl(libc::PR_SET_THP_DISABLE, 1, 0, 0, 0)
+    };
 }
 
 #[cfg(test)]
 mod tests {
     #[test]
+    #[cfg(target_os = "linux")]
     fn small_pages_only_turns_huge_pages_off_for_the_process() {
         if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
             return;
