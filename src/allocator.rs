@@ -29,7 +29,7 @@ pub fn keep_freed_memory() {
 /// its memory after the first fit (`keep_freed_memory`), so small pages are the default.
 /// `TRISPLINE_HUGE_PAGES=1` keeps the system's setting. Linux only; elsewhere it does nothing.
 pub fn small_pages_only() {
-    if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
+    if huge_pages_kept() {
         return;
     }
     // SAFETY: PR_SET_THP_DISABLE takes one integer flag and sets a per-process bit the
@@ -40,12 +40,17 @@ pub fn small_pages_only() {
     };
 }
 
+/// `TRISPLINE_HUGE_PAGES=1`: the system's huge-page setting stays.
+fn huge_pages_kept() -> bool {
+    std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1")
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
     #[cfg(target_os = "linux")]
     fn small_pages_only_turns_huge_pages_off_for_the_process() {
-        if std::env::var_os("TRISPLINE_HUGE_PAGES").is_some_and(|v| v == "1") {
+        if super::huge_pages_kept() {
             return;
         }
         super::small_pages_only();

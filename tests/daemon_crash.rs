@@ -60,6 +60,16 @@ fn check_outputs(dir: &Path, hashes: &HashSet<String>, round: usize) {
     }
 }
 
+/// Every newline-terminated line of the event log is a JSON value.
+fn assert_whole_lines_parse(events: &str, round: usize) {
+    for line in events.split_inclusive('\n').filter(|l| l.ends_with('\n')) {
+        assert!(
+            serde_json::from_str::<serde_json::Value>(line).is_ok(),
+            "round {round}: event line cut: {line}"
+        );
+    }
+}
+
 #[test]
 fn kill_9_mid_write_leaves_only_complete_outputs() {
     // A large tessellation makes the GLB write long enough for kills to land inside it.
@@ -115,12 +125,7 @@ fn kill_9_mid_write_leaves_only_complete_outputs() {
         // between pages); the next start moves the fragment aside, so every whole line
         // parses: a fragment left in place would have joined the next line.
         let ev = std::fs::read_to_string(s.out.join("events.ndjson")).unwrap_or_default();
-        for line in ev.split_inclusive('\n').filter(|l| l.ends_with('\n')) {
-            assert!(
-                serde_json::from_str::<serde_json::Value>(line).is_ok(),
-                "round {round}: event line cut: {line}"
-            );
-        }
+        assert_whole_lines_parse(&ev, round);
     }
     // Not asserted (timing decides), but shows that kills landed on both sides of commits.
     println!("{changed} of {rounds} rounds changed the committed report; {temps} temp files seen");
@@ -135,12 +140,7 @@ fn kill_9_mid_write_leaves_only_complete_outputs() {
     check_outputs(&s.out.join("scan"), &hashes, rounds);
     let ev = std::fs::read_to_string(s.out.join("events.ndjson")).expect("event log");
     assert!(ev.ends_with('\n'), "the event log ends in a cut line");
-    for line in ev.lines() {
-        assert!(
-            serde_json::from_str::<serde_json::Value>(line).is_ok(),
-            "event line cut: {line}"
-        );
-    }
+    assert_whole_lines_parse(&ev, rounds);
     let leftovers: Vec<_> = std::fs::read_dir(s.out.join("scan"))
         .expect("dir")
         .flatten()

@@ -112,8 +112,12 @@ fn repair_cut_tail(path: &Path) -> std::io::Result<Option<usize>> {
 }
 
 impl Writer {
+    fn event_log(&self) -> PathBuf {
+        self.out_dir.join("events.ndjson")
+    }
+
     pub fn run(mut self, inbox: Receiver<WriterMsg>) -> Summary {
-        let log = self.out_dir.join("events.ndjson");
+        let log = self.event_log();
         match repair_cut_tail(&log) {
             Ok(Some(bytes)) => tracing::warn!(
                 bytes,
@@ -386,7 +390,7 @@ impl Writer {
     fn event(&self, mut line: serde_json::Value) {
         use std::io::Write;
         line["time"] = json!(secs(SystemTime::now()));
-        let path = self.out_dir.join("events.ndjson");
+        let path = self.event_log();
         let appended = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
