@@ -44,13 +44,25 @@ impl<'a> GridStencils<'a> {
     /// The data rows at `params`; `None` if one lies outside the covered cells (the
     /// general assembly then takes over).
     fn rows(&self, params: &[SurfaceParam]) -> Option<StencilRows> {
-        let rows: Vec<(u32, [f64; 12])> = params
-            .par_iter()
+        // Written in place: collecting `Option`s would gather the rows in pieces and copy
+        // them twice (into one vector, then apart), fresh memory each time.
+        let mut stencil = vec![0u32; params.len()];
+        let mut weights = vec![[0.0; 12]; params.len()];
+        let all_inside = stencil
+            .par_iter_mut()
+            .zip(weights.par_iter_mut())
+            .zip(params)
             .with_min_len(1024)
-            .map(|p| self.grid.stencil_row(&self.of_slot, *p))
-            .collect::<Option<_>>()?;
-        let (stencil, weights) = rows.into_iter().unzip();
-        Some(StencilRows { stencil, weights })
+            .all(
+                |((s, w), p)| match self.grid.stencil_row(&self.of_slot, *p) {
+                    Some((g, values)) => {
+                        (*s, *w) = (g, values);
+                        true
+                    }
+                    None => false,
+                },
+            );
+        all_inside.then_some(StencilRows { stencil, weights })
     }
 }
 
