@@ -37,6 +37,21 @@ fn an_irregular_patch_is_remeshed_and_fitted_with_a_trim() {
         report["data_points"], 1254,
         "every scan vertex is a data point; no virtual ones"
     );
+    // Every stage's time, the file's read included (the benchmark reads them).
+    for stage in [
+        "read_ms",
+        "parameterization_ms",
+        "resample_ms",
+        "prepare_ms",
+        "fit_ms",
+        "wall_ms",
+    ] {
+        assert!(
+            report[stage].as_f64().is_some_and(|t| t > 0.0),
+            "{stage}: {}",
+            report[stage]
+        );
+    }
     // The dome spans 2.83 units; a degree-12 patch follows it to well under 1 %.
     let rms = report["final"]["geometric_rms_error"]
         .as_f64()

@@ -104,7 +104,9 @@ pub struct FitArgs {
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
+    let started = std::time::Instant::now();
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
+    let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let cfg = WorkerConfig {
         surface: args.surface,
         levels: args.levels,
@@ -155,11 +157,15 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         Err(e) => return Err(e).context(format!("{}: fit failed", args.input.display())),
     };
     let label = args.input.display().to_string();
+    let source = Source {
+        label: &label,
+        read_ms,
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     if args.components == ComponentMode::Largest {
         for part in input.parts {
-            write_outputs(&args.out, part.outputs, &label)?;
+            write_outputs(&args.out, part.outputs, &source)?;
         }
         return Ok(ExitCode::SUCCESS);
     }
@@ -172,7 +178,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
             "data_points": part.outputs.report["data_points"],
             "final": part.outputs.report["final"],
         }));
-        write_outputs(&args.out.join(&name), part.outputs, &label)?;
+        write_outputs(&args.out.join(&name), part.outputs, &source)?;
     }
     for (suffix, reason) in &input.failed {
         eprintln!("{label}: component {suffix} not fitted: {reason}");
@@ -189,9 +195,17 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Where a fit's mesh came from, for its report.
+struct Source<'a> {
+    label: &'a str,
+    /// Reading and parsing the input file (the report's `wall_ms` starts after it).
+    read_ms: f64,
+}
+
 /// One surface's files; surface.json last, its presence marks a complete set.
-fn write_outputs(dir: &Path, mut out: PatchOutputs, label: &str) -> anyhow::Result<()> {
-    out.report["input"] = json!(label);
+fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::Result<()> {
+    out.report["input"] = json!(source.label);
+    out.report["read_ms"] = json!(source.read_ms);
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     write_atomic(&dir.join("surface.glb"), &out.glb)?;
     write_atomic(

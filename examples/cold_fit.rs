@@ -1,0 +1,143 @@
+//! The cold-fit benchmark of the real-scan issue, measured as a user meets it: a fresh
+//! `trispline fit` process per run, from its start to `surface.json` in place, on a
+//! 40k-vertex range scan.
+//!
+//!     cargo build --release --bin trispline
+//!     cargo run --release --example cold_fit [-- FILE [RUNS [IDLE_S [SURFACE]]]]
+//!
+//! Defaults: `../shared/data/range_scans/bun000_tri.ply`, 8 runs, no idle, `loop`. With
+//! IDLE_S > 0 every run waits that long first: on a VM that hands free memory back to its
+//! host, a fit after idle pays for its fresh pages again (see `allocator::small_pages_only`),
+//! so back-to-back runs alone flatter the figures.
+//!
+//! Per run: `surface` = process start -> `surface.json` renamed into place (polled every
+//! millisecond, so late by up to 1 ms); `exit` = process start -> exit; then the report's
+//! stages: `read` (read + parse), `prepare` (clean, components, holes, map, grid, initial
+//! net), `fit` (first fit and correction rounds), `shown` (tessellation, GLB, report and
+//! surface descriptions: the report's `wall_ms` less prepare and fit), and `rest` =
+//! surface - read - wall: process start, argument parsing and the three atomic writes with
+//! their fsyncs.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+fn binary() -> Res<PathBuf> {
+    let exe = std::env::current_exe()?;
+    let bin = exe
+        .parent()
+        .and_then(Path::parent)
+        .ok_or("cannot locate the target folder")?
+        .join("trispline");
+    if !bin.exists() {
+        return Err(format!(
+            "{} missing: run `cargo build --release --bin trispline` first",
+            bin.display()
+        )
+        .into());
+    }
+    Ok(bin)
+}
+
+const COLUMNS: [&str; 7] = ["surface", "exit", "read", "prepare", "fit", "shown", "rest"];
+
+fn run_once(bin: &Path, input: &Path, surface: &str) -> Res<[f64; 7]> {
+    let out = tempfile::tempdir()?;
+    let target = out.path().join("surface.json");
+    let start = Instant::now();
+    let mut child = Command::new(bin)
+        .args(["fit", "--surface", surface, "--out"])
+        .arg(out.path())
+        .arg(input)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()?;
+    let mut at_surface = None;
+    let status = loop {
+        if at_surface.is_none() && target.exists() {
+            at_surface = Some(start.elapsed());
+        }
+        if let Some(status) = child.try_wait()? {
+            break status;
+        }
+        if start.elapsed() > Duration::from_secs(600) {
+            child.kill()?;
+            return Err("a fit took over 10 minutes".into());
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    let exit = start.elapsed();
+    if !status.success() {
+        let mut why = String::new();
+        if let Some(mut e) = child.stderr.take() {
+            std::io::Read::read_to_string(&mut e, &mut why)?;
+        }
+        return Err(format!("trispline fit failed ({status}): {why}").into());
+    }
+    let surface_ms = at_surface.unwrap_or(exit).as_secs_f64() * 1e3;
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("report.json"))?)?;
+    let field = |k: &str| report[k].as_f64().ok_or(format!("report.json has no {k}"));
+    let (read, prepare, fit, wall) = (
+        field("read_ms")?,
+        field("prepare_ms")?,
+        field("fit_ms")?,
+        field("wall_ms")?,
+    );
+    Ok([
+        surface_ms,
+        exit.as_secs_f64() * 1e3,
+        read,
+        prepare,
+        fit,
+        wall - prepare - fit,
+        surface_ms - read - wall,
+    ])
+}
+
+fn main() -> Res<()> {
+    let mut args = std::env::args().skip(1);
+    let input = args.next().map(PathBuf::from).unwrap_or_else(|| {
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/range_scans/bun000_tri.ply")
+    });
+    let runs: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(8).max(1);
+    let idle: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(0.0);
+    let surface = args.next().unwrap_or_else(|| "loop".into());
+    if !input.exists() {
+        return Err(format!("{} missing (pass a mesh file)", input.display()).into());
+    }
+    let bin = binary()?;
+    println!(
+        "{}: {runs} cold `trispline fit --surface {surface}` processes, {idle} s idle before each (ms)",
+        input.display()
+    );
+    println!("{}", COLUMNS.map(|c| format!("{c:>8}")).join(""));
+    let mut rows = Vec::with_capacity(runs);
+    for _ in 0..runs {
+        if idle > 0.0 {
+            std::thread::sleep(Duration::from_secs_f64(idle));
+        }
+        let row = run_once(&bin, &input, &surface)?;
+        println!("{}", row.map(|v| format!("{v:8.1}")).join(""));
+        rows.push(row);
+    }
+    let column = |c: usize| {
+        let mut v: Vec<f64> = rows.iter().map(|r| r[c]).collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let min = |v: Vec<f64>| v[0];
+    let median = |v: Vec<f64>| 0.5 * (v[(v.len() - 1) / 2] + v[v.len() / 2]);
+    for (label, stat) in [
+        ("min", &min as &dyn Fn(Vec<f64>) -> f64),
+        ("median", &median),
+    ] {
+        let cells: String = (0..COLUMNS.len())
+            .map(|c| format!("{:8.1}", stat(column(c))))
+            .collect();
+        println!("{cells}  {label}");
+    }
+    Ok(())
+}
