@@ -2,7 +2,7 @@
 
 use super::progress::Progress;
 use crate::fit::Method;
-use crate::io::{read_mesh_file, write_atomic, LoadOptions};
+use crate::io::{read_mesh_file, write_atomic, write_atomic_group, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::components::ComponentMode;
 use crate::pipeline::worker::{self, run_input_with, PatchOutputs, WorkerConfig};
@@ -207,14 +207,16 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
     out.report["input"] = json!(source.label);
     out.report["read_ms"] = json!(source.read_ms);
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    write_atomic(&dir.join("surface.glb"), &out.glb)?;
-    write_atomic(
-        &dir.join("report.json"),
-        &serde_json::to_vec_pretty(&out.report)?,
-    )?;
-    write_atomic(
-        &dir.join("surface.json"),
-        &serde_json::to_vec_pretty(&out.surface)?,
+    let report = serde_json::to_vec_pretty(&out.report)?;
+    let surface = serde_json::to_vec_pretty(&out.surface)?;
+    // As the daemon writes them: the three synced at once, surface.json renamed last.
+    write_atomic_group(
+        dir,
+        &[
+            ("surface.glb", &out.glb),
+            ("report.json", &report),
+            ("surface.json", &surface),
+        ],
     )?;
     Ok(())
 }
