@@ -22,24 +22,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-type Res<T> = Result<T, Box<dyn std::error::Error>>;
-
-fn binary() -> Res<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let bin = exe
-        .parent()
-        .and_then(Path::parent)
-        .ok_or("cannot locate the target folder")?
-        .join("trispline");
-    if !bin.exists() {
-        return Err(format!(
-            "{} missing: run `cargo build --release --bin trispline` first",
-            bin.display()
-        )
-        .into());
-    }
-    Ok(bin)
-}
+mod common;
+use common::{binary, Res};
 
 const COLUMNS: [&str; 7] = ["surface", "exit", "read", "prepare", "fit", "shown", "rest"];
 

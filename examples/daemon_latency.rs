@@ -17,24 +17,8 @@ use std::time::{Duration, Instant};
 use trispline::io::{read_mesh_file, write_mesh_file, LoadOptions};
 use trispline::{DVec3, TriMesh};
 
-type Res<T> = Result<T, Box<dyn std::error::Error>>;
-
-fn binary() -> Res<PathBuf> {
-    let exe = std::env::current_exe()?;
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .ok_or("cannot locate the target folder")?;
-    let bin = dir.join("trispline");
-    if !bin.exists() {
-        return Err(format!(
-            "{} missing: run `cargo build --release --bin trispline` first",
-            bin.display()
-        )
-        .into());
-    }
-    Ok(bin)
-}
+mod common;
+use common::{binary, Res};
 
 fn source_mesh() -> Res<(TriMesh, String)> {
     let bun =
