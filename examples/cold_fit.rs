@@ -30,13 +30,16 @@ const COLUMNS: [&str; 7] = ["surface", "exit", "read", "prepare", "fit", "shown"
 fn run_once(bin: &Path, input: &Path, surface: &str) -> Res<[f64; 7]> {
     let out = tempfile::tempdir()?;
     let target = out.path().join("surface.json");
+    // Into a file, not a pipe: a pipe nobody reads while the fit runs could fill and stall it.
+    let log_path = out.path().join("stderr.txt");
+    let log = std::fs::File::create(&log_path)?;
     let start = Instant::now();
     let mut child = Command::new(bin)
         .args(["fit", "--surface", surface, "--out"])
         .arg(out.path())
         .arg(input)
         .stdout(Stdio::null())
-        .stderr(Stdio::piped())
+        .stderr(log)
         .spawn()?;
     let mut at_surface = None;
     let status = loop {
@@ -54,10 +57,7 @@ fn run_once(bin: &Path, input: &Path, surface: &str) -> Res<[f64; 7]> {
     };
     let exit = start.elapsed();
     if !status.success() {
-        let mut why = String::new();
-        if let Some(mut e) = child.stderr.take() {
-            std::io::Read::read_to_string(&mut e, &mut why)?;
-        }
+        let why = std::fs::read_to_string(&log_path).unwrap_or_default();
         return Err(format!("trispline fit failed ({status}): {why}").into());
     }
     let surface_ms = at_surface.unwrap_or(exit).as_secs_f64() * 1e3;
