@@ -107,21 +107,20 @@ fn main() -> Res<()> {
         println!("{}", row.map(|v| format!("{v:8.1}")).join(""));
         rows.push(row);
     }
-    let column = |c: usize| {
-        let mut v: Vec<f64> = rows.iter().map(|r| r[c]).collect();
-        v.sort_by(f64::total_cmp);
-        v
+    let sorted: Vec<Vec<f64>> = (0..COLUMNS.len())
+        .map(|c| {
+            let mut v: Vec<f64> = rows.iter().map(|r| r[c]).collect();
+            v.sort_by(f64::total_cmp);
+            v
+        })
+        .collect();
+    let line = |stat: &dyn Fn(&[f64]) -> f64| -> String {
+        sorted.iter().map(|v| format!("{:8.1}", stat(v))).collect()
     };
-    let min = |v: Vec<f64>| v[0];
-    let median = |v: Vec<f64>| 0.5 * (v[(v.len() - 1) / 2] + v[v.len() / 2]);
-    for (label, stat) in [
-        ("min", &min as &dyn Fn(Vec<f64>) -> f64),
-        ("median", &median),
-    ] {
-        let cells: String = (0..COLUMNS.len())
-            .map(|c| format!("{:8.1}", stat(column(c))))
-            .collect();
-        println!("{cells}  {label}");
-    }
+    println!("{}  min", line(&|v| v[0]));
+    println!(
+        "{}  median",
+        line(&|v| 0.5 * (v[(v.len() - 1) / 2] + v[v.len() / 2]))
+    );
     Ok(())
 }
