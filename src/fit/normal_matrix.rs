@@ -10,18 +10,29 @@
 //! triangular update without index lookups, and each control gathers its row of M from the
 //! few dozen pattern matrices it appears in, in parallel and without write conflicts.
 //!
-//! Per control pair an entry keeps `K` sums: first the scalar part
-//! sum w_a w_b t + s (L^T L)_ab, then for blocks (K = 8) the six distinct entries of
-//! sum w_a w_b n n^T (the block is symmetric) and a zero that pads the entry to a whole
-//! number of AVX registers.
+//! Per control pair an entry keeps `K` sums: for the scalar matrix (K = 1) the sum
+//! w_a w_b + s (L^T L)_ab; for blocks (K = 6) the six distinct entries of the symmetric
+//! block sum w_a w_b (n n^T + t I), the fairness term s (L^T L)_ab added on its diagonal.
+//! Assembled in that form, a CG product reads the entries as they are (no repacking per
+//! solve) and a row costs six multiplies per pair.
 
 use super::sparse::Csr;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
-/// Index of the scalar part in an entry.
+/// Index of the scalar matrix's value in its entry.
 pub(super) const SCALAR: usize = 0;
+
+/// The lanes of an entry on the block's diagonal, where the scalar fairness term adds: the
+/// one lane of a scalar entry, (0, 0), (1, 1) and (2, 2) of a packed block.
+pub(super) const fn diagonal_lanes(k: usize) -> &'static [usize] {
+    match k {
+        1 => &[0],
+        6 => &[0, 3, 5],
+        _ => panic!("entries are scalars (1) or symmetric 3x3 blocks (6)"),
+    }
+}
 
 /// Control pairs of a pattern with k columns, a <= b, packed row by row.
 pub(super) fn packed_len(k: usize) -> usize {
@@ -48,8 +59,8 @@ pub struct NormalMatrix<const K: usize> {
 
 /// Point-to-point: the same matrix for all three coordinates.
 pub type ScalarMatrix = NormalMatrix<1>;
-/// Squared distance: 3x3 blocks from six n n^T sums and a scalar part.
-pub type BlockMatrix = NormalMatrix<8>;
+/// Squared distance: symmetric 3x3 blocks, six sums each (`BlockMatrix::block`).
+pub type BlockMatrix = NormalMatrix<6>;
 
 /// The fairness term s L^T L: L by rows and by columns (its transpose).
 #[derive(Clone, Copy)]
@@ -388,7 +399,10 @@ impl<const K: usize> Gather<'_, K> {
                         seen[j] = true;
                         touched.push(j);
                     }
-                    acc[j][SCALAR] += wc * f.l.values[e];
+                    let v = wc * f.l.values[e];
+                    for &d in diagonal_lanes(K) {
+                        acc[j][d] += v;
+                    }
                 }
             }
         }
@@ -446,7 +460,7 @@ impl BlockMatrix {
         fairness: Option<Fairness>,
         lower_only: bool,
     ) -> Self {
-        assemble::<8>(
+        assemble::<6>(
             n,
             Self::weight(data, normals, tangential),
             fairness,
@@ -454,24 +468,22 @@ impl BlockMatrix {
         )
     }
 
-    /// Per data row: W = n n^T + t I, as the scalar part t and the six entries of n n^T.
+    /// Per data row: W = n n^T + t I, its six distinct entries.
     pub(super) fn weight<'a>(
         data: &'a [DVec3],
         normals: &'a [DVec3],
         tangential: &'a [f64],
-    ) -> impl Fn(usize) -> ([f64; 8], DVec3) + Sync + 'a {
+    ) -> impl Fn(usize) -> ([f64; 6], DVec3) + Sync + 'a {
         move |r: usize| {
             let (q, p, t) = (normals[r], data[r], tangential[r]);
             (
                 [
-                    t,
-                    q.x * q.x,
+                    q.x * q.x + t,
                     q.x * q.y,
                     q.x * q.z,
-                    q.y * q.y,
+                    q.y * q.y + t,
                     q.y * q.z,
-                    q.z * q.z,
-                    0.0,
+                    q.z * q.z + t,
                 ],
                 q * q.dot(p) + p * t,
             )
@@ -480,43 +492,20 @@ impl BlockMatrix {
 
     /// The 3x3 block of an entry, row-major (symmetric, so also column-major).
     #[inline]
-    pub fn block(e: &[f64; 8]) -> [f64; 9] {
-        let s = e[SCALAR];
-        [
-            e[1] + s,
-            e[2],
-            e[3],
-            e[2],
-            e[4] + s,
-            e[5],
-            e[3],
-            e[5],
-            e[6] + s,
-        ]
+    pub fn block(e: &[f64; 6]) -> [f64; 9] {
+        [e[0], e[1], e[2], e[1], e[3], e[4], e[2], e[4], e[5]]
     }
 
-    /// M x. Repeated products (CG) keep the packed form (`packed`) instead.
+    /// M x.
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        self.packed().apply(x, out)
-    }
-
-    /// The entries as `PackedBlocks`.
-    pub fn packed(&self) -> PackedBlocks<'_> {
-        let blocks = self
-            .entries
-            .par_iter()
-            .with_min_len(4096)
-            .map(|e| {
-                let s = e[SCALAR];
-                [e[1] + s, e[2], e[3], e[4] + s, e[5], e[6] + s]
-            })
-            .collect();
-        PackedBlocks {
-            ptr: &self.ptr,
-            idx: &self.idx,
-            blocks,
-            rhs: &self.rhs,
-        }
+        row_products(&self.ptr, &self.idx, x, out, |k, v| {
+            let e = &self.entries[k];
+            DVec3::new(
+                e[0] * v.x + e[1] * v.y + e[2] * v.z,
+                e[1] * v.x + e[3] * v.y + e[4] * v.z,
+                e[2] * v.x + e[4] * v.y + e[5] * v.z,
+            )
+        });
     }
 
     /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
@@ -540,29 +529,6 @@ impl BlockMatrix {
                 }
             })
             .collect()
-    }
-}
-
-/// A block matrix's entries as the six distinct values of each symmetric 3x3 block, the
-/// scalar part added in: a product reads 48 bytes per entry instead of 64 (CG on bun000:
-/// 21.6 -> 19.9 ms per fit).
-pub struct PackedBlocks<'a> {
-    ptr: &'a [usize],
-    idx: &'a [u32],
-    blocks: Vec<[f64; 6]>,
-    pub(super) rhs: &'a [DVec3],
-}
-
-impl PackedBlocks<'_> {
-    pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
-        row_products(self.ptr, self.idx, x, out, |k, v| {
-            let e = &self.blocks[k];
-            DVec3::new(
-                e[0] * v.x + e[1] * v.y + e[2] * v.z,
-                e[1] * v.x + e[3] * v.y + e[4] * v.z,
-                e[2] * v.x + e[4] * v.y + e[5] * v.z,
-            )
-        });
     }
 }
 

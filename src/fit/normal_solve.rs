@@ -2,7 +2,7 @@
 //! gradients (Jacobi for the scalar matrix, inverse 3x3 diagonal blocks for the coupled
 //! one) and sparse Cholesky factorisations (faer, fill-reducing ordering).
 
-use super::normal_matrix::{BlockMatrix, PackedBlocks, ScalarMatrix, SCALAR};
+use super::normal_matrix::{BlockMatrix, ScalarMatrix, SCALAR};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -33,12 +33,12 @@ impl Apply for ScalarMatrix {
     }
 }
 
-impl Apply for PackedBlocks<'_> {
+impl Apply for BlockMatrix {
     fn apply_to(&self, x: &[DVec3], out: &mut [DVec3]) {
         self.apply(x, out)
     }
     fn rhs(&self) -> &[DVec3] {
-        self.rhs
+        &self.rhs
     }
 }
 
@@ -168,7 +168,7 @@ impl BlockMatrix {
     ) -> (Vec<DVec3>, usize) {
         let inv = self.block_jacobi();
         let precondition = |c: usize, r: DVec3| inv[c] * r;
-        pcg(&self.packed(), precondition, start, max_iter, rel_tol)
+        pcg(self, precondition, start, max_iter, rel_tol)
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
