@@ -387,6 +387,22 @@ pub fn fit_scan(
             })
             .as_ref()
     };
+    // Per data point, the tangential share of the distance rounds: stiffer near the data's
+    // edges (outer rim and holes).
+    let edge_shares = || -> Vec<f64> {
+        let rims: Vec<&[u32]> = std::iter::once(patch.outer.as_slice())
+            .chain(patch.hole_loops.iter().map(|h| h.as_slice()))
+            .collect();
+        let radius = EDGE_BAND_SPACINGS * control_spacing(&domain, scan.lattice);
+        near_edges(&part, &plane[..real], &rims, radius)
+            .iter()
+            .map(|&near| match near {
+                true => scan.correction_tangential_edge,
+                false => scan.correction_tangential,
+            })
+            .collect()
+    };
+    let mut early_band = None;
     // A warm start that covers the domain already sits near the fit: its foot points are
     // better parameters than the projection, so it goes straight to the correction rounds.
     let warm_enough = scan.correction_rounds > 0
@@ -424,29 +440,35 @@ pub fn fit_scan(
         };
         (outcome, feet)
     } else {
-        let outcome = match opts.method {
-            Method::Cg | Method::Direct => assembled_fit(
-                surface,
-                grid_stencils(),
-                &params,
-                data,
-                &fairness,
-                smoothing,
-                start,
-                opts,
-            ),
-            Method::Pia | Method::Lspia => {
-                run_fit(surface, &params, data, &fairness, smoothing, start, opts)?
+        // The assembly plan and the first fit's rows are built side by side, and the
+        // rounds' edge band beside the first fit: none of them needs another.
+        let first_rows = match (&model, opts.method) {
+            (SurfaceModel::Grid(grid), Method::Cg | Method::Direct) => {
+                let (built, rows) = GridStencils::with_rows(grid, &fairness, smoothing, &params);
+                let _ = stencils.set(Some(built));
+                rows
             }
+            _ => None,
         };
-        let feet = foot_points(
-            surface,
-            grid_stencils(),
-            &outcome.controls,
-            data,
-            &mut params,
+        let plan = grid_stencils();
+        let params = &mut params;
+        let (first, band) = rayon::join(
+            || -> Result<_, PipelineError> {
+                let outcome = match opts.method {
+                    Method::Cg | Method::Direct => assembled_fit(
+                        surface, plan, params, data, &fairness, smoothing, start, opts, first_rows,
+                    ),
+                    Method::Pia | Method::Lspia => {
+                        run_fit(surface, params, data, &fairness, smoothing, start, opts)?
+                    }
+                };
+                let feet = foot_points(surface, plan, &outcome.controls, data, params);
+                Ok((outcome, feet))
+            },
+            || (scan.correction_rounds > 0).then(edge_shares),
         );
-        (outcome, feet)
+        early_band = band;
+        first?
     };
     let mut steps = outcome.steps.clone();
     let mut errors = feet.distances();
@@ -458,20 +480,9 @@ pub fn fit_scan(
     } else {
         scan.correction_rounds
     };
-    let tangential: Vec<f64> = if rounds > 0 {
-        let rims: Vec<&[u32]> = std::iter::once(patch.outer.as_slice())
-            .chain(patch.hole_loops.iter().map(|h| h.as_slice()))
-            .collect();
-        let radius = EDGE_BAND_SPACINGS * control_spacing(&domain, scan.lattice);
-        near_edges(&part, &plane[..real], &rims, radius)
-            .iter()
-            .map(|&near| match near {
-                true => scan.correction_tangential_edge,
-                false => scan.correction_tangential,
-            })
-            .collect()
-    } else {
-        Vec::new()
+    let tangential: Vec<f64> = match rounds {
+        0 => Vec::new(),
+        _ => early_band.unwrap_or_else(edge_shares),
     };
     let round = DistanceRound {
         surface,

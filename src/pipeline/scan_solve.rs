@@ -27,43 +27,62 @@ pub(super) struct GridStencils<'a> {
 
 impl<'a> GridStencils<'a> {
     pub(super) fn new(grid: &'a GridSpline, fairness: &Collocation, smoothing: f64) -> Self {
+        Self::with_rows(grid, fairness, smoothing, &[]).0
+    }
+
+    /// `new` and the data rows at `params` (`rows`), built side by side: the rows need only
+    /// the cell table, not the plan.
+    pub(super) fn with_rows(
+        grid: &'a GridSpline,
+        fairness: &Collocation,
+        smoothing: f64,
+        params: &[SurfaceParam],
+    ) -> (Self, Option<StencilRows>) {
         let (stencils, of_slot) = grid.stencil_table();
         let fair = Fairness {
             l: fairness.n(),
             lt: fairness.nt(),
             smoothing,
         };
-        Self {
+        let (plan, rows) = rayon::join(
+            || StencilPlan::new(grid.control_count(), stencils, Some(fair)),
+            || rows_at(grid, &of_slot, params),
+        );
+        let built = Self {
             grid,
             of_slot,
-            plan: StencilPlan::new(grid.control_count(), stencils, Some(fair)),
+            plan,
             smoothing,
-        }
+        };
+        (built, rows)
     }
 
     /// The data rows at `params`; `None` if one lies outside the covered cells (the
     /// general assembly then takes over).
     fn rows(&self, params: &[SurfaceParam]) -> Option<StencilRows> {
-        // Written in place: collecting `Option`s would gather the rows in pieces and copy
-        // them twice (into one vector, then apart), fresh memory each time.
-        let mut stencil = vec![0u32; params.len()];
-        let mut weights = vec![[0.0; 12]; params.len()];
-        let all_inside = stencil
-            .par_iter_mut()
-            .zip(weights.par_iter_mut())
-            .zip(params)
-            .with_min_len(1024)
-            .all(
-                |((s, w), p)| match self.grid.stencil_row(&self.of_slot, *p) {
-                    Some((g, values)) => {
-                        (*s, *w) = (g, values);
-                        true
-                    }
-                    None => false,
-                },
-            );
-        all_inside.then_some(StencilRows { stencil, weights })
+        rows_at(self.grid, &self.of_slot, params)
     }
+}
+
+/// `GridStencils::rows` from the grid and its cell table.
+fn rows_at(grid: &GridSpline, of_slot: &[u32], params: &[SurfaceParam]) -> Option<StencilRows> {
+    // Written in place: collecting `Option`s would gather the rows in pieces and copy
+    // them twice (into one vector, then apart), fresh memory each time.
+    let mut stencil = vec![0u32; params.len()];
+    let mut weights = vec![[0.0; 12]; params.len()];
+    let all_inside = stencil
+        .par_iter_mut()
+        .zip(weights.par_iter_mut())
+        .zip(params)
+        .with_min_len(1024)
+        .all(|((s, w), p)| match grid.stencil_row(of_slot, *p) {
+            Some((g, values)) => {
+                (*s, *w) = (g, values);
+                true
+            }
+            None => false,
+        });
+    all_inside.then_some(StencilRows { stencil, weights })
 }
 
 /// Data rows as the general sparse matrix or as stencil rows of a plan.
@@ -137,6 +156,8 @@ const FIRST_FIT_REL_TOL: f64 = 1e-6;
 /// of going through all data points twice, so converging costs a few ms where the
 /// engine's CGLS spent ~100 ms on a 40k-point scan. The budget is checked on the result
 /// (the engine checks it after every step): this fit is only the start of the rounds.
+/// `rows`: the stencil rows at `params` when the caller built them with the plan
+/// (`GridStencils::with_rows`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn assembled_fit(
     surface: &dyn TriSurface,
@@ -147,9 +168,13 @@ pub(super) fn assembled_fit(
     smoothing: f64,
     start: Vec<DVec3>,
     opts: &FitOptions,
+    rows: Option<StencilRows>,
 ) -> FitOutcome {
     let t0 = Instant::now();
-    let basis = Rows::at(surface, stencils, params, smoothing);
+    let basis = match (rows, stencils) {
+        (Some(rows), Some(s)) => Rows::Stencil(rows, &s.plan),
+        _ => Rows::at(surface, stencils, params, smoothing),
+    };
     let budget = &opts.budget;
     let stats = |k: usize, x: &[DVec3]| {
         let mut fitted = vec![DVec3::ZERO; data.len()];
