@@ -16,6 +16,7 @@
 
 use super::band::BandMatrix;
 use super::planar::doubled_area;
+use crate::surface::grid_spline::floor;
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -164,7 +165,11 @@ impl PlaneWarp {
         let d = p - self.origin;
         let y = d.y / (self.spacing * SQRT3_2);
         let x = d.x / self.spacing - 0.5 * y;
-        let (fi, fj) = (x.floor(), y.floor());
+        if !(x.is_finite() && y.is_finite()) {
+            return None;
+        }
+        // Not `f64::floor`: a libm call on baseline x86-64, once per mapped point.
+        let (fi, fj) = (floor(x), floor(y));
         if !(fi >= 0.0 && fj >= 0.0)
             || fi as usize + 1 >= self.columns
             || fj as usize + 1 >= self.rows
@@ -331,17 +336,35 @@ fn relax(
             bx[order(k)] = pin * r.x;
             by[order(k)] = pin * r.y;
         }
-        for (c, (shape, w)) in shapes.iter().zip(&weights).enumerate() {
+        // Each cell's best rotation (the local step), in parallel; the sums into the
+        // right-hand side stay serial.
+        let rotations: Vec<DMat2> = shapes
+            .par_iter()
+            .zip(&weights)
+            .enumerate()
+            .with_min_len(512)
+            .map(|(c, (shape, w))| {
+                let t = lattice.triangle(c);
+                let mut cov = DMat2::ZERO;
+                for (k, &wk) in w.iter().enumerate() {
+                    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+                    let du = image[t[i]] - image[t[j]];
+                    let dx = shape[i] - shape[j];
+                    cov += DMat2::from_cols(du * dx.x, du * dx.y) * wk;
+                }
+                // The rotation nearest the covariance: its angle's cosine and sine are
+                // the normalised trace and skew part (no atan2 and sin/cos round trip).
+                let (cos, sin) = (cov.x_axis.x + cov.y_axis.y, cov.x_axis.y - cov.y_axis.x);
+                let r = cos.hypot(sin);
+                if r > 0.0 && r.is_finite() {
+                    DMat2::from_cols(DVec2::new(cos, sin) / r, DVec2::new(-sin, cos) / r)
+                } else {
+                    DMat2::IDENTITY
+                }
+            })
+            .collect();
+        for (c, ((shape, w), rotation)) in shapes.iter().zip(&weights).zip(&rotations).enumerate() {
             let t = lattice.triangle(c);
-            let mut cov = DMat2::ZERO;
-            for (k, &wk) in w.iter().enumerate() {
-                let (i, j) = ((k + 1) % 3, (k + 2) % 3);
-                let du = image[t[i]] - image[t[j]];
-                let dx = shape[i] - shape[j];
-                cov += DMat2::from_cols(du * dx.x, du * dx.y) * wk;
-            }
-            let rotation =
-                DMat2::from_angle((cov.x_axis.y - cov.y_axis.x).atan2(cov.x_axis.x + cov.y_axis.y));
             for (k, &wk) in w.iter().enumerate() {
                 let (i, j) = (order(t[(k + 1) % 3]), order(t[(k + 2) % 3]));
                 let d = rotation * (shape[(k + 1) % 3] - shape[(k + 2) % 3]) * wk;
@@ -351,8 +374,8 @@ fn relax(
                 by[j] -= d.y;
             }
         }
-        factor.solve(&mut bx);
-        factor.solve(&mut by);
+        // Two independent triangular sweeps over the same factor.
+        rayon::join(|| factor.solve(&mut bx), || factor.solve(&mut by));
         for (k, p) in image.iter_mut().enumerate() {
             *p = DVec2::new(bx[order(k)], by[order(k)]);
         }
