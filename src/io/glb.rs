@@ -16,23 +16,68 @@ pub struct GlbAttributes<'a> {
     pub polylines: &'a [Vec<DVec3>],
 }
 
+/// One buffer view's contents, written straight into the file's binary chunk.
+enum ViewData<'a> {
+    /// f32 x, y, z per point.
+    Vec3(&'a [DVec3]),
+    /// f32 r, g, b, a per vertex.
+    Rgba(&'a [[f32; 4]]),
+    /// u32 per corner.
+    Indices(&'a [[u32; 3]]),
+}
+
+impl ViewData<'_> {
+    /// Bytes of the view; every kind is a whole number of 4-byte words, so views laid end
+    /// to end stay 4-byte aligned as glTF requires.
+    fn byte_len(&self) -> usize {
+        match self {
+            ViewData::Vec3(p) => 12 * p.len(),
+            ViewData::Rgba(c) => 16 * c.len(),
+            ViewData::Indices(t) => 12 * t.len(),
+        }
+    }
+
+    fn write(&self, out: &mut Vec<u8>) {
+        match self {
+            ViewData::Vec3(pts) => {
+                for p in *pts {
+                    for c in [p.x as f32, p.y as f32, p.z as f32] {
+                        out.extend_from_slice(&c.to_le_bytes());
+                    }
+                }
+            }
+            ViewData::Rgba(colors) => {
+                for c in colors.iter().flatten() {
+                    out.extend_from_slice(&c.to_le_bytes());
+                }
+            }
+            ViewData::Indices(tris) => {
+                for i in tris.iter().flatten() {
+                    out.extend_from_slice(&i.to_le_bytes());
+                }
+            }
+        }
+    }
+}
+
 /// Encodes a triangle mesh as GLB. glTF stores f32: coordinates are written as given,
 /// with no axis swap or scaling.
-pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
-    let mut bin: Vec<u8> = Vec::new();
+pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
+    // The views' sizes are known up front: the JSON chunk (which lists their offsets) is
+    // made first and each view is then encoded once, in place in the output, instead of
+    // into a buffer of its own that is copied into the binary chunk and that into the file.
+    let mut data: Vec<ViewData<'a>> = Vec::new();
     let mut views = Vec::new();
-    let mut accessors = Vec::new();
-    let mut push_view = |bin: &mut Vec<u8>, data: &[u8], target: u32| -> usize {
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let offset = bin.len();
-        bin.extend_from_slice(data);
-        views.push(
-            json!({"buffer": 0, "byteOffset": offset, "byteLength": data.len(), "target": target}),
-        );
+    let mut bin_len = 0;
+    let mut push_view = |d: ViewData<'a>, target: u32| -> usize {
+        let len = d.byte_len();
+        views
+            .push(json!({"buffer": 0, "byteOffset": bin_len, "byteLength": len, "target": target}));
+        bin_len += len;
+        data.push(d);
         views.len() - 1
     };
+    let mut accessors = Vec::new();
     let vec3_accessor = |view: usize, pts: &[DVec3], with_bounds: bool| {
         let mut acc =
             json!({"bufferView": view, "componentType": 5126, "count": pts.len(), "type": "VEC3"});
@@ -51,46 +96,30 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
         }
         acc
     };
-    let f32_bytes = |pts: &[DVec3]| -> Vec<u8> {
-        pts.iter()
-            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32])
-            .flat_map(f32::to_le_bytes)
-            .collect()
-    };
 
-    let pos_view = push_view(&mut bin, &f32_bytes(&mesh.positions), 34962);
+    let pos_view = push_view(ViewData::Vec3(&mesh.positions), 34962);
     accessors.push(vec3_accessor(pos_view, &mesh.positions, true));
     let mut attributes = json!({"POSITION": 0});
     if let Some(n) = attrs.normals.filter(|n| n.len() == mesh.positions.len()) {
-        let v = push_view(&mut bin, &f32_bytes(n), 34962);
+        let v = push_view(ViewData::Vec3(n), 34962);
         accessors.push(vec3_accessor(v, n, false));
         attributes["NORMAL"] = json!(accessors.len() - 1);
     }
     if let Some(c) = attrs.colors.filter(|c| c.len() == mesh.positions.len()) {
-        let data: Vec<u8> = c.iter().flatten().flat_map(|x| x.to_le_bytes()).collect();
-        let v = push_view(&mut bin, &data, 34962);
+        let v = push_view(ViewData::Rgba(c), 34962);
         accessors.push(
             json!({"bufferView": v, "componentType": 5126, "count": c.len(), "type": "VEC4"}),
         );
         attributes["COLOR_0"] = json!(accessors.len() - 1);
     }
-    let idx: Vec<u8> = mesh
-        .triangles
-        .iter()
-        .flatten()
-        .flat_map(|i| i.to_le_bytes())
-        .collect();
-    let iv = push_view(&mut bin, &idx, 34963);
+    let iv = push_view(ViewData::Indices(&mesh.triangles), 34963);
     accessors.push(json!({"bufferView": iv, "componentType": 5125, "count": mesh.triangles.len() * 3, "type": "SCALAR"}));
     let mut primitives =
         vec![json!({"attributes": attributes, "indices": accessors.len() - 1, "mode": 4})];
     for line in attrs.polylines.iter().filter(|l| l.len() >= 2) {
-        let v = push_view(&mut bin, &f32_bytes(line), 34962);
+        let v = push_view(ViewData::Vec3(line), 34962);
         accessors.push(vec3_accessor(v, line, true));
         primitives.push(json!({"attributes": {"POSITION": accessors.len() - 1}, "mode": 3}));
-    }
-    while !bin.len().is_multiple_of(4) {
-        bin.push(0);
     }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "trispline"},
@@ -98,7 +127,7 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0}],
         "meshes": [{"primitives": primitives}],
-        "buffers": [{"byteLength": bin.len()}],
+        "buffers": [{"byteLength": bin_len}],
         "bufferViews": views,
         "accessors": accessors,
     });
@@ -106,7 +135,7 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
     while !json_bytes.len().is_multiple_of(4) {
         json_bytes.push(b' ');
     }
-    let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
+    let total = 12 + 8 + json_bytes.len() + 8 + bin_len;
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());
@@ -114,9 +143,12 @@ pub fn glb_bytes(mesh: &TriMesh, attrs: &GlbAttributes) -> Vec<u8> {
     out.extend_from_slice(&(json_bytes.len() as u32).to_le_bytes());
     out.extend_from_slice(b"JSON");
     out.extend_from_slice(&json_bytes);
-    out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+    out.extend_from_slice(&(bin_len as u32).to_le_bytes());
     out.extend_from_slice(b"BIN\0");
-    out.extend_from_slice(&bin);
+    for d in &data {
+        d.write(&mut out);
+    }
+    debug_assert_eq!(out.len(), total);
     out
 }
 

@@ -38,8 +38,13 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     let nv = input.positions.len();
     let rep = weld_map(&input.positions, opts.weld_tolerance);
     report.welded_vertices = (0..nv).filter(|&v| rep[v] as usize != v).count();
-    let mut positions = input.positions.clone();
-    let mut origin: Vec<u32> = (0..nv as u32).collect();
+    // Splitting non-manifold edges and pinch vertices appends copies: room for some, as
+    // pages never written cost nothing and a full vector would be copied whole to grow.
+    let room = nv + nv / 16 + 16;
+    let mut positions = Vec::with_capacity(room);
+    positions.extend_from_slice(&input.positions);
+    let mut origin: Vec<u32> = Vec::with_capacity(room);
+    origin.extend(0..nv as u32);
     // Degenerate faces.
     let mut faces: Vec<[u32; 3]> = Vec::with_capacity(input.triangles.len());
     for t in &input.triangles {
@@ -446,9 +451,11 @@ impl EdgeTable {
             }
         }
         drop(fill);
-        let mut start = Vec::with_capacity(nh / 2 + 2);
+        // Edges number between nh / 2 and nh (boundary edges have one half-edge): sized for
+        // the most, as pages never written cost nothing, where growing would copy.
+        let mut start = Vec::with_capacity(nh + 1);
         let mut half = Vec::with_capacity(nh);
-        let mut ends = Vec::with_capacity(nh / 2 + 1);
+        let mut ends = Vec::with_capacity(nh);
         for v in 0..vertex_count {
             let group = &mut entries[bucket[v] as usize..bucket[v + 1] as usize];
             // Half-edges were filled in order, so this keeps face order within an edge.

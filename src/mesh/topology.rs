@@ -181,7 +181,10 @@ impl Topology {
             .into_par_iter()
             .map(|c| {
                 let vs = c * PARALLEL_MIN..((c + 1) * PARALLEL_MIN).min(vertex_count);
-                let (mut ring, mut ring_halfedge) = (Vec::new(), Vec::new());
+                // A ring holds a vertex's outgoing half-edges and at most one more.
+                let most = (out_start[vs.end] - out_start[vs.start]) as usize + vs.len();
+                let (mut ring, mut ring_halfedge) =
+                    (Vec::with_capacity(most), Vec::with_capacity(most));
                 let mut ends = Vec::with_capacity(vs.len());
                 let mut boundary = Vec::with_capacity(vs.len());
                 for v in vs {

@@ -68,19 +68,31 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
             uf.union(hs[0] as usize / 3, g as usize / 3);
         }
     }
+    // Components numbered in first-face order and sized before they are filled (grown
+    // push by push, the largest would be copied at every doubling).
     let mut slot_of_root = vec![u32::MAX; mesh.triangles.len()];
-    let mut parts: Vec<TriMesh> = Vec::new();
+    let mut face_counts: Vec<usize> = Vec::new();
+    for f in 0..mesh.triangles.len() {
+        let root = uf.find(f);
+        if slot_of_root[root] == u32::MAX {
+            slot_of_root[root] = face_counts.len() as u32;
+            face_counts.push(0);
+        }
+        face_counts[slot_of_root[root] as usize] += 1;
+    }
+    let mut parts: Vec<TriMesh> = face_counts
+        .iter()
+        .map(|&faces| TriMesh {
+            positions: Vec::with_capacity((3 * faces).min(mesh.positions.len())),
+            triangles: Vec::with_capacity(faces),
+        })
+        .collect();
     // A vertex belongs to one component (faces sharing it are joined only through edges,
     // but a pinch vertex can sit in two): remember its index per (component, vertex).
     let mut local: FxHashMap<(usize, u32), u32> = FxHashMap::default();
     let mut single = vec![(u32::MAX, u32::MAX); mesh.positions.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
-        let root = uf.find(f);
-        if slot_of_root[root] == u32::MAX {
-            slot_of_root[root] = parts.len() as u32;
-            parts.push(TriMesh::default());
-        }
-        let slot = slot_of_root[root] as usize;
+        let slot = slot_of_root[uf.find(f)] as usize;
         let part = &mut parts[slot];
         let mut nt = [0u32; 3];
         for (k, &v) in t.iter().enumerate() {

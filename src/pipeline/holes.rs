@@ -147,13 +147,16 @@ pub fn plan_holes(
     for &k in &wide_triangles {
         keep[k] = false;
     }
-    let covered = mapped
-        .triangles
-        .iter()
-        .zip(&keep)
-        .filter(|(_, keep)| **keep)
-        .map(|(t, _)| *t)
-        .collect();
+    // Sized first: a collected filter would grow by doubling, copying as it goes.
+    let mut covered = Vec::with_capacity(keep.iter().filter(|k| **k).count());
+    covered.extend(
+        mapped
+            .triangles
+            .iter()
+            .zip(&keep)
+            .filter(|(_, keep)| **keep)
+            .map(|(t, _)| *t),
+    );
     HolePlan {
         max_bridge,
         radius,

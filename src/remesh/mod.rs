@@ -87,10 +87,14 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
     let mut taken: Vec<Option<Vec<u32>>> = loops.into_iter().map(Some).collect();
     loops = order.iter().filter_map(|&k| taken[k].take()).collect();
     let outer = loops[0].clone();
-    let mut filled = mesh.clone();
+    // Built at its final size: a clone grown by the fans would be copied once more.
     let fan_faces: usize = loops[1..].iter().map(Vec::len).sum();
-    filled.positions.reserve(loops.len() - 1);
-    filled.triangles.reserve(fan_faces);
+    let mut filled = TriMesh {
+        positions: Vec::with_capacity(mesh.positions.len() + loops.len() - 1),
+        triangles: Vec::with_capacity(mesh.triangles.len() + fan_faces),
+    };
+    filled.positions.extend_from_slice(&mesh.positions);
+    filled.triangles.extend_from_slice(&mesh.triangles);
     for hole in &loops[1..] {
         let c = hole
             .iter()
