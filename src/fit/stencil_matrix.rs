@@ -90,12 +90,11 @@ pub struct StencilPlan {
     stencils: Vec<[u32; WIDTH]>,
     ptr: Vec<usize>,
     idx: Vec<u32>,
-    /// Per membership of a control in a stencil (by control, then stencil): for each
-    /// control of that stencil, the entry of c's row it adds into (counted from the row's
-    /// start)...
+    /// For stencil g's control c at position a (`g * WIDTH + a`): for each control of
+    /// that stencil, the entry of c's row it adds into (counted from the row's start).
+    /// Stencil by stencil, as an assembly walks them: kept by control instead (as the
+    /// plan's rows are built), each lookup was a cache miss, half of an assembly's time.
     slots: Vec<[u32; WIDTH]>,
-    /// ... and for stencil g's control at position a, that membership: `g * WIDTH + a`.
-    member_at: Vec<u32>,
     /// The stencils by band: band b holds the stencils whose smallest control lies in
     /// `b * band_width..(b + 1) * band_width`, `band_stencils[bands[b]..bands[b + 1]]`. No
     /// stencil spans `band_width` controls, so a band's stencils touch only controls
@@ -186,10 +185,6 @@ impl StencilPlan {
             )
             .collect();
 
-        let mut member_at = vec![0u32; stencils.len() * WIDTH];
-        for (s, &member) in members.iter().enumerate() {
-            member_at[member as usize] = s as u32;
-        }
         let span = |s: &[u32; WIDTH]| {
             let (lo, hi) = (s.iter().min(), s.iter().max());
             (*lo.unwrap_or(&0) as usize, *hi.unwrap_or(&0) as usize)
@@ -221,17 +216,19 @@ impl StencilPlan {
             stencils,
             ptr: Vec::with_capacity(m + 1),
             idx: Vec::with_capacity(nnz),
-            slots: Vec::with_capacity(members.len()),
-            member_at,
+            slots: vec![[0; WIDTH]; members.len()],
             band_width,
             bands,
             band_stencils,
             fairness: Vec::with_capacity(nnz),
         };
         plan.ptr.push(0);
-        for (idx, slots, fair) in rows {
+        for (c, (idx, slots, fair)) in rows.into_iter().enumerate() {
+            let own = &members[member_ptr[c]..member_ptr[c + 1]];
+            for (&member, slot) in own.iter().zip(slots) {
+                plan.slots[member as usize] = slot;
+            }
             plan.idx.extend(idx);
-            plan.slots.extend(slots);
             plan.fairness.extend(fair);
             plan.ptr.push(plan.idx.len());
         }
@@ -378,7 +375,7 @@ impl StencilPlan {
                 let c = c as usize;
                 rhs[c - lo] += local_rhs[a];
                 let row = &mut entries[self.ptr[c] - row_base..self.ptr[c + 1] - row_base];
-                let slots = &self.slots[self.member_at[g * WIDTH + a] as usize];
+                let slots = &self.slots[g * WIDTH + a];
                 for (b, &k) in slots.iter().enumerate() {
                     let v = &sums[a.min(b)][a.max(b)];
                     let e = &mut row[k as usize];
