@@ -177,17 +177,32 @@ pub fn stencil_values(lu: f64, lv: f64) -> [f64; 12] {
 }
 
 /// The values alone of `quartic_bernstein`: collocation rows are built for every data point
-/// in every round.
+/// in every round. A plain loop over constant coefficients: `QUARTIC_LATTICE.map` with the
+/// coefficient divided out per term was not inlined (a call and a division per value).
 fn quartic_bernstein_values(u: f64, v: f64) -> [f64; 15] {
     let w = 1.0 - u - v;
     let pow = |x: f64| [1.0, x, x * x, x * x * x, x * x * x * x];
     let (pu, pv, pw) = (pow(u), pow(v), pow(w));
-    const FACT: [f64; 5] = [1.0, 1.0, 2.0, 6.0, 24.0];
-    QUARTIC_LATTICE.map(|(i, j)| {
-        let k = 4 - i - j;
-        24.0 / (FACT[i] * FACT[j] * FACT[k]) * pu[i] * pv[j] * pw[k]
-    })
+    let mut out = [0.0; 15];
+    for (n, &(i, j)) in QUARTIC_LATTICE.iter().enumerate() {
+        out[n] = QUARTIC_MULTINOMIALS[n] * pu[i] * pv[j] * pw[4 - i - j];
+    }
+    out
 }
+
+/// 4! / (i! j! k!) for each lattice point (i, j), k = 4 - i - j: whole numbers, so exactly
+/// the quotient of the factorials in floating point too.
+const QUARTIC_MULTINOMIALS: [f64; 15] = {
+    const FACT: [usize; 5] = [1, 1, 2, 6, 24];
+    let mut out = [0.0; 15];
+    let mut n = 0;
+    while n < 15 {
+        let (i, j) = QUARTIC_LATTICE[n];
+        out[n] = (24 / (FACT[i] * FACT[j] * FACT[4 - i - j])) as f64;
+        n += 1;
+    }
+    out
+};
 
 /// The 15 Bezier ordinates (lattice order of degree 4) of the patch over the up triangle
 /// whose stencil points, in `STENCIL` order, are `stencil`: computed once per cell and control
