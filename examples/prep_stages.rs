@@ -14,7 +14,7 @@ use std::time::Instant;
 use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::inverse::InverseMethod;
-use trispline::pipeline::components::connected_components;
+use trispline::pipeline::components::cleaned_components;
 use trispline::pipeline::domain::{covered_cells, grid_initial_net, spacing_for_target, GridFrame};
 use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
@@ -59,9 +59,7 @@ fn main() {
         print_hash("read", &mesh_bits(&mesh));
         let cleaned = stage("clean", repeats, || clean(&mesh, &CleanOptions::default()));
         print_hash("clean", &mesh_bits(&cleaned.mesh));
-        let parts = stage("components", repeats, || {
-            connected_components(&cleaned.mesh)
-        });
+        let parts = stage("components", repeats, || cleaned_components(&cleaned));
         print_hash(
             "components",
             &parts.iter().map(mesh_bits).collect::<Vec<_>>(),

@@ -30,6 +30,10 @@ pub struct Cleaned {
     pub mesh: TriMesh,
     /// Cleaned vertex -> input vertex (a split vertex maps to the vertex it came from).
     pub original_vertex: Vec<u32>,
+    /// Per face of `mesh`, the first face (lowest index) of its edge-connected component:
+    /// the components found while orienting, so that splitting the mesh into them needs no
+    /// second edge table.
+    pub face_component: Vec<u32>,
     pub report: CleanReport,
 }
 
@@ -101,10 +105,12 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     } else {
         incidence
     };
+    let mut face_component = Vec::new();
     report.faces_flipped = orient(
         &mut faces,
         &incidence,
         &mut report.non_orientable_components,
+        &mut face_component,
     );
     report.pinch_vertices_split = split_pinches(&mut faces, &mut positions, &mut origin);
     // Compact: drop vertices no face uses.
@@ -152,6 +158,7 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     Cleaned {
         mesh: TriMesh::new(positions, faces),
         original_vertex,
+        face_component,
         report,
     }
 }
@@ -246,13 +253,23 @@ fn weld_map(positions: &[DVec3], tolerance: Option<f64>) -> Vec<u32> {
 
 /// Breadth-first flips so that neighbours use each shared edge in opposite directions.
 /// Returns the number of faces flipped; counts components where that is impossible.
-fn orient(faces: &mut [[u32; 3]], incidence: &EdgeTable, non_orientable: &mut usize) -> usize {
+/// Also labels every face with its component's seed face (`component`): after non-manifold
+/// edges are split every edge has at most two faces, so the manifold neighbours the search
+/// walks join exactly the edge-connected faces, and seeds are taken in face order.
+fn orient(
+    faces: &mut [[u32; 3]],
+    incidence: &EdgeTable,
+    non_orientable: &mut usize,
+    component: &mut Vec<u32>,
+) -> usize {
     let nbr = incidence.manifold_neighbours();
     let has_directed =
         |t: &[u32; 3], a: u32, b: u32| (0..3).any(|k| t[k] == a && t[(k + 1) % 3] == b);
     // 0 unvisited, 1 visited as built, 2 visited and flipped: a flip swaps corners 1 and 2,
     // so the face's edge k is then the table's edge 2 - k.
     let mut state = vec![0u8; faces.len()];
+    component.clear();
+    component.resize(faces.len(), u32::MAX);
     let mut flipped = 0;
     let mut queue = std::collections::VecDeque::new();
     for seed in 0..faces.len() {
@@ -260,6 +277,7 @@ fn orient(faces: &mut [[u32; 3]], incidence: &EdgeTable, non_orientable: &mut us
             continue;
         }
         state[seed] = 1;
+        component[seed] = seed as u32;
         queue.push_back(seed);
         let mut conflict = false;
         while let Some(f) = queue.pop_front() {
@@ -275,6 +293,7 @@ fn orient(faces: &mut [[u32; 3]], incidence: &EdgeTable, non_orientable: &mut us
                 let consistent = has_directed(&faces[g], b, a);
                 if state[g] == 0 {
                     state[g] = 1;
+                    component[g] = seed as u32;
                     if !consistent {
                         faces[g].swap(1, 2);
                         flipped += 1;

@@ -2,7 +2,7 @@
 //! surface of their own. Range scans come in 8–28 pieces, most of them a few stray triangles
 //! at silhouettes; a fit of such a sliver is noise, so pieces are kept by size.
 
-use crate::mesh::clean::EdgeTable;
+use crate::mesh::clean::{Cleaned, EdgeTable};
 use crate::mesh::stats::UnionFind;
 use crate::TriMesh;
 use glam::DVec3;
@@ -68,12 +68,29 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
             uf.union(hs[0] as usize / 3, g as usize / 3);
         }
     }
+    let root: Vec<usize> = (0..mesh.triangles.len()).map(|f| uf.find(f)).collect();
+    split_by_label(mesh, |f| root[f])
+}
+
+/// `connected_components` of a cleaned mesh, from the components `clean` found.
+pub fn cleaned_components(cleaned: &Cleaned) -> Vec<TriMesh> {
+    let mesh = &cleaned.mesh;
+    let labels = &cleaned.face_component;
+    if labels.len() != mesh.triangles.len() || labels.iter().any(|&l| l as usize >= labels.len()) {
+        return connected_components(mesh);
+    }
+    split_by_label(mesh, |f| labels[f] as usize)
+}
+
+/// The faces of `mesh` grouped by `label` (any face index of the group, one value per
+/// group), each group compacted; the order of `connected_components`.
+fn split_by_label(mesh: &TriMesh, label: impl Fn(usize) -> usize) -> Vec<TriMesh> {
     // Components numbered in first-face order and sized before they are filled (grown
     // push by push, the largest would be copied at every doubling).
     let mut slot_of_root = vec![u32::MAX; mesh.triangles.len()];
     let mut face_counts: Vec<usize> = Vec::new();
     for f in 0..mesh.triangles.len() {
-        let root = uf.find(f);
+        let root = label(f);
         if slot_of_root[root] == u32::MAX {
             slot_of_root[root] = face_counts.len() as u32;
             face_counts.push(0);
@@ -92,7 +109,7 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
     let mut local: FxHashMap<(usize, u32), u32> = FxHashMap::default();
     let mut single = vec![(u32::MAX, u32::MAX); mesh.positions.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
-        let slot = slot_of_root[uf.find(f)] as usize;
+        let slot = slot_of_root[label(f)] as usize;
         let part = &mut parts[slot];
         let mut nt = [0u32; 3];
         for (k, &v) in t.iter().enumerate() {
@@ -120,8 +137,8 @@ pub fn connected_components(mesh: &TriMesh) -> Vec<TriMesh> {
 
 /// Splits and filters. The largest component is always reported in `kept` when it passes
 /// `min_vertices`; an empty `kept` means nothing is big enough.
-pub fn split_components(mesh: &TriMesh, filter: &ComponentFilter) -> Split {
-    let parts = connected_components(mesh);
+/// `parts`: the components, largest first (`connected_components`, `cleaned_components`).
+pub fn split_components(parts: Vec<TriMesh>, filter: &ComponentFilter) -> Split {
     let total = parts.len();
     let largest = parts.first().map_or(0, |p| p.positions.len());
     let mut split = Split {
@@ -180,7 +197,7 @@ mod tests {
         assert_eq!(all[0].triangles.len(), 40);
 
         let split = split_components(
-            &mesh,
+            connected_components(&mesh),
             &ComponentFilter {
                 min_vertices: 10,
                 min_fraction: 0.4,
@@ -194,7 +211,7 @@ mod tests {
         assert!((split.kept[1].centroid.x - 44.5).abs() < 1e-12);
 
         let strict = split_components(
-            &mesh,
+            connected_components(&mesh),
             &ComponentFilter {
                 min_vertices: 10,
                 min_fraction: 0.5,
@@ -202,5 +219,37 @@ mod tests {
         );
         assert_eq!(strict.kept.len(), 1);
         assert_eq!(strict.dropped_vertices, vec![20, 8]);
+    }
+
+    /// The components `clean` finds while orienting are those of the edge table: the same
+    /// pieces in the same order, also where cleaning split a non-manifold edge (a fin of
+    /// three faces) and a pinch vertex (two strips touching at a corner).
+    #[test]
+    fn cleaned_components_equal_the_edge_connected_ones() {
+        let mut mesh = TriMesh::default();
+        strip(&mut mesh, 0.0, 6);
+        strip(&mut mesh, 20.0, 4);
+        strip(&mut mesh, 40.0, 9);
+        // A fin: a third face on the first strip's inner edge (1, 2).
+        let apex = mesh.positions.len() as u32;
+        mesh.positions.push(DVec3::new(0.5, 0.5, 1.0));
+        mesh.triangles.push([1, 2, apex]);
+        // A pinch: a triangle touching the second strip at one corner only.
+        let corner = (2 * 6 + 2) as u32;
+        let base = mesh.positions.len() as u32;
+        mesh.positions.push(DVec3::new(19.0, -1.0, 0.0));
+        mesh.positions.push(DVec3::new(18.0, -1.0, 0.0));
+        mesh.triangles.push([corner, base, base + 1]);
+        let cleaned = crate::mesh::clean::clean(&mesh, &Default::default());
+        assert!(cleaned.report.non_manifold_edges_split > 0);
+        assert!(cleaned.report.pinch_vertices_split > 0);
+        let by_table = connected_components(&cleaned.mesh);
+        let by_clean = cleaned_components(&cleaned);
+        assert_eq!(by_table.len(), by_clean.len());
+        assert!(by_table.len() >= 4, "{} pieces", by_table.len());
+        for (a, b) in by_table.iter().zip(&by_clean) {
+            assert_eq!(a.triangles, b.triangles);
+            assert_eq!(a.positions, b.positions);
+        }
     }
 }

@@ -3,7 +3,7 @@
 //! (`domain`), resample and inverse-subdivide for the initial net, then fit the ORIGINAL
 //! scan points with a fairness term and a few rounds of parameter correction.
 
-use super::components::connected_components;
+use super::components::cleaned_components;
 use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_for_target,
     grid_initial_net, plane_extent, GridFrame, InitialNet,
@@ -214,7 +214,7 @@ pub fn fit_scan(
 ) -> Result<ScanFit, PipelineError> {
     let t0 = Instant::now();
     let cleaned = clean(mesh, &CleanOptions::default());
-    let parts = connected_components(&cleaned.mesh);
+    let parts = cleaned_components(&cleaned);
     let components = parts.len();
     let part = parts.into_iter().next().unwrap_or_default();
     if part.triangles.is_empty() {

@@ -1,7 +1,7 @@
 //! The worker as one pure function: (mesh, previous control net, config) -> outputs as
 //! bytes and JSON values. The CLI and the daemon write them; nothing here touches files.
 
-use super::components::{split_components, ComponentFilter, ComponentMode};
+use super::components::{cleaned_components, split_components, ComponentFilter, ComponentMode};
 use super::output::{surface_json, tessellate, tessellated_glb, Coverage};
 use super::scan::{
     fit_scan, BezierLayout, Correction, Domain, ScanFit, ScanOptions, ScanWarm, SurfaceModel,
@@ -528,7 +528,7 @@ pub fn run_input_with(
         min_vertices: cfg.min_component_vertices,
         min_fraction: cfg.min_component_fraction,
     };
-    let split = split_components(&cleaned.mesh, &filter);
+    let split = split_components(cleaned_components(&cleaned), &filter);
     if split.kept.is_empty() {
         return Err(PipelineError::Unsupported(format!(
             "no component has min_component_vertices = {} vertices (the largest has {})",
