@@ -155,7 +155,8 @@ impl<'a> Locator<'a> {
         lo -= DVec2::splat(extent * 1e-9);
         let dim = ((tris.len() as f64).sqrt() as usize).clamp(1, 2048);
         let cell = extent * (1.0 + 2e-9) / dim as f64;
-        let ranges: Vec<[usize; 4]> = tris
+        // Bucket ranges fit u32 (dim <= 2048): half the memory of usize, touched fresh.
+        let ranges: Vec<[u32; 4]> = tris
             .par_iter()
             .with_min_len(4096)
             .map(|t| {
@@ -168,31 +169,33 @@ impl<'a> Locator<'a> {
                 let mx = ps[0].max(ps[1]).max(ps[2]);
                 let (x0, y0) = Self::cell_of(lo, cell, dim, mn);
                 let (x1, y1) = Self::cell_of(lo, cell, dim, mx);
-                [x0, y0, x1, y1]
+                [x0, y0, x1, y1].map(|c| c as u32)
             })
             .collect();
         let mut start = vec![0usize; dim * dim + 1];
-        for &[x0, y0, x1, y1] in &ranges {
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    start[y * dim + x + 1] += 1;
-                }
+        let buckets = |&[x0, y0, x1, y1]: &[u32; 4]| {
+            (y0 as usize..=y1 as usize)
+                .flat_map(move |y| (x0 as usize..=x1 as usize).map(move |x| y * dim + x))
+        };
+        for r in &ranges {
+            for b in buckets(r) {
+                start[b + 1] += 1;
             }
         }
         for b in 0..dim * dim {
             start[b + 1] += start[b];
         }
-        let mut fill = start.clone();
+        // Filled through `start` itself (each bucket's entry advanced past its triangles,
+        // so it ends at the next bucket's start), then shifted back: no second index.
         let mut bucketed = vec![0u32; start[dim * dim]];
-        for (f, &[x0, y0, x1, y1]) in ranges.iter().enumerate() {
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    let slot = &mut fill[y * dim + x];
-                    bucketed[*slot] = f as u32;
-                    *slot += 1;
-                }
+        for (f, r) in ranges.iter().enumerate() {
+            for b in buckets(r) {
+                bucketed[start[b]] = f as u32;
+                start[b] += 1;
             }
         }
+        start.copy_within(0..dim * dim, 1);
+        start[0] = 0;
         Self {
             tris,
             plane,
