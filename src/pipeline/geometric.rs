@@ -24,9 +24,9 @@ const TAYLOR_STEP2: f64 = 1e-6;
 /// `|position - point|`). The distance never exceeds the distance at `start`: a step that
 /// does not reduce it is halved and finally refused.
 /// `evaluate` is the surface's evaluator for the control set (`TriSurface::evaluator`).
-pub fn foot_point(
-    surface: &dyn TriSurface,
-    evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
+pub fn foot_point<S: TriSurface + ?Sized>(
+    surface: &S,
+    evaluate: &(impl Fn(SurfaceParam) -> Derivatives + ?Sized),
     point: DVec3,
     start: SurfaceParam,
 ) -> (SurfaceParam, Derivatives) {
@@ -96,8 +96,8 @@ pub fn foot_point(
 /// the step leaves the face's coordinates (clipped by the domain, or onto another face of
 /// a mesh surface) or the expansion does not come nearer `point`: the caller then takes
 /// the step with an evaluation, as any other.
-fn taylor_step(
-    surface: &dyn TriSurface,
+fn taylor_step<S: TriSurface + ?Sized>(
+    surface: &S,
     param: &mut SurfaceParam,
     d: &mut Derivatives,
     dist2: &mut f64,
