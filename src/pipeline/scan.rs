@@ -18,7 +18,7 @@ use crate::fit::engine::umbrella_laplacian;
 use crate::fit::{Collocation, FitOutcome, FitStatus, Method, StepStats};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::fill_holes;
-use crate::remesh::planar::{evened_out, planar_map, MapMethod, PlaneFrame};
+use crate::remesh::planar::{evened_out, planar_map, projection_warp, MapMethod, PlaneFrame};
 use crate::remesh::warp::PlaneWarp;
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};
 use crate::surface::grid_spline::GridSpline;
@@ -223,7 +223,24 @@ pub fn fit_scan(
         ));
     }
     let unsupported = |e: crate::remesh::RemeshError| PipelineError::Unsupported(e.to_string());
-    let patch = fill_holes(&part).map_err(unsupported)?;
+    let previous_warp = warm.and_then(|w| w.warp);
+    // The plane's frame and warp read only the data triangles: found beside the filling of
+    // the holes (a warp from the previous version is reused instead, when it covers).
+    let frame_and_warp = || -> Result<_, PipelineError> {
+        let frame = match warm.and_then(|w| w.frame) {
+            Some(f) => f,
+            None => PlaneFrame::fit_least_folds(&part).ok_or_else(|| {
+                PipelineError::Unsupported("degenerate patch: no mean normal".into())
+            })?,
+        };
+        let warp = match previous_warp {
+            Some(_) => None,
+            None => projection_warp(&part, &frame),
+        };
+        Ok((frame, warp))
+    };
+    let (filled, framed) = rayon::join(|| fill_holes(&part), frame_and_warp);
+    let patch = filled.map_err(unsupported)?;
     // After the topology checks, whose reasons (closed, not disk-like) say more.
     if part.positions.len() < scan.min_component_vertices {
         return Err(PipelineError::Unsupported(format!(
@@ -232,15 +249,11 @@ pub fn fit_scan(
             scan.min_component_vertices
         )));
     }
-    let frame = match warm.and_then(|w| w.frame) {
-        Some(f) => f,
-        None => PlaneFrame::fit_least_folds(&part)
-            .ok_or_else(|| PipelineError::Unsupported("degenerate patch: no mean normal".into()))?,
-    };
+    let (frame, early_warp) = framed?;
     let map = evened_out(
         planar_map(&patch, &frame).map_err(unsupported)?,
         &patch,
-        warm.and_then(|w| w.warp),
+        previous_warp.or(early_warp.as_ref()),
     );
     let plane = &map.plane;
     let edge_length = median_edge_length(&part);

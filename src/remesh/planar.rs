@@ -273,6 +273,20 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
 const WARP_LATTICE_TRIANGLES: usize = 2000;
 const WARP_ITERATIONS: usize = 5;
 
+/// The warp `evened_out` builds for the projection of `data` (the patch before its holes
+/// are filled: the warp reads only data triangles), so that it can be built beside the
+/// filling and handed to `evened_out` as the one to reuse.
+pub fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
+    let plane: Vec<DVec2> = data.positions.iter().map(|&p| frame.project(p)).collect();
+    PlaneWarp::build(
+        &data.positions,
+        &plane,
+        &data.triangles,
+        WARP_LATTICE_TRIANGLES,
+        WARP_ITERATIONS,
+    )
+}
+
 /// A projection map composed with a `PlaneWarp` that evens out its stretch (see
 /// `warp`): the previous version's warp when it covers this version's points (the
 /// parameters of the two versions then agree), else a new one. Maps of other kinds come
