@@ -275,9 +275,20 @@ const WARP_ITERATIONS: usize = 5;
 
 /// The warp `evened_out` builds for the projection of `data` (the patch before its holes
 /// are filled: the warp reads only data triangles), so that it can be built beside the
-/// filling and handed to `evened_out` as the one to reuse.
+/// filling and handed to `evened_out` as the one to reuse. `None` also where the data
+/// alone fold more than the share of triangles a projection map may fold: `planar_map`
+/// then falls back to the disk, which is not warped (should it not, `evened_out` builds
+/// the warp itself, the same one).
 pub fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
     let plane: Vec<DVec2> = data.positions.iter().map(|&p| frame.project(p)).collect();
+    let folds = data
+        .triangles
+        .iter()
+        .filter(|t| doubled_area(&plane, t) <= 0.0)
+        .count();
+    if folds as f64 > MAX_FOLD_FRACTION * data.triangles.len() as f64 {
+        return None;
+    }
     PlaneWarp::build(
         &data.positions,
         &plane,
