@@ -223,7 +223,7 @@ mod tests {
 
     /// The components `clean` finds while orienting are those of the edge table: the same
     /// pieces in the same order, also where cleaning split a non-manifold edge (a fin of
-    /// three faces) and a pinch vertex (two strips touching at a corner).
+    /// three faces) and a pinch vertex (a triangle touching a strip at one corner).
     #[test]
     fn cleaned_components_equal_the_edge_connected_ones() {
         let mut mesh = TriMesh::default();

@@ -281,11 +281,7 @@ const WARP_ITERATIONS: usize = 5;
 /// the warp itself, the same one).
 pub fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
     let plane: Vec<DVec2> = data.positions.iter().map(|&p| frame.project(p)).collect();
-    let folds = data
-        .triangles
-        .iter()
-        .filter(|t| doubled_area(&plane, t) <= 0.0)
-        .count();
+    let folds = folded_triangles(&data.triangles, &plane).len();
     if folds as f64 > MAX_FOLD_FRACTION * data.triangles.len() as f64 {
         return None;
     }

@@ -298,12 +298,11 @@ fn quartic_bernstein(u: f64, v: f64) -> [[f64; 6]; 15] {
             },
         ]
     };
-    const FACT: [f64; 5] = [1.0, 1.0, 2.0, 6.0, 24.0];
     let mut out = [[0.0; 6]; 15];
     for (idx, &(i, j)) in QUARTIC_LATTICE.iter().enumerate() {
         {
             let k = 4 - i - j;
-            let c = 24.0 / (FACT[i] * FACT[j] * FACT[k]);
+            let c = QUARTIC_MULTINOMIALS[idx];
             let (a, b, d) = (term(&pu, i), term(&pv, j), term(&pw, k));
             // Partials in the independent (u, v, w), then the chain rule with w = 1 - u - v.
             let f_u = a[1] * b[0] * d[0];
