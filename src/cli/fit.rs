@@ -4,19 +4,38 @@ use super::progress::Progress;
 use crate::fit::Method;
 use crate::io::{read_mesh_file, write_atomic, write_atomic_group, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
-use crate::pipeline::components::ComponentMode;
-use crate::pipeline::worker::{self, run_input_with, PatchOutputs, WorkerConfig};
-use crate::pipeline::{PipelineError, SurfaceKind};
+use crate::pipeline::scan::components::ComponentMode;
+use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConfig};
+use crate::pipeline::worker::{
+    run_input_with, BudgetConfig, ComponentsConfig, FitConfig, PatchOutputs, WorkerConfig,
+    DEFAULT_TESSELLATION,
+};
+use crate::pipeline::{SurfaceKind, UnknownName};
 use anyhow::Context;
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::str::FromStr;
+
+/// A parser for a core enum spelled by fixed names: `--help` lists them, and the core needs
+/// no command-line library.
+fn named<T>(names: &'static [&'static str]) -> impl TypedValueParser<Value = T>
+where
+    T: FromStr<Err = UnknownName> + Clone + Send + Sync + 'static,
+{
+    PossibleValuesParser::new(names).try_map(|s| s.parse::<T>())
+}
+
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
+    /// The input mesh: a disk-like scan patch (any connectivity) or a mesh with Loop
+    /// subdivision connectivity (fitted exactly).
     pub input: PathBuf,
-    #[arg(long, value_enum, default_value = "bezier")]
+    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "bezier")]
     pub surface: SurfaceKind,
-    /// Levels of inverse subdivision (the input must have subdivision connectivity this deep).
+    /// Levels of inverse subdivision (subdivided inputs: the depth of their connectivity;
+    /// scans: the resampling depth of the initial net).
     #[arg(long, default_value_t = 2)]
     pub levels: usize,
     /// Inputs with subdivision connectivity: when the budget is not met, refit with one level
@@ -28,13 +47,13 @@ pub struct FitArgs {
     #[arg(long, default_value = "exact")]
     pub inverse: InverseMethod,
     /// Maximum number of fitting steps.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = BudgetConfig::default().max_iterations)]
     pub iterations: usize,
     /// Absolute tolerance; the default is 1e-3 of the bounding-box diagonal.
     #[arg(long)]
     pub tolerance: Option<f64>,
     /// Tolerance as a fraction of the bounding-box diagonal (ignored with --tolerance).
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = BudgetConfig::default().tolerance_rel)]
     pub tolerance_rel: f64,
     /// Targets; with none given the fit aims at max error <= tolerance.
     #[arg(long)]
@@ -51,106 +70,121 @@ pub struct FitArgs {
     #[arg(long)]
     pub lattice: Option<usize>,
     /// Scans, `loop`: control points as a percentage of the data points.
-    #[arg(long, default_value_t = worker::default_target_controls_pct())]
+    #[arg(long, default_value_t = ScanConfig::default().target_controls_pct)]
     pub target_controls_pct: f64,
     /// Scans: rounds of parameter correction (data parameters moved to foot points).
-    #[arg(long, default_value_t = worker::default_correction_rounds())]
+    #[arg(long, default_value_t = CorrectionConfig::default().rounds)]
     pub corrections: usize,
     /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
     /// or `parameters` (point-to-point again).
-    #[arg(long, value_enum, default_value = "distance")]
-    pub correction: crate::pipeline::scan::Correction,
+    #[arg(long, value_parser = named::<Correction>(Correction::NAMES), default_value = "distance")]
+    pub correction: Correction,
     /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
     /// fraction.
-    #[arg(long, default_value_t = worker::default_correction_min_gain())]
+    #[arg(long, default_value_t = CorrectionConfig::default().min_gain)]
     pub correction_min_gain: f64,
     /// Scans, distance rounds: share of the point-to-point term beside point-to-plane
     /// inside the data (smaller: rounds converge faster and further)...
-    #[arg(long, default_value_t = worker::default_correction_tangential())]
+    #[arg(long, default_value_t = CorrectionConfig::default().tangential)]
     pub correction_tangential: f64,
     /// ... and within half a control spacing of the data's edges (smaller: the surface
     /// slides past the last points, higher maximum errors).
-    #[arg(long, default_value_t = worker::default_correction_tangential_edge())]
+    #[arg(long, default_value_t = CorrectionConfig::default().tangential_edge)]
     pub correction_tangential_edge: f64,
     /// Scans: fairness weight relative to the data.
-    #[arg(long, default_value_t = 1e-5)]
+    #[arg(long, default_value_t = ScanConfig::default().smoothing)]
     pub smoothing: f64,
     /// Scans: fit the largest component (`largest`) or every component big enough (`all`,
     /// written to OUT/c0, OUT/c1, ... largest first, with OUT/components.json).
-    #[arg(long, value_enum, default_value = "largest")]
+    #[arg(long, value_parser = named::<ComponentMode>(ComponentMode::NAMES), default_value = "largest")]
     pub components: ComponentMode,
     /// Scans: components with fewer vertices are not fitted.
-    #[arg(long, default_value_t = 100)]
+    #[arg(long, default_value_t = ComponentsConfig::default().min_vertices)]
     pub min_component_vertices: usize,
     /// Scans, `--components all`: components under this fraction of the largest (in
     /// vertices) are not fitted.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = ComponentsConfig::default().min_fraction)]
     pub min_component_fraction: f64,
     /// Scans with `--surface bezier`: `patches` (one quartic Bezier patch per grid cell,
     /// the Bezier form of the grid fit) or `single` (one patch of degree `--lattice`, 16 by
     /// default; implied by `--lattice`).
-    #[arg(long, value_enum, default_value = "patches")]
-    pub bezier_layout: crate::pipeline::scan::BezierLayout,
+    #[arg(long, value_parser = named::<BezierLayout>(BezierLayout::NAMES), default_value = "patches")]
+    pub bezier_layout: BezierLayout,
     /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
     /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
     /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = ScanConfig::default().hole_bridge_edges)]
     pub hole_bridge_edges: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
     #[arg(long)]
     pub out: PathBuf,
+}
+
+impl FitArgs {
+    /// The worker's configuration from the flags.
+    fn worker_config(&self) -> WorkerConfig {
+        let scan_defaults = ScanConfig::default();
+        let fit = FitConfig {
+            surface: self.surface,
+            levels: self.levels,
+            min_levels: self.min_levels,
+            method: self.method,
+            inverse: self.inverse,
+            budget: BudgetConfig {
+                max_iterations: self.iterations,
+                tolerance: self.tolerance,
+                tolerance_rel: self.tolerance_rel,
+                max_error: self.max_error,
+                mean_error: self.mean_error,
+                within_tolerance_pct: self.within_tolerance_pct,
+                max_time_ms: self.max_time_ms,
+            },
+            scan: ScanConfig {
+                target_controls_pct: self.target_controls_pct,
+                grid_segments: self.lattice.filter(|_| self.surface == SurfaceKind::Loop),
+                // A degree given for `bezier` asks for one patch of that degree.
+                bezier_layout: match (self.surface, self.lattice) {
+                    (SurfaceKind::Bezier, Some(_)) => BezierLayout::Single,
+                    _ => self.bezier_layout,
+                },
+                lattice: self.lattice.unwrap_or(scan_defaults.lattice),
+                smoothing: self.smoothing,
+                hole_bridge_edges: self.hole_bridge_edges,
+            },
+            correction: CorrectionConfig {
+                rounds: self.corrections,
+                kind: self.correction,
+                min_gain: self.correction_min_gain,
+                tangential: self.correction_tangential,
+                tangential_edge: self.correction_tangential_edge,
+            },
+            components: ComponentsConfig {
+                mode: self.components,
+                min_vertices: self.min_component_vertices,
+                min_fraction: self.min_component_fraction,
+            },
+        };
+        WorkerConfig {
+            fit,
+            tessellation: self.tessellation,
+        }
+    }
 }
 
 pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let started = std::time::Instant::now();
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     let read_ms = started.elapsed().as_secs_f64() * 1e3;
-    let cfg = WorkerConfig {
-        surface: args.surface,
-        levels: args.levels,
-        min_levels: args.min_levels,
-        method: args.method,
-        inverse: args.inverse,
-        max_iterations: args.iterations,
-        tolerance: args.tolerance,
-        tolerance_rel: args.tolerance_rel,
-        max_error: args.max_error,
-        mean_error: args.mean_error,
-        within_tolerance_pct: args.within_tolerance_pct,
-        max_time_ms: args.max_time_ms,
-        lattice: args.lattice.unwrap_or(16),
-        // A degree given for `bezier` asks for one patch of that degree.
-        bezier_layout: match (args.surface, args.lattice) {
-            (SurfaceKind::Bezier, Some(_)) => crate::pipeline::scan::BezierLayout::Single,
-            _ => args.bezier_layout,
-        },
-        grid_segments: args.lattice.filter(|_| args.surface == SurfaceKind::Loop),
-        target_controls_pct: args.target_controls_pct,
-        correction_rounds: args.corrections,
-        correction: args.correction,
-        correction_min_gain: args.correction_min_gain,
-        correction_tangential: args.correction_tangential,
-        correction_tangential_edge: args.correction_tangential_edge,
-        smoothing: args.smoothing,
-        tessellation: args.tessellation,
-        components: args.components,
-        min_component_vertices: args.min_component_vertices,
-        min_component_fraction: args.min_component_fraction,
-        hole_bridge_edges: args.hole_bridge_edges,
-    };
-    let progress = Progress::new(cfg.max_iterations);
+    let cfg = args.worker_config();
+    let progress = Progress::new(cfg.fit.budget.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
     let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));
     progress.finish();
     let input = match fitted {
         Ok(o) => o,
-        Err(
-            e @ (PipelineError::NoSubdivision(_)
-            | PipelineError::NotALattice(_)
-            | PipelineError::Unsupported(_)),
-        ) => {
+        Err(e) if e.is_refusal() => {
             eprintln!("{}: cannot fit: {e}", args.input.display());
             return Ok(ExitCode::from(2));
         }

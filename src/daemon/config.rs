@@ -1,6 +1,7 @@
 //! Daemon configuration: TOML with unknown keys refused and ranges checked.
 
-use crate::pipeline::worker::WorkerConfig;
+use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
+use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
 
 pub const DEFAULT_CONFIG: &str = include_str!("../../config/default.toml");
@@ -8,7 +9,7 @@ pub const DEFAULT_CONFIG: &str = include_str!("../../config/default.toml");
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DaemonConfig {
-    pub fit: WorkerConfig,
+    pub fit: FitConfig,
     pub daemon: DaemonSection,
     #[serde(default)]
     pub output: OutputSection,
@@ -67,6 +68,9 @@ pub enum ProcessedPolicy {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputSection {
+    /// Tessellation segments per side of the shown surface in surface.glb.
+    #[serde(default = "default_tessellation")]
+    pub tessellation: usize,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quarantine_dir: Option<PathBuf>,
     /// `surface.json` is always written (last, as the commit marker); these are optional.
@@ -81,12 +85,17 @@ pub struct OutputSection {
 impl Default for OutputSection {
     fn default() -> Self {
         Self {
+            tessellation: DEFAULT_TESSELLATION,
             quarantine_dir: None,
             glb: true,
             report: true,
             processed: ProcessedPolicy::Leave,
         }
     }
+}
+
+fn default_tessellation() -> usize {
+    DEFAULT_TESSELLATION
 }
 
 fn yes() -> bool {
@@ -125,194 +134,135 @@ fn default_level() -> String {
     "info".to_string()
 }
 
+/// Why a configuration is refused.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum ConfigError {
-    #[error("{source_name}: {message}")]
+    /// Not TOML, or a key or type the schema does not have (toml names the key, line and
+    /// column).
+    #[error("{source_name}: {source}")]
     Parse {
+        /// The file (or "embedded ...") the text came from.
         source_name: String,
-        message: String,
+        /// What the TOML parser found.
+        source: toml::de::Error,
     },
-    #[error("{source_name}: {key} = {value}: {reason}")]
+    /// A value outside its range.
+    #[error("{source_name}: {key} = {value}: {rule}")]
     Range {
+        /// The file the text came from.
         source_name: String,
-        key: String,
+        /// The key, with its table (`fit.levels`).
+        key: &'static str,
+        /// The value given.
         value: String,
-        reason: String,
+        /// The range it must be in.
+        rule: &'static str,
     },
+    /// A value of the right type that does not parse as what the key needs.
+    #[error("{source_name}: {key} = {value}: {source}")]
+    Invalid {
+        /// The file the text came from.
+        source_name: String,
+        /// The key, with its table.
+        key: &'static str,
+        /// The value given.
+        value: String,
+        /// Why it does not parse.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+}
+
+impl ConfigError {
+    /// A stable snake_case name of the refusal, for machines.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ConfigError::Parse { .. } => "config_parse",
+            ConfigError::Range { .. } => "config_out_of_range",
+            ConfigError::Invalid { .. } => "config_invalid_value",
+        }
+    }
+}
+
+/// A range check: `Err((key, value, rule))` when it fails.
+type Check = Result<(), (&'static str, String, &'static str)>;
+
+/// `Ok` when `ok` holds, else the key, value and rule for a `ConfigError::Range`.
+fn check(ok: bool, key: &'static str, value: impl ToString, rule: &'static str) -> Check {
+    match ok {
+        true => Ok(()),
+        false => Err((key, value.to_string(), rule)),
+    }
 }
 
 impl DaemonConfig {
     /// Parses and validates; `source_name` names the file in errors (toml reports the key,
     /// line and column of a bad entry).
     pub fn parse(text: &str, source_name: &str) -> Result<DaemonConfig, ConfigError> {
-        let cfg: DaemonConfig = toml::from_str(text).map_err(|e| ConfigError::Parse {
+        let cfg: DaemonConfig = toml::from_str(text).map_err(|source| ConfigError::Parse {
             source_name: source_name.to_string(),
-            message: e.to_string(),
+            source,
         })?;
         cfg.validate(source_name)?;
         Ok(cfg)
     }
 
+    /// The configuration built into the binary.
     pub fn embedded_default() -> Result<DaemonConfig, ConfigError> {
         Self::parse(DEFAULT_CONFIG, "embedded config/default.toml")
     }
 
+    /// What the worker is told.
+    pub fn worker_config(&self) -> WorkerConfig {
+        WorkerConfig {
+            fit: self.fit.clone(),
+            tessellation: self.output.tessellation,
+        }
+    }
+
     fn validate(&self, source_name: &str) -> Result<(), ConfigError> {
-        let bad = |key: &str, value: String, reason: &str| {
-            Err(ConfigError::Range {
+        let ranges = validate_fit(&self.fit)
+            .and_then(|()| validate_daemon(&self.daemon))
+            .and_then(|()| {
+                let t = self.output.tessellation;
+                check(
+                    (1..=2048).contains(&t),
+                    "output.tessellation",
+                    t,
+                    "must be 1..=2048",
+                )
+            });
+        if let Err((key, value, rule)) = ranges {
+            return Err(ConfigError::Range {
                 source_name: source_name.to_string(),
-                key: key.to_string(),
+                key,
                 value,
-                reason: reason.to_string(),
-            })
+                rule,
+            });
+        }
+        let invalid = |key, value: &str, source| ConfigError::Invalid {
+            source_name: source_name.to_string(),
+            key,
+            value: value.to_string(),
+            source,
         };
-        let f = &self.fit;
-        if !(1..=6).contains(&f.levels) {
-            return bad("fit.levels", f.levels.to_string(), "must be 1..=6");
-        }
-        if f.min_levels > 6 {
-            return bad("fit.min_levels", f.min_levels.to_string(), "must be 0..=6");
-        }
-        if !(1..=64).contains(&f.lattice) {
-            return bad("fit.lattice", f.lattice.to_string(), "must be 1..=64");
-        }
-        if f.max_iterations == 0 || f.max_iterations > 1_000_000 {
-            return bad(
-                "fit.max_iterations",
-                f.max_iterations.to_string(),
-                "must be 1..=1000000",
-            );
-        }
-        if !(f.tolerance_rel > 0.0 && f.tolerance_rel < 1.0) {
-            return bad(
-                "fit.tolerance_rel",
-                f.tolerance_rel.to_string(),
-                "must be in (0, 1)",
-            );
-        }
-        if let Some(t) = f.tolerance.filter(|t| !(*t > 0.0 && t.is_finite())) {
-            return bad("fit.tolerance", t.to_string(), "must be positive");
-        }
-        if let Some(p) = f
-            .within_tolerance_pct
-            .filter(|p| !(0.0..=100.0).contains(p))
-        {
-            return bad("fit.within_tolerance_pct", p.to_string(), "must be 0..=100");
-        }
-        if !(f.smoothing >= 0.0 && f.smoothing.is_finite()) {
-            return bad("fit.smoothing", f.smoothing.to_string(), "must be >= 0");
-        }
-        if let Some(n) = f.grid_segments.filter(|n| !(1..=4096).contains(n)) {
-            return bad("fit.grid_segments", n.to_string(), "must be 1..=4096");
-        }
-        if !(f.target_controls_pct > 0.0 && f.target_controls_pct <= 100.0) {
-            return bad(
-                "fit.target_controls_pct",
-                f.target_controls_pct.to_string(),
-                "must be in (0, 100]",
-            );
-        }
-        if !(0.0..=1.0).contains(&f.min_component_fraction) {
-            return bad(
-                "fit.min_component_fraction",
-                f.min_component_fraction.to_string(),
-                "must be 0..=1",
-            );
-        }
-        if !(f.hole_bridge_edges > 0.0 && f.hole_bridge_edges.is_finite()) {
-            return bad(
-                "fit.hole_bridge_edges",
-                f.hole_bridge_edges.to_string(),
-                "must be a positive number",
-            );
-        }
-        if f.min_component_vertices < 3 {
-            return bad(
-                "fit.min_component_vertices",
-                f.min_component_vertices.to_string(),
-                "must be at least 3",
-            );
-        }
-        if !(0.0..1.0).contains(&f.correction_min_gain) {
-            return bad(
-                "fit.correction_min_gain",
-                f.correction_min_gain.to_string(),
-                "must be in [0, 1)",
-            );
-        }
-        for (key, value) in [
-            ("fit.correction_tangential", f.correction_tangential),
-            (
-                "fit.correction_tangential_edge",
-                f.correction_tangential_edge,
-            ),
-        ] {
-            if !(value > 0.0 && value <= 1.0) {
-                return bad(key, value.to_string(), "must be in (0, 1]");
-            }
-        }
-        if f.correction_rounds > 100 {
-            return bad(
-                "fit.correction_rounds",
-                f.correction_rounds.to_string(),
-                "must be 0..=100",
-            );
-        }
-        if !(1..=2048).contains(&f.tessellation) {
-            return bad(
-                "fit.tessellation",
-                f.tessellation.to_string(),
-                "must be 1..=2048",
-            );
-        }
-        if !(1..=60_000).contains(&self.daemon.poll_interval_ms) {
-            return bad(
-                "daemon.poll_interval_ms",
-                self.daemon.poll_interval_ms.to_string(),
-                "must be 1..=60000",
-            );
-        }
-        if self.daemon.stop_timeout_ms > 3_600_000 {
-            return bad(
-                "daemon.stop_timeout_ms",
-                self.daemon.stop_timeout_ms.to_string(),
-                "must be at most 3600000",
-            );
-        }
-        if self.daemon.max_file_bytes == 0 {
-            return bad("daemon.max_file_bytes", "0".into(), "must be positive");
-        }
-        if self.daemon.workers > 256 {
-            return bad(
-                "daemon.workers",
-                self.daemon.workers.to_string(),
-                "must be 0..=256 (0: one per core)",
-            );
-        }
-        if self.daemon.settle_ms > 3_600_000 {
-            return bad(
-                "daemon.settle_ms",
-                self.daemon.settle_ms.to_string(),
-                "must be at most 3600000",
-            );
-        }
         if let Some(addr) = &self.daemon.metrics_addr {
-            match addr.parse::<std::net::SocketAddr>() {
-                Err(e) => return bad("daemon.metrics_addr", addr.clone(), &e.to_string()),
-                // The responder has no authentication: it must not be reachable from outside.
-                Ok(a) if !a.ip().is_loopback() => {
-                    return bad(
-                        "daemon.metrics_addr",
-                        addr.clone(),
-                        "must be a loopback address (127.0.0.1 or ::1)",
-                    )
-                }
-                Ok(_) => {}
+            let key = "daemon.metrics_addr";
+            let a = addr
+                .parse::<std::net::SocketAddr>()
+                .map_err(|e| invalid(key, addr, Box::new(e)))?;
+            // The responder has no authentication: it must not be reachable from outside.
+            if !a.ip().is_loopback() {
+                return Err(ConfigError::Range {
+                    source_name: source_name.to_string(),
+                    key,
+                    value: addr.clone(),
+                    rule: "must be a loopback address (127.0.0.1 or ::1)",
+                });
             }
         }
-        if let Err(e) = tracing_subscriber::EnvFilter::try_new(&self.log.level) {
-            return bad("log.level", self.log.level.clone(), &e.to_string());
-        }
+        tracing_subscriber::EnvFilter::try_new(&self.log.level)
+            .map_err(|e| invalid("log.level", &self.log.level, Box::new(e)))?;
         Ok(())
     }
 
@@ -329,6 +279,7 @@ impl DaemonConfig {
     pub fn output_hash(&self) -> u64 {
         let shaping = serde_json::json!({
             "fit": self.fit,
+            "tessellation": self.output.tessellation,
             "glb": self.output.glb,
             "report": self.output.report,
         });
@@ -362,9 +313,159 @@ impl DaemonConfig {
     }
 }
 
+/// Ranges of the `[fit]` table and its sub-tables.
+fn validate_fit(f: &FitConfig) -> Check {
+    check(
+        (1..=6).contains(&f.levels),
+        "fit.levels",
+        f.levels,
+        "must be 1..=6",
+    )?;
+    check(
+        f.min_levels <= 6,
+        "fit.min_levels",
+        f.min_levels,
+        "must be 0..=6",
+    )?;
+    let b = &f.budget;
+    check(
+        (1..=1_000_000).contains(&b.max_iterations),
+        "fit.budget.max_iterations",
+        b.max_iterations,
+        "must be 1..=1000000",
+    )?;
+    check(
+        b.tolerance_rel > 0.0 && b.tolerance_rel < 1.0,
+        "fit.budget.tolerance_rel",
+        b.tolerance_rel,
+        "must be in (0, 1)",
+    )?;
+    if let Some(t) = b.tolerance {
+        check(
+            t > 0.0 && t.is_finite(),
+            "fit.budget.tolerance",
+            t,
+            "must be positive",
+        )?;
+    }
+    if let Some(p) = b.within_tolerance_pct {
+        let key = "fit.budget.within_tolerance_pct";
+        check((0.0..=100.0).contains(&p), key, p, "must be 0..=100")?;
+    }
+    validate_scan(&f.scan)?;
+    validate_correction(&f.correction)?;
+    let c = &f.components;
+    check(
+        c.min_vertices >= 3,
+        "fit.components.min_vertices",
+        c.min_vertices,
+        "must be at least 3",
+    )?;
+    check(
+        (0.0..=1.0).contains(&c.min_fraction),
+        "fit.components.min_fraction",
+        c.min_fraction,
+        "must be 0..=1",
+    )
+}
+
+/// Ranges of `[fit.scan]`.
+fn validate_scan(s: &ScanConfig) -> Check {
+    check(
+        (1..=64).contains(&s.lattice),
+        "fit.scan.lattice",
+        s.lattice,
+        "must be 1..=64",
+    )?;
+    check(
+        s.smoothing >= 0.0 && s.smoothing.is_finite(),
+        "fit.scan.smoothing",
+        s.smoothing,
+        "must be >= 0",
+    )?;
+    if let Some(n) = s.grid_segments {
+        check(
+            (1..=4096).contains(&n),
+            "fit.scan.grid_segments",
+            n,
+            "must be 1..=4096",
+        )?;
+    }
+    check(
+        s.target_controls_pct > 0.0 && s.target_controls_pct <= 100.0,
+        "fit.scan.target_controls_pct",
+        s.target_controls_pct,
+        "must be in (0, 100]",
+    )?;
+    check(
+        s.hole_bridge_edges > 0.0 && s.hole_bridge_edges.is_finite(),
+        "fit.scan.hole_bridge_edges",
+        s.hole_bridge_edges,
+        "must be a positive number",
+    )
+}
+
+/// Ranges of `[fit.correction]`.
+fn validate_correction(c: &CorrectionConfig) -> Check {
+    check(
+        c.rounds <= 100,
+        "fit.correction.rounds",
+        c.rounds,
+        "must be 0..=100",
+    )?;
+    check(
+        (0.0..1.0).contains(&c.min_gain),
+        "fit.correction.min_gain",
+        c.min_gain,
+        "must be in [0, 1)",
+    )?;
+    for (key, value) in [
+        ("fit.correction.tangential", c.tangential),
+        ("fit.correction.tangential_edge", c.tangential_edge),
+    ] {
+        check(value > 0.0 && value <= 1.0, key, value, "must be in (0, 1]")?;
+    }
+    Ok(())
+}
+
+/// Ranges of `[daemon]`.
+fn validate_daemon(d: &DaemonSection) -> Check {
+    check(
+        (1..=60_000).contains(&d.poll_interval_ms),
+        "daemon.poll_interval_ms",
+        d.poll_interval_ms,
+        "must be 1..=60000",
+    )?;
+    check(
+        d.stop_timeout_ms <= 3_600_000,
+        "daemon.stop_timeout_ms",
+        d.stop_timeout_ms,
+        "must be at most 3600000",
+    )?;
+    check(
+        d.max_file_bytes > 0,
+        "daemon.max_file_bytes",
+        d.max_file_bytes,
+        "must be positive",
+    )?;
+    check(
+        d.workers <= 256,
+        "daemon.workers",
+        d.workers,
+        "must be 0..=256 (0: one per core)",
+    )?;
+    check(
+        d.settle_ms <= 3_600_000,
+        "daemon.settle_ms",
+        d.settle_ms,
+        "must be at most 3600000",
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::worker::BudgetConfig;
 
     #[test]
     fn embedded_default_parses_and_round_trips() {
@@ -416,8 +517,11 @@ mod tests {
 
     #[test]
     fn new_keys_have_defaults_and_are_checked() {
-        let old = "[fit]\nsurface = \"bezier\"\nlevels = 1\nmethod = \"cg\"\ninverse = \"exact\"\nmax_iterations = 5\ntolerance_rel = 1e-3\nlattice = 8\nsmoothing = 1e-5\ntessellation = 8\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
+        let old = "[fit]\nsurface = \"bezier\"\nlevels = 1\nmethod = \"cg\"\ninverse = \"exact\"\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
         let cfg = DaemonConfig::parse(old, "old.toml").expect("configs without the new keys");
+        assert_eq!(cfg.fit.budget, BudgetConfig::default());
+        assert_eq!(cfg.fit.scan, ScanConfig::default());
+        assert_eq!(cfg.output.tessellation, DEFAULT_TESSELLATION);
         assert_eq!(cfg.daemon.watcher, WatcherKind::Native);
         assert_eq!(cfg.output.processed, ProcessedPolicy::Leave);
         assert!(cfg.output.glb && cfg.output.report);
@@ -437,7 +541,29 @@ mod tests {
         let mut b = a.clone();
         b.daemon.settle_ms += 1;
         assert_eq!(a.output_hash(), b.output_hash());
-        b.fit.max_iterations += 1;
+        b.fit.budget.max_iterations += 1;
         assert_ne!(a.output_hash(), b.output_hash());
+        let mut c = a.clone();
+        c.output.tessellation += 1;
+        assert_ne!(a.output_hash(), c.output_hash());
+    }
+
+    #[test]
+    fn keys_of_the_flat_fit_table_are_refused_with_their_name() {
+        let flat = DEFAULT_CONFIG.replace("[fit.budget]\n", "");
+        let e = DaemonConfig::parse(&flat, "flat.toml").expect_err("refused");
+        assert_eq!(e.kind(), "config_parse");
+        assert!(e.to_string().contains("max_iterations"), "{e}");
+    }
+
+    #[test]
+    fn sub_table_ranges_are_named_by_their_whole_key() {
+        let text = DEFAULT_CONFIG.replace("rounds = 8", "rounds = 101");
+        let e = DaemonConfig::parse(&text, "r.toml").expect_err("refused");
+        assert_eq!(e.kind(), "config_out_of_range");
+        assert!(e.to_string().contains("fit.correction.rounds"), "{e}");
+        let text = DEFAULT_CONFIG.replace("tessellation = 128", "tessellation = 0");
+        let e = DaemonConfig::parse(&text, "t.toml").expect_err("refused");
+        assert!(e.to_string().contains("output.tessellation"), "{e}");
     }
 }

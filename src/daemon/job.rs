@@ -144,7 +144,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     t.parse_ms = ms(start);
     let warm = job.warm.as_ref().or(previous.as_ref().map(|p| &p.warm));
     let start = Instant::now();
-    let fitted = run_input(&mesh, warm, &job.cfg.fit);
+    let fitted = run_input(&mesh, warm, &job.cfg.worker_config());
     t.fit_ms = ms(start);
     match fitted {
         Ok(outputs) => Outcome::Fitted {

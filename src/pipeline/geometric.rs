@@ -3,6 +3,7 @@
 
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// Newton iterations per point. Started from the fitting parameter the foot point is
 /// usually within a small fraction of a face; a handful of steps reaches machine precision.
@@ -124,32 +125,18 @@ fn taylor_step<S: TriSurface + ?Sized>(
     true
 }
 
-/// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
-/// half the tolerance, yellow the tolerance, red twice it or more.
-pub fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
-    let t = if tolerance > 0.0 {
-        (error / tolerance).clamp(0.0, 2.0) / 2.0
-    } else {
-        0.0
-    } as f32;
-    let stops: [[f32; 3]; 5] = [
-        [0.10, 0.25, 0.90],
-        [0.10, 0.75, 0.30],
-        [0.95, 0.90, 0.10],
-        [0.95, 0.50, 0.10],
-        [0.85, 0.10, 0.10],
-    ];
-    let x = t * 4.0;
-    let i = (x.floor() as usize).min(3);
-    let f = x - i as f32;
-    let a = stops[i];
-    let b = stops[i + 1];
-    [
-        a[0] + (b[0] - a[0]) * f,
-        a[1] + (b[1] - a[1]) * f,
-        a[2] + (b[2] - a[2]) * f,
-        1.0,
-    ]
+/// Distance of every data point to its foot point, Newton started at its parameter.
+pub fn geometric_errors(
+    surface: &dyn TriSurface,
+    controls: &[DVec3],
+    data: &[DVec3],
+    params: &[SurfaceParam],
+) -> Vec<f64> {
+    let evaluate = surface.evaluator(controls);
+    data.par_iter()
+        .zip(params.par_iter())
+        .map(|(p, u)| (foot_point(surface, &*evaluate, *p, *u).1.position - *p).length())
+        .collect()
 }
 
 #[cfg(test)]

@@ -1,9 +1,8 @@
 //! What a fit turns into: the surface.json value, the tessellation (trimmed to the scanned
 //! region) and its error colours. Bytes and values only; callers write them.
 
-use super::geometric::error_colour;
-use super::scan::{ScanFit, SurfaceModel};
-use super::PatchFit;
+use super::scan::ScanFit;
+use super::{PatchFit, SurfaceKind, SurfaceModel};
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::remesh::param::{ring_cells, Locator};
 use crate::surface::bezier::{lattice_points, lattice_triangles};
@@ -14,6 +13,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use serde_json::json;
 
+/// surface.json of a fit: the model, its controls, and for scans the plane, domain and
+/// trims; `report` gives the final errors and status.
 pub fn surface_json(
     f: &PatchFit,
     scan: Option<&ScanFit>,
@@ -31,7 +32,7 @@ pub fn surface_json(
             "domain": "reference triangle: barycentric (u, v, w = 1 - u - v)",
             "lattice_ordering": "control point P_{i,j,k} (i + j + k = degree) has weight degree!/(i! j! k!) u^i v^j w^k and sits at index j*(degree+1) - j*(j-1)/2 + i",
         }),
-        SurfaceModel::Grid(g) if f.surface == super::SurfaceKind::Bezier => {
+        SurfaceModel::Grid(g) if f.surface == SurfaceKind::Bezier => {
             let patches = g
                 .cells()
                 .iter()
@@ -84,13 +85,13 @@ pub fn surface_json(
     if let Some(s) = scan {
         v["parameter_frame"] = json!({
             "about": "the plane the scan was mapped to: plane point (s, t) = ((p - origin) . e1, (p - origin) . e2); triangle domains give corners in (s, t), grid domains the spacing (grid vertex (i, j) at s = spacing (i + j / 2), t = spacing j sqrt(3) / 2)",
-            "origin": s.frame.origin.to_array(),
-            "e1": s.frame.e1.to_array(),
-            "e2": s.frame.e2.to_array(),
+            "origin": s.mapping.frame.origin.to_array(),
+            "e1": s.mapping.frame.e1.to_array(),
+            "e2": s.mapping.frame.e2.to_array(),
             "domain": s.domain,
-            "map": s.map_method,
+            "map": s.mapping.method,
         });
-        if let Some(w) = &s.warp {
+        if let Some(w) = &s.mapping.warp {
             v["parameter_frame"]["warp"] = json!({
                 "about": "the projection (s, t) is warped before the domain applies: lattice vertex (i, j), 0 <= i < columns, 0 <= j < rows, sits at origin + spacing (i + j / 2, j sqrt(3) / 2) and moves to image[i + j columns]; between vertices the warp is linear on the triangles (i,j),(i+1,j),(i,j+1) and (i+1,j),(i+1,j+1),(i,j+1)",
                 "lattice": w,
@@ -98,8 +99,8 @@ pub fn surface_json(
         }
         v["trim"] = json!({
             "space": "the surface's own parameters (barycentric (u, v) for bezier, grid (x, y) for loop)",
-            "outer": s.trim.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
-            "holes": s.hole_trims.iter().map(|h| h.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "outer": s.trims.outer.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>(),
+            "holes": s.trims.holes.iter().map(|h| h.iter().map(|&(u, v)| [u, v]).collect::<Vec<_>>()).collect::<Vec<_>>(),
         });
     }
     v["fit"] = report["final"].clone();
@@ -158,6 +159,16 @@ impl Coverage {
             })
             .collect();
         Self { triangles, params }
+    }
+
+    /// The scanned region of a scan fit.
+    pub fn of(fit: &PatchFit, scan: &ScanFit) -> Self {
+        Self::new(
+            &scan.trims.plan.covered,
+            &fit.params,
+            &scan.mapping.mapped_params,
+            &scan.mapping.near_fold,
+        )
     }
 
     /// Returns a test for parameters: inside a kept triangle.
@@ -307,6 +318,34 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
             polylines: &[],
         },
     )
+}
+
+/// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
+/// half the tolerance, yellow the tolerance, red twice it or more.
+pub fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
+    let t = if tolerance > 0.0 {
+        (error / tolerance).clamp(0.0, 2.0) / 2.0
+    } else {
+        0.0
+    } as f32;
+    let stops: [[f32; 3]; 5] = [
+        [0.10, 0.25, 0.90],
+        [0.10, 0.75, 0.30],
+        [0.95, 0.90, 0.10],
+        [0.95, 0.50, 0.10],
+        [0.85, 0.10, 0.10],
+    ];
+    let x = t * 4.0;
+    let i = (x.floor() as usize).min(3);
+    let f = x - i as f32;
+    let a = stops[i];
+    let b = stops[i + 1];
+    [
+        a[0] + (b[0] - a[0]) * f,
+        a[1] + (b[1] - a[1]) * f,
+        a[2] + (b[2] - a[2]) * f,
+        1.0,
+    ]
 }
 
 /// Nearest data parameter through a uniform bucket grid over the parameters' bounding box.

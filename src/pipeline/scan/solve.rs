@@ -3,13 +3,15 @@
 //! through a `StencilPlan` of the grid's covered cells, built once per fit: every round then
 //! skips grouping rows, gathering neighbours and recomputing the fairness term.
 
-use super::{collocation, collocation_rows, geometric, FitOptions, PipelineError};
 use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::stencil_matrix::{StencilPlan, StencilRows};
 use crate::fit::{
     fit, Budget, Collocation, Csr, FitOutcome, FitProblem, FitStatus, Method, StepStats,
 };
+use crate::pipeline::collocation::{collocation, collocation_rows};
+use crate::pipeline::geometric;
+use crate::pipeline::{FitOptions, PipelineError};
 use crate::surface::grid_spline::{GridEvaluator, GridSpline};
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;

@@ -4,22 +4,13 @@
 
 use crate::mesh::clean::{Cleaned, EdgeTable};
 use crate::mesh::stats::UnionFind;
+use crate::pipeline::names::named;
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 
 /// Which components of an input get a surface.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ComponentMode {
     /// The largest kept component only; the patch keeps its id.
@@ -29,6 +20,11 @@ pub enum ComponentMode {
     /// (k = 0 for the largest, in decreasing size).
     All,
 }
+
+named!(ComponentMode {
+    Largest => "largest",
+    All => "all",
+});
 
 /// Size thresholds: a component is kept when it has at least `min_vertices` vertices AND at
 /// least `min_fraction` of the largest component's vertices.

@@ -1,0 +1,107 @@
+//! Stage 1 of a scan fit: clean the input, keep its largest component, close its holes and
+//! map it to the plane.
+
+use super::components::cleaned_components;
+use super::types::{ScanOptions, ScanWarm};
+use crate::mesh::clean::{clean, CleanOptions};
+use crate::pipeline::PipelineError;
+use crate::remesh::planar::{evened_out, planar_map, projection_warp, PlanarMap, PlaneFrame};
+use crate::remesh::{fill_holes, FilledPatch};
+use crate::TriMesh;
+
+/// The patch ready for a domain: the component fitted, its holes filled and its map.
+pub(super) struct Prepared {
+    /// The largest component of the cleaned input: its vertices are the data.
+    pub(super) part: TriMesh,
+    /// Components of the cleaned input.
+    pub(super) components: usize,
+    /// `part` with its holes closed by virtual fans.
+    pub(super) patch: FilledPatch,
+    /// The plane of the map.
+    pub(super) frame: PlaneFrame,
+    /// The filled patch in the plane.
+    pub(super) map: PlanarMap,
+    /// The data's sample spacing: the unit in which hole widths are judged.
+    pub(super) edge_length: f64,
+}
+
+pub(super) fn prepare(
+    mesh: &TriMesh,
+    scan: &ScanOptions,
+    warm: Option<&ScanWarm>,
+) -> Result<Prepared, PipelineError> {
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let parts = cleaned_components(&cleaned);
+    let components = parts.len();
+    let part = parts.into_iter().next().unwrap_or_default();
+    if part.triangles.is_empty() {
+        return Err(PipelineError::EmptyAfterCleaning);
+    }
+    let previous_warp = warm.and_then(|w| w.warp);
+    // The plane's frame and warp read only the data triangles: found beside the filling of
+    // the holes (a warp from the previous version is reused instead, when it covers).
+    let frame_and_warp = || -> Result<_, PipelineError> {
+        let frame = match warm.and_then(|w| w.frame) {
+            Some(f) => f,
+            None => PlaneFrame::fit_least_folds(&part).ok_or(PipelineError::DegeneratePatch)?,
+        };
+        let warp = match previous_warp {
+            Some(_) => None,
+            None => projection_warp(&part, &frame),
+        };
+        Ok((frame, warp))
+    };
+    let (filled, framed) = rayon::join(|| fill_holes(&part), frame_and_warp);
+    let patch = filled.map_err(|source| PipelineError::NotDiskLike { source })?;
+    // After the topology checks, whose reasons (closed, not disk-like) say more.
+    if part.positions.len() < scan.min_component_vertices {
+        return Err(PipelineError::TooFewVertices {
+            vertices: part.positions.len(),
+            min: scan.min_component_vertices,
+        });
+    }
+    let (frame, early_warp) = framed?;
+    let map = evened_out(
+        planar_map(&patch, &frame).map_err(|source| PipelineError::MapFailed { source })?,
+        &patch,
+        previous_warp.or(early_warp.as_ref()),
+    );
+    let edge_length = median_edge_length(&part);
+    Ok(Prepared {
+        part,
+        components,
+        patch,
+        frame,
+        map,
+        edge_length,
+    })
+}
+
+/// Triangles sampled for the median edge length: a scan's edges are of nearly one length, so
+/// a sample spread over the mesh finds their median without sorting every edge.
+const EDGE_SAMPLE_TRIANGLES: usize = 10_000;
+
+/// Median edge length of a mesh, from at most ~30k edges spread over it: the data's
+/// sample spacing, the unit in which hole widths are judged.
+fn median_edge_length(mesh: &TriMesh) -> f64 {
+    let stride = (mesh.triangles.len() / EDGE_SAMPLE_TRIANGLES).max(1);
+    let mut lengths: Vec<f64> = mesh
+        .triangles
+        .iter()
+        .step_by(stride)
+        .flat_map(|t| {
+            let p = t.map(|v| mesh.positions[v as usize]);
+            [
+                (p[1] - p[0]).length(),
+                (p[2] - p[1]).length(),
+                (p[0] - p[2]).length(),
+            ]
+        })
+        .filter(|l| l.is_finite())
+        .collect();
+    if lengths.is_empty() {
+        return 0.0;
+    }
+    let mid = lengths.len() / 2;
+    *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
+}

@@ -1,0 +1,364 @@
+//! The worker as one pure function: (mesh, previous version's warm start, config) ->
+//! outputs as bytes and JSON values. The CLI and the daemon write them; nothing here touches
+//! files. It chooses the path (subdivision connectivity when the input has it, else the
+//! scan path) and applies the component policy.
+
+mod config;
+mod report;
+
+pub use config::{BudgetConfig, ComponentsConfig, FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
+pub use report::{PartWarm, Refinement, WarmStart};
+
+use super::output::{tessellate, tessellated_glb, Coverage};
+use super::scan::components::{
+    cleaned_components, split_components, ComponentFilter, ComponentMode,
+};
+use super::scan::{fit_scan, ScanFit, ScanOptions, ScanWarm};
+use super::subdivided::fit_subdivided;
+use super::{FitOptions, PatchFit, PipelineError};
+use crate::fit::{Budget, FitStatus, StepHook};
+use crate::mesh::clean::{clean, CleanOptions};
+use crate::TriMesh;
+use glam::DVec3;
+use serde_json::json;
+use std::time::Instant;
+
+/// What one fitted surface yields.
+pub struct PatchOutputs {
+    /// surface.json.
+    pub surface: serde_json::Value,
+    /// report.json (callers add where the input came from).
+    pub report: serde_json::Value,
+    /// surface.glb.
+    pub glb: Vec<u8>,
+    /// What the next version of the patch starts from; callers store it opaquely.
+    pub warm: WarmStart,
+    /// How the fit ended.
+    pub status: FitStatus,
+}
+
+/// A fit before it is turned into outputs.
+pub struct FittedPatch {
+    /// The fit.
+    pub fit: PatchFit,
+    /// Remeshed scans: the preparation and domain.
+    pub scan: Option<ScanFit>,
+    /// The budget, its tolerance resolved.
+    pub budget: Budget,
+    /// Levels of inverse subdivision of the fit returned (subdivided inputs may refine).
+    pub levels: usize,
+    /// Subdivided inputs: the fits that missed the budget before it, coarsest first.
+    pub refinement: Vec<Refinement>,
+}
+
+/// The fit alone: subdivision connectivity when the input has it, else the scan path.
+pub fn fit_patch(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Result<FittedPatch, PipelineError> {
+    fit_patch_with(mesh, previous, cfg, None)
+}
+
+/// `fit_patch` reporting every step to `on_step` (a progress display).
+pub fn fit_patch_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<FittedPatch, PipelineError> {
+    let fit_cfg = &cfg.fit;
+    let budget = fit_cfg.budget.resolve(mesh);
+    let opts = FitOptions {
+        surface: fit_cfg.surface,
+        levels: fit_cfg.levels,
+        method: fit_cfg.method,
+        inverse: fit_cfg.inverse,
+        budget: budget.clone(),
+        on_step,
+    };
+    let previous = previous.filter(|w| w.surface == fit_cfg.surface);
+    let mut levels = fit_cfg.levels;
+    let mut refinement = Vec::new();
+    let subdivided = loop {
+        let at_level = FitOptions {
+            levels,
+            ..opts.clone()
+        };
+        match fit_subdivided(mesh, &at_level, previous.map(|w| w.controls.as_slice())) {
+            Ok(f) if f.outcome.status != FitStatus::Met && levels > fit_cfg.min_levels => {
+                refinement.push(Refinement {
+                    levels,
+                    control_points: f.controls.len(),
+                    status: f.outcome.status,
+                    last: f.outcome.steps.last().cloned(),
+                });
+                levels -= 1;
+            }
+            other => break other,
+        }
+    };
+    let not_subdivided = match subdivided {
+        Ok(fit) => {
+            return Ok(FittedPatch {
+                fit,
+                scan: None,
+                budget,
+                levels,
+                refinement,
+            })
+        }
+        Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
+        Err(e) => return Err(e),
+    };
+    // No subdivision connectivity: remesh the scan onto a lattice.
+    let scan = ScanOptions {
+        config: fit_cfg.scan,
+        correction: fit_cfg.correction,
+        min_component_vertices: fit_cfg.components.min_vertices,
+    };
+    let warm = previous.map(|w| ScanWarm {
+        frame: w.frame,
+        warp: w.warp.as_ref(),
+        domain: w.domain.as_ref(),
+        controls: &w.controls,
+        coords: &w.coords,
+        feet: w.feet.as_ref(),
+    });
+    let s = fit_scan(mesh, &opts, &scan, warm.as_ref()).map_err(|e| PipelineError::ScanFailed {
+        source: Box::new(e),
+        not_subdivided: Box::new(not_subdivided),
+    })?;
+    Ok(FittedPatch {
+        fit: s.fit.clone(),
+        scan: Some(s),
+        budget,
+        levels: fit_cfg.levels,
+        refinement,
+    })
+}
+
+/// The fit and its outputs.
+pub fn run_patch(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Result<PatchOutputs, PipelineError> {
+    run_patch_with(mesh, previous, cfg, None)
+}
+
+/// `run_patch` reporting every fitting step to `on_step`.
+pub fn run_patch_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<PatchOutputs, PipelineError> {
+    let wall = Instant::now();
+    let FittedPatch {
+        fit: fitted,
+        scan: scan_info,
+        budget,
+        levels,
+        refinement,
+    } = fit_patch_with(mesh, previous, cfg, on_step)?;
+    let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
+    // The shown surface and the written descriptions need nothing of each other.
+    let (glb, (mut report, surface, warm)) = rayon::join(
+        || {
+            let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
+            tessellated_glb(&fitted, &tess, budget.tolerance)
+        },
+        || {
+            report::describe(
+                cfg,
+                &fitted,
+                scan_info.as_ref(),
+                &budget,
+                levels,
+                &refinement,
+                wall,
+            )
+        },
+    );
+    report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
+    Ok(PatchOutputs {
+        surface,
+        report,
+        glb,
+        warm,
+        status: fitted.outcome.status,
+    })
+}
+
+/// One fitted surface of an input: the whole patch (`suffix` empty) or one component
+/// (`suffix` = `.c<k>`, appended to the patch id).
+pub struct PartOutputs {
+    /// Empty, or `.c<k>`.
+    pub suffix: String,
+    /// The surface's outputs.
+    pub outputs: PatchOutputs,
+}
+
+/// Everything one input yields under the component policy.
+pub struct InputOutputs {
+    /// The fitted surfaces.
+    pub parts: Vec<PartOutputs>,
+    /// Components that were kept but could not be fitted: (suffix, reason).
+    pub failed: Vec<(String, String)>,
+    /// What the next version of the input starts from.
+    pub warm: WarmStart,
+}
+
+impl InputOutputs {
+    /// The worst status over the fitted parts.
+    pub fn status(&self) -> FitStatus {
+        let rank = |s: FitStatus| match s {
+            FitStatus::Met => 0,
+            FitStatus::Stalled => 1,
+            FitStatus::Capped => 2,
+        };
+        self.parts
+            .iter()
+            .map(|p| p.outputs.status)
+            .max_by_key(|s| rank(*s))
+            .unwrap_or(FitStatus::Met)
+    }
+}
+
+/// The worker under the component policy: `largest` is `run_patch` on the input; `all`
+/// cleans and splits the input and fits every component big enough, each warm-started from
+/// the previous version's component that sat in the same place.
+pub fn run_input(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Result<InputOutputs, PipelineError> {
+    run_input_with(mesh, previous, cfg, None)
+}
+
+/// `run_input` reporting every fitting step (of every component) to `on_step`.
+pub fn run_input_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<InputOutputs, PipelineError> {
+    let components = &cfg.fit.components;
+    if components.mode == ComponentMode::Largest {
+        let outputs = run_patch_with(mesh, previous.filter(|w| w.parts.is_empty()), cfg, on_step)?;
+        return Ok(InputOutputs {
+            warm: outputs.warm.clone(),
+            parts: vec![PartOutputs {
+                suffix: String::new(),
+                outputs,
+            }],
+            failed: Vec::new(),
+        });
+    }
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let filter = ComponentFilter {
+        min_vertices: components.min_vertices,
+        min_fraction: components.min_fraction,
+    };
+    let split = split_components(cleaned_components(&cleaned), &filter);
+    if split.kept.is_empty() {
+        return Err(PipelineError::NoComponent {
+            min: components.min_vertices,
+            largest: split.dropped_vertices.first().copied().unwrap_or(0),
+        });
+    }
+    let previous_parts = previous.map_or(&[][..], |w| w.parts.as_slice());
+    let mut taken = vec![false; previous_parts.len()];
+    let mut parts = Vec::new();
+    let mut failures = Vec::new();
+    let mut warm_parts = Vec::new();
+    for (k, c) in split.kept.iter().enumerate() {
+        let suffix = format!(".c{k}");
+        let vertices = c.mesh.positions.len();
+        let matched = matching_part(previous_parts, &taken, c.centroid, c.diagonal, vertices);
+        if let Some(i) = matched {
+            taken[i] = true;
+        }
+        match run_patch_with(
+            &c.mesh,
+            matched.map(|i| &previous_parts[i].warm),
+            cfg,
+            on_step,
+        ) {
+            Ok(mut outputs) => {
+                outputs.report["component"] = json!({
+                    "index": k,
+                    "vertices": vertices,
+                    "kept": split.kept.len(),
+                    "total": split.total,
+                    "dropped_vertices": split.dropped_vertices,
+                });
+                warm_parts.push(PartWarm {
+                    suffix: suffix.clone(),
+                    centroid: c.centroid,
+                    diagonal: c.diagonal,
+                    vertices,
+                    warm: outputs.warm.clone(),
+                });
+                parts.push(PartOutputs { suffix, outputs });
+            }
+            Err(e) => failures.push((suffix, e)),
+        }
+    }
+    if parts.is_empty() {
+        return Err(PipelineError::NoComponentFitted { failures });
+    }
+    Ok(InputOutputs {
+        parts,
+        failed: failures
+            .into_iter()
+            .map(|(suffix, e)| (suffix, e.to_string()))
+            .collect(),
+        warm: WarmStart {
+            surface: cfg.fit.surface,
+            controls: Vec::new(),
+            frame: None,
+            warp: None,
+            domain: None,
+            coords: Vec::new(),
+            feet: None,
+            parts: warm_parts,
+        },
+    })
+}
+
+/// Largest ratio of vertex counts between a component and the previous version's piece it
+/// may continue: a rescan of the same piece changes its size by far less than 2x.
+const MATCH_MAX_SIZE_RATIO: f64 = 2.0;
+
+/// How far (as a fraction of the larger diagonal) a component's centroid may sit from the
+/// previous piece it continues.
+const MATCH_MAX_CENTROID_SHIFT: f64 = 0.25;
+
+/// The untaken previous component nearest to a new one, if it is plausibly the same piece:
+/// centroids within a quarter of the larger diagonal and vertex counts within 2x.
+fn matching_part(
+    previous: &[PartWarm],
+    taken: &[bool],
+    centroid: DVec3,
+    diagonal: f64,
+    vertices: usize,
+) -> Option<usize> {
+    previous
+        .iter()
+        .enumerate()
+        .filter(|(i, p)| {
+            let ratio = p.vertices.max(1) as f64 / vertices.max(1) as f64;
+            !taken[*i]
+                && (1.0 / MATCH_MAX_SIZE_RATIO..=MATCH_MAX_SIZE_RATIO).contains(&ratio)
+                && p.centroid.distance(centroid)
+                    <= MATCH_MAX_CENTROID_SHIFT * p.diagonal.max(diagonal)
+        })
+        .min_by(|(_, a), (_, b)| {
+            a.centroid
+                .distance(centroid)
+                .total_cmp(&b.centroid.distance(centroid))
+        })
+        .map(|(i, _)| i)
+}
