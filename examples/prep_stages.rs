@@ -14,10 +14,13 @@ use std::time::Instant;
 use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::inverse::InverseMethod;
-use trispline::pipeline::components::cleaned_components;
-use trispline::pipeline::domain::{covered_cells, grid_initial_net, spacing_for_target, GridFrame};
 use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Coverage};
-use trispline::pipeline::worker::{fit_patch, WorkerConfig};
+use trispline::pipeline::scan::components::cleaned_components;
+use trispline::pipeline::scan::domain::{
+    covered_cells, grid_initial_net, spacing_for_target, GridFrame,
+};
+use trispline::pipeline::scan::ScanConfig;
+use trispline::pipeline::worker::{fit_patch, FitConfig, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
 use trispline::remesh::planar::{evened_out, planar_map, PlaneFrame};
@@ -90,8 +93,7 @@ fn main() {
             .map(|p| [p.x.to_bits(), p.y.to_bits()])
             .collect();
         print_hash("planar_map", &(mesh_bits(&map.mesh), plane_bits));
-        let target =
-            WorkerConfig::default().target_controls_pct / 100.0 * patch.real_vertices as f64;
+        let target = ScanConfig::default().target_controls_pct / 100.0 * patch.real_vertices as f64;
         let target = target.round() as usize;
         let spacing = stage("spacing_for_target", repeats, || {
             spacing_for_target(&map.plane, &map.mesh.triangles, target)
@@ -117,7 +119,10 @@ fn main() {
 
         // Outputs of a fit (the fit itself is not timed here).
         let cfg = WorkerConfig {
-            surface: SurfaceKind::Loop,
+            fit: FitConfig {
+                surface: SurfaceKind::Loop,
+                ..FitConfig::default()
+            },
             ..WorkerConfig::default()
         };
         let Ok(fitted) = fit_patch(&mesh, None, &cfg) else {
@@ -131,10 +136,10 @@ fn main() {
         println!("   ({} controls)", f.model.as_surface().control_count());
         let coverage = stage("coverage", repeats, || {
             Coverage::new(
-                &s.filled.triangles,
+                &s.mapping.filled.triangles,
                 &f.params,
-                &s.mapped_params,
-                &s.near_fold,
+                &s.mapping.mapped_params,
+                &s.mapping.near_fold,
             )
         });
         let tess = stage("tessellate", repeats, || {

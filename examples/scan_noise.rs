@@ -16,7 +16,7 @@ use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector3, Vector6};
 use std::path::PathBuf;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
-use trispline::pipeline::components::connected_components;
+use trispline::pipeline::scan::components::connected_components;
 use trispline::TriMesh;
 
 /// Fewer 2-ring neighbours leave too few degrees of freedom over the 6 quadric unknowns for

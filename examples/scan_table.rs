@@ -94,18 +94,16 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     let rounds = std::env::args()
         .nth(3)
         .and_then(|r| r.parse().ok())
-        .unwrap_or(defaults.correction_rounds);
+        .unwrap_or(defaults.fit.correction.rounds);
     // Optional fourth argument: the fairness weight.
     let smoothing = std::env::args()
         .nth(4)
         .and_then(|r| r.parse().ok())
-        .unwrap_or(defaults.smoothing);
-    let cfg = WorkerConfig {
-        surface,
-        correction_rounds: rounds,
-        smoothing,
-        ..defaults
-    };
+        .unwrap_or(defaults.fit.scan.smoothing);
+    let mut cfg = defaults;
+    cfg.fit.surface = surface;
+    cfg.fit.correction.rounds = rounds;
+    cfg.fit.scan.smoothing = smoothing;
     let t1 = Instant::now();
     let fitted = match fit_patch(&loaded.mesh, None, &cfg) {
         Ok(f) => f,
@@ -117,14 +115,7 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     let fit_total = ms(t1);
     let t2 = Instant::now();
     let f = &fitted.fit;
-    let coverage = fitted.scan.as_ref().map(|s| {
-        Coverage::new(
-            &s.hole_plan.covered,
-            &f.params,
-            &s.mapped_params,
-            &s.near_fold,
-        )
-    });
+    let coverage = fitted.scan.as_ref().map(|s| Coverage::of(f, s));
     let tess = tessellate(f, cfg.tessellation, coverage.as_ref());
     let glb = tessellated_glb(f, &tess, fitted.budget.tolerance);
     let report = serde_json::json!({"final": {}, "status": f.outcome.status});
@@ -169,11 +160,14 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     // in the plane) is what a surface without bulges stays near.
     let filled = fitted.scan.as_ref().map_or_else(
         || dist.clone(),
-        |s| distances(&MeshDistance::new(&s.filled)),
+        |s| distances(&MeshDistance::new(&s.mapping.filled)),
     );
     let (prepare_ms, fit_ms) = (f.prepare_ms, f.fit_ms);
     let map = fitted.scan.as_ref().map_or("subdivision".to_string(), |s| {
-        format!("{:?}, {} folds", s.map_method, s.folds_projected)
+        format!(
+            "{:?}, {} folds",
+            s.mapping.method, s.mapping.folds_projected
+        )
     });
     println!(
         "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.4} {u} | {:.4} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.4} {u} | {:.4} {u} | {:.4} {u} | {:.4} {u} | {map}; diagonal {:.4} |",

@@ -6,7 +6,7 @@
 
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
-use trispline::pipeline::worker::{run_patch, PatchOutputs, WarmStart, WorkerConfig};
+use trispline::pipeline::worker::{run_patch, FitConfig, PatchOutputs, WarmStart, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::{DVec3, TriMesh};
 
@@ -53,11 +53,14 @@ fn main() {
     };
     let v1 = loaded.mesh;
     let v2 = second_version(&v1);
-    let base = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        max_iterations: 2000,
+    let mut base = WorkerConfig {
+        fit: FitConfig {
+            surface: SurfaceKind::Loop,
+            ..FitConfig::default()
+        },
         ..WorkerConfig::default()
     };
+    base.fit.budget.max_iterations = 2000;
     let (first, reference) = match (run_patch(&v1, None, &base), run_patch(&v2, None, &base)) {
         (Ok(a), Ok(b)) => (a, b),
         (Err(e), _) | (_, Err(e)) => {
@@ -89,25 +92,23 @@ fn main() {
         (
             "mean <= 1.02 x best",
             Some(best * 1.02),
-            base.max_iterations,
+            base.fit.budget.max_iterations,
         ),
         (
             "mean <= 1.005 x best",
             Some(best * 1.005),
-            base.max_iterations,
+            base.fit.budget.max_iterations,
         ),
         (
             "default budget",
             None,
-            WorkerConfig::default().max_iterations,
+            WorkerConfig::default().fit.budget.max_iterations,
         ),
     ];
     for (name, mean_error, max_iterations) in budgets {
-        let budget = WorkerConfig {
-            mean_error,
-            max_iterations,
-            ..base.clone()
-        };
+        let mut budget = base.clone();
+        budget.fit.budget.mean_error = mean_error;
+        budget.fit.budget.max_iterations = max_iterations;
         let run = |warm: Option<&WarmStart>| {
             let t = Instant::now();
             let out = run_patch(&v2, warm, &budget).expect("version 2 fits");

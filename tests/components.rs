@@ -5,8 +5,8 @@
 mod daemon_support;
 use daemon_support::*;
 use trispline::io::{read_mesh_file, LoadOptions};
-use trispline::pipeline::components::ComponentMode;
-use trispline::pipeline::worker::{run_input, WorkerConfig};
+use trispline::pipeline::scan::components::ComponentMode;
+use trispline::pipeline::worker::{run_input, ComponentsConfig, FitConfig, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
@@ -42,11 +42,16 @@ fn three_pieces(seed: f64) -> TriMesh {
 
 fn worker(mode: ComponentMode) -> WorkerConfig {
     WorkerConfig {
-        surface: SurfaceKind::Loop,
-        components: mode,
-        min_component_vertices: 100,
+        fit: FitConfig {
+            surface: SurfaceKind::Loop,
+            components: ComponentsConfig {
+                mode,
+                min_vertices: 100,
+                ..ComponentsConfig::default()
+            },
+            ..FitConfig::default()
+        },
         tessellation: 16,
-        ..WorkerConfig::default()
     }
 }
 
@@ -114,7 +119,10 @@ fn components_under_the_vertex_floor_are_refused_with_the_reason() {
             Ok(_) => panic!("{mode:?}: a 64-vertex patch passed a floor of 100"),
             Err(e) => e.to_string(),
         };
-        assert!(err.contains("min_component_vertices"), "{mode:?}: {err}");
+        assert!(
+            err.contains("fit.components.min_vertices"),
+            "{mode:?}: {err}"
+        );
     }
 }
 
@@ -147,10 +155,8 @@ fn the_cli_writes_one_folder_per_component_and_a_listing() {
 
 #[test]
 fn the_daemon_writes_suffixed_patches_and_keeps_one_state_per_input() {
-    let cfg = config(0, "native", "").replace(
-        "tessellation = 8",
-        "tessellation = 8\ncomponents = \"all\"\nmin_component_vertices = 100",
-    );
+    let cfg =
+        config(0, "native", "").replace("mode = \"largest\"", "mode = \"all\"\nmin_vertices = 100");
     let s = setup(&cfg);
     let tmp = tempfile::tempdir().expect("tmp");
     let obj = tmp.path().join("pieces.obj");
@@ -188,18 +194,12 @@ fn stanford_scan_all_components() {
     let mesh = read_mesh_file(&path, &LoadOptions::default())
         .expect("reads")
         .mesh;
-    let cfg = WorkerConfig {
-        components: ComponentMode::All,
-        tessellation: 32,
-        ..worker(ComponentMode::All)
-    };
+    let mut cfg = worker(ComponentMode::All);
+    cfg.tessellation = 32;
     // Its two side pieces have ~300 vertices, under 1 % of the main one: a fraction of
     // 0.5 % keeps them.
-    let cfg = WorkerConfig {
-        min_component_vertices: 200,
-        min_component_fraction: 0.005,
-        ..cfg
-    };
+    cfg.fit.components.min_vertices = 200;
+    cfg.fit.components.min_fraction = 0.005;
     let out = run_input(&mesh, None, &cfg).expect("fits");
     let c0 = &out.parts[0].outputs.report["component"];
     eprintln!(

@@ -11,10 +11,16 @@ surface = "bezier"
 levels = 1
 method = "cg"
 inverse = "exact"
+
+[fit.budget]
 max_iterations = 30
 tolerance_rel = 1e-3
+
+[fit.scan]
 lattice = 8
 smoothing = 1e-5
+
+[output]
 tessellation = 16
 
 [daemon]

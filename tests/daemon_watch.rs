@@ -237,8 +237,8 @@ fn corrupt_files_are_quarantined_and_the_daemon_keeps_going() {
 fn processed_policy_moves_or_deletes_only_fitted_inputs() {
     for policy in ["move", "delete"] {
         let text = config(0, "native", "").replace(
-            "[daemon]",
-            &format!("[output]\nprocessed = \"{policy}\"\n\n[daemon]"),
+            "[output]\n",
+            &format!("[output]\nprocessed = \"{policy}\"\n"),
         );
         let s = setup(&text);
         std::fs::write(s.inbox.join("a@1.ply"), patch_ply(10, 1)).expect("write");

@@ -8,8 +8,9 @@ use trispline::mesh::detect::Hierarchy;
 use trispline::mesh::inverse::{coarsen, InverseMethod};
 use trispline::mesh::loop_subdiv::subdivide;
 use trispline::mesh::topology::Topology;
-use trispline::pipeline::worker::{run_patch, WorkerConfig};
-use trispline::pipeline::{fit_subdivided, FitOptions, SurfaceKind};
+use trispline::pipeline::subdivided::fit_subdivided;
+use trispline::pipeline::worker::{run_patch, FitConfig, WorkerConfig};
+use trispline::pipeline::{FitOptions, SurfaceKind};
 use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::shared_data;
@@ -132,11 +133,13 @@ fn the_exact_path_writes_the_control_faces_and_warm_starts() {
         p.z += 0.002 * ((k * 7919 % 101) as f64 / 101.0 - 0.5);
     }
     let cfg = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        levels: 2,
-        min_levels: 2,
+        fit: FitConfig {
+            surface: SurfaceKind::Loop,
+            levels: 2,
+            min_levels: 2,
+            ..FitConfig::default()
+        },
         tessellation: 8,
-        ..WorkerConfig::default()
     };
     let first = run_patch(&data, None, &cfg).expect("fits");
     assert_eq!(first.surface["kind"], "loop");

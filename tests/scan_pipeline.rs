@@ -7,7 +7,7 @@ use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellate, Coverage};
 use trispline::pipeline::scan::Domain;
-use trispline::pipeline::worker::{fit_patch, run_patch, PatchOutputs, WorkerConfig};
+use trispline::pipeline::worker::{fit_patch, run_patch, FitConfig, PatchOutputs, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
 use trispline::remesh::planar::{folded_triangles, planar_map, MapMethod, PlaneFrame};
@@ -63,6 +63,17 @@ fn height_field(n: usize, hole: usize, f: impl Fn(f64, f64) -> DVec3) -> TriMesh
     TriMesh::new(positions, triangles)
 }
 
+/// The default worker with Loop surfaces.
+fn loop_config() -> WorkerConfig {
+    WorkerConfig {
+        fit: FitConfig {
+            surface: SurfaceKind::Loop,
+            ..FitConfig::default()
+        },
+        ..WorkerConfig::default()
+    }
+}
+
 #[test]
 fn a_tilted_height_field_is_projected_without_folds_and_its_hole_ear_clipped() {
     // Tilted 35 degrees about x: the least-fold search must still find a fold-free plane.
@@ -109,10 +120,7 @@ fn a_smooth_patch_is_fitted_on_a_grid_far_below_its_size() {
     let mesh = height_field(60, 10, |x, y| {
         DVec3::new(x, y, 0.15 * (2.5 * x).sin() * (1.5 * y + 0.3).cos())
     });
-    let cfg = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        ..WorkerConfig::default()
-    };
+    let cfg = loop_config();
     let f = fit_patch(&mesh, None, &cfg).expect("fits");
     let scan = f.scan.as_ref().expect("remeshed");
     assert!(matches!(scan.domain, Domain::Grid { .. }));
@@ -136,10 +144,7 @@ fn stanford_range_scan_quality_and_warm_start() {
     let Some(mesh) = range_scan("bun000_range_grid.ply") else {
         return;
     };
-    let cfg = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        ..WorkerConfig::default()
-    };
+    let cfg = loop_config();
     let first = run_patch(&mesh, None, &cfg).expect("fits");
     let report = &first.report;
     let data = report["data_points"].as_f64().expect("data");
@@ -161,11 +166,10 @@ fn stanford_range_scan_quality_and_warm_start() {
             .filter(|t| t.iter().all(|&v| mesh.positions[v as usize].x >= cut))
             .collect(),
     );
-    let budget = WorkerConfig {
-        mean_error: Some(report["final"]["mean_error"].as_f64().expect("mean") * 1.05),
-        max_iterations: 1000,
-        ..cfg
-    };
+    let mut budget = cfg;
+    budget.fit.budget.mean_error =
+        Some(report["final"]["mean_error"].as_f64().expect("mean") * 1.05);
+    budget.fit.budget.max_iterations = 1000;
     let cg_steps = |o: &PatchOutputs| {
         o.report["iterations"]
             .as_array()
@@ -207,10 +211,7 @@ fn a_warm_start_the_previous_surface_already_fits_runs_no_round() {
     let Some(mesh) = range_scan("bun000_range_grid.ply") else {
         return;
     };
-    let cfg = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        ..WorkerConfig::default()
-    };
+    let cfg = loop_config();
     let first = run_patch(&mesh, None, &cfg).expect("fits");
     let v1_rms = geometric_rms(&first);
     let rounds = |o: &PatchOutputs| {
@@ -283,10 +284,7 @@ fn stanford_scans_meet_the_quality_goals() {
         let Some(mesh) = range_scan(name) else {
             return;
         };
-        let cfg = WorkerConfig {
-            surface: SurfaceKind::Loop,
-            ..WorkerConfig::default()
-        };
+        let cfg = loop_config();
         let fitted = fit_patch(&mesh, None, &cfg).expect("fits");
         let rms = fitted.fit.geometric_rms();
         assert!(rms < 75e-6, "{name}: rms {:.1} um", rms * 1e6);
@@ -297,10 +295,10 @@ fn stanford_scans_meet_the_quality_goals() {
         );
         let scan = fitted.scan.as_ref().expect("remeshed scan");
         let coverage = Coverage::new(
-            &scan.hole_plan.covered,
+            &scan.trims.plan.covered,
             &fitted.fit.params,
-            &scan.mapped_params,
-            &scan.near_fold,
+            &scan.mapping.mapped_params,
+            &scan.mapping.near_fold,
         );
         let tess = tessellate(&fitted.fit, cfg.tessellation, Some(&coverage));
         assert!(tess.triangles.len() > 10_000, "{name}: the scan is shown");
@@ -313,8 +311,8 @@ fn stanford_scans_meet_the_quality_goals() {
             .fold(0.0f64, f64::max);
         assert!(worst < 1e-3, "{name}: {:.0} um from the data", worst * 1e6);
         let (bridged, trimmed) = (
-            scan.hole_plan.bridged.iter().filter(|b| **b).count(),
-            scan.hole_plan.trimmed() + scan.hole_plan.wide_triangles.len(),
+            scan.trims.plan.bridged.iter().filter(|b| **b).count(),
+            scan.trims.plan.trimmed() + scan.trims.plan.wide_triangles.len(),
         );
         if name.starts_with("bun045") || name.contains("meshlab") {
             assert!(trimmed > 0, "{name}: something was too wide to bridge");
@@ -336,7 +334,10 @@ fn bezier_patches_of_a_scan_are_its_grid_surface_in_bezier_form() {
     });
     let fit_as = |surface| {
         let cfg = WorkerConfig {
-            surface,
+            fit: FitConfig {
+                surface,
+                ..FitConfig::default()
+            },
             ..WorkerConfig::default()
         };
         fit_patch(&mesh, None, &cfg).expect("fits")
@@ -431,11 +432,8 @@ fn the_time_cap_stops_the_correction_rounds() {
         return;
     };
     let fit = |max_time_ms| {
-        let cfg = WorkerConfig {
-            surface: SurfaceKind::Loop,
-            max_time_ms,
-            ..WorkerConfig::default()
-        };
+        let mut cfg = loop_config();
+        cfg.fit.budget.max_time_ms = max_time_ms;
         fit_patch(&mesh, None, &cfg).expect("fits")
     };
     let free = fit(None);
@@ -456,15 +454,10 @@ fn more_correction_rounds_lower_the_rms_error() {
     let Some(mesh) = range_scan("chin_tri.ply") else {
         return;
     };
-    let base = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        ..WorkerConfig::default()
-    };
-    let tuned = WorkerConfig {
-        correction_min_gain: 0.01,
-        correction_rounds: 16,
-        ..base.clone()
-    };
+    let base = loop_config();
+    let mut tuned = base.clone();
+    tuned.fit.correction.min_gain = 0.01;
+    tuned.fit.correction.rounds = 16;
     let default_fit = fit_patch(&mesh, None, &base).expect("fits");
     let tuned_fit = fit_patch(&mesh, None, &tuned).expect("fits");
     let (d, t) = (
@@ -489,16 +482,17 @@ fn the_edge_band_lowers_the_rms_without_raising_the_maximum() {
     let Some(mesh) = range_scan("chin_tri.ply") else {
         return;
     };
-    let band = WorkerConfig {
-        surface: SurfaceKind::Loop,
-        ..WorkerConfig::default()
-    };
-    let (inner, edge) = (band.correction_tangential, band.correction_tangential_edge);
+    let band = loop_config();
+    let (inner, edge) = (
+        band.fit.correction.tangential,
+        band.fit.correction.tangential_edge,
+    );
     assert!(inner < edge);
-    let uniform = |t: f64| WorkerConfig {
-        correction_tangential: t,
-        correction_tangential_edge: t,
-        ..band.clone()
+    let uniform = |t: f64| {
+        let mut cfg = band.clone();
+        cfg.fit.correction.tangential = t;
+        cfg.fit.correction.tangential_edge = t;
+        cfg
     };
     let fit = |cfg: &WorkerConfig| {
         let f = fit_patch(&mesh, None, cfg).expect("fits");

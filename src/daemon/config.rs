@@ -471,7 +471,8 @@ mod tests {
     fn embedded_default_parses_and_round_trips() {
         let cfg = DaemonConfig::embedded_default().expect("valid default");
         let again = DaemonConfig::parse(&cfg.to_toml(), "printed").expect("printed config parses");
-        assert_eq!(again.fit.lattice, cfg.fit.lattice);
+        assert_eq!(again.to_toml(), cfg.to_toml());
+        assert_eq!(again.output_hash(), cfg.output_hash());
     }
 
     #[test]

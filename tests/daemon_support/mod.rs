@@ -22,10 +22,19 @@ surface = "bezier"
 levels = 1
 method = "cg"
 inverse = "exact"
+
+[fit.budget]
 max_iterations = 20
 tolerance_rel = 1e-3
+
+[fit.scan]
 lattice = 6
 smoothing = 1e-5
+
+[fit.components]
+mode = "largest"
+
+[output]
 tessellation = 8
 
 [daemon]
