@@ -25,7 +25,8 @@ enum Command {
     Subdivide(cli::mesh_tools::SubdivideArgs),
     /// Inverse Loop subdivision (exit 2 without subdivision connectivity).
     Coarsen(cli::mesh_tools::CoarsenArgs),
-    /// Fit a triangular surface to a mesh with subdivision connectivity.
+    /// Fit a triangular surface to a disk-like scan patch or a mesh with subdivision
+    /// connectivity.
     Fit(cli::fit::FitArgs),
     /// The daemon: watch a folder, fit every patch that arrives.
     Watch(cli::watch::WatchArgs),

@@ -28,8 +28,10 @@ pub struct WatchArgs {
     /// Process what is there, then exit.
     #[arg(long)]
     pub once: bool,
+    /// Print the effective configuration (the file's or the embedded one) as TOML and exit.
     #[arg(long)]
     pub print_config: bool,
+    /// Check the configuration and exit (0: valid).
     #[arg(long)]
     pub check_config: bool,
     /// Log lines as JSON (overrides log.format).

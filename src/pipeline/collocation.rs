@@ -17,7 +17,7 @@ pub fn collocation(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Colloca
 
 /// The collocation rows at `params` as a stored matrix (no transpose), built in parallel
 /// chunks with one row buffer per chunk.
-pub fn collocation_rows(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Csr {
+pub(crate) fn collocation_rows(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Csr {
     const CHUNK: usize = 4096;
     let parts: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = params
         .par_chunks(CHUNK)

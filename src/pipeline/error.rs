@@ -143,7 +143,7 @@ impl PipelineError {
 
     /// True when the input (or the configuration) cannot be fitted, as opposed to a solver
     /// failure: the CLI exits with 2 on these.
-    pub fn is_refusal(&self) -> bool {
+    pub(crate) fn is_refusal(&self) -> bool {
         !matches!(self, PipelineError::Fit(_))
     }
 }

@@ -25,7 +25,7 @@ const TAYLOR_STEP2: f64 = 1e-6;
 /// `|position - point|`). The distance never exceeds the distance at `start`: a step that
 /// does not reduce it is halved and finally refused.
 /// `evaluate` is the surface's evaluator for the control set (`TriSurface::evaluator`).
-pub fn foot_point<S: TriSurface + ?Sized>(
+pub(crate) fn foot_point<S: TriSurface + ?Sized>(
     surface: &S,
     evaluate: &(impl Fn(SurfaceParam) -> Derivatives + ?Sized),
     point: DVec3,
@@ -126,7 +126,7 @@ fn taylor_step<S: TriSurface + ?Sized>(
 }
 
 /// Distance of every data point to its foot point, Newton started at its parameter.
-pub fn geometric_errors(
+pub(crate) fn geometric_errors(
     surface: &dyn TriSurface,
     controls: &[DVec3],
     data: &[DVec3],

@@ -13,16 +13,16 @@
 
 #![warn(missing_docs)]
 
-pub mod collocation;
+mod collocation;
 mod error;
-pub mod geometric;
+mod geometric;
 mod names;
 pub mod output;
 pub mod scan;
 pub mod subdivided;
 pub mod worker;
 
-pub use collocation::{collocation, collocation_rows};
+pub use collocation::collocation;
 pub use error::{NoSubdivision, PipelineError};
 pub use names::UnknownName;
 

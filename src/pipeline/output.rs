@@ -111,9 +111,13 @@ pub fn surface_json(
 /// A tessellation of the fitted surface: parameters, points, normals, triangles (trimmed
 /// to the scanned region when a trim is given).
 pub struct Tessellation {
+    /// Each vertex's surface parameter.
     pub params: Vec<SurfaceParam>,
+    /// Each vertex's surface point.
     pub positions: Vec<DVec3>,
+    /// Each vertex's unit normal.
     pub normals: Vec<DVec3>,
+    /// The triangles kept.
     pub triangles: Vec<[u32; 3]>,
 }
 
@@ -172,7 +176,7 @@ impl Coverage {
     }
 
     /// Returns a test for parameters: inside a kept triangle.
-    pub fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
+    fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
         let locator = Locator::new(&self.triangles, &self.params);
         move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
     }
@@ -322,7 +326,7 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
 
 /// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
 /// half the tolerance, yellow the tolerance, red twice it or more.
-pub fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
+fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
     let t = if tolerance > 0.0 {
         (error / tolerance).clamp(0.0, 2.0) / 2.0
     } else {

@@ -29,7 +29,7 @@ named!(ComponentMode {
 /// Size thresholds: a component is kept when it has at least `min_vertices` vertices AND at
 /// least `min_fraction` of the largest component's vertices.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ComponentFilter {
+pub(crate) struct ComponentFilter {
     pub min_vertices: usize,
     pub min_fraction: f64,
 }
@@ -37,14 +37,14 @@ pub struct ComponentFilter {
 /// One kept component: its own compacted mesh and where it sits (for matching the pieces
 /// of a new version to those of the previous one).
 #[derive(Clone, Debug)]
-pub struct Component {
+pub(crate) struct Component {
     pub mesh: TriMesh,
     pub centroid: DVec3,
     pub diagonal: f64,
 }
 
 #[derive(Clone, Debug, Default)]
-pub struct Split {
+pub(crate) struct Split {
     /// Kept components, largest first.
     pub kept: Vec<Component>,
     /// How many components the mesh has in all.
@@ -134,7 +134,7 @@ fn split_by_label(mesh: &TriMesh, label: impl Fn(usize) -> usize) -> Vec<TriMesh
 /// Splits and filters. The largest component is always reported in `kept` when it passes
 /// `min_vertices`; an empty `kept` means nothing is big enough.
 /// `parts`: the components, largest first (`connected_components`, `cleaned_components`).
-pub fn split_components(parts: Vec<TriMesh>, filter: &ComponentFilter) -> Split {
+pub(crate) fn split_components(parts: Vec<TriMesh>, filter: &ComponentFilter) -> Split {
     let total = parts.len();
     let largest = parts.first().map_or(0, |p| p.positions.len());
     let mut split = Split {

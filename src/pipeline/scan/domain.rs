@@ -25,22 +25,23 @@ const SQRT3_2: f64 = 0.866_025_403_784_438_6;
 /// The plane <-> grid-coordinate map of a grid of spacing `spacing`.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GridFrame {
+    /// Distance between neighbouring grid vertices in the plane.
     pub spacing: f64,
 }
 
 impl GridFrame {
-    pub fn to_grid(&self, p: DVec2) -> (f64, f64) {
+    pub(crate) fn to_grid(&self, p: DVec2) -> (f64, f64) {
         let y = p.y / (self.spacing * SQRT3_2);
         (p.x / self.spacing - 0.5 * y, y)
     }
 
-    pub fn to_plane(&self, x: f64, y: f64) -> DVec2 {
+    pub(crate) fn to_plane(&self, x: f64, y: f64) -> DVec2 {
         DVec2::new(self.spacing * (x + 0.5 * y), self.spacing * SQRT3_2 * y)
     }
 }
 
 /// Width and height of the points' bounding box (zero for no points).
-pub fn plane_extent(points: &[DVec2]) -> DVec2 {
+pub(crate) fn plane_extent(points: &[DVec2]) -> DVec2 {
     let (lo, hi) = points.iter().fold(
         (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
@@ -223,7 +224,11 @@ pub fn spacing_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> 
 /// instead of three, but its spacings, a fraction of a percent smaller, changed the fits
 /// more than the counts did (grid placement against the rims: chin's RMS 71.9 -> 74.1 um,
 /// bun000's maximum 0.64 -> 1.40 mm), so the spacings stay these.
-pub fn grid_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> (f64, Vec<Cell>) {
+pub(crate) fn grid_for_target(
+    plane: &[DVec2],
+    tris: &[[u32; 3]],
+    target: usize,
+) -> (f64, Vec<Cell>) {
     let area: f64 = tris
         .iter()
         .map(|t| 0.5 * doubled_area(plane, t).abs())
@@ -266,7 +271,7 @@ pub fn grid_for_target(plane: &[DVec2], tris: &[[u32; 3]], target: usize) -> (f6
 
 /// The smallest equilateral triangle (over orientations in 1-degree steps) containing all
 /// points, grown by `margin` of its size, corners counter-clockwise.
-pub fn enclosing_triangle(points: &[DVec2], margin: f64) -> [DVec2; 3] {
+pub(crate) fn enclosing_triangle(points: &[DVec2], margin: f64) -> [DVec2; 3] {
     let mut best = (f64::MAX, [DVec2::ZERO; 3]);
     for step in 0..120 {
         let theta = (step as f64).to_radians();
@@ -314,14 +319,16 @@ fn sample(mesh: &TriMesh, locator: &Locator, q: DVec2) -> DVec3 {
 /// How the initial net came about, for the report.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct InitialNet {
+    /// The net's control points.
     pub controls: Vec<DVec3>,
+    /// Points resampled from the map to make it (0 when taken from a previous version).
     pub resample_points: usize,
     /// "exact" or "lsq" inverse Loop, or why the net was sampled directly instead.
     pub inverse: String,
 }
 
 /// Bezier: sample the lattice of `n0 * 2^levels` segments over `tri` and inverse-subdivide.
-pub fn bezier_initial_net(
+pub(crate) fn bezier_initial_net(
     mesh: &TriMesh,
     plane: &[DVec2],
     tri: &[DVec2; 3],

@@ -15,7 +15,12 @@ use std::collections::BinaryHeap;
 /// Per vertex of `mesh`: whether its distance along the mesh's edges (edge lengths taken
 /// from `plane`) to the nearest of `rims` is at most `radius`. Vertices of `rims` past
 /// the mesh's vertex count (virtual fill centres) are ignored.
-pub fn near_edges(mesh: &TriMesh, plane: &[DVec2], rims: &[&[u32]], radius: f64) -> Vec<bool> {
+pub(crate) fn near_edges(
+    mesh: &TriMesh,
+    plane: &[DVec2],
+    rims: &[&[u32]],
+    radius: f64,
+) -> Vec<bool> {
     let n = mesh.positions.len().min(plane.len());
     let neighbours = neighbour_lists(mesh, n);
     let mut dist = vec![f64::INFINITY; n];

@@ -14,14 +14,14 @@ use glam::DVec3;
 
 /// The exact inverse steps (each from a finer lattice to the next coarser one) from `refined_lattice(2^levels)` (given as `coords`, `triangles`) down
 /// to `refined_lattice(1)`, and that coarsest lattice's vertex coordinates (grid points).
-pub struct LatticeLadder {
+pub(crate) struct LatticeLadder {
     steps: Vec<SparseOperator>,
     coarsest: Vec<(i64, i64)>,
 }
 
 /// Why the lattice's own hierarchy cannot be used.
 #[derive(Debug, thiserror::Error)]
-pub enum LadderError {
+pub(crate) enum LadderError {
     #[error(transparent)]
     Topology(#[from] TopologyError),
     #[error("lattice vertex ({0}, {1}) has no even vertex in the finer lattice")]
@@ -29,7 +29,7 @@ pub enum LadderError {
 }
 
 impl LatticeLadder {
-    pub fn new(
+    pub(crate) fn new(
         grid: &GridSpline,
         levels: usize,
         coords: &[(i64, i64)],
@@ -65,7 +65,7 @@ impl LatticeLadder {
 
     /// The exact inverse of `positions` (one per vertex of the finest lattice): the
     /// coarsest lattice's points, in the order of `coarsest_coords`.
-    pub fn invert(&self, positions: &[DVec3]) -> Vec<DVec3> {
+    pub(crate) fn invert(&self, positions: &[DVec3]) -> Vec<DVec3> {
         let Some((first, rest)) = self.steps.split_first() else {
             return positions.to_vec();
         };
@@ -73,7 +73,7 @@ impl LatticeLadder {
             .fold(first.apply(positions), |x, step| step.apply(&x))
     }
 
-    pub fn coarsest_coords(&self) -> &[(i64, i64)] {
+    pub(crate) fn coarsest_coords(&self) -> &[(i64, i64)] {
         &self.coarsest
     }
 }

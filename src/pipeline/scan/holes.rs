@@ -19,12 +19,14 @@ use rustc_hash::FxHashSet;
 /// Rim vertices a hole's radius is measured against at most.
 const MAX_RIM_SAMPLES: usize = 256;
 
+/// Which holes of a scan the surface bridges and which it leaves open.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HolePlan {
     /// The largest bridging radius kept (input units).
     pub max_bridge: f64,
-    /// Per hole loop (in `hole_loops` order): its bridging radius and whether it is bridged.
+    /// Per hole loop (in `hole_loops` order): its bridging radius...
     pub radius: Vec<f64>,
+    /// ... and whether it is bridged.
     pub bridged: Vec<bool>,
     /// Data triangles (indices into the mapped triangles) too wide to keep.
     pub wide_triangles: Vec<usize>,
@@ -34,6 +36,7 @@ pub struct HolePlan {
 }
 
 impl HolePlan {
+    /// Holes left open.
     pub fn trimmed(&self) -> usize {
         self.bridged.iter().filter(|b| !**b).count()
     }
@@ -42,7 +45,7 @@ impl HolePlan {
 /// `mapped`: the patch as mapped (data triangles, then hole fills over the rims and virtual
 /// vertices at index >= `real_vertices`); `data_triangles`: the input's triangles, which
 /// tell a data triangle that happens to join three rim vertices from a fill.
-pub fn plan_holes(
+pub(crate) fn plan_holes(
     mapped: &TriMesh,
     real_vertices: usize,
     hole_loops: &[Vec<u32>],

@@ -10,9 +10,9 @@
 
 pub mod components;
 pub mod domain;
-pub mod edge_band;
+mod edge_band;
 mod feet;
-pub mod grid_inverse;
+mod grid_inverse;
 pub mod holes;
 mod prepare;
 mod resample;
@@ -26,9 +26,10 @@ mod warm;
 pub use feet::WarmFeet;
 pub use types::{
     BezierLayout, Correction, CorrectionConfig, Domain, Mapping, Preparation, ScanConfig, ScanFit,
-    ScanOptions, ScanTimings, ScanWarm, Trims,
+    ScanTimings, Trims,
 };
-pub use warm::warm_feet;
+pub(crate) use types::{ScanOptions, ScanWarm};
+pub(crate) use warm::warm_feet;
 
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::Collocation;
@@ -39,7 +40,7 @@ use rounds::{EdgeBand, LazyStencils, Problem};
 use std::time::Instant;
 
 /// Fits a disk-like scan: the stages above, in order, each taking what the ones before left.
-pub fn fit_scan(
+pub(crate) fn fit_scan(
     mesh: &TriMesh,
     opts: &FitOptions,
     scan: &ScanOptions,

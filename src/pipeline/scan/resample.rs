@@ -64,8 +64,8 @@ const MAX_BEZIER_DEGREE: usize = 96;
 /// allocated (a huge degree or many levels would otherwise exhaust memory).
 const MAX_BEZIER_RESAMPLE_POINTS: f64 = 1e8;
 
-/// Margin of the enclosing triangle around the map, as a fraction of its size: keeps the
-/// outermost data off the patch's boundary, where a Bezier patch is least held.
+/// Margin of the enclosing triangle around the map, as a fraction of its size: the outermost
+/// data then sit strictly inside the reference triangle rather than on its edges.
 const ENCLOSING_MARGIN: f64 = 0.01;
 
 /// One Bezier patch of degree `lattice` over a triangle enclosing the map (the previous

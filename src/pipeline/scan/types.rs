@@ -114,7 +114,7 @@ impl Default for CorrectionConfig {
 
 /// Everything the scan path is told besides the shared `FitOptions`.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct ScanOptions {
+pub(crate) struct ScanOptions {
     /// Layout and weights.
     pub config: ScanConfig,
     /// The correction rounds.
@@ -152,7 +152,7 @@ impl Domain {
 
 /// What a previous version of the same patch leaves for this one.
 #[derive(Clone, Debug, Default)]
-pub struct ScanWarm<'a> {
+pub(crate) struct ScanWarm<'a> {
     /// The plane the previous version was mapped to.
     pub frame: Option<PlaneFrame>,
     /// The previous version's warp of that plane.

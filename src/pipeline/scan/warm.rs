@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 /// What a grid fit leaves for the next version's foot-point searches (`None` for other
 /// domains).
-pub fn warm_feet(fit: &ScanFit) -> Option<WarmFeet> {
+pub(crate) fn warm_feet(fit: &ScanFit) -> Option<WarmFeet> {
     matches!(fit.domain, Domain::Grid { .. }).then(|| WarmFeet {
         points: fit
             .fit

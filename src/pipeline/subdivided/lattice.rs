@@ -4,12 +4,14 @@
 use crate::mesh::topology::Topology;
 use crate::surface::bezier::{lattice_index, lattice_len};
 
+/// Why a coarse net is not one triangular lattice (a description of where the
+/// propagation of lattice coordinates broke: there is no lower-level cause).
 #[derive(Debug, thiserror::Error)]
 #[error("the coarse control net is not one triangular lattice: {0}")]
 pub struct NotALattice(pub String);
 
 /// Lattice index of every coarse vertex, and the lattice's segment count n.
-pub fn lattice_coordinates(
+pub(crate) fn lattice_coordinates(
     vertex_count: usize,
     triangles: &[[u32; 3]],
 ) -> Result<(usize, Vec<usize>), NotALattice> {

@@ -49,94 +49,17 @@ pub fn fit_subdivided(
     previous: Option<&[DVec3]>,
 ) -> Result<PatchFit, PipelineError> {
     let t0 = Instant::now();
-    // L levels of Loop subdivision multiply the face count by 4^L: most scans fail this
-    // count before a topology of all their faces is built.
-    let faces = mesh.triangles.len();
-    let per_coarse_face = u32::try_from(opts.levels)
-        .ok()
-        .and_then(|l| 4usize.checked_pow(l));
-    if per_coarse_face.is_none_or(|k| !faces.is_multiple_of(k)) {
-        return Err(NoSubdivision::FaceCount {
-            faces,
-            levels: opts.levels,
-        }
-        .into());
-    }
-    if opts.levels > 0 {
-        if let Some(face) = face_without_two_edge_vertices(mesh) {
-            return Err(NoSubdivision::IrregularFace { face }.into());
-        }
-    }
-    let topo = Topology::from_mesh(mesh).map_err(NoSubdivision::NotManifold)?;
-    let (hierarchy, why) = Hierarchy::detect(&topo, opts.levels);
-    if hierarchy.depth() < opts.levels {
-        return Err(NoSubdivision::TooShallow {
-            wanted: opts.levels,
-            found: hierarchy.depth(),
-            cause: why,
-        }
-        .into());
-    }
+    let (topo, hierarchy) = hierarchy_of(mesh, opts.levels)?;
     let coarse = coarsen(mesh, opts.levels, opts.inverse).map_err(NoSubdivision::Inverse)?;
     let r = composed_exact_inverse(&topo, &hierarchy).map_err(NoSubdivision::InverseOperator)?;
     let fine_params = hierarchy.fine_vertex_params(&topo);
-    // The PIA update R^L(eps) comes out in coarse vertex order; `to_control[v]` is coarse
-    // vertex v's control index.
-    let (model, params, initial, to_control, degree) = match opts.surface {
-        SurfaceKind::Loop => {
-            let surface =
-                LoopLimitSurface::new(coarse.mesh.positions.len(), &coarse.mesh.triangles)
-                    .map_err(|source| PipelineError::NoLimitSurface {
-                        levels: opts.levels,
-                        source,
-                    })?;
-            let params: Vec<SurfaceParam> = fine_params
-                .into_iter()
-                .map(|(face, u, v)| SurfaceParam { face, u, v })
-                .collect();
-            let identity: Vec<usize> = (0..coarse.mesh.positions.len()).collect();
-            (
-                SurfaceModel::Mesh(std::sync::Arc::new(surface)),
-                params,
-                coarse.mesh.positions.clone(),
-                identity,
-                0,
-            )
-        }
-        SurfaceKind::Bezier => {
-            let (n, index) =
-                lattice::lattice_coordinates(coarse.mesh.positions.len(), &coarse.mesh.triangles)?;
-            let coords = lattice_points(n);
-            let mut initial = vec![DVec3::ZERO; coords.len()];
-            for (v, &idx) in index.iter().enumerate() {
-                initial[idx] = coarse.mesh.positions[v];
-            }
-            // Each fine vertex: (coarse face, barycentric) -> global lattice (u, v).
-            let coarse_faces = &coarse.mesh.triangles;
-            let params: Vec<SurfaceParam> = fine_params
-                .into_iter()
-                .map(|(f, u, v)| {
-                    let t = coarse_faces.get(f as usize).copied().unwrap_or([0, 0, 0]);
-                    let w = 1.0 - u - v;
-                    let c = |k: usize| coords[index[t[k] as usize]];
-                    let gu = (u * c(0).0 as f64 + v * c(1).0 as f64 + w * c(2).0 as f64) / n as f64;
-                    let gv = (u * c(0).1 as f64 + v * c(1).1 as f64 + w * c(2).1 as f64) / n as f64;
-                    SurfaceParam {
-                        face: 0,
-                        u: gu,
-                        v: gv,
-                    }
-                })
-                .collect();
-            (
-                SurfaceModel::Bezier(BezierTriangle::new(n)),
-                params,
-                initial,
-                index,
-                n,
-            )
-        }
-    };
+    let OnNet {
+        model,
+        params,
+        initial,
+        to_control,
+        degree,
+    } = model_on_net(&coarse.mesh, fine_params, opts)?;
     let surface = model.as_surface();
     let basis = collocation(surface, &params);
     let pia = |res: &[DVec3]| {
@@ -175,6 +98,113 @@ pub fn fit_subdivided(
         prepare_ms,
         fit_ms,
     })
+}
+
+/// The input's subdivision hierarchy `levels` deep, or why it has none. The cheap tests
+/// (face count, one irregular face) run before a topology of the whole mesh is built.
+fn hierarchy_of(mesh: &TriMesh, levels: usize) -> Result<(Topology, Hierarchy), PipelineError> {
+    // L levels of Loop subdivision multiply the face count by 4^L: most scans fail this
+    // count before a topology of all their faces is built.
+    let faces = mesh.triangles.len();
+    let per_coarse_face = u32::try_from(levels)
+        .ok()
+        .and_then(|l| 4usize.checked_pow(l));
+    if per_coarse_face.is_none_or(|k| !faces.is_multiple_of(k)) {
+        return Err(NoSubdivision::FaceCount { faces, levels }.into());
+    }
+    if levels > 0 {
+        if let Some(face) = face_without_two_edge_vertices(mesh) {
+            return Err(NoSubdivision::IrregularFace { face }.into());
+        }
+    }
+    let topo = Topology::from_mesh(mesh).map_err(NoSubdivision::NotManifold)?;
+    let (hierarchy, why) = Hierarchy::detect(&topo, levels);
+    if hierarchy.depth() < levels {
+        return Err(NoSubdivision::TooShallow {
+            wanted: levels,
+            found: hierarchy.depth(),
+            cause: why,
+        }
+        .into());
+    }
+    Ok((topo, hierarchy))
+}
+
+/// The surface on a coarse net and where the fine vertices sit on it.
+struct OnNet {
+    model: SurfaceModel,
+    /// Each fine vertex's parameter.
+    params: Vec<SurfaceParam>,
+    /// The coarse net in the model's control order.
+    initial: Vec<DVec3>,
+    /// Coarse vertex v's control index (the PIA update comes out in coarse vertex order).
+    to_control: Vec<usize>,
+    /// Bezier degree (0 for the Loop limit surface).
+    degree: usize,
+}
+
+/// `loop`: the exact Loop limit surface of the coarse net; `bezier`: one patch, when the net
+/// is one triangular lattice. `fine_params`: (coarse face, u, v) of every fine vertex.
+fn model_on_net(
+    coarse: &TriMesh,
+    fine_params: Vec<(u32, f64, f64)>,
+    opts: &FitOptions,
+) -> Result<OnNet, PipelineError> {
+    let on_net = match opts.surface {
+        SurfaceKind::Loop => {
+            let surface = LoopLimitSurface::new(coarse.positions.len(), &coarse.triangles)
+                .map_err(|source| PipelineError::NoLimitSurface {
+                    levels: opts.levels,
+                    source,
+                })?;
+            let params: Vec<SurfaceParam> = fine_params
+                .into_iter()
+                .map(|(face, u, v)| SurfaceParam { face, u, v })
+                .collect();
+            let identity: Vec<usize> = (0..coarse.positions.len()).collect();
+            OnNet {
+                model: SurfaceModel::Mesh(std::sync::Arc::new(surface)),
+                params,
+                initial: coarse.positions.clone(),
+                to_control: identity,
+                degree: 0,
+            }
+        }
+        SurfaceKind::Bezier => {
+            let (n, index) =
+                lattice::lattice_coordinates(coarse.positions.len(), &coarse.triangles)?;
+            let coords = lattice_points(n);
+            let mut initial = vec![DVec3::ZERO; coords.len()];
+            for (v, &idx) in index.iter().enumerate() {
+                initial[idx] = coarse.positions[v];
+            }
+            // Each fine vertex: (coarse face, barycentric) -> global lattice (u, v).
+            let coarse_faces = &coarse.triangles;
+            let params: Vec<SurfaceParam> = fine_params
+                .into_iter()
+                .map(|(f, u, v)| {
+                    let t = coarse_faces.get(f as usize).copied().unwrap_or([0, 0, 0]);
+                    let w = 1.0 - u - v;
+                    let c = |k: usize| coords[index[t[k] as usize]];
+                    let gu = (u * c(0).0 as f64 + v * c(1).0 as f64 + w * c(2).0 as f64) / n as f64;
+                    let gv = (u * c(0).1 as f64 + v * c(1).1 as f64 + w * c(2).1 as f64) / n as f64;
+                    SurfaceParam {
+                        face: 0,
+                        u: gu,
+                        v: gv,
+                    }
+                })
+                .collect();
+            OnNet {
+                model: SurfaceModel::Bezier(BezierTriangle::new(n)),
+                params,
+                initial,
+                to_control: index,
+                degree: n,
+            }
+        }
+    };
+    Ok(on_net)
 }
 
 #[cfg(test)]

@@ -126,7 +126,7 @@ impl Default for BudgetConfig {
 impl BudgetConfig {
     /// The solver's budget with the tolerance resolved against the mesh's size; with no
     /// target set the fit aims at max error <= tolerance.
-    pub fn resolve(&self, mesh: &TriMesh) -> Budget {
+    pub(crate) fn resolve(&self, mesh: &TriMesh) -> Budget {
         let tolerance = self
             .tolerance
             .unwrap_or(self.tolerance_rel * mesh.bounds_diagonal());

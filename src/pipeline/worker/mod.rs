@@ -61,7 +61,7 @@ pub fn fit_patch(
 }
 
 /// `fit_patch` reporting every step to `on_step` (a progress display).
-pub fn fit_patch_with(
+pub(crate) fn fit_patch_with(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
@@ -148,7 +148,7 @@ pub fn run_patch(
 }
 
 /// `run_patch` reporting every fitting step to `on_step`.
-pub fn run_patch_with(
+pub(crate) fn run_patch_with(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
@@ -238,7 +238,7 @@ pub fn run_input(
 }
 
 /// `run_input` reporting every fitting step (of every component) to `on_step`.
-pub fn run_input_with(
+pub(crate) fn run_input_with(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
@@ -329,7 +329,8 @@ pub fn run_input_with(
 }
 
 /// Largest ratio of vertex counts between a component and the previous version's piece it
-/// may continue: a rescan of the same piece changes its size by far less than 2x.
+/// may continue: a piece that doubled or halved is taken for another piece, which starts
+/// cold rather than from a net fitted to different data.
 const MATCH_MAX_SIZE_RATIO: f64 = 2.0;
 
 /// How far (as a fraction of the larger diagonal) a component's centroid may sit from the
