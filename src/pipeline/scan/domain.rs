@@ -30,12 +30,12 @@ pub struct GridFrame {
 }
 
 impl GridFrame {
-    pub(crate) fn to_grid(&self, p: DVec2) -> (f64, f64) {
+    pub(crate) fn to_grid(self, p: DVec2) -> (f64, f64) {
         let y = p.y / (self.spacing * SQRT3_2);
         (p.x / self.spacing - 0.5 * y, y)
     }
 
-    pub(crate) fn to_plane(&self, x: f64, y: f64) -> DVec2 {
+    pub(crate) fn to_plane(self, x: f64, y: f64) -> DVec2 {
         DVec2::new(self.spacing * (x + 0.5 * y), self.spacing * SQRT3_2 * y)
     }
 }

@@ -138,7 +138,7 @@ pub(super) fn first_fit<'a>(
     start: Vec<DVec3>,
     reused: usize,
     previous_feet: Option<&WarmFeet>,
-    params: &mut Vec<SurfaceParam>,
+    params: &mut [SurfaceParam],
 ) -> Result<FirstFit, PipelineError> {
     let Problem {
         opts, scan, data, ..
