@@ -551,8 +551,8 @@ mod tests {
 
     #[test]
     fn keys_of_the_flat_fit_table_are_refused_with_their_name() {
-        let flat = DEFAULT_CONFIG.replace("[fit.budget]\n", "");
-        let e = DaemonConfig::parse(&flat, "flat.toml").expect_err("refused");
+        let flat = "[fit]\nsurface = \"loop\"\nlevels = 2\nmethod = \"cg\"\ninverse = \"exact\"\nmax_iterations = 5\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
+        let e = DaemonConfig::parse(flat, "flat.toml").expect_err("refused");
         assert_eq!(e.kind(), "config_parse");
         assert!(e.to_string().contains("max_iterations"), "{e}");
     }
