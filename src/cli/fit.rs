@@ -32,6 +32,9 @@ pub struct FitArgs {
     /// The input mesh: a disk-like scan patch (any connectivity) or a mesh with Loop
     /// subdivision connectivity (fitted exactly).
     pub input: PathBuf,
+    /// The surface fitted: `loop` (scans: a Loop surface over a grid; subdivided inputs: the
+    /// Loop limit surface of their coarse net) or `bezier` (scans: one quartic Bezier patch
+    /// per grid cell; subdivided inputs: one patch over a lattice-shaped coarse net).
     #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "bezier")]
     pub surface: SurfaceKind,
     /// Levels of inverse subdivision (subdivided inputs: the depth of their connectivity;
