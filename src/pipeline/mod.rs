@@ -8,6 +8,7 @@ pub mod geometric;
 pub mod grid_inverse;
 pub mod holes;
 pub mod lattice;
+pub mod object;
 pub mod output;
 pub mod scan;
 mod scan_solve;
