@@ -95,9 +95,10 @@ fn a_torus_is_fitted_by_a_genus_one_control_mesh() {
         decimated_rms(&fit),
         fit.rounds
     );
-    assert!(rms < 2e-4 * MAJOR, "analytic rms {rms}");
-    assert!(max < 2e-3 * MAJOR, "analytic max {max}");
-    assert!(fit.rms < 0.25 * decimated_rms(&fit));
+    // Measured: analytic RMS 3.5e-4, max 1.5e-3; the decimated mesh 7.8e-3.
+    assert!(rms < 6e-4 * MAJOR, "analytic rms {rms}");
+    assert!(max < 3e-3 * MAJOR, "analytic max {max}");
+    assert!(fit.rms < 0.1 * decimated_rms(&fit));
     // The rounds only ever lower the RMS.
     assert!(fit.rounds.windows(2).all(|w| w[1].rms < w[0].rms));
 }
@@ -139,8 +140,10 @@ fn bun_zipper_keeps_its_five_holes() {
         decimated_rms(&fit),
         fit.times
     );
-    assert!(fit.rms < 1e-4, "rms {} m", fit.rms);
-    assert!(fit.rms < 0.5 * decimated_rms(&fit));
+    // Measured: 62 um against the decimated control mesh's 127 um; max 0.67 mm.
+    assert!(fit.rms < 8e-5, "rms {} m", fit.rms);
+    assert!(fit.max < 2e-3, "max {} m", fit.max);
+    assert!(fit.rms < 0.6 * decimated_rms(&fit));
 }
 
 #[test]
@@ -171,5 +174,15 @@ fn a_broken_bunny_is_cleaned_and_fitted() {
     assert_topology_kept(&fit);
     let diag = mesh.bounds_diagonal();
     assert!(fit.distances.iter().all(|d| d.is_finite()));
-    assert!(fit.rms < 1e-2 * diag, "rms {} of diag {diag}", fit.rms);
+    // 453 vertices: 5 % is a couple of dozen controls, so only a coarse fit, but one that
+    // beats the decimated mesh it starts from.
+    eprintln!(
+        "res4: {} points, {} controls, rms {:.2e} (diag {diag:.3}), decimated rms {:.2e}",
+        fit.data.len(),
+        fit.controls.len(),
+        fit.rms,
+        decimated_rms(&fit)
+    );
+    assert!(fit.rms < 2e-2 * diag, "rms {} of diag {diag}", fit.rms);
+    assert!(fit.rms < decimated_rms(&fit));
 }

@@ -103,7 +103,9 @@ mod tests {
         for n in [DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 1.0).normalize()] {
             q.add(&Quadric::plane(n, corner, 2.0));
         }
-        let x = q.minimiser(DVec3::ZERO, 10.0).expect("three independent planes");
+        let x = q
+            .minimiser(DVec3::ZERO, 10.0)
+            .expect("three independent planes");
         assert!((x - corner).length() < 1e-12);
         assert!(q.error(corner) < 1e-24);
         // One unit along x: 1 from the x plane, 1/sqrt(3) from the diagonal one.

@@ -70,9 +70,15 @@ fn check_result(input: &TriMesh, out: &Simplified, opts: &SimplifyOptions) {
     for v in 0..out.mesh.positions.len() as u32 {
         let faces = topo.face_valence[v as usize] as usize;
         if topo.is_boundary(v) {
-            assert!(faces < opts.max_faces_per_vertex, "vertex {v}: {faces} faces");
+            assert!(
+                faces < opts.max_faces_per_vertex,
+                "vertex {v}: {faces} faces"
+            );
         } else {
-            assert!((3..=opts.max_faces_per_vertex).contains(&faces), "vertex {v}: {faces}");
+            assert!(
+                (3..=opts.max_faces_per_vertex).contains(&faces),
+                "vertex {v}: {faces}"
+            );
         }
     }
     assert_eq!(out.landing.len(), input.positions.len());
@@ -98,7 +104,10 @@ fn a_torus_keeps_genus_one_down_to_the_target() {
     assert_eq!(out.mesh.positions.len(), 60);
     check_result(&mesh, &out, &opts);
     let t = SurfaceTopology::of(&out.mesh).expect("manifold");
-    assert_eq!((t.euler, t.genus, t.boundary_loops, t.components), (0, 1, 0, 1));
+    assert_eq!(
+        (t.euler, t.genus, t.boundary_loops, t.components),
+        (0, 1, 0, 1)
+    );
     // Control vertices stay near the torus (a quadric minimiser on a convex-concave
     // surface sits within a fraction of the edge length of it).
     for p in &out.mesh.positions {
@@ -137,8 +146,8 @@ fn a_hole_and_the_sheet_corners_survive() {
             // Within 1e-3, under 1 % of a final edge (the constraint planes of a rim that
             // curves in z meet slightly off it).
             let tol = 1e-3;
-            let near_hole = (p.x - 0.5).abs() <= 1.0 / 24.0 + tol
-                && (p.y - 0.5).abs() <= 1.0 / 24.0 + tol;
+            let near_hole =
+                (p.x - 0.5).abs() <= 1.0 / 24.0 + tol && (p.y - 0.5).abs() <= 1.0 / 24.0 + tol;
             let on_rim = p.x.abs() < tol
                 || p.y.abs() < tol
                 || (p.x - 1.0).abs() < tol

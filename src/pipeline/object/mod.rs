@@ -10,21 +10,27 @@
 //! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
 //! with a small tangential share) until a round gains less than `min_gain` of the RMS.
 
+mod component;
 mod solve;
 
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::Collocation;
-use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::clean::CleanOptions;
 use crate::mesh::simplify::{
     simplify, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
 };
-use crate::mesh::topology::TopologyError;
+use crate::mesh::topology::{Topology, TopologyError};
 use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
+use component::largest_component;
 use glam::DVec3;
 use solve::{point_fit, rows_at, DistanceRound, Feet};
 use std::time::Instant;
+
+/// Refused rounds (each retried with four times the tangential share) before the rounds
+/// stop.
+const MAX_REFUSALS: usize = 3;
 
 #[derive(Clone, Debug)]
 pub struct ObjectOptions {
@@ -42,8 +48,16 @@ pub struct ObjectOptions {
     pub min_gain: f64,
     /// Share of the point-to-point term beside the point-to-plane one in the rounds.
     pub tangential: f64,
+    /// The same share for data points within `edge_rings` rings of the data's boundary:
+    /// there the residual runs past the surface's edge, along it, where the point-to-plane
+    /// term does not pull.
+    pub tangential_edge: f64,
+    pub edge_rings: usize,
     /// CG steps where a sparse factorisation fails.
     pub max_iterations: usize,
+    /// Start the first fit from the data's foot points on the limit surface of the initial
+    /// control mesh instead of their projections onto the control faces.
+    pub limit_start: bool,
 }
 
 impl Default for ObjectOptions {
@@ -52,12 +66,18 @@ impl Default for ObjectOptions {
             target_controls_pct: 5.0,
             target_controls: None,
             clean: CleanOptions::default(),
-            simplify: SimplifyOptions::default(),
+            simplify: SimplifyOptions {
+                isotropy: 1e-3,
+                ..Default::default()
+            },
             smoothing: 1e-5,
             rounds: 8,
             min_gain: 0.02,
             tangential: 0.005,
+            tangential_edge: 0.05,
+            edge_rings: 3,
             max_iterations: 400,
+            limit_start: true,
         }
     }
 }
@@ -73,6 +93,8 @@ pub enum ObjectError {
     Simplify(#[source] SimplifyError),
     #[error("the control mesh has no Loop limit surface")]
     Surface(#[source] LoopLimitError),
+    #[error("{params} initial parameters for {points} data points")]
+    ParamCount { params: usize, points: usize },
     #[error("the {stage} solve gave no finite control points")]
     Solve { stage: &'static str },
 }
@@ -130,7 +152,6 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let component = largest_component(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
-    let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
     times.clean_ms = ms_since(start);
 
     let t = Instant::now();
@@ -147,16 +168,11 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     let simplified = simplify(&component, &simplify_opts).map_err(ObjectError::Simplify)?;
     times.simplify_ms = ms_since(t);
 
-    let t = Instant::now();
     let Simplified {
         mesh: control_mesh,
         landing,
         ..
     } = simplified;
-    let control_topology =
-        SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let surface = LoopLimitSurface::new(control_mesh.positions.len(), &control_mesh.triangles)
-        .map_err(ObjectError::Surface)?;
     let params: Vec<SurfaceParam> = landing
         .iter()
         .map(|l| SurfaceParam {
@@ -165,6 +181,37 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
             v: l.v,
         })
         .collect();
+    let mut fit = fit_on_control_mesh(component, control_mesh, params, opts)?;
+    fit.times.clean_ms = times.clean_ms;
+    fit.times.simplify_ms = times.simplify_ms;
+    fit.times.total_ms = ms_since(start);
+    Ok(fit)
+}
+
+/// The fit stages after the control mesh is chosen: the limit surface of `control_mesh`
+/// fitted to the vertices of `component` from the initial parameters `params` (one per
+/// vertex, on the control faces), the control positions initialised by a least-squares
+/// fit there.
+pub fn fit_on_control_mesh(
+    component: TriMesh,
+    control_mesh: TriMesh,
+    params: Vec<SurfaceParam>,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
+    let start = Instant::now();
+    let mut times = ObjectTimes::default();
+    let t = Instant::now();
+    let n = component.positions.len();
+    if params.len() != n {
+        return Err(ObjectError::ParamCount {
+            params: params.len(),
+            points: n,
+        });
+    }
+    let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
+    let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
+    let surface = LoopLimitSurface::new(control_mesh.positions.len(), &control_mesh.triangles)
+        .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
     let fairness = Collocation::new(umbrella_laplacian(m, &control_mesh.triangles));
     let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
@@ -172,6 +219,11 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
 
     let t = Instant::now();
     let data = component.positions.clone();
+    let params = if opts.limit_start {
+        Feet::find(&surface, &control_mesh.positions, &data, &params).params
+    } else {
+        params
+    };
     let rows = rows_at(&surface, &params);
     let mut controls = point_fit(
         &rows,
@@ -191,30 +243,47 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         rms: feet.rms(),
         max: feet.max(),
     }];
-    let tangential = vec![opts.tangential; n];
-    let round = DistanceRound {
-        surface: &surface,
-        data: &data,
-        fairness: &fairness,
-        smoothing,
-        tangential: &tangential,
-        max_iterations: opts.max_iterations,
-    };
-    for _ in 0..opts.rounds {
-        let Some(next) = round.solve(&feet, controls.clone()) else {
-            break;
+    // Levenberg-Marquardt on the tangential share: a round that does not lower the RMS is
+    // taken again with four times the share (the surface slides less per round), a round
+    // that does halves it again down to `opts.tangential`. Controls far from their final
+    // parameterization need long slides that a fixed small share makes unstable and a
+    // fixed large share makes slow.
+    let mut share = opts.tangential;
+    let near_edge = near_boundary(&component, opts.edge_rings);
+    let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
+    let mut refusals = 0;
+    let mut taken = 0;
+    while taken < opts.rounds && refusals < MAX_REFUSALS {
+        let tangential: Vec<f64> = near_edge
+            .iter()
+            .map(|&e| share * if e { edge_factor } else { 1.0 })
+            .collect();
+        let round = DistanceRound {
+            surface: &surface,
+            data: &data,
+            fairness: &fairness,
+            smoothing,
+            tangential: &tangential,
+            max_iterations: opts.max_iterations,
         };
-        let next_feet = Feet::find(&surface, &next, &data, &feet.params);
-        let (before, after) = (feet.rms(), next_feet.rms());
-        if after.is_nan() || after >= before {
-            break;
-        }
+        let next_feet = round
+            .solve(&feet, controls.clone())
+            .map(|next| (Feet::find(&surface, &next, &data, &feet.params), next));
+        let before = feet.rms();
+        let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
+            refusals += 1;
+            share *= 4.0;
+            continue;
+        };
+        let after = next_feet.rms();
         controls = next;
         feet = next_feet;
+        taken += 1;
         rounds.push(RoundReport {
             rms: after,
             max: feet.max(),
         });
+        share = (share * 0.5).max(opts.tangential);
         if before - after < opts.min_gain * before {
             break;
         }
@@ -242,41 +311,26 @@ fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
 
-/// The cleaned mesh's largest edge-connected component (most faces; the lowest label on a
-/// tie), its vertices in cleaned order.
-fn largest_component(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
-    let cleaned = clean(mesh, opts);
-    let labels = &cleaned.face_component;
-    let mut counts = vec![0usize; cleaned.mesh.triangles.len()];
-    for &l in labels {
-        counts[l as usize] += 1;
-    }
-    let (best, &size) = counts
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0)))?;
-    if size == 0 {
-        return None;
-    }
-    let mut index = vec![u32::MAX; cleaned.mesh.positions.len()];
-    let mut triangles = Vec::with_capacity(size);
-    for (t, &l) in cleaned.mesh.triangles.iter().zip(labels) {
-        if l as usize == best {
-            for &v in t {
-                index[v as usize] = 0;
+/// Per vertex: whether it lies within `rings` rings of the mesh's boundary.
+fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
+    let Ok(topo) = Topology::from_mesh(mesh) else {
+        return vec![false; mesh.positions.len()];
+    };
+    let mut near = topo.boundary.clone();
+    let mut front: Vec<u32> = (0..mesh.positions.len() as u32)
+        .filter(|&v| near[v as usize])
+        .collect();
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &front {
+            for &x in topo.ring(v) {
+                if !near[x as usize] {
+                    near[x as usize] = true;
+                    next.push(x);
+                }
             }
-            triangles.push(*t);
         }
+        front = next;
     }
-    let mut positions = Vec::new();
-    for (v, i) in index.iter_mut().enumerate() {
-        if *i == 0 {
-            *i = positions.len() as u32;
-            positions.push(cleaned.mesh.positions[v]);
-        }
-    }
-    for t in &mut triangles {
-        *t = t.map(|v| index[v as usize]);
-    }
-    Some(TriMesh::new(positions, triangles))
+    near
 }

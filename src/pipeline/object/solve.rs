@@ -133,9 +133,10 @@ impl Feet {
                 let (param, d) = foot_point(surface, &*evaluate, *p, *s);
                 let r = d.position - *p;
                 // Where the tangents degenerate the residual is the best normal at hand.
-                let n = d.du.cross(d.dv).try_normalize().unwrap_or_else(|| {
-                    r.try_normalize().unwrap_or(DVec3::Z)
-                });
+                let n =
+                    d.du.cross(d.dv)
+                        .try_normalize()
+                        .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
                 (param, n, r.length())
             })
             .collect();
