@@ -15,6 +15,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
+use trispline::mesh::simplify::{simplify, SimplifyOptions};
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::{DVec3, TriMesh};
@@ -43,8 +44,8 @@ fn main() {
         "models/bun_zipper_res4.ply",
     ];
     println!(
-        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>9} {:>9} | {:>6} | {:>2} {:>2} | times ms: read clean simplify surface first rounds (rounds)",
-        "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem rms", "qem max", "ratio", "g", "b"
+        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | times ms: read clean simplify surface first rounds (rounds)",
+        "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b"
     );
     for name in models {
         let path = root.join(name);
@@ -69,12 +70,29 @@ fn main() {
             }
         };
         let (tess_rms, tess_max) = rms_max(&fit.data, &tessellation(&fit));
-        let (qem_rms, qem_max) = rms_max(&fit.data, &fit.simplified);
+        // The baseline: plain quadric decimation (no isotropy term) to the control count.
+        let baseline = simplify(
+            &fit.component,
+            &SimplifyOptions {
+                target_vertices: fit.controls.len(),
+                ..Default::default()
+            },
+        );
+        let (qem_rms, qem_max, qem_count) = match baseline {
+            Ok(b) => {
+                let (r, m) = rms_max(&fit.data, &b.mesh);
+                (r, m, b.mesh.positions.len())
+            }
+            Err(e) => {
+                println!("{name}: baseline decimation failed: {e}");
+                continue;
+            }
+        };
         let n = fit.data.len();
         let m = fit.controls.len();
         let ts = &fit.times;
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({})",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({})",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -83,6 +101,7 @@ fn main() {
             fit.max,
             tess_rms,
             tess_max,
+            qem_count,
             qem_rms,
             qem_max,
             fit.rms / qem_rms,
