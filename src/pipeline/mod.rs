@@ -17,6 +17,7 @@ mod collocation;
 mod error;
 mod geometric;
 mod names;
+pub mod object;
 pub mod output;
 pub mod scan;
 pub mod subdivided;

@@ -1,0 +1,169 @@
+//! Whole objects against quadric decimation: each model fitted by `pipeline::object` (the
+//! Loop limit surface of a simplified control mesh), compared with the quadric-decimated
+//! mesh of as many vertices as there are control points (the simplification the fit
+//! started from, a plain QEM decimation).
+//!
+//! Prints per model: data points, control points (and their share), the fit's RMS / max
+//! (data vertices to their foot points on the limit surface), the same measured
+//! independently (data vertices to a tessellation of the limit surface, `TESS` segments per
+//! control face edge, through `MeshDistance`), the decimated mesh's RMS / max (data vertices
+//! to it), the ratio of the RMS values, genus and boundary loops, and the stage times.
+//!
+//!     cargo run --release --example object_table [-- DATA_DIR [PCT]]
+
+use std::path::PathBuf;
+use std::time::Instant;
+use trispline::io::{read_mesh_file, LoadOptions};
+use trispline::mesh::distance::MeshDistance;
+use trispline::mesh::simplify::{simplify, SimplifyOptions};
+use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
+use trispline::surface::{SurfaceParam, TriSurface};
+use trispline::{DVec3, TriMesh};
+
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
+/// Tessellation segments per control face edge for the independent measurement.
+const TESS: usize = 8;
+
+fn main() {
+    trispline::allocator::keep_freed_memory();
+    let root = std::env::args()
+        .nth(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let pct: f64 = std::env::args()
+        .nth(2)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(5.0);
+    let models = [
+        "models/bun_zipper.ply",
+        "models/fertility.off",
+        "models/decimated-max.obj",
+        "models/camelhead.off",
+        "models/bun_zipper_res4.ply",
+    ];
+    println!(
+        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | times ms: read clean simplify surface first rounds (rounds)",
+        "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b"
+    );
+    for name in models {
+        let path = root.join(name);
+        let t = Instant::now();
+        let mesh = match read_mesh_file(&path, &LoadOptions::default()) {
+            Ok(l) => l.mesh,
+            Err(e) => {
+                println!("{name}: {e}");
+                continue;
+            }
+        };
+        let read_ms = t.elapsed().as_secs_f64() * 1e3;
+        let opts = ObjectOptions {
+            target_controls_pct: pct,
+            ..Default::default()
+        };
+        let fit = match fit_object(&mesh, &opts) {
+            Ok(f) => f,
+            Err(e) => {
+                println!("{name}: {e}");
+                continue;
+            }
+        };
+        let (tess_rms, tess_max) = rms_max(&fit.data, &tessellation(&fit));
+        // The baseline: plain quadric decimation (no isotropy term) to the control count.
+        let baseline = simplify(
+            &fit.component,
+            &SimplifyOptions {
+                target_vertices: fit.controls.len(),
+                ..Default::default()
+            },
+        );
+        let (qem_rms, qem_max, qem_count) = match baseline {
+            Ok(b) => {
+                let (r, m) = rms_max(&fit.data, &b.mesh);
+                (r, m, b.mesh.positions.len())
+            }
+            Err(e) => {
+                println!("{name}: baseline decimation failed: {e}");
+                continue;
+            }
+        };
+        let n = fit.data.len();
+        let m = fit.controls.len();
+        let ts = &fit.times;
+        println!(
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({})",
+            name.trim_start_matches("models/"),
+            n,
+            m,
+            100.0 * m as f64 / n as f64,
+            fit.rms,
+            fit.max,
+            tess_rms,
+            tess_max,
+            qem_count,
+            qem_rms,
+            qem_max,
+            fit.rms / qem_rms,
+            fit.control_topology.genus,
+            fit.control_topology.boundary_loops,
+            read_ms,
+            ts.clean_ms,
+            ts.simplify_ms,
+            ts.surface_ms,
+            ts.first_fit_ms,
+            ts.rounds_ms,
+            fit.rounds.len() - 1,
+        );
+    }
+}
+
+/// RMS and max distance of `points` to `mesh`.
+fn rms_max(points: &[DVec3], mesh: &TriMesh) -> (f64, f64) {
+    let md = MeshDistance::new(mesh);
+    let (mut sum, mut max) = (0.0, 0.0f64);
+    for p in points {
+        let d = md.distance(*p).unwrap_or(f64::INFINITY);
+        sum += d * d;
+        max = max.max(d);
+    }
+    ((sum / points.len().max(1) as f64).sqrt(), max)
+}
+
+/// Each control face's limit patch on a lattice of `TESS` segments per edge (vertices along
+/// shared edges repeated: only distances are measured on it).
+fn tessellation(fit: &ObjectFit) -> TriMesh {
+    let evaluate = fit.surface.evaluator(&fit.controls);
+    let k = TESS;
+    // Row j of the lattice holds k + 1 - j points.
+    let index = |i: usize, j: usize| j * (2 * k + 3 - j) / 2 + i;
+    let per_face = (k + 1) * (k + 2) / 2;
+    let mut positions = Vec::with_capacity(fit.surface.domain_face_count() * per_face);
+    let mut triangles = Vec::new();
+    for f in 0..fit.surface.domain_face_count() {
+        let base = positions.len() as u32;
+        for j in 0..=k {
+            for i in 0..=k - j {
+                let p = SurfaceParam {
+                    face: f as u32,
+                    u: i as f64 / k as f64,
+                    v: j as f64 / k as f64,
+                };
+                positions.push(evaluate(p).position);
+            }
+        }
+        for j in 0..k {
+            for i in 0..k - j {
+                let a = base + index(i, j) as u32;
+                let b = base + index(i + 1, j) as u32;
+                let c = base + index(i, j + 1) as u32;
+                triangles.push([a, b, c]);
+                if i + j + 1 < k {
+                    let d = base + index(i + 1, j + 1) as u32;
+                    triangles.push([b, d, c]);
+                }
+            }
+        }
+    }
+    TriMesh::new(positions, triangles)
+}

@@ -1,0 +1,619 @@
+//! Control meshes by simplification: topology-preserving quadric-error edge collapse
+//! (Garland & Heckbert 1997) of a cleaned manifold mesh down to a target vertex count.
+//!
+//! A collapse is taken only if it keeps the surface's topology and a usable control mesh:
+//! the link condition (the two end points share exactly the neighbours opposite the edge),
+//! no interior edge between two boundary vertices (that would pinch or bridge a hole), no
+//! boundary loop below three edges, faces per vertex in 3..=max (2.. on the boundary), no
+//! face turning by more than `max_normal_turn_deg`, no face worse than both
+//! `min_quality` and the worst face it replaces. Boundary edges carry constraint planes
+//! (perpendicular to their face through the edge) so holes keep their shape, and boundary
+//! vertices where the boundary turns sharply are locked.
+//!
+//! Every input vertex is carried along: it starts on one of its own faces, and each
+//! collapse re-projects the points of the faces it changes onto the new fan around the
+//! kept vertex (the nearest of those faces). A point so never leaves the neighbourhood it
+//! came from, which a global closest-point projection at the end does not guarantee on thin
+//! parts (ears, fingers) where the nearest control face may be on the other side.
+//!
+//! The order is deterministic: costs tie-break on the vertex indices, stale queue entries
+//! are recognised by per-vertex versions (lazy invalidation).
+
+mod quadric;
+mod summary;
+
+use super::distance::closest_on_triangle;
+use super::topology::{Topology, TopologyError, NONE};
+use super::TriMesh;
+use glam::DVec3;
+use quadric::Quadric;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+pub use summary::SurfaceTopology;
+
+/// Marks an input vertex that was collapsed away (`Simplified::control_of`).
+pub const REMOVED: u32 = u32::MAX;
+
+#[derive(Clone, Debug)]
+pub struct SimplifyOptions {
+    /// Vertices left at the end (at least 4; fewer if no further collapse is allowed).
+    pub target_vertices: usize,
+    /// Most faces around an interior vertex; a boundary vertex has one less.
+    pub max_faces_per_vertex: usize,
+    /// Triangle quality `4 sqrt(3) area / sum of squared edges` (1 for equilateral) that a
+    /// collapse may not go below unless the faces it replaces were already worse.
+    pub min_quality: f64,
+    /// A collapse may turn no remaining face's normal by more than this.
+    pub max_normal_turn_deg: f64,
+    /// Weight of a boundary edge's constraint plane relative to face planes of the same
+    /// squared size.
+    pub boundary_weight: f64,
+    /// Boundary vertices where the boundary turns by more than this stay where they are.
+    pub corner_turn_deg: f64,
+    /// Weight of the edge length to the fourth power (the quadric error's units) added to
+    /// each collapse's cost. 0 is plain quadric decimation, the best piecewise-linear
+    /// approximation for the count; a positive weight collapses short edges first, giving
+    /// the more even, isotropic triangles a control mesh needs (a Loop limit surface over
+    /// long thin faces and widely spread valences fits far worse than over an even mesh).
+    pub isotropy: f64,
+}
+
+impl Default for SimplifyOptions {
+    fn default() -> Self {
+        Self {
+            target_vertices: 1000,
+            max_faces_per_vertex: 12,
+            min_quality: 0.15,
+            max_normal_turn_deg: 60.0,
+            boundary_weight: 20.0,
+            corner_turn_deg: 75.0,
+            isotropy: 0.0,
+        }
+    }
+}
+
+/// Where an input vertex lies on the simplified mesh: a face and the barycentric weights of
+/// its corners 0 and 1 (corner 2 has `1 - u - v`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Landing {
+    pub face: u32,
+    pub u: f64,
+    pub v: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct Simplified {
+    pub mesh: TriMesh,
+    /// Per input vertex: the vertex of `mesh` it became, or `REMOVED`.
+    pub control_of: Vec<u32>,
+    /// Per input vertex: where it lies on `mesh`.
+    pub landing: Vec<Landing>,
+    pub collapses: usize,
+    /// Boundary vertices locked as corners.
+    pub locked_corners: usize,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimplifyError {
+    #[error("the mesh has no faces")]
+    NoFaces,
+    #[error("vertex {vertex} belongs to no face")]
+    IsolatedVertex { vertex: usize },
+    #[error("the mesh is not a manifold")]
+    NonManifold(#[source] TopologyError),
+}
+
+/// Simplifies `mesh` (manifold, consistently oriented: `mesh::clean`'s output) to
+/// `opts.target_vertices` vertices or as close as the guards allow.
+pub fn simplify(mesh: &TriMesh, opts: &SimplifyOptions) -> Result<Simplified, SimplifyError> {
+    if mesh.triangles.is_empty() {
+        return Err(SimplifyError::NoFaces);
+    }
+    let topo = Topology::from_mesh(mesh).map_err(SimplifyError::NonManifold)?;
+    if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
+        return Err(SimplifyError::IsolatedVertex { vertex });
+    }
+    let mut state = State::new(mesh, &topo, opts);
+    let target = opts.target_vertices.max(4);
+    // Edges refused in one pass may be allowed after their neighbourhood changed.
+    for _ in 0..4 {
+        if state.alive_vertices <= target || state.run_pass(target) == 0 {
+            break;
+        }
+    }
+    Ok(state.finish())
+}
+
+/// Queue entry: cost bits (non-negative f64 order as u64), the edge, and the versions of
+/// its end points when it was queued.
+type Entry = Reverse<(u64, u32, u32, u32, u32)>;
+
+struct Candidate {
+    keep: u32,
+    remove: u32,
+    position: DVec3,
+    quadric: Quadric,
+    cost: f64,
+}
+
+struct State<'a> {
+    input: &'a [DVec3],
+    opts: &'a SimplifyOptions,
+    cos_turn: f64,
+    pos: Vec<DVec3>,
+    quadric: Vec<Quadric>,
+    faces: Vec<[u32; 3]>,
+    face_alive: Vec<bool>,
+    vfaces: Vec<Vec<u32>>,
+    boundary: Vec<bool>,
+    locked: Vec<bool>,
+    alive: Vec<bool>,
+    alive_vertices: usize,
+    version: Vec<u32>,
+    land_face: Vec<u32>,
+    land_bary: Vec<[f64; 3]>,
+    face_points: Vec<Vec<u32>>,
+    collapses: usize,
+}
+
+fn face_normal(p: [DVec3; 3]) -> DVec3 {
+    (p[1] - p[0]).cross(p[2] - p[0])
+}
+
+fn quality(p: [DVec3; 3]) -> f64 {
+    let edges = (p[1] - p[0]).length_squared()
+        + (p[2] - p[1]).length_squared()
+        + (p[0] - p[2]).length_squared();
+    if edges <= 0.0 {
+        return 0.0;
+    }
+    2.0 * 3f64.sqrt() * face_normal(p).length() / edges
+}
+
+impl<'a> State<'a> {
+    fn new(mesh: &'a TriMesh, topo: &Topology, opts: &'a SimplifyOptions) -> Self {
+        let nv = mesh.positions.len();
+        let nf = mesh.triangles.len();
+        let pos = mesh.positions.clone();
+        let mut quadric = vec![Quadric::default(); nv];
+        let mut vfaces: Vec<Vec<u32>> = (0..nv)
+            .map(|v| Vec::with_capacity(topo.face_valence[v] as usize))
+            .collect();
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            let p = t.map(|v| pos[v as usize]);
+            let n = face_normal(p);
+            let area = 0.5 * n.length();
+            let unit = n.normalize_or_zero();
+            let plane = Quadric::plane(unit, p[0], area);
+            for (k, &v) in t.iter().enumerate() {
+                quadric[v as usize].add(&plane);
+                vfaces[v as usize].push(f as u32);
+                if topo.twin[3 * f + k] == NONE {
+                    let (a, b) = (p[k], p[(k + 1) % 3]);
+                    let side = (b - a).cross(unit).normalize_or_zero();
+                    let weight = opts.boundary_weight * (b - a).length_squared();
+                    let constraint = Quadric::plane(side, a, weight);
+                    quadric[v as usize].add(&constraint);
+                    quadric[t[(k + 1) % 3] as usize].add(&constraint);
+                }
+            }
+        }
+        let locked = Self::corners(mesh, topo, opts.corner_turn_deg);
+        let mut land_face = vec![0u32; nv];
+        let mut land_bary = vec![[0.0; 3]; nv];
+        let mut face_points = vec![Vec::new(); nf];
+        for v in 0..nv {
+            let f = vfaces[v][0];
+            let slot = mesh.triangles[f as usize]
+                .iter()
+                .position(|&c| c as usize == v)
+                .unwrap_or(0);
+            land_face[v] = f;
+            land_bary[v][slot] = 1.0;
+            face_points[f as usize].push(v as u32);
+        }
+        State {
+            input: &mesh.positions,
+            opts,
+            cos_turn: opts.max_normal_turn_deg.to_radians().cos(),
+            pos,
+            quadric,
+            faces: mesh.triangles.clone(),
+            face_alive: vec![true; nf],
+            vfaces,
+            boundary: topo.boundary.clone(),
+            locked,
+            alive: vec![true; nv],
+            alive_vertices: nv,
+            version: vec![0; nv],
+            land_face,
+            land_bary,
+            face_points,
+            collapses: 0,
+        }
+    }
+
+    /// Boundary vertices where the boundary turns by more than `turn_deg` (the angle
+    /// between the two boundary edges, seen from inside, is below 180 - turn).
+    fn corners(mesh: &TriMesh, topo: &Topology, turn_deg: f64) -> Vec<bool> {
+        let min_angle = (180.0 - turn_deg).to_radians();
+        (0..mesh.positions.len() as u32)
+            .map(|v| {
+                let ring = topo.ring(v);
+                if !topo.is_boundary(v) || ring.len() < 2 {
+                    return false;
+                }
+                let p = mesh.positions[v as usize];
+                let first = mesh.positions[ring[0] as usize] - p;
+                let last = mesh.positions[ring[ring.len() - 1] as usize] - p;
+                // The interior angle is the sum of the face angles at v.
+                let interior: f64 = ring
+                    .windows(2)
+                    .map(|w| {
+                        let a = mesh.positions[w[0] as usize] - p;
+                        let b = mesh.positions[w[1] as usize] - p;
+                        a.angle_between(b)
+                    })
+                    .sum();
+                first.length() > 0.0 && last.length() > 0.0 && interior < min_angle
+            })
+            .collect()
+    }
+
+    fn run_pass(&mut self, target: usize) -> usize {
+        let mut heap: BinaryHeap<Entry> = BinaryHeap::new();
+        for f in 0..self.faces.len() {
+            if !self.face_alive[f] {
+                continue;
+            }
+            for k in 0..3 {
+                let (a, b) = (self.faces[f][k], self.faces[f][(k + 1) % 3]);
+                // Each interior edge once (from the face where it runs upwards); a
+                // boundary edge may run either way, so it is queued in both cases.
+                if a < b || !self.edge_is_interior(a, b) {
+                    self.push(&mut heap, a, b);
+                }
+            }
+        }
+        let before = self.collapses;
+        while self.alive_vertices > target {
+            let Some(Reverse((_, a, b, va, vb))) = heap.pop() else {
+                break;
+            };
+            let (ai, bi) = (a as usize, b as usize);
+            if !self.alive[ai]
+                || !self.alive[bi]
+                || self.version[ai] != va
+                || self.version[bi] != vb
+            {
+                continue;
+            }
+            let Some(c) = self.candidate(a, b) else {
+                continue;
+            };
+            if !self.allowed(&c) {
+                continue;
+            }
+            self.collapse(&c);
+            for x in self.neighbours(c.keep) {
+                self.push(&mut heap, c.keep, x);
+            }
+        }
+        self.collapses - before
+    }
+
+    fn push(&self, heap: &mut BinaryHeap<Entry>, a: u32, b: u32) {
+        let (a, b) = (a.min(b), a.max(b));
+        if let Some(c) = self.candidate(a, b) {
+            let cost = if c.cost.is_finite() { c.cost } else { f64::MAX };
+            heap.push(Reverse((
+                cost.to_bits(),
+                a,
+                b,
+                self.version[a as usize],
+                self.version[b as usize],
+            )));
+        }
+    }
+
+    fn edge_is_interior(&self, a: u32, b: u32) -> bool {
+        self.shared_faces(a, b).len() == 2
+    }
+
+    fn shared_faces(&self, a: u32, b: u32) -> Vec<u32> {
+        self.vfaces[a as usize]
+            .iter()
+            .copied()
+            .filter(|&f| self.faces[f as usize].contains(&b))
+            .collect()
+    }
+
+    fn neighbours(&self, v: u32) -> Vec<u32> {
+        let mut n: Vec<u32> = self.vfaces[v as usize]
+            .iter()
+            .flat_map(|&f| self.faces[f as usize])
+            .filter(|&x| x != v)
+            .collect();
+        n.sort_unstable();
+        n.dedup();
+        n
+    }
+
+    /// Which end stays and where it goes: a locked or boundary end stays in place when the
+    /// other is free or interior (the boundary keeps its shape), otherwise the lower index
+    /// stays and moves to the quadric's minimiser (on the edge where that is singular).
+    fn candidate(&self, a: u32, b: u32) -> Option<Candidate> {
+        let (ai, bi) = (a as usize, b as usize);
+        if self.locked[ai] && self.locked[bi] {
+            return None;
+        }
+        let q = self.quadric[ai].sum(&self.quadric[bi]);
+        let fixed = if self.locked[ai] || (self.boundary[ai] && !self.boundary[bi]) {
+            Some((a, b))
+        } else if self.locked[bi] || (self.boundary[bi] && !self.boundary[ai]) {
+            Some((b, a))
+        } else {
+            None
+        };
+        let (keep, remove, position) = match fixed {
+            Some((k, r)) => (k, r, self.pos[k as usize]),
+            None => {
+                let (pa, pb) = (self.pos[ai], self.pos[bi]);
+                let mid = (pa + pb) * 0.5;
+                let reach = 2.0 * (pa - pb).length();
+                let x = q
+                    .minimiser(mid, reach)
+                    .unwrap_or_else(|| q.segment_minimiser(pa, pb));
+                (a.min(b), a.max(b), x)
+            }
+        };
+        let length2 = (self.pos[ai] - self.pos[bi]).length_squared();
+        Some(Candidate {
+            keep,
+            remove,
+            position,
+            cost: q.error(position) + self.opts.isotropy * length2 * length2,
+            quadric: q,
+        })
+    }
+
+    /// The topological and geometric guards of the module comment.
+    fn allowed(&self, c: &Candidate) -> bool {
+        let (k, r) = (c.keep, c.remove);
+        let (ki, ri) = (k as usize, r as usize);
+        if self.alive_vertices <= 4 {
+            return false;
+        }
+        let shared = self.shared_faces(k, r);
+        let on_boundary = match shared.len() {
+            1 => true,
+            2 => false,
+            _ => return false,
+        };
+        if self.boundary[ki] && self.boundary[ri] && !on_boundary {
+            return false;
+        }
+        let mut opposite: Vec<u32> = shared
+            .iter()
+            .flat_map(|&f| self.faces[f as usize])
+            .filter(|&x| x != k && x != r)
+            .collect();
+        opposite.sort_unstable();
+        let nk = self.neighbours(k);
+        let common: Vec<u32> = self
+            .neighbours(r)
+            .into_iter()
+            .filter(|x| nk.binary_search(x).is_ok())
+            .collect();
+        if common != opposite {
+            return false;
+        }
+        if on_boundary && self.boundary_loop_of_three(k, r) {
+            return false;
+        }
+        if !self.face_counts_allowed(k, r, shared.len(), &opposite) {
+            return false;
+        }
+        self.geometry_allowed(c)
+    }
+
+    fn face_counts_allowed(&self, k: u32, r: u32, shared: usize, opposite: &[u32]) -> bool {
+        let (ki, ri) = (k as usize, r as usize);
+        let merged = self.vfaces[ki].len() + self.vfaces[ri].len() - 2 * shared;
+        let max = self.opts.max_faces_per_vertex;
+        let (lo, hi) = if self.boundary[ki] || self.boundary[ri] {
+            (2, max.saturating_sub(1))
+        } else {
+            (3, max)
+        };
+        if merged < lo || merged > hi {
+            return false;
+        }
+        opposite.iter().all(|&o| {
+            let min = if self.boundary[o as usize] { 2 } else { 3 };
+            self.vfaces[o as usize].len() > min
+        })
+    }
+
+    fn geometry_allowed(&self, c: &Candidate) -> bool {
+        let (k, r) = (c.keep, c.remove);
+        let mut worst_before = f64::INFINITY;
+        let mut worst_after = f64::INFINITY;
+        for &f in self.vfaces[k as usize]
+            .iter()
+            .chain(&self.vfaces[r as usize])
+        {
+            let t = self.faces[f as usize];
+            if t.contains(&k) && t.contains(&r) {
+                continue;
+            }
+            let before = t.map(|v| self.pos[v as usize]);
+            let after = t.map(|v| {
+                if v == k || v == r {
+                    c.position
+                } else {
+                    self.pos[v as usize]
+                }
+            });
+            let (n0, n1) = (face_normal(before), face_normal(after));
+            let (l0, l1) = (n0.length(), n1.length());
+            if l1 <= 0.0 || (l0 > 0.0 && n0.dot(n1) < self.cos_turn * l0 * l1) {
+                return false;
+            }
+            worst_before = worst_before.min(quality(before));
+            worst_after = worst_after.min(quality(after));
+        }
+        worst_after >= self.opts.min_quality.min(worst_before)
+    }
+
+    /// Whether the boundary edge (a, b) lies on a loop of three edges.
+    fn boundary_loop_of_three(&self, a: u32, b: u32) -> bool {
+        let (mut prev, mut cur) = (a, b);
+        for _ in 0..2 {
+            let Some(next) = self.next_on_boundary(cur, prev) else {
+                return false;
+            };
+            if next == a {
+                return true;
+            }
+            (prev, cur) = (cur, next);
+        }
+        false
+    }
+
+    /// The boundary neighbour of `v` other than `prev`.
+    fn next_on_boundary(&self, v: u32, prev: u32) -> Option<u32> {
+        let mut seen: Vec<(u32, u32)> = Vec::with_capacity(16);
+        for &f in &self.vfaces[v as usize] {
+            for x in self.faces[f as usize] {
+                if x == v {
+                    continue;
+                }
+                match seen.iter_mut().find(|(y, _)| *y == x) {
+                    Some(e) => e.1 += 1,
+                    None => seen.push((x, 1)),
+                }
+            }
+        }
+        seen.iter()
+            .find(|&&(x, count)| count == 1 && x != prev)
+            .map(|&(x, _)| x)
+    }
+
+    fn collapse(&mut self, c: &Candidate) {
+        let (k, r) = (c.keep, c.remove);
+        let (ki, ri) = (k as usize, r as usize);
+        let mut affected: Vec<u32> = self.vfaces[ki].clone();
+        affected.extend(self.vfaces[ri].iter().copied().filter(|f| {
+            let t = self.faces[*f as usize];
+            !t.contains(&k)
+        }));
+        for f in self.shared_faces(k, r) {
+            self.face_alive[f as usize] = false;
+            for v in self.faces[f as usize] {
+                self.vfaces[v as usize].retain(|&g| g != f);
+            }
+        }
+        let moved = std::mem::take(&mut self.vfaces[ri]);
+        for f in moved {
+            for v in self.faces[f as usize].iter_mut() {
+                if *v == r {
+                    *v = k;
+                }
+            }
+            self.vfaces[ki].push(f);
+        }
+        self.pos[ki] = c.position;
+        self.quadric[ki] = c.quadric;
+        self.boundary[ki] |= self.boundary[ri];
+        self.alive[ri] = false;
+        self.alive_vertices -= 1;
+        self.version[ki] += 1;
+        self.version[ri] += 1;
+        self.collapses += 1;
+        self.carry_points(k, &affected);
+    }
+
+    /// Re-projects the input points of the faces a collapse changed onto the nearest face
+    /// of the new fan around `k`.
+    fn carry_points(&mut self, k: u32, affected: &[u32]) {
+        let fan = &self.vfaces[k as usize];
+        let mut points = Vec::new();
+        for &f in affected {
+            points.append(&mut self.face_points[f as usize]);
+        }
+        for p in points {
+            let q = self.input[p as usize];
+            let mut best = (f64::INFINITY, fan[0], [1.0, 0.0, 0.0]);
+            for &f in fan {
+                let tri = self.faces[f as usize].map(|v| self.pos[v as usize]);
+                let (d2, bary) = project(q, tri);
+                if d2 < best.0 {
+                    best = (d2, f, bary);
+                }
+            }
+            self.land_face[p as usize] = best.1;
+            self.land_bary[p as usize] = best.2;
+            self.face_points[best.1 as usize].push(p);
+        }
+    }
+
+    fn finish(self) -> Simplified {
+        let mut control_of = vec![REMOVED; self.pos.len()];
+        let mut positions = Vec::with_capacity(self.alive_vertices);
+        for (v, &alive) in self.alive.iter().enumerate() {
+            if alive {
+                control_of[v] = positions.len() as u32;
+                positions.push(self.pos[v]);
+            }
+        }
+        let mut face_index = vec![u32::MAX; self.faces.len()];
+        let mut triangles = Vec::new();
+        for (f, t) in self.faces.iter().enumerate() {
+            if self.face_alive[f] {
+                face_index[f] = triangles.len() as u32;
+                triangles.push(t.map(|v| control_of[v as usize]));
+            }
+        }
+        let landing = self
+            .land_face
+            .iter()
+            .zip(&self.land_bary)
+            .map(|(&f, b)| Landing {
+                face: face_index[f as usize],
+                u: b[0],
+                v: b[1],
+            })
+            .collect();
+        let locked_corners = self.locked.iter().filter(|&&l| l).count();
+        Simplified {
+            mesh: TriMesh::new(positions, triangles),
+            control_of,
+            landing,
+            collapses: self.collapses,
+            locked_corners,
+        }
+    }
+}
+
+/// Squared distance from `p` to triangle `tri` and the barycentric weights of the
+/// closest point.
+fn project(p: DVec3, tri: [DVec3; 3]) -> (f64, [f64; 3]) {
+    let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
+    let (e0, e1, e2) = (tri[1] - tri[0], tri[2] - tri[0], q - tri[0]);
+    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
+    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
+    let denom = d00 * d11 - d01 * d01;
+    let bary = if denom > 0.0 {
+        let b1 = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
+        let b2 = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - b1);
+        [1.0 - b1 - b2, b1, b2]
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    ((q - p).length_squared(), bary)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,84 @@
+//! The one surface an input becomes: the largest component of the cleaned mesh, made
+//! orientable where cleaning could not (a non-orientable strip keeps edges that two faces
+//! run the same way: one of those faces goes, and the rest is cleaned again).
+
+use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::topology::Topology;
+use crate::TriMesh;
+use rustc_hash::FxHashSet;
+
+/// Repair passes before the input is given up as not manifold.
+const REPAIR_PASSES: usize = 8;
+
+/// The largest manifold, oriented component of `mesh` (see the module comment), or `None`
+/// if nothing is left.
+pub(super) fn largest_component(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
+    let mut part = largest_cleaned(mesh, opts)?;
+    for _ in 0..REPAIR_PASSES {
+        if Topology::from_mesh(&part).is_ok() {
+            break;
+        }
+        let kept = without_repeated_directed_edges(&part);
+        if kept.triangles.len() == part.triangles.len() {
+            break;
+        }
+        part = largest_cleaned(&kept, opts)?;
+    }
+    Some(part)
+}
+
+/// Drops every face that runs a directed edge an earlier face already runs.
+fn without_repeated_directed_edges(mesh: &TriMesh) -> TriMesh {
+    let mut seen: FxHashSet<(u32, u32)> = FxHashSet::default();
+    let mut triangles = Vec::with_capacity(mesh.triangles.len());
+    for t in &mesh.triangles {
+        let edges = [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])];
+        if edges.iter().any(|e| seen.contains(e)) {
+            continue;
+        }
+        for e in edges {
+            seen.insert(e);
+        }
+        triangles.push(*t);
+    }
+    TriMesh::new(mesh.positions.clone(), triangles)
+}
+
+/// The cleaned mesh's largest edge-connected component (most faces; the lowest label on a
+/// tie), its vertices in cleaned order.
+fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
+    let cleaned = clean(mesh, opts);
+    let labels = &cleaned.face_component;
+    let mut counts = vec![0usize; cleaned.mesh.triangles.len()];
+    for &l in labels {
+        counts[l as usize] += 1;
+    }
+    let (best, &size) = counts
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0)))?;
+    if size == 0 {
+        return None;
+    }
+    let mut index = vec![u32::MAX; cleaned.mesh.positions.len()];
+    let mut triangles = Vec::with_capacity(size);
+    for (t, &l) in cleaned.mesh.triangles.iter().zip(labels) {
+        if l as usize == best {
+            for &v in t {
+                index[v as usize] = 0;
+            }
+            triangles.push(*t);
+        }
+    }
+    let mut positions = Vec::new();
+    for (v, i) in index.iter_mut().enumerate() {
+        if *i == 0 {
+            *i = positions.len() as u32;
+            positions.push(cleaned.mesh.positions[v]);
+        }
+    }
+    for t in &mut triangles {
+        *t = t.map(|v| index[v as usize]);
+    }
+    Some(TriMesh::new(positions, triangles))
+}

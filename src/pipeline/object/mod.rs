@@ -1,0 +1,336 @@
+//! Whole objects (closed, holed, any genus): the exact Loop limit surface of a control mesh
+//! found by simplifying the data (Hoppe et al. 1994; Marinov & Kobbelt 2005), fitted to
+//! every data point.
+//!
+//! Stages: clean and keep the largest component; simplify it by quadric edge collapse to
+//! the control budget (`mesh::simplify`: the topology is kept, so the control mesh has the
+//! component's Euler characteristic and boundary loops, and every data vertex is carried
+//! to a control face: its initial parameter); a point-to-point least-squares fit at those
+//! parameters with a small umbrella fairness term; then rounds of foot points (Newton on
+//! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
+//! with a small tangential share) until a round gains less than `min_gain` of the RMS.
+
+mod component;
+mod solve;
+
+use crate::fit::engine::umbrella_laplacian;
+use crate::fit::Collocation;
+use crate::mesh::clean::CleanOptions;
+use crate::mesh::simplify::{
+    simplify, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
+};
+use crate::mesh::topology::{Topology, TopologyError};
+use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
+use crate::surface::SurfaceParam;
+use crate::TriMesh;
+use component::largest_component;
+use glam::DVec3;
+use solve::{point_fit, rows_at, DistanceRound, Feet};
+use std::time::Instant;
+
+/// Refused rounds (each retried with four times the tangential share) before the rounds
+/// stop.
+const MAX_REFUSALS: usize = 3;
+
+#[derive(Clone, Debug)]
+pub struct ObjectOptions {
+    /// Control points as a percentage of the data points (when `target_controls` is unset).
+    pub target_controls_pct: f64,
+    pub target_controls: Option<usize>,
+    pub clean: CleanOptions,
+    /// Guards of the simplification; its `target_vertices` is set from the targets above.
+    pub simplify: SimplifyOptions,
+    /// Fairness weight relative to the data: s = smoothing * data points / control points.
+    pub smoothing: f64,
+    /// Foot-point rounds after the first fit (at most).
+    pub rounds: usize,
+    /// Rounds stop once one lowers the RMS by less than this fraction.
+    pub min_gain: f64,
+    /// Share of the point-to-point term beside the point-to-plane one in the rounds.
+    pub tangential: f64,
+    /// The same share for data points within `edge_rings` rings of the data's boundary:
+    /// there the residual runs past the surface's edge, along it, where the point-to-plane
+    /// term does not pull.
+    pub tangential_edge: f64,
+    pub edge_rings: usize,
+    /// CG steps where a sparse factorisation fails.
+    pub max_iterations: usize,
+    /// Start the first fit from the data's foot points on the limit surface of the initial
+    /// control mesh instead of their projections onto the control faces.
+    pub limit_start: bool,
+}
+
+impl Default for ObjectOptions {
+    fn default() -> Self {
+        Self {
+            target_controls_pct: 5.0,
+            target_controls: None,
+            clean: CleanOptions::default(),
+            simplify: SimplifyOptions {
+                isotropy: 1e-3,
+                ..Default::default()
+            },
+            smoothing: 1e-5,
+            rounds: 8,
+            min_gain: 0.02,
+            tangential: 0.005,
+            tangential_edge: 0.05,
+            edge_rings: 3,
+            max_iterations: 400,
+            limit_start: true,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ObjectError {
+    #[error("the mesh has no faces left after cleaning")]
+    Empty,
+    #[error("the cleaned component is not a manifold")]
+    NotManifold(#[source] TopologyError),
+    #[error("simplifying to a control mesh failed")]
+    Simplify(#[source] SimplifyError),
+    #[error("the control mesh has no Loop limit surface")]
+    Surface(#[source] LoopLimitError),
+    #[error("{params} initial parameters for {points} data points")]
+    ParamCount { params: usize, points: usize },
+    #[error("the {stage} solve gave no finite control points")]
+    Solve { stage: &'static str },
+}
+
+/// Stage times in milliseconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ObjectTimes {
+    pub clean_ms: f64,
+    pub simplify_ms: f64,
+    pub surface_ms: f64,
+    pub first_fit_ms: f64,
+    pub rounds_ms: f64,
+    pub total_ms: f64,
+}
+
+/// RMS and max distance of the data to the surface after a stage.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct RoundReport {
+    pub rms: f64,
+    pub max: f64,
+}
+
+pub struct ObjectFit {
+    /// The data points fitted: the vertices of the kept component.
+    pub data: Vec<DVec3>,
+    /// The component itself (data points and their triangles).
+    pub component: TriMesh,
+    /// The simplification before fitting: the control faces at their initial positions
+    /// (also the quadric-decimated mesh with as many vertices as there are controls).
+    pub simplified: TriMesh,
+    pub surface: LoopLimitSurface,
+    pub controls: Vec<DVec3>,
+    /// Foot point of every data point on the final surface.
+    pub params: Vec<SurfaceParam>,
+    /// Distance of every data point to its foot point.
+    pub distances: Vec<f64>,
+    pub rms: f64,
+    pub max: f64,
+    /// After the first fit, then after each round.
+    pub rounds: Vec<RoundReport>,
+    pub data_topology: SurfaceTopology,
+    pub control_topology: SurfaceTopology,
+    pub times: ObjectTimes,
+}
+
+impl ObjectFit {
+    pub fn control_mesh(&self) -> TriMesh {
+        TriMesh::new(self.controls.clone(), self.surface.faces().to_vec())
+    }
+}
+
+/// Fits the exact Loop limit surface of a simplified control mesh to the largest
+/// component of `mesh`.
+pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, ObjectError> {
+    let start = Instant::now();
+    let mut times = ObjectTimes::default();
+    let component = largest_component(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
+    times.clean_ms = ms_since(start);
+
+    let t = Instant::now();
+    let n = component.positions.len();
+    let target = opts
+        .target_controls
+        .unwrap_or((opts.target_controls_pct / 100.0 * n as f64).round() as usize)
+        .max(4)
+        .min(n);
+    let simplify_opts = SimplifyOptions {
+        target_vertices: target,
+        ..opts.simplify.clone()
+    };
+    let simplified = simplify(&component, &simplify_opts).map_err(ObjectError::Simplify)?;
+    times.simplify_ms = ms_since(t);
+
+    let Simplified {
+        mesh: control_mesh,
+        landing,
+        ..
+    } = simplified;
+    let params: Vec<SurfaceParam> = landing
+        .iter()
+        .map(|l| SurfaceParam {
+            face: l.face,
+            u: l.u,
+            v: l.v,
+        })
+        .collect();
+    let mut fit = fit_on_control_mesh(component, control_mesh, params, opts)?;
+    fit.times.clean_ms = times.clean_ms;
+    fit.times.simplify_ms = times.simplify_ms;
+    fit.times.total_ms = ms_since(start);
+    Ok(fit)
+}
+
+/// The fit stages after the control mesh is chosen: the limit surface of `control_mesh`
+/// fitted to the vertices of `component` from the initial parameters `params` (one per
+/// vertex, on the control faces), the control positions initialised by a least-squares
+/// fit there.
+pub fn fit_on_control_mesh(
+    component: TriMesh,
+    control_mesh: TriMesh,
+    params: Vec<SurfaceParam>,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
+    let start = Instant::now();
+    let mut times = ObjectTimes::default();
+    let t = Instant::now();
+    let n = component.positions.len();
+    if params.len() != n {
+        return Err(ObjectError::ParamCount {
+            params: params.len(),
+            points: n,
+        });
+    }
+    let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
+    let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
+    let surface = LoopLimitSurface::new(control_mesh.positions.len(), &control_mesh.triangles)
+        .map_err(ObjectError::Surface)?;
+    let m = control_mesh.positions.len();
+    let fairness = Collocation::new(umbrella_laplacian(m, &control_mesh.triangles));
+    let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
+    times.surface_ms = ms_since(t);
+
+    let t = Instant::now();
+    let data = component.positions.clone();
+    let params = if opts.limit_start {
+        Feet::find(&surface, &control_mesh.positions, &data, &params).params
+    } else {
+        params
+    };
+    let rows = rows_at(&surface, &params);
+    let mut controls = point_fit(
+        &rows,
+        &data,
+        &fairness,
+        smoothing,
+        control_mesh.positions.clone(),
+        opts.max_iterations,
+    )
+    .ok_or(ObjectError::Solve { stage: "first" })?;
+    drop(rows);
+    let mut feet = Feet::find(&surface, &controls, &data, &params);
+    times.first_fit_ms = ms_since(t);
+
+    let t = Instant::now();
+    let mut rounds = vec![RoundReport {
+        rms: feet.rms(),
+        max: feet.max(),
+    }];
+    // Levenberg-Marquardt on the tangential share: a round that does not lower the RMS is
+    // taken again with four times the share (the surface slides less per round), a round
+    // that does halves it again down to `opts.tangential`. Controls far from their final
+    // parameterization need long slides that a fixed small share makes unstable and a
+    // fixed large share makes slow.
+    let mut share = opts.tangential;
+    let near_edge = near_boundary(&component, opts.edge_rings);
+    let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
+    let mut refusals = 0;
+    let mut taken = 0;
+    while taken < opts.rounds && refusals < MAX_REFUSALS {
+        let tangential: Vec<f64> = near_edge
+            .iter()
+            .map(|&e| share * if e { edge_factor } else { 1.0 })
+            .collect();
+        let round = DistanceRound {
+            surface: &surface,
+            data: &data,
+            fairness: &fairness,
+            smoothing,
+            tangential: &tangential,
+            max_iterations: opts.max_iterations,
+        };
+        let next_feet = round
+            .solve(&feet, controls.clone())
+            .map(|next| (Feet::find(&surface, &next, &data, &feet.params), next));
+        let before = feet.rms();
+        let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
+            refusals += 1;
+            share *= 4.0;
+            continue;
+        };
+        let after = next_feet.rms();
+        controls = next;
+        feet = next_feet;
+        taken += 1;
+        rounds.push(RoundReport {
+            rms: after,
+            max: feet.max(),
+        });
+        share = (share * 0.5).max(opts.tangential);
+        if before - after < opts.min_gain * before {
+            break;
+        }
+    }
+    times.rounds_ms = ms_since(t);
+    times.total_ms = ms_since(start);
+    Ok(ObjectFit {
+        data,
+        component,
+        simplified: control_mesh,
+        rms: feet.rms(),
+        max: feet.max(),
+        surface,
+        controls,
+        params: feet.params,
+        distances: feet.distances,
+        rounds,
+        data_topology,
+        control_topology,
+        times,
+    })
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Per vertex: whether it lies within `rings` rings of the mesh's boundary.
+fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
+    let Ok(topo) = Topology::from_mesh(mesh) else {
+        return vec![false; mesh.positions.len()];
+    };
+    let mut near = topo.boundary.clone();
+    let mut front: Vec<u32> = (0..mesh.positions.len() as u32)
+        .filter(|&v| near[v as usize])
+        .collect();
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &front {
+            for &x in topo.ring(v) {
+                if !near[x as usize] {
+                    near[x as usize] = true;
+                    next.push(x);
+                }
+            }
+        }
+        front = next;
+    }
+    near
+}
