@@ -4,11 +4,10 @@
 //! functions that are non-zero on a span are ever formed), so a basis row costs O(p^2)
 //! and no 0/0 quotient is ever evaluated.
 
-use super::BSplineError;
+use super::error::BSplineError;
+pub use super::error::MAX_DEGREE;
 use glam::DVec3;
 
-/// Highest degree handled: basis rows live in fixed stack arrays of this size + 1.
-pub const MAX_DEGREE: usize = 15;
 const W: usize = MAX_DEGREE + 1;
 
 /// The basis functions N_{span-p..=span, p} and their derivatives up to order 2 at one
@@ -37,31 +36,28 @@ pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSpli
         return Err(BSplineError::TooFewControls { count, degree: p });
     }
     if count.checked_add(p + 1) != Some(knots.len()) {
-        return Err(BSplineError::Knots(format!(
-            "{} knots for {count} control points of degree {p} (need {} + {})",
-            knots.len(),
+        return Err(BSplineError::KnotCount {
+            knots: knots.len(),
             count,
-            p + 1
-        )));
+            degree: p,
+        });
     }
     if knots.iter().any(|k| !k.is_finite()) || knots.windows(2).any(|w| w[1] < w[0]) {
-        return Err(BSplineError::Knots(
-            "knots must be finite and non-decreasing".into(),
-        ));
+        return Err(BSplineError::KnotOrder);
     }
     let (a, b) = (knots[p], knots[count]);
     if b <= a {
-        return Err(BSplineError::Knots("empty parameter domain".into()));
+        return Err(BSplineError::EmptyDomain);
     }
     // Interior multiplicity above p would disconnect the curve.
     let mut run = 1;
     for w in knots[1..knots.len() - 1].windows(2) {
         run = if w[1] == w[0] { run + 1 } else { 1 };
         if run > p && w[0] > a && w[0] < b {
-            return Err(BSplineError::Knots(format!(
-                "interior knot {} repeated more than {p} times",
-                w[0]
-            )));
+            return Err(BSplineError::KnotMultiplicity {
+                knot: w[0],
+                degree: p,
+            });
         }
     }
     Ok(())

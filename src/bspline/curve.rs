@@ -1,7 +1,7 @@
 //! B-spline curves: validated construction and evaluation with derivatives.
 
 use super::basis::{basis_row, validate_knots};
-use super::BSplineError;
+use super::error::BSplineError;
 use glam::DVec3;
 
 #[derive(Clone, Debug, PartialEq)]

@@ -333,7 +333,7 @@ impl Grid<'_> {
 }
 
 /// Which least-squares problem a grid fit solves.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GridMethod {
     /// The documents' approximation: columns then rows, each a least-squares curve fit with
@@ -342,6 +342,35 @@ pub enum GridMethod {
     /// The exact least-squares surface over all control points at once. On a grid it
     /// separates: P = A_u^+ D (A_v^+)^T, i.e. the same two passes with free ends.
     Lsq,
+}
+
+impl GridMethod {
+    /// Every method, in the order a user interface lists them.
+    pub const ALL: [GridMethod; 2] = [GridMethod::TwoPass, GridMethod::Lsq];
+
+    /// The method's name in output files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            GridMethod::TwoPass => "two-pass",
+            GridMethod::Lsq => "lsq",
+        }
+    }
+}
+
+impl std::fmt::Display for GridMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for GridMethod {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        GridMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| crate::names::UnknownName::new(s, GridMethod::ALL.map(GridMethod::name)))
+    }
 }
 
 /// Grid parameters: per direction, the average over all grid lines of their own

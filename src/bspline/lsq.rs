@@ -7,7 +7,7 @@
 //! factorisation, which is what makes the two-pass grid fit cheap: every column of a grid
 //! has the same parameters, so one factorisation serves all of them.
 
-use super::BSplineError;
+use super::error::BSplineError;
 
 #[derive(Clone, Debug)]
 pub struct BandedQr {

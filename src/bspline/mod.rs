@@ -6,6 +6,7 @@
 
 pub mod basis;
 pub mod curve;
+mod error;
 pub mod fit;
 pub mod lsq;
 pub mod scattered;
@@ -13,22 +14,5 @@ pub mod surface;
 
 pub use basis::ParamMethod;
 pub use curve::BSplineCurve;
+pub use error::BSplineError;
 pub use surface::BSplineSurface;
-
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum BSplineError {
-    #[error("degree {0} is outside 1..={max}", max = basis::MAX_DEGREE)]
-    Degree(usize),
-    #[error("{count} control points cannot carry degree {degree} (need at least degree + 1)")]
-    TooFewControls { count: usize, degree: usize },
-    #[error("knot vector: {0}")]
-    Knots(String),
-    #[error("{got} control points given, {expected} expected")]
-    ControlCount { got: usize, expected: usize },
-    #[error("{points} data points cannot determine {controls} control points")]
-    TooFewPoints { points: usize, controls: usize },
-    #[error("non-finite coordinate in the data (point {0})")]
-    NonFinite(usize),
-    #[error("the least-squares system is rank deficient at unknown {0} (data leaves a knot span empty; add smoothing or fewer control points)")]
-    RankDeficient(usize),
-}

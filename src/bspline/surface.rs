@@ -2,7 +2,7 @@
 //! second partial derivatives, and separable evaluation on parameter grids.
 
 use super::basis::{basis_row, validate_knots, BasisRow};
-use super::BSplineError;
+use super::error::BSplineError;
 use crate::surface::Derivatives;
 use glam::DVec3;
 use rayon::prelude::*;

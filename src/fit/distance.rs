@@ -14,8 +14,9 @@
 //! the surface, and the blocks, which see each control's local normal, take most of that
 //! spread out of the iteration.
 
+use super::collocation::Collocation;
+use super::csr::Csr;
 use super::normal_matrix::{BlockMatrix, Fairness};
-use super::sparse::{Collocation, Csr};
 use glam::DVec3;
 
 pub struct DistanceProblem<'a> {
@@ -266,7 +267,7 @@ mod tests {
             })
             .collect();
         let basis = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let fairness = Collocation::new(crate::fit::sparse::ring_laplacian(m, 7));
+        let fairness = Collocation::new(crate::fit::csr::ring_laplacian(m, 7));
         let data: Vec<DVec3> = (0..50).map(|j| DVec3::splat(j as f64)).collect();
         let normals: Vec<DVec3> = (0..50)
             .map(|j| DVec3::new((j as f64).cos(), 0.3, (j as f64).sin()).normalize())

@@ -114,11 +114,14 @@ fn cholesky_solve(
 }
 
 /// Why a factorisation gave no solution.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum DirectFailure {
     /// M is not positive definite: controls no term holds.
+    #[error("normal matrix is not positive definite: control points without data; add smoothing")]
     NotDefinite,
     /// The solve produced non-finite values (M is ill-conditioned).
+    #[error("the factorisation produced non-finite values (ill-conditioned normal matrix)")]
     NotFinite,
 }
 

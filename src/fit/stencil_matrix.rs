@@ -9,8 +9,8 @@
 //! The result is the same `NormalMatrix` as the general assembly's (same structure, same
 //! sums up to the order of floating-point additions), solved by the same code.
 
+use super::csr::Csr;
 use super::normal_matrix::{diagonal_lanes, BlockMatrix, Fairness, NormalMatrix, ScalarMatrix};
-use super::sparse::Csr;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -323,7 +323,7 @@ impl StencilPlan {
         work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
     ) {
         #[cfg(target_arch = "x86_64")]
-        if super::bezier_rows::wide() {
+        if super::simd::wide() {
             // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
             return unsafe { self.add_band_wide(band, lo, entries, rhs, work) };
         }
@@ -498,7 +498,7 @@ mod tests {
         let normals: Vec<DVec3> = (0..points)
             .map(|_| DVec3::new(rng.next() - 0.5, rng.next() - 0.5, 1.0).normalize())
             .collect();
-        let l = crate::fit::sparse::ring_laplacian(m, 9);
+        let l = crate::fit::csr::ring_laplacian(m, 9);
         let fairness = super::super::Collocation::new(l);
         let fair = Fairness {
             l: fairness.n(),

@@ -1,6 +1,6 @@
 //! Binary glTF writer: positions, optional normals and colours, u32 indices.
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -154,7 +154,7 @@ pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
 
 pub fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
     std::fs::write(path, glb_bytes(mesh, attrs))
-        .map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
+        .map_err(|e| IoError::new(path.display().to_string(), None, IoErrorKind::Write(e)))
 }
 
 #[cfg(test)]

@@ -10,14 +10,30 @@ use crate::bspline::{BSplineCurve, BSplineSurface};
 use glam::DVec3;
 use std::time::SystemTime;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+/// The length unit an IGES file declares (coordinates are written unscaled).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum IgesUnits {
+    /// Millimetres.
     Mm,
+    /// Metres.
     M,
+    /// Inches.
     In,
 }
 
 impl IgesUnits {
+    /// Every unit, in the order a user interface lists them.
+    pub const ALL: [IgesUnits; 3] = [IgesUnits::Mm, IgesUnits::M, IgesUnits::In];
+
+    /// The unit's short name ("mm", "m", "in").
+    pub fn name(self) -> &'static str {
+        match self {
+            IgesUnits::Mm => "mm",
+            IgesUnits::M => "m",
+            IgesUnits::In => "in",
+        }
+    }
+
     /// The global section's unit flag and unit name.
     fn flag_and_name(self) -> (u32, &'static str) {
         match self {
@@ -25,6 +41,22 @@ impl IgesUnits {
             IgesUnits::Mm => (2, "MM"),
             IgesUnits::M => (6, "M"),
         }
+    }
+}
+
+impl std::fmt::Display for IgesUnits {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for IgesUnits {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        IgesUnits::ALL
+            .into_iter()
+            .find(|u| u.name() == s)
+            .ok_or_else(|| crate::names::UnknownName::new(s, IgesUnits::ALL.map(IgesUnits::name)))
     }
 }
 

@@ -1,5 +1,6 @@
 //! File formats. The only module that touches the filesystem for meshes.
 
+mod error;
 pub mod glb;
 pub mod gltf_reader;
 pub mod iges;
@@ -11,33 +12,11 @@ pub mod stl;
 pub mod surface_json;
 pub mod writers;
 
+pub use error::{IoError, IoErrorKind};
+
 use crate::mesh::TriMesh;
 use glam::DVec3;
 use std::path::Path;
-
-/// A reader or writer failure, always naming the file and, where known, where in it.
-#[derive(Debug, thiserror::Error)]
-#[error("{file}{}: {reason}", location.as_ref().map(|l| format!(" ({l})")).unwrap_or_default())]
-pub struct IoError {
-    pub file: String,
-    /// "line 12", "byte 4096", "element face 17": whatever the reader knows.
-    pub location: Option<String>,
-    pub reason: String,
-}
-
-impl IoError {
-    pub fn new(
-        file: impl Into<String>,
-        location: Option<String>,
-        reason: impl Into<String>,
-    ) -> Self {
-        Self {
-            file: file.into(),
-            location,
-            reason: reason.into(),
-        }
-    }
-}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -101,10 +80,10 @@ pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError
         IoError::new(
             &name,
             None,
-            "unknown extension (obj, gltf, glb, ply, stl, off)",
+            IoErrorKind::UnknownExtension("unknown extension (obj, gltf, glb, ply, stl, off)"),
         )
     })?;
-    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, IoErrorKind::Open(e)))?;
     read_with_base(&bytes, format, &name, opts, path.parent())
 }
 
@@ -126,7 +105,7 @@ fn read_with_base(
     base: Option<&Path>,
 ) -> Result<Loaded, IoError> {
     if bytes.is_empty() {
-        return Err(IoError::new(name, None, "empty file"));
+        return Err(IoError::new(name, None, IoErrorKind::Empty));
     }
     let plain = |mesh: TriMesh| Loaded { mesh, grid: None };
     let loaded = match format {
@@ -137,7 +116,7 @@ fn read_with_base(
         Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base)?),
     };
     if loaded.mesh.positions.is_empty() {
-        return Err(IoError::new(name, None, "no vertices"));
+        return Err(IoError::new(name, None, IoErrorKind::NoVertices));
     }
     Ok(loaded)
 }
@@ -180,7 +159,7 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
         _ => Err(IoError::new(
             path.display().to_string(),
             None,
-            "can write .obj, .ply or .glb only",
+            IoErrorKind::UnknownExtension("can write .obj, .ply or .glb only"),
         )),
     }
 }
@@ -190,7 +169,7 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     use std::io::Write;
     let name = path.display().to_string();
-    let err = |e: &dyn std::fmt::Display| IoError::new(&name, None, e.to_string());
+    let err = |e: std::io::Error| IoError::new(&name, None, IoErrorKind::Write(e));
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -199,10 +178,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         .prefix(".trispline-")
         .suffix(".tmp")
         .tempfile_in(dir)
-        .map_err(|e| err(&e))?;
-    tmp.write_all(bytes).map_err(|e| err(&e))?;
-    tmp.as_file().sync_all().map_err(|e| err(&e))?;
-    tmp.persist(path).map_err(|e| err(&e.error))?;
+        .map_err(err)?;
+    tmp.write_all(bytes).map_err(err)?;
+    tmp.as_file().sync_all().map_err(err)?;
+    tmp.persist(path).map_err(|e| err(e.error))?;
     if let Ok(d) = std::fs::File::open(dir) {
         let _ = d.sync_all();
     }
@@ -216,8 +195,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 /// only durable together with the others because they share the folder's one fsync.
 pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
     use std::io::Write;
-    let err = |name: &str, e: &dyn std::fmt::Display| {
-        IoError::new(dir.join(name).display().to_string(), None, e.to_string())
+    let err = |name: &str, e: std::io::Error| {
+        IoError::new(
+            dir.join(name).display().to_string(),
+            None,
+            IoErrorKind::Write(e),
+        )
     };
     let temps: Vec<Result<tempfile::NamedTempFile, IoError>> = std::thread::scope(|scope| {
         let handles: Vec<_> = files
@@ -228,9 +211,9 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
                         .prefix(".trispline-")
                         .suffix(".tmp")
                         .tempfile_in(dir)
-                        .map_err(|e| err(name, &e))?;
-                    tmp.write_all(bytes).map_err(|e| err(name, &e))?;
-                    tmp.as_file().sync_all().map_err(|e| err(name, &e))?;
+                        .map_err(|e| err(name, e))?;
+                    tmp.write_all(bytes).map_err(|e| err(name, e))?;
+                    tmp.as_file().sync_all().map_err(|e| err(name, e))?;
                     Ok(tmp)
                 })
             })
@@ -239,8 +222,9 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
             .into_iter()
             .zip(files)
             .map(|(h, (name, _))| {
-                h.join()
-                    .unwrap_or_else(|_| Err(err(name, &"writer thread panicked")))
+                h.join().unwrap_or_else(|_| {
+                    Err(err(name, std::io::Error::other("writer thread panicked")))
+                })
             })
             .collect()
     });
@@ -251,9 +235,9 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
     }
     for (tmp, (name, _)) in ready.into_iter().zip(files) {
         tmp.persist(dir.join(name))
-            .map_err(|e| err(name, &e.error))?;
+            .map_err(|e| err(name, e.error))?;
     }
     std::fs::File::open(dir)
         .and_then(|d| d.sync_all())
-        .map_err(|e| err("", &e))
+        .map_err(|e| err("", e))
 }

@@ -1,6 +1,6 @@
 //! OBJ and binary PLY writers (full f64 precision in both).
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use std::io::Write;
 use std::path::Path;
@@ -42,7 +42,7 @@ pub fn ply_bytes(mesh: &TriMesh) -> Vec<u8> {
 
 fn write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     std::fs::write(path, bytes)
-        .map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
+        .map_err(|e| IoError::new(path.display().to_string(), None, IoErrorKind::Write(e)))
 }
 
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {

@@ -8,36 +8,79 @@ use super::TriMesh;
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// How coarse positions are recovered from fine ones.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum InverseMethod {
+    /// The exact inverse of the subdivision rules (the fine mesh must be a subdivision).
     Exact,
+    /// The coarse points whose subdivision is closest to the fine ones in least squares.
     Lsq,
 }
 
-impl std::str::FromStr for InverseMethod {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "exact" => Ok(Self::Exact),
-            "lsq" => Ok(Self::Lsq),
-            _ => Err(format!("unknown inverse method '{s}' (exact|lsq)")),
+impl InverseMethod {
+    /// Every method, in the order a user interface lists them.
+    pub const ALL: [InverseMethod; 2] = [InverseMethod::Exact, InverseMethod::Lsq];
+
+    /// The method's name in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            InverseMethod::Exact => "exact",
+            InverseMethod::Lsq => "lsq",
         }
     }
 }
 
+impl std::fmt::Display for InverseMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for InverseMethod {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        InverseMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                crate::names::UnknownName::new(s, InverseMethod::ALL.map(InverseMethod::name))
+            })
+    }
+}
+
+/// Why a mesh cannot be coarsened as asked.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum InverseError {
+    /// Fewer subdivision levels were found than asked for; `reason` is the detector's
+    /// account of the first level that failed, when there is one.
     #[error(
-        "input has no Loop subdivision connectivity at depth {wanted} (found {found}): {reason}"
+        "input has no Loop subdivision connectivity at depth {wanted} (found {found}): {}",
+        reason.as_ref().map_or_else(|| "unknown".to_string(), ToString::to_string)
     )]
     NotSubdivided {
+        /// Levels asked for.
         wanted: usize,
+        /// Levels found.
         found: usize,
-        reason: String,
+        /// Why the next level was not found.
+        #[source]
+        reason: Option<DetectError>,
     },
+    /// The mesh (or a recovered coarse mesh) is not a manifold.
     #[error(transparent)]
     Topology(#[from] TopologyError),
+}
+
+impl InverseError {
+    /// A stable snake_case name of the variant, for machine-readable reports.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::NotSubdivided { .. } => "not_subdivided",
+            Self::Topology(_) => "topology",
+        }
+    }
 }
 
 /// Paper's equation 1 weights (mu, eta) for an interior even vertex of valence `l`.
@@ -197,7 +240,7 @@ pub fn coarsen(
         return Err(InverseError::NotSubdivided {
             wanted: levels,
             found: hierarchy.depth(),
-            reason: err.map_or_else(|| "unknown".to_string(), |e: DetectError| e.to_string()),
+            reason: err,
         });
     }
     let mut positions = mesh.positions.clone();

@@ -12,8 +12,9 @@
 //! provably bijective, and verified to have no triangle of non-positive area.
 
 use super::param::mean_value_disk;
+pub use super::plane2d::{doubled_area, folded_triangles};
 use super::warp::PlaneWarp;
-use super::{FilledPatch, RemeshError};
+use super::{FilledPatch, MapFailure, RemeshError};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -165,25 +166,6 @@ pub struct PlanarMap {
     pub folds_warped: usize,
 }
 
-/// Twice the signed area of a triangle in the map (positive counter-clockwise).
-pub fn doubled_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
-    let (a, b, c) = (
-        plane[t[0] as usize],
-        plane[t[1] as usize],
-        plane[t[2] as usize],
-    );
-    (b - a).perp_dot(c - a)
-}
-
-/// Triangles with non-positive signed area in the map.
-pub fn folded_triangles(tris: &[[u32; 3]], plane: &[DVec2]) -> Vec<usize> {
-    tris.iter()
-        .enumerate()
-        .filter(|(_, t)| doubled_area(plane, t) <= 0.0)
-        .map(|(f, _)| f)
-        .collect()
-}
-
 /// Longest hole rim closed by ear clipping.
 const MAX_EAR_CLIP: usize = 1000;
 
@@ -251,10 +233,9 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
     }
     let left = folded_triangles(&patch.mesh.triangles, &disk);
     if !left.is_empty() {
-        return Err(RemeshError::Parameterization(format!(
-            "{} folded triangles remain after the mean-value map (degenerate input triangles?)",
-            left.len()
-        )));
+        return Err(RemeshError::Parameterization(MapFailure::FoldsRemain {
+            count: left.len(),
+        }));
     }
     Ok(PlanarMap {
         near_fold: vec![false; disk.len()],

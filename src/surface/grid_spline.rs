@@ -12,6 +12,9 @@ use super::box_spline::{
     bezier_ordinates, evaluate_ordinates, stencil_values, stencil_weights, STENCIL,
 };
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
+use crate::numeric::floor;
+/// Re-exported for the scan domain, which rounds grid coordinates the same way.
+pub(crate) use crate::numeric::floor_i64;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -42,29 +45,6 @@ pub fn cell_stencil((i, j, down): Cell) -> [(i64, i64); 12] {
             (i + di, j + dj)
         }
     })
-}
-
-/// `x.floor()` for |x| < 2^63 without the libm call that `floor` is on baseline x86-64
-/// (no SSE4.1 rounding instruction): every surface evaluation locates its cell.
-#[inline(always)]
-pub(crate) fn floor(x: f64) -> f64 {
-    let t = x as i64 as f64;
-    if t > x {
-        t - 1.0
-    } else {
-        t
-    }
-}
-
-/// `x.floor() as i64` (saturating, NaN to 0) without the libm call.
-#[inline(always)]
-pub(crate) fn floor_i64(x: f64) -> i64 {
-    let t = x as i64;
-    if (t as f64) > x {
-        t - 1
-    } else {
-        t
-    }
 }
 
 /// The cell containing grid point (x, y) and the local coordinates of its up-triangle form.
