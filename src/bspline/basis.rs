@@ -28,7 +28,7 @@ impl BasisRow {
 
 /// Checks a knot vector for `count` control points of degree `p`: length, order, clamping
 /// and a non-empty domain.
-pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSplineError> {
+pub(crate) fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSplineError> {
     if p == 0 || p > MAX_DEGREE {
         return Err(BSplineError::Degree(p));
     }
@@ -65,7 +65,7 @@ pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSpli
 
 /// The span index s with knots[s] <= t < knots[s + 1], p <= s < count; the domain's right
 /// end belongs to the last non-empty span. Parameters outside the domain are clamped.
-pub fn find_span(knots: &[f64], count: usize, p: usize, t: f64) -> usize {
+pub(crate) fn find_span(knots: &[f64], count: usize, p: usize, t: f64) -> usize {
     if t >= knots[count] {
         // Last span with a positive length.
         let mut s = count - 1;
@@ -233,7 +233,7 @@ pub fn parameters(points: &[DVec3], method: ParamMethod) -> Vec<f64> {
 
 /// Clamped knots for interpolation by de Boor's averaging: interior knot j is the mean of
 /// p consecutive parameters, which keeps the collocation matrix nonsingular.
-pub fn averaging_knots(params: &[f64], p: usize) -> Vec<f64> {
+pub(crate) fn averaging_knots(params: &[f64], p: usize) -> Vec<f64> {
     let n = params.len();
     let mut k = vec![0.0; p + 1];
     for j in 1..n - p {
@@ -262,7 +262,7 @@ pub fn approximation_knots(params: &[f64], count: usize, p: usize) -> Vec<f64> {
 
 /// Schoenberg-Whitney: a strictly increasing choice of parameters with N_i(t) > 0 for every
 /// basis function exists. Without it the least-squares matrix is rank deficient.
-pub fn schoenberg_whitney(knots: &[f64], count: usize, p: usize, sorted_params: &[f64]) -> bool {
+pub(crate) fn schoenberg_whitney(knots: &[f64], count: usize, p: usize, sorted_params: &[f64]) -> bool {
     // Greedy: give each function the first unused parameter past the start of its support.
     let mut k = 0;
     for i in 0..count {

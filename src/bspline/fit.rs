@@ -414,7 +414,7 @@ pub struct SurfaceFit {
 }
 
 /// Fits a grid with given parameters and knots: the column pass, then the row pass.
-pub fn fit_grid_with(
+pub(crate) fn fit_grid_with(
     grid: &Grid,
     (us, vs): (&[f64], &[f64]),
     (knots_u, knots_v): (Vec<f64>, Vec<f64>),
@@ -453,7 +453,7 @@ pub fn fit_grid_with(
 }
 
 /// Distances between the data and the surface at the grid parameters, row-major.
-pub fn grid_errors(surface: &BSplineSurface, grid: &Grid, us: &[f64], vs: &[f64]) -> Vec<f64> {
+pub(crate) fn grid_errors(surface: &BSplineSurface, grid: &Grid, us: &[f64], vs: &[f64]) -> Vec<f64> {
     let rows_v: Vec<_> = vs.iter().map(|&v| surface.row_v(v, 0)).collect();
     let mut e = Vec::with_capacity(grid.points.len());
     for (r, &u) in us.iter().enumerate() {

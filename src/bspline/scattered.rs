@@ -115,7 +115,7 @@ fn check(
 
 /// Knots at quantiles of the data parameters (the approximation averaging rule applied to
 /// the sorted parameters), so denser data gets more knots.
-pub fn scattered_knots(
+pub(crate) fn scattered_knots(
     params: &[(f64, f64)],
     (cu, cv): (usize, usize),
     (p, q): (usize, usize),
@@ -139,7 +139,7 @@ pub fn scattered_knots(
 }
 
 /// Direct least squares with given knots.
-pub fn solve_direct(
+pub(crate) fn solve_direct(
     points: &[DVec3],
     params: &[(f64, f64)],
     knots: (&[f64], &[f64]),
@@ -233,7 +233,7 @@ pub fn solve_direct(
 /// LSPIA: P <- P + mu N^T (D - N P) with mu = 1 / max column sum of N, which is below
 /// 2 / lambda_max(N^T N) because rows of N sum to 1. Converges to the least-squares
 /// solution when N has full rank, more slowly than the direct solve but in O(data) memory.
-pub fn solve_lspia(
+pub(crate) fn solve_lspia(
     points: &[DVec3],
     params: &[(f64, f64)],
     start: BSplineSurface,

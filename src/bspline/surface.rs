@@ -86,7 +86,7 @@ impl BSplineSurface {
     }
 
     /// Position from precomputed basis rows (grids evaluate each row once).
-    pub fn point_from_rows(&self, ru: &BasisRow, rv: &BasisRow) -> DVec3 {
+    pub(crate) fn point_from_rows(&self, ru: &BasisRow, rv: &BasisRow) -> DVec3 {
         self.combine(ru, rv, false).position
     }
 
@@ -126,7 +126,7 @@ impl BSplineSurface {
 
     /// Derivatives at every (us[r], vs[c]), row-major in r. Basis rows are computed once per
     /// grid line, not once per point, and rows of the grid run in parallel.
-    pub fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
+    pub(crate) fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
         let rows_v: Vec<BasisRow> = vs.iter().map(|&v| self.row_v(v, 2)).collect();
         let mut out = vec![Derivatives::default(); us.len() * vs.len()];
         if vs.is_empty() {
@@ -246,7 +246,7 @@ impl BSplineSurface {
 
 /// Two counter-clockwise (in (u, v)) triangles per cell of a rows x cols vertex grid,
 /// row-major vertices, split along the (r, c)-(r + 1, c + 1) diagonal.
-pub fn grid_triangles(rows: usize, cols: usize) -> Vec<[u32; 3]> {
+pub(crate) fn grid_triangles(rows: usize, cols: usize) -> Vec<[u32; 3]> {
     let id = |r: usize, c: usize| (r * cols + c) as u32;
     let mut t = Vec::with_capacity(2 * rows.saturating_sub(1) * cols.saturating_sub(1));
     for r in 0..rows.saturating_sub(1) {

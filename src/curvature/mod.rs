@@ -8,6 +8,7 @@
 //!
 //! Sign convention (the document's): n = S_u x S_v / |S_u x S_v|; a cap bulging towards
 //! n has H < 0 and counts as convex.
+#![warn(missing_docs)]
 
 pub mod regions;
 
@@ -86,7 +87,7 @@ impl DerivativeSurface for BSplineSurface {
 }
 
 /// The Loop surface over grid cells that `trispline fit` writes for scans.
-pub struct GridPatch {
+pub(crate) struct GridPatch {
     pub surface: crate::surface::grid_spline::GridSpline,
     pub controls: Vec<DVec3>,
 }
@@ -201,12 +202,12 @@ impl LoopMeshPatch {
     }
 
     /// The packed parameter of (face, u, v).
-    pub fn pack(face: usize, u: f64, v: f64) -> (f64, f64) {
+    pub(crate) fn pack(face: usize, u: f64, v: f64) -> (f64, f64) {
         (2.0 * face as f64 + u, v)
     }
 
     /// The (face, u, v) of a packed parameter; faces out of range are clamped.
-    pub fn unpack(&self, s: f64, v: f64) -> SurfaceParam {
+    pub(crate) fn unpack(&self, s: f64, v: f64) -> SurfaceParam {
         let last = self.surface.faces().len().saturating_sub(1);
         let face = if s.is_finite() && s > 0.0 {
             ((s / 2.0).floor() as usize).min(last)

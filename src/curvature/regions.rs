@@ -65,7 +65,7 @@ pub struct Lattice {
 
 impl Lattice {
     /// `n x n` samples over a rectangle (n >= 2), row-major with u along rows.
-    pub fn rectangle(u: (f64, f64), v: (f64, f64), n: usize) -> Self {
+    pub(crate) fn rectangle(u: (f64, f64), v: (f64, f64), n: usize) -> Self {
         let n = n.max(2);
         let at = |a: (f64, f64), k: usize| a.0 + (a.1 - a.0) * k as f64 / (n - 1) as f64;
         let params = (0..n * n).map(|k| (at(u, k / n), at(v, k % n))).collect();

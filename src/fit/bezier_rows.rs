@@ -31,7 +31,7 @@ const PARALLEL_WORK: usize = 200_000;
 const BLOCK_WORK: usize = 40_000;
 
 #[derive(Clone, Debug)]
-pub struct BezierRows {
+pub(crate) struct BezierRows {
     degree: usize,
     npoints: usize,
     /// Row r holds sorted positions `start[r]..start[r + 1]`.
@@ -330,7 +330,7 @@ impl BezierRows {
     }
 
     /// y = N x.
-    pub fn mul<const L: usize>(&self, x: &[[f64; L]], y: &mut [[f64; L]]) {
+    pub(crate) fn mul<const L: usize>(&self, x: &[[f64; L]], y: &mut [[f64; L]]) {
         let q = self.grid(x);
         let sorted_out = |out: &mut [[f64; L]]| {
             if self.parallel() {
@@ -361,7 +361,7 @@ impl BezierRows {
     }
 
     /// x = N^T y.
-    pub fn mul_t<const L: usize>(&self, y: &[[f64; L]], x: &mut [[f64; L]]) {
+    pub(crate) fn mul_t<const L: usize>(&self, y: &[[f64; L]], x: &mut [[f64; L]]) {
         let grid = if self.parallel() {
             let parts: Vec<Vec<f64>> = self
                 .blocks
@@ -388,7 +388,7 @@ impl BezierRows {
     }
 
     /// The same operator as an explicit CSR matrix (for the direct solve and for tests).
-    pub fn to_csr(&self) -> Csr {
+    pub(crate) fn to_csr(&self) -> Csr {
         let n1 = self.degree + 1;
         let nc = self.ncols();
         let mut rows: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.npoints];

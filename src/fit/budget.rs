@@ -57,7 +57,7 @@ pub struct StepStats {
 }
 
 impl StepStats {
-    pub fn from_residuals(k: usize, residuals: &[DVec3], tolerance: f64, elapsed_ms: f64) -> Self {
+    pub(crate) fn from_residuals(k: usize, residuals: &[DVec3], tolerance: f64, elapsed_ms: f64) -> Self {
         let n = residuals.len().max(1) as f64;
         let chunk = |rs: &[DVec3]| {
             let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
@@ -103,7 +103,7 @@ impl Budget {
         targets.iter().any(Option::is_some) && targets.iter().all(|t| t.unwrap_or(true))
     }
 
-    pub fn has_targets(&self) -> bool {
+    pub(crate) fn has_targets(&self) -> bool {
         self.max_error.is_some()
             || self.mean_error.is_some()
             || self.rms_error.is_some()

@@ -95,7 +95,7 @@ impl Collocation {
     }
 
     /// The LSPIA step's lambda_max of N^T N alone, computed by `estimate` on first use.
-    pub fn cached_lambda_max(&self, estimate: impl FnOnce() -> f64) -> f64 {
+    pub(crate) fn cached_lambda_max(&self, estimate: impl FnOnce() -> f64) -> f64 {
         *self.lambda.get_or_init(estimate)
     }
 
@@ -151,7 +151,7 @@ impl Collocation {
     }
 
     /// y = N x for one scalar field.
-    pub fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
+    pub(crate) fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
         match &self.op {
             Operator::Sparse => self.n().mul_scalar(x, y),
             Operator::BezierRows(op) => {
@@ -164,7 +164,7 @@ impl Collocation {
     }
 
     /// x = N^T y for one scalar field.
-    pub fn mul_t_scalar(&self, y: &[f64], x: &mut [f64]) {
+    pub(crate) fn mul_t_scalar(&self, y: &[f64], x: &mut [f64]) {
         match &self.op {
             Operator::Sparse => self.nt().mul_scalar(y, x),
             Operator::BezierRows(op) => {

@@ -87,7 +87,7 @@ impl Csr {
     }
 
     /// y = A x for one scalar field.
-    pub fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
+    pub(crate) fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
         let row = |r: usize| -> f64 {
             (self.row_ptr[r]..self.row_ptr[r + 1])
                 .map(|k| self.values[k] * x[self.col_idx[k] as usize])

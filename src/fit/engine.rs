@@ -85,7 +85,7 @@ impl FitError {
     }
 }
 
-pub type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
+pub(crate) type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
 
 pub struct FitProblem<'a> {
     pub basis: &'a Collocation,

@@ -1,4 +1,5 @@
 //! Surface-independent fitting: collocation matrix, methods, budgets.
+#![warn(missing_docs)]
 
 pub mod bezier_rows;
 pub mod budget;
@@ -6,10 +7,10 @@ pub mod collocation;
 pub mod csr;
 pub mod distance;
 pub mod engine;
-pub mod normal_matrix;
-pub mod normal_solve;
+pub(crate) mod normal_matrix;
+pub(crate) mod normal_solve;
 mod simd;
-pub mod stencil_matrix;
+pub(crate) mod stencil_matrix;
 
 pub use budget::{Budget, FitStatus, StepStats};
 pub use collocation::Collocation;

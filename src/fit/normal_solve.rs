@@ -135,7 +135,7 @@ fn finite(x: Vec<DVec3>) -> Result<Vec<DVec3>, DirectFailure> {
 
 impl ScalarMatrix {
     /// Jacobi-preconditioned CG.
-    pub fn solve_pcg(
+    pub(crate) fn solve_pcg(
         &self,
         start: Vec<DVec3>,
         max_iter: usize,
@@ -147,7 +147,7 @@ impl ScalarMatrix {
     }
 
     /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly.
-    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
+    pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
         let rows = self.idx.iter().map(|&j| j as usize).collect();
@@ -163,7 +163,7 @@ impl BlockMatrix {
     /// CG preconditioned by the inverse 3x3 diagonal blocks: with a small tangential share
     /// the system is much stiffer along the normals than along the surface, and the blocks,
     /// which see each control's normal, take most of that spread out of the iteration.
-    pub fn solve_pcg(
+    pub(crate) fn solve_pcg(
         &self,
         start: Vec<DVec3>,
         max_iter: usize,
@@ -175,7 +175,7 @@ impl BlockMatrix {
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
-    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
+    pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let mut col_ptr = Vec::with_capacity(3 * m + 1);
         col_ptr.push(0);

@@ -15,11 +15,11 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 /// Controls per stencil (a box-spline cell).
-pub const WIDTH: usize = 12;
+pub(crate) const WIDTH: usize = 12;
 
 /// One data row per point: its stencil and the weights of the stencil's controls.
 #[derive(Clone, Debug, Default)]
-pub struct StencilRows {
+pub(crate) struct StencilRows {
     pub stencil: Vec<u32>,
     pub weights: Vec<[f64; WIDTH]>,
 }
@@ -85,7 +85,7 @@ struct StencilSums<'a, W> {
 
 /// The fixed part of every assembly over a set of stencils.
 #[derive(Clone, Debug)]
-pub struct StencilPlan {
+pub(crate) struct StencilPlan {
     controls: usize,
     stencils: Vec<[u32; WIDTH]>,
     ptr: Vec<usize>,
@@ -388,12 +388,12 @@ impl StencilPlan {
     }
 
     /// N^T N + s L^T L and N^T p (point-to-point).
-    pub fn assemble_scalar(&self, rows: &StencilRows, data: &[DVec3]) -> ScalarMatrix {
+    pub(crate) fn assemble_scalar(&self, rows: &StencilRows, data: &[DVec3]) -> ScalarMatrix {
         self.assemble::<1>(rows, ScalarMatrix::weight(data))
     }
 
     /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (squared distance).
-    pub fn assemble_blocks(
+    pub(crate) fn assemble_blocks(
         &self,
         rows: &StencilRows,
         data: &[DVec3],
@@ -421,7 +421,7 @@ impl StencilRows {
 
     /// The same rows as a general sparse matrix (zero weights dropped, as the general
     /// collocation does).
-    pub fn to_csr(&self, plan: &StencilPlan) -> Csr {
+    pub(crate) fn to_csr(&self, plan: &StencilPlan) -> Csr {
         let mut m = Csr {
             nrows: self.stencil.len(),
             ncols: plan.controls,

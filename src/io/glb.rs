@@ -152,7 +152,7 @@ pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
     out
 }
 
-pub fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
+pub(crate) fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
     std::fs::write(path, glb_bytes(mesh, attrs))
         .map_err(|e| IoError::new(path.display().to_string(), None, IoErrorKind::Write(e)))
 }

@@ -12,7 +12,7 @@ const COMPRESSED: [&str; 3] = [
 ];
 
 /// `base` is the folder for external buffers of a .gltf file (None for in-memory input).
-pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
+pub(crate) fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
     let e = |kind: IoErrorKind| IoError::new(file, None, kind);
     let gltf = gltf::Gltf::from_slice(bytes).map_err(|x| e(IoErrorKind::Gltf(x)))?;
     for ext in gltf.extensions_required().chain(gltf.extensions_used()) {

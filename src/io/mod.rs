@@ -1,8 +1,9 @@
 //! File formats. The only module that touches the filesystem for meshes.
+#![warn(missing_docs)]
 
 mod error;
 pub mod glb;
-pub mod gltf_reader;
+pub(crate) mod gltf_reader;
 pub mod iges;
 pub mod obj;
 pub mod off;
@@ -30,7 +31,7 @@ pub enum Format {
 }
 
 impl Format {
-    pub fn from_path(path: &Path) -> Option<Format> {
+    pub(crate) fn from_path(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         Some(match ext.as_str() {
             "obj" => Format::Obj,
@@ -122,7 +123,7 @@ fn read_with_base(
 }
 
 /// Merges vertices with bit-identical coordinates (and drops none otherwise).
-pub fn weld_exact(mesh: TriMesh) -> TriMesh {
+pub(crate) fn weld_exact(mesh: TriMesh) -> TriMesh {
     let mut map = std::collections::HashMap::with_capacity(mesh.positions.len());
     let mut positions = Vec::new();
     let remap: Vec<u32> = mesh
@@ -193,7 +194,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 /// then all are renamed in order and the folder is fsynced once. Each file on its own is
 /// old-complete or new-complete after a crash, as with `write_atomic`, and the last one is
 /// only durable together with the others because they share the folder's one fsync.
-pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
+pub(crate) fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
     use std::io::Write;
     let err = |name: &str, e: std::io::Error| {
         IoError::new(

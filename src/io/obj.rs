@@ -8,7 +8,7 @@ use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
         IoError::at(
             file,

@@ -5,7 +5,7 @@ use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub fn read_stl(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_stl(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     // A binary STL states its facet count; check it before stl_io allocates for it.
     if bytes.len() >= 84 && !bytes.starts_with(b"solid") {
         let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;

@@ -10,7 +10,7 @@ use crate::surface::loop_limit::LoopLimitSurface;
 use glam::DVec3;
 use serde_json::{json, Value};
 
-pub const SCHEMA: &str = "trispline.surface/1";
+pub(crate) const SCHEMA: &str = "trispline.surface/1";
 
 /// A surface as described by a `surface.json`.
 #[derive(Clone, Debug)]
@@ -72,7 +72,7 @@ fn int_rows<const N: usize>(v: &Value, key: &str, name: &str) -> Result<Vec<[i64
 }
 
 /// The JSON object of a B-spline surface (without fit statistics, which callers add).
-pub fn bspline_json(s: &BSplineSurface) -> Value {
+pub(crate) fn bspline_json(s: &BSplineSurface) -> Value {
     let (p, q) = s.degrees();
     let (nu, nv) = s.counts();
     json!({

@@ -49,6 +49,6 @@ pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     write(path, &obj_bytes(mesh))
 }
 
-pub fn write_ply(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
+pub(crate) fn write_ply(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     write(path, &ply_bytes(mesh))
 }

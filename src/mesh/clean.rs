@@ -427,11 +427,6 @@ fn split_pinches(
     pinches.len()
 }
 
-/// An undirected edge as one hashable word.
-pub fn edge_key(a: u32, b: u32) -> u64 {
-    ((a.min(b) as u64) << 32) | a.max(b) as u64
-}
-
 /// The undirected edges of a triangle list and the faces on each, built without hashing:
 /// half-edges are bucketed by their lower endpoint and each (small) bucket sorted. Edge
 /// ids follow the (lower, higher) endpoint order; each edge's faces come in face order.

@@ -84,7 +84,7 @@ impl InverseError {
 }
 
 /// Paper's equation 1 weights (mu, eta) for an interior even vertex of valence `l`.
-pub fn inverse_weights(l: usize) -> (f64, f64) {
+pub(crate) fn inverse_weights(l: usize) -> (f64, f64) {
     let beta = loop_beta(l);
     let alpha = 1.0 - l as f64 * beta;
     let mu = 5.0 / (8.0 * alpha - 3.0);
@@ -100,7 +100,7 @@ pub fn exact_inverse_operator(fine: &Topology, level: &Level) -> SparseOperator 
 /// `exact_inverse_operator` for a fine mesh whose coarse vertices are known without
 /// detection (a resampling lattice's): `coarse_to_fine` maps each coarse vertex to its
 /// even fine vertex. The rule reads only that vertex's ring in `fine`.
-pub fn exact_inverse_rows(fine: &Topology, coarse_to_fine: &[u32]) -> SparseOperator {
+pub(crate) fn exact_inverse_rows(fine: &Topology, coarse_to_fine: &[u32]) -> SparseOperator {
     let mut op = SparseOperator {
         input_len: fine.vertex_count,
         row_start: vec![0],
@@ -291,7 +291,7 @@ fn identity(n: usize) -> SparseOperator {
 }
 
 /// `outer * inner` as one operator.
-pub fn compose(outer: &SparseOperator, inner: &SparseOperator) -> SparseOperator {
+pub(crate) fn compose(outer: &SparseOperator, inner: &SparseOperator) -> SparseOperator {
     let mut op = SparseOperator {
         input_len: inner.input_len,
         row_start: vec![0],

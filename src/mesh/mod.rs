@@ -1,4 +1,5 @@
 //! Triangle meshes: the in-memory form every reader produces and every stage consumes.
+#![warn(missing_docs)]
 
 use glam::DVec3;
 
@@ -26,16 +27,18 @@ impl TriMesh {
         }
     }
 
+    /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
+    /// Number of triangles.
     pub fn face_count(&self) -> usize {
         self.triangles.len()
     }
 
     /// Axis-aligned bounds, or `None` for a mesh without vertices.
-    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+    pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
         let first = *self.positions.first()?;
         Some(
             self.positions

@@ -173,7 +173,7 @@ pub fn mesh_stats(mesh: &TriMesh, max_depth: usize) -> MeshStats {
     }
 }
 
-pub struct UnionFind {
+pub(crate) struct UnionFind {
     parent: Vec<usize>,
 }
 
@@ -190,7 +190,7 @@ impl UnionFind {
         }
         x
     }
-    pub fn union(&mut self, a: usize, b: usize) {
+    pub(crate) fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra != rb {
             self.parent[ra.max(rb)] = ra.min(rb);

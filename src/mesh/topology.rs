@@ -120,7 +120,7 @@ impl Topology {
 
     /// Number of neighbours (edges) of `v`.
     #[inline]
-    pub fn ring_halfedges(&self, v: u32) -> &[u32] {
+    pub(crate) fn ring_halfedges(&self, v: u32) -> &[u32] {
         &self.ring_halfedge
             [self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize]
     }
@@ -141,7 +141,7 @@ impl Topology {
         self.boundary[v as usize] && self.face_valence[v as usize] == 1
     }
 
-    pub fn edge_count(&self) -> usize {
+    pub(crate) fn edge_count(&self) -> usize {
         let boundary = self.twin.iter().filter(|&&t| t == NONE).count();
         boundary + (self.twin.len() - boundary) / 2
     }

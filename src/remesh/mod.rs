@@ -1,12 +1,13 @@
 //! From an arbitrary disk-like scan component to a planar map: boundary loops, hole filling
 //! (virtual faces, never data), the least-fold projection (`planar`) and its bijective
 //! fallback, Floater's mean-value map onto a disk (`param`), and point location in the map.
+#![warn(missing_docs)]
 
 mod band;
 pub mod param;
 pub mod planar;
 mod plane2d;
-pub mod warp;
+pub(crate) mod warp;
 
 use crate::mesh::topology::{Topology, TopologyError, NONE};
 use crate::mesh::TriMesh;
@@ -193,7 +194,7 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
 
 /// An equilateral triangle of side 1; the mean-value disk map puts the boundary on (a
 /// slightly shrunk copy of) its inscribed circle.
-pub const DOMAIN: [DVec2; 3] = [
+pub(crate) const DOMAIN: [DVec2; 3] = [
     DVec2::new(1.0, 0.0),
     DVec2::new(0.5, 0.866_025_403_784_438_6),
     DVec2::new(0.0, 0.0),

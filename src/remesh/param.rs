@@ -126,7 +126,7 @@ fn solve_mean_value(rows: &[Vec<(usize, f64)>], b: &[DVec2]) -> Result<Vec<DVec2
 }
 
 /// Point location in the planar triangulation through a uniform grid of buckets.
-pub struct Locator<'a> {
+pub(crate) struct Locator<'a> {
     tris: &'a [[u32; 3]],
     plane: &'a [DVec2],
     lo: DVec2,

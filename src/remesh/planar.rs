@@ -12,7 +12,8 @@
 //! provably bijective, and verified to have no triangle of non-positive area.
 
 use super::param::mean_value_disk;
-pub use super::plane2d::{doubled_area, folded_triangles};
+pub(crate) use super::plane2d::doubled_area;
+pub use super::plane2d::folded_triangles;
 use super::warp::PlaneWarp;
 use super::{FilledPatch, MapFailure, RemeshError};
 use crate::mesh::TriMesh;
@@ -260,7 +261,7 @@ const WARP_ITERATIONS: usize = 5;
 /// alone fold more than the share of triangles a projection map may fold: `planar_map`
 /// then falls back to the disk, which is not warped (should it not, `evened_out` builds
 /// the warp itself, the same one).
-pub fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
+pub(crate) fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
     let plane: Vec<DVec2> = data.positions.iter().map(|&p| frame.project(p)).collect();
     let folds = folded_triangles(&data.triangles, &plane).len();
     if folds as f64 > MAX_FOLD_FRACTION * data.triangles.len() as f64 {

@@ -4,7 +4,7 @@
 use glam::DVec2;
 
 /// Twice the signed area of a triangle in the map (positive counter-clockwise).
-pub fn doubled_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
+pub(crate) fn doubled_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
     let (a, b, c) = (
         plane[t[0] as usize],
         plane[t[1] as usize],

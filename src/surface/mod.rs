@@ -1,4 +1,5 @@
 //! Triangular surfaces behind one trait: value, derivatives and sparse basis rows.
+#![warn(missing_docs)]
 
 pub mod bezier;
 pub mod box_spline;

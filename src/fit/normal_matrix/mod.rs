@@ -49,7 +49,7 @@ pub(super) fn packed_index(a: usize, b: usize, k: usize) -> usize {
 /// Row-wise sparse storage of M: for control c its neighbours `idx[ptr[c]..ptr[c + 1]]`
 /// (sorted) and the sums of each pair.
 #[derive(Clone, Debug)]
-pub struct NormalMatrix<const K: usize> {
+pub(crate) struct NormalMatrix<const K: usize> {
     pub ptr: Vec<usize>,
     pub idx: Vec<u32>,
     pub entries: Vec<[f64; K]>,
@@ -58,13 +58,13 @@ pub struct NormalMatrix<const K: usize> {
 }
 
 /// Point-to-point: the same matrix for all three coordinates.
-pub type ScalarMatrix = NormalMatrix<1>;
+pub(crate) type ScalarMatrix = NormalMatrix<1>;
 /// Squared distance: symmetric 3x3 blocks, six sums each (`BlockMatrix::block`).
-pub type BlockMatrix = NormalMatrix<6>;
+pub(crate) type BlockMatrix = NormalMatrix<6>;
 
 /// The fairness term s L^T L: L by rows and by columns (its transpose).
 #[derive(Clone, Copy)]
-pub struct Fairness<'a> {
+pub(crate) struct Fairness<'a> {
     pub l: &'a Csr,
     pub lt: &'a Csr,
     pub smoothing: f64,
@@ -418,7 +418,7 @@ impl<const K: usize> Gather<'_, K> {
 
 impl ScalarMatrix {
     /// N^T N + s L^T L and N^T p.
-    pub fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
+    pub(crate) fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
         assemble::<1>(n, Self::weight(data), fairness, lower_only)
     }
 
@@ -434,7 +434,7 @@ impl ScalarMatrix {
     }
 
     /// Inverse diagonal (1 where a control has no term).
-    pub fn jacobi(&self) -> Vec<f64> {
+    pub(crate) fn jacobi(&self) -> Vec<f64> {
         (0..self.ptr.len() - 1)
             .map(|c| {
                 let range = self.ptr[c]..self.ptr[c + 1];
@@ -452,7 +452,7 @@ impl ScalarMatrix {
 impl BlockMatrix {
     /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (`tangential`: t_j per
     /// data row).
-    pub fn assemble(
+    pub(crate) fn assemble(
         n: &Csr,
         data: &[DVec3],
         normals: &[DVec3],
@@ -510,7 +510,7 @@ impl BlockMatrix {
 
     /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
     /// becomes the identity.
-    pub fn block_jacobi(&self) -> Vec<DMat3> {
+    pub(crate) fn block_jacobi(&self) -> Vec<DMat3> {
         (0..self.ptr.len() - 1)
             .into_par_iter()
             .map(|c| {

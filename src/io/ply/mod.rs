@@ -11,10 +11,10 @@ use crate::mesh::TriMesh;
 use body::{read_count, Body};
 use glam::DVec3;
 use header::{parse_header, Element, Encoding, Header, Property};
-pub use range_grid::triangulate_range_grid;
+use range_grid::triangulate_range_grid;
 
 /// Reads a PLY file held in memory; `file` names it in errors.
-pub fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, IoError> {
+pub(crate) fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<Loaded, IoError> {
     let header = parse_header(bytes, file)?;
     let mut body = Body {
         bytes,

@@ -5,7 +5,7 @@ use crate::io::RangeGrid;
 /// Triangulates a range image: each full 2x2 cell is split on its shorter diagonal, a cell
 /// with three points gives one triangle, and triangles with an edge longer than
 /// `max_edge_factor` times the median grid spacing (depth jumps) are dropped.
-pub fn triangulate_range_grid(
+pub(crate) fn triangulate_range_grid(
     grid: &RangeGrid,
     cells: &[Option<u32>],
     max_edge_factor: f64,
