@@ -14,7 +14,9 @@ const W: usize = MAX_DEGREE + 1;
 /// parameter: `d[k][r]` is the k-th derivative of N_{span-p+r}.
 #[derive(Clone, Copy, Debug)]
 pub struct BasisRow {
+    /// The knot span s: the row's values belong to controls s - p ..= s.
     pub span: usize,
+    /// Basis values and their first and second derivatives, p + 1 each.
     pub d: [[f64; W]; 3],
 }
 
@@ -262,7 +264,12 @@ pub fn approximation_knots(params: &[f64], count: usize, p: usize) -> Vec<f64> {
 
 /// Schoenberg-Whitney: a strictly increasing choice of parameters with N_i(t) > 0 for every
 /// basis function exists. Without it the least-squares matrix is rank deficient.
-pub(crate) fn schoenberg_whitney(knots: &[f64], count: usize, p: usize, sorted_params: &[f64]) -> bool {
+pub(crate) fn schoenberg_whitney(
+    knots: &[f64],
+    count: usize,
+    p: usize,
+    sorted_params: &[f64],
+) -> bool {
     // Greedy: give each function the first unused parameter past the start of its support.
     let mut k = 0;
     for i in 0..count {

@@ -33,7 +33,7 @@ pub enum BSplineError {
     /// A knot is not finite or the knots decrease somewhere.
     #[error("knot vector: knots must be finite and non-decreasing")]
     KnotOrder,
-    /// The clamped parameter domain [knots[p], knots[count]] is empty.
+    /// The clamped parameter domain `[knots[p], knots[count]]` is empty.
     #[error("knot vector: empty parameter domain")]
     EmptyDomain,
     /// An interior knot repeats more than `degree` times, which would disconnect the curve.

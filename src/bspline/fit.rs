@@ -24,12 +24,16 @@ pub enum Ends {
 /// the data parameters, which bound the true point-to-surface distances from above.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ErrorStats {
+    /// Largest error.
     pub max_error: f64,
+    /// Root mean square error.
     pub rms_error: f64,
+    /// Mean error.
     pub mean_error: f64,
 }
 
 impl ErrorStats {
+    /// Statistics of a list of point errors (all zero for an empty list).
     pub fn of(errors: &[f64]) -> Self {
         if errors.is_empty() {
             return Self::default();
@@ -135,9 +139,13 @@ fn check_points(points: &[DVec3]) -> Result<(), BSplineError> {
 /// A fitted curve with its data parameters and per-point errors.
 #[derive(Clone, Debug)]
 pub struct CurveFit {
+    /// The fitted curve.
     pub curve: BSplineCurve,
+    /// Parameter of every data point.
     pub params: Vec<f64>,
+    /// Distance of every data point to its curve point.
     pub errors: Vec<f64>,
+    /// Statistics of `errors`.
     pub stats: ErrorStats,
 }
 
@@ -320,13 +328,17 @@ pub fn adaptive_curve(
 /// Grid data: `rows x cols` points, row-major. Rows run along u, columns along v.
 #[derive(Clone, Copy, Debug)]
 pub struct Grid<'a> {
+    /// Number of rows (the u direction).
     pub rows: usize,
+    /// Points per row (the v direction).
     pub cols: usize,
+    /// The points, row-major: point (r, c) at `r * cols + c`.
     pub points: &'a [DVec3],
 }
 
 impl Grid<'_> {
     #[inline]
+    /// Point (r, c).
     pub fn at(&self, r: usize, c: usize) -> DVec3 {
         self.points[r * self.cols + c]
     }
@@ -407,9 +419,13 @@ pub fn grid_parameters(grid: &Grid, method: ParamMethod) -> (Vec<f64>, Vec<f64>)
 /// A fitted surface with its data parameters and per-point errors (row-major, like the data).
 #[derive(Clone, Debug)]
 pub struct SurfaceFit {
+    /// The fitted surface.
     pub surface: BSplineSurface,
+    /// (u, v) of every grid point, row-major.
     pub params: Vec<(f64, f64)>,
+    /// Distance of every grid point to its surface point.
     pub errors: Vec<f64>,
+    /// Statistics of `errors`.
     pub stats: ErrorStats,
 }
 
@@ -453,7 +469,12 @@ pub(crate) fn fit_grid_with(
 }
 
 /// Distances between the data and the surface at the grid parameters, row-major.
-pub(crate) fn grid_errors(surface: &BSplineSurface, grid: &Grid, us: &[f64], vs: &[f64]) -> Vec<f64> {
+pub(crate) fn grid_errors(
+    surface: &BSplineSurface,
+    grid: &Grid,
+    us: &[f64],
+    vs: &[f64],
+) -> Vec<f64> {
     let rows_v: Vec<_> = vs.iter().map(|&v| surface.row_v(v, 0)).collect();
     let mut e = Vec::with_capacity(grid.points.len());
     for (r, &u) in us.iter().enumerate() {

@@ -8,6 +8,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 #[derive(Clone, Debug, PartialEq)]
+/// A clamped, non-rational tensor-product B-spline surface.
 pub struct BSplineSurface {
     degree_u: usize,
     degree_v: usize,
@@ -20,6 +21,7 @@ pub struct BSplineSurface {
 }
 
 impl BSplineSurface {
+    /// Checks degrees, knots and control count (`counts.0 * counts.1`) and the controls for finiteness.
     pub fn new(
         (degree_u, degree_v): (usize, usize),
         knots_u: Vec<f64>,
@@ -49,18 +51,23 @@ impl BSplineSurface {
         })
     }
 
+    /// Degrees (p along u, q along v).
     pub fn degrees(&self) -> (usize, usize) {
         (self.degree_u, self.degree_v)
     }
+    /// Control points along u and along v.
     pub fn counts(&self) -> (usize, usize) {
         (self.count_u, self.count_v)
     }
+    /// The knot vector along u.
     pub fn knots_u(&self) -> &[f64] {
         &self.knots_u
     }
+    /// The knot vector along v.
     pub fn knots_v(&self) -> &[f64] {
         &self.knots_v
     }
+    /// The control points, row-major (see the module docs).
     pub fn controls(&self) -> &[DVec3] {
         &self.controls
     }
@@ -73,13 +80,16 @@ impl BSplineSurface {
         )
     }
 
+    /// Basis row along u at `u`, with `nd` derivatives (0..=2).
     pub fn row_u(&self, u: f64, nd: usize) -> BasisRow {
         basis_row(&self.knots_u, self.count_u, self.degree_u, u, nd)
     }
+    /// Basis row along v at `v`, with `nd` derivatives (0..=2).
     pub fn row_v(&self, v: f64, nd: usize) -> BasisRow {
         basis_row(&self.knots_v, self.count_v, self.degree_v, v, nd)
     }
 
+    /// The surface point at (u, v).
     pub fn point(&self, u: f64, v: f64) -> DVec3 {
         self.combine(&self.row_u(u, 0), &self.row_v(v, 0), false)
             .position

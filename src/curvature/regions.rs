@@ -50,7 +50,9 @@ type FastSet<K> = HashSet<K, BuildHasherDefault<FxHasher>>;
 /// boundary as a counter-clockwise vertex loop.
 #[derive(Clone, Debug)]
 pub struct Lattice {
+    /// Sample parameters.
     pub params: Vec<(f64, f64)>,
+    /// Counter-clockwise triangles of samples.
     pub triangles: Vec<[u32; 3]>,
     /// Directed domain-boundary edges, the domain on their left (one loop for a rectangle
     /// or triangle, several for a union of grid cells with holes).
@@ -181,6 +183,7 @@ impl Lattice {
 }
 
 #[derive(Clone, Debug)]
+/// How a surface is sampled and its regions cleaned up.
 pub struct AnalysisOptions {
     /// Samples per side of the parameter lattice.
     pub grid: usize,
@@ -202,9 +205,13 @@ impl Default for AnalysisOptions {
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
+/// A connected region of one type with its boundary loops.
 pub struct Region {
+    /// Region id (the index in `Analysis::regions`).
     pub id: u32,
+    /// Its type.
     pub kind: RegionKind,
+    /// Samples in it.
     pub samples: usize,
     /// Closed loops (last point = first) on the surface.
     pub loops: Vec<Vec<DVec3>>,
@@ -213,8 +220,11 @@ pub struct Region {
 }
 
 #[derive(Clone, Debug)]
+/// A curvature analysis: samples, their curvature and type, and the regions.
 pub struct Analysis {
+    /// The sampling.
     pub lattice: Lattice,
+    /// Surface point of every sample.
     pub positions: Vec<DVec3>,
     /// `None` at singular points of the parametrisation.
     pub curvature: Vec<Option<Curvature>>,
@@ -222,7 +232,9 @@ pub struct Analysis {
     pub kinds: Vec<RegionKind>,
     /// Region id per sample.
     pub region: Vec<u32>,
+    /// The regions, by id.
     pub regions: Vec<Region>,
+    /// The zero tolerance used.
     pub tolerance: ZeroTolerance,
     /// Milliseconds spent sampling (derivatives and curvature), labelling (classification,
     /// components, small-region merging) and tracing boundaries.
@@ -230,9 +242,13 @@ pub struct Analysis {
 }
 
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+/// Milliseconds per stage of an analysis.
 pub struct Timings {
+    /// Derivatives and curvature of every sample.
     pub sampling: f64,
+    /// Classification, components and small-region merging.
     pub labelling: f64,
+    /// Boundary loops.
     pub tracing: f64,
 }
 

@@ -86,10 +86,12 @@ impl Collocation {
         }
     }
 
+    /// Rows: data points.
     pub fn nrows(&self) -> usize {
         self.nrows
     }
 
+    /// Columns: control points.
     pub fn ncols(&self) -> usize {
         self.ncols
     }

@@ -8,15 +8,22 @@ use rayon::prelude::*;
 const PARALLEL_ROWS: usize = 20_000;
 
 #[derive(Clone, Debug, Default)]
+/// A sparse matrix in compressed-row form.
 pub struct Csr {
+    /// Number of rows.
     pub nrows: usize,
+    /// Number of columns.
     pub ncols: usize,
+    /// Row r's entries are `row_ptr[r]..row_ptr[r + 1]`.
     pub row_ptr: Vec<usize>,
+    /// Column of every entry.
     pub col_idx: Vec<u32>,
+    /// Value of every entry.
     pub values: Vec<f64>,
 }
 
 impl Csr {
+    /// A matrix of `ncols` columns from (column, value) rows; zero values are not stored.
     pub fn from_rows<'a>(ncols: usize, rows: impl IntoIterator<Item = &'a [(u32, f64)]>) -> Csr {
         let mut m = Csr {
             ncols,
@@ -36,6 +43,7 @@ impl Csr {
         m
     }
 
+    /// The transpose; each of its rows lists the original rows in increasing order.
     pub fn transpose(&self) -> Csr {
         let mut counts = vec![0usize; self.ncols + 1];
         for &c in &self.col_idx {
@@ -102,6 +110,7 @@ impl Csr {
         }
     }
 
+    /// Number of stored entries.
     pub fn nnz(&self) -> usize {
         self.values.len()
     }

@@ -87,26 +87,36 @@ impl FitError {
 
 pub(crate) type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
 
+/// A fit's inputs: the operator, the data and the optional fairness and PIA terms.
 pub struct FitProblem<'a> {
+    /// The collocation operator N.
     pub basis: &'a Collocation,
+    /// Data points, one per row of N.
     pub data: &'a [DVec3],
+    /// Weight s of the fairness term s |L P|^2 (0 = none).
     pub smoothing: f64,
     /// Fairness operator L over control points (with its transpose).
     pub fairness: Option<&'a Collocation>,
+    /// PIA's update from data residuals to control corrections (method pia only).
     pub pia_operator: Option<PiaOperator<'a>>,
     /// Called with every step's statistics as soon as they exist (k = 0, the starting
     /// net, first), e.g. for a progress bar. Runs on the fitting thread between steps.
     pub on_step: Option<StepHook<'a>>,
 }
 
+/// Called with every step's statistics.
 pub type StepHook<'a> = &'a (dyn Fn(&StepStats) + Sync);
 
 #[derive(Clone, Debug)]
+/// A finished fit.
 pub struct FitOutcome {
+    /// The fitted control points.
     pub controls: Vec<DVec3>,
     /// k = 0 is the initial net.
     pub steps: Vec<StepStats>,
+    /// Why it stopped.
     pub status: FitStatus,
+    /// Steps taken (`steps.len() - 1`).
     pub iterations: usize,
 }
 

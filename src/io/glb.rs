@@ -9,6 +9,7 @@ use std::path::Path;
 /// Optional per-vertex attributes for [`glb_bytes`].
 #[derive(Default)]
 pub struct GlbAttributes<'a> {
+    /// Unit normals, one per vertex.
     pub normals: Option<&'a [DVec3]>,
     /// Linear RGBA in 0..1.
     pub colors: Option<&'a [[f32; 4]]>,

@@ -61,10 +61,13 @@ impl std::str::FromStr for IgesUnits {
 }
 
 #[derive(Clone, Debug)]
+/// What goes into an IGES file's global section.
 pub struct IgesOptions {
+    /// Declared length unit.
     pub units: IgesUnits,
     /// Written into the global section (truncated to 60 characters).
     pub file_name: String,
+    /// Written into the global section's author field.
     pub author: String,
     /// Generation time; `None` writes the Unix epoch (reproducible output for tests).
     pub time: Option<SystemTime>,

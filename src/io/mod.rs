@@ -21,12 +21,19 @@ use std::path::Path;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+/// A mesh file format, named by its extension.
 pub enum Format {
+    /// Wavefront OBJ.
     Obj,
+    /// glTF 2.0 JSON (buffers embedded or beside the file).
     Gltf,
+    /// Binary glTF.
     Glb,
+    /// PLY, ascii or binary, with Stanford range grids.
     Ply,
+    /// STL, ascii or binary.
     Stl,
+    /// Object File Format.
     Off,
 }
 
@@ -46,6 +53,7 @@ impl Format {
 }
 
 #[derive(Clone, Debug)]
+/// Options of the mesh readers.
 pub struct LoadOptions {
     /// Range grids: triangles with an edge longer than this multiple of the median grid
     /// spacing bridge depth jumps and are dropped.
@@ -63,14 +71,20 @@ impl Default for LoadOptions {
 /// A raw range image: `rows x cols` cells, each holding a point or nothing.
 #[derive(Clone, Debug)]
 pub struct RangeGrid {
+    /// Rows of the image.
     pub rows: usize,
+    /// Columns of the image.
     pub cols: usize,
+    /// Cell (r, c) at `r * cols + c`.
     pub points: Vec<Option<DVec3>>,
 }
 
 #[derive(Clone, Debug)]
+/// A mesh as read, with the range image it came from, if any.
 pub struct Loaded {
+    /// The triangles (range grids: triangulated from the image).
     pub mesh: TriMesh,
+    /// The range image of a Stanford range-grid PLY.
     pub grid: Option<RangeGrid>,
 }
 

@@ -17,33 +17,44 @@ pub(crate) const SCHEMA: &str = "trispline.surface/1";
 pub enum SurfaceDescription {
     /// Triangular Bezier patch of the given degree, controls in lattice order.
     Bezier {
+        /// The degree.
         degree: usize,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface (quartic box spline) of a regular lattice net.
     Loop {
+        /// Domain lattice segments per side.
         domain_segments: usize,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface over cells of the three-direction grid (remeshed scans).
     LoopGrid {
+        /// The surface over the listed cells.
         surface: GridSpline,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Quartic Bezier patches over the cells of a grid (`bezier`, `layout: patches`): the
     /// same surface as `LoopGrid`, read from the box-spline form the file carries beside
     /// the patches.
     BezierPatches {
+        /// The box-spline form of the patches.
         surface: GridSpline,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface of an arbitrary manifold control mesh (`layout: mesh`): the
     /// control faces are the domain faces. Shared, since the surface memoises its
     /// subdivision nodes and is not cheap to rebuild.
     LoopMesh {
+        /// The surface of the control faces.
         surface: std::sync::Arc<LoopLimitSurface>,
+        /// Control points.
         controls: Vec<DVec3>,
     },
+    /// A tensor-product B-spline surface.
     BSpline(BSplineSurface),
 }
 

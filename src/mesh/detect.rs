@@ -425,6 +425,7 @@ fn propagate(
 /// A hierarchy of `levels.len()` detected levels, finest first.
 #[derive(Debug, Clone)]
 pub struct Hierarchy {
+    /// The levels, finest first.
     pub levels: Vec<Level>,
 }
 
@@ -454,6 +455,7 @@ impl Hierarchy {
         (Hierarchy { levels }, None)
     }
 
+    /// Number of levels found.
     pub fn depth(&self) -> usize {
         self.levels.len()
     }

@@ -6,6 +6,7 @@ use super::TriMesh;
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// Closest-point queries against a triangle mesh through a uniform grid of buckets.
 pub struct MeshDistance<'a> {
     mesh: &'a TriMesh,
     cell: f64,
@@ -13,6 +14,7 @@ pub struct MeshDistance<'a> {
 }
 
 impl<'a> MeshDistance<'a> {
+    /// Buckets the triangles of `mesh` (cells two mean edges wide).
     pub fn new(mesh: &'a TriMesh) -> Self {
         let p = &mesh.positions;
         let mean_edge = mesh

@@ -224,7 +224,9 @@ fn lsq_level(
 
 /// Result of coarsening: the coarse mesh and the hierarchy that produced it.
 pub struct Coarsened {
+    /// The coarsest mesh.
     pub mesh: TriMesh,
+    /// The levels recovered on the way.
     pub hierarchy: Hierarchy,
 }
 

@@ -15,11 +15,14 @@ pub mod topology;
 /// counter-clockwise order of the three corners.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {
+    /// Vertex positions.
     pub positions: Vec<DVec3>,
+    /// Counter-clockwise triangles of vertex indices.
     pub triangles: Vec<[u32; 3]>,
 }
 
 impl TriMesh {
+    /// A mesh of these vertices and triangles (not checked: see `clean` and `Topology`).
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Self {
         Self {
             positions,

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 /// Half-edges (twins) and vertices (rings) per parallel task.
 const PARALLEL_MIN: usize = 1 << 12;
 
+/// "No such half-edge / vertex" in the index arrays.
 pub const NONE: u32 = u32::MAX;
 
 /// Why a triangle list is not a manifold mesh this crate can walk.
@@ -53,23 +54,28 @@ impl TopologyError {
 /// Half-edge `h = 3 f + k` runs from corner k of face f to corner k+1.
 #[derive(Debug, Clone)]
 pub struct Topology {
+    /// Number of vertices (isolated ones included).
     pub vertex_count: usize,
+    /// The triangles.
     pub triangles: Vec<[u32; 3]>,
     /// Opposite half-edge, or `NONE` on the boundary.
     pub twin: Vec<u32>,
     /// CSR of the ordered 1-ring of each vertex: counter-clockwise, starting at the boundary
     /// neighbour for boundary vertices (whose ring then has one more vertex than faces).
     pub ring_start: Vec<u32>,
+    /// Ring entries (neighbour vertices), see `ring_start`.
     pub ring: Vec<u32>,
     /// Outgoing half-edge to each ring entry (`NONE` for the last neighbour of a boundary
     /// vertex, which is reached only through an incoming half-edge).
     pub ring_halfedge: Vec<u32>,
+    /// Whether each vertex is on the boundary.
     pub boundary: Vec<bool>,
     /// Number of incident faces per vertex.
     pub face_valence: Vec<u32>,
 }
 
 #[inline]
+/// The next half-edge in the same face.
 pub fn next(h: u32) -> u32 {
     if h % 3 == 2 {
         h - 2
@@ -78,6 +84,7 @@ pub fn next(h: u32) -> u32 {
     }
 }
 #[inline]
+/// The previous half-edge in the same face.
 pub fn prev(h: u32) -> u32 {
     if h.is_multiple_of(3) {
         h + 2
@@ -87,6 +94,7 @@ pub fn prev(h: u32) -> u32 {
 }
 
 impl Topology {
+    /// `build` on a mesh's vertex count and triangles.
     pub fn from_mesh(mesh: &TriMesh) -> Result<Topology, TopologyError> {
         Self::build(mesh.positions.len(), &mesh.triangles)
     }
@@ -114,6 +122,7 @@ impl Topology {
     }
 
     #[inline]
+    /// The ordered 1-ring of `v`.
     pub fn ring(&self, v: u32) -> &[u32] {
         &self.ring[self.ring_start[v as usize] as usize..self.ring_start[v as usize + 1] as usize]
     }
@@ -126,11 +135,13 @@ impl Topology {
     }
 
     #[inline]
+    /// Number of neighbours of `v`.
     pub fn valence(&self, v: u32) -> usize {
         self.ring(v).len()
     }
 
     #[inline]
+    /// Whether `v` is on the boundary.
     pub fn is_boundary(&self, v: u32) -> bool {
         self.boundary[v as usize]
     }

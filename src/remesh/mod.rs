@@ -116,10 +116,13 @@ fn loop_length(positions: &[DVec3], l: &[u32]) -> f64 {
 /// A disk-like patch ready for parameterization: the input plus virtual hole fans.
 #[derive(Clone, Debug)]
 pub struct FilledPatch {
+    /// The patch with the virtual fans appended.
     pub mesh: TriMesh,
     /// Vertices at index >= `real_vertices` are virtual hole centres.
     pub real_vertices: usize,
+    /// The outer boundary loop (the longest), which goes onto the disk's rim.
     pub outer: Vec<u32>,
+    /// Number of holes filled.
     pub holes: usize,
     /// Triangles at index >= `real_triangles` are the virtual fans.
     pub real_triangles: usize,

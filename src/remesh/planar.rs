@@ -24,8 +24,11 @@ use rayon::prelude::*;
 /// warm-start state so that a new version of a patch is projected the same way.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlaneFrame {
+    /// A point of the plane (the data's centroid).
     pub origin: DVec3,
+    /// First axis.
     pub e1: DVec3,
+    /// Second axis.
     pub e2: DVec3,
 }
 
@@ -129,11 +132,13 @@ impl PlaneFrame {
         })
     }
 
+    /// Coordinates of p's orthogonal projection in the frame.
     pub fn project(&self, p: DVec3) -> DVec2 {
         let d = p - self.origin;
         DVec2::new(d.dot(self.e1), d.dot(self.e2))
     }
 
+    /// The plane's unit normal.
     pub fn normal(&self) -> DVec3 {
         self.e1.cross(self.e2)
     }
@@ -141,6 +146,7 @@ impl PlaneFrame {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
+/// Which planar map a patch got.
 pub enum MapMethod {
     /// Orthogonal projection (folded triangles, if any, left out of the mapped mesh).
     Projection,
@@ -149,6 +155,7 @@ pub enum MapMethod {
 }
 
 #[derive(Clone, Debug)]
+/// A patch mapped onto the plane.
 pub struct PlanarMap {
     /// The filled patch as mapped: the projection closes holes by ear clipping in the plane
     /// (no fold by construction) where the fans of `fill_holes` would fold; virtual
@@ -156,6 +163,7 @@ pub struct PlanarMap {
     pub mesh: TriMesh,
     /// Plane position of every vertex of `mesh` (real, then virtual).
     pub plane: Vec<DVec2>,
+    /// The map used.
     pub method: MapMethod,
     /// Folded triangles of the projection (left out of `mesh` when the projection is used).
     pub folds_projected: usize,
@@ -173,6 +181,8 @@ const MAX_EAR_CLIP: usize = 1000;
 /// Above this share of folded triangles the patch is no height field over the plane.
 const MAX_FOLD_FRACTION: f64 = 0.01;
 
+/// The projection onto `frame` (holes closed in the plane) if it folds little enough,
+/// otherwise the mean-value disk map.
 pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, RemeshError> {
     let plane: Vec<DVec2> = patch
         .mesh

@@ -45,11 +45,14 @@ pub fn lattice_triangles(n: usize) -> Vec<[u32; 3]> {
 }
 
 #[derive(Clone, Debug)]
+/// A triangular Bezier patch of one degree over the reference triangle.
 pub struct BezierTriangle {
+    /// The degree n ((n + 1)(n + 2) / 2 controls).
     pub degree: usize,
 }
 
 impl BezierTriangle {
+    /// A patch of degree `degree`.
     pub fn new(degree: usize) -> Self {
         Self { degree }
     }
@@ -161,7 +164,6 @@ impl TriSurface for BezierTriangle {
         SurfaceParam { face: 0, u, v }
     }
 }
-
 
 #[cfg(test)]
 mod tests {

@@ -328,12 +328,14 @@ fn quartic_bernstein(u: f64, v: f64) -> [[f64; 6]; 15] {
 }
 
 #[derive(Clone, Debug)]
+/// The Loop limit surface of a regular triangular lattice net (a quartic box spline).
 pub struct LatticeSpline {
     /// Domain lattice segments per side.
     pub n: usize,
 }
 
 impl LatticeSpline {
+    /// The surface over a domain lattice of `n` segments a side (at least 1).
     pub fn new(n: usize) -> Self {
         Self { n: n.max(1) }
     }

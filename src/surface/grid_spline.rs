@@ -22,6 +22,7 @@ use rayon::prelude::*;
 pub(crate) type Cell = (i64, i64, bool);
 
 #[derive(Clone, Debug)]
+/// The Loop limit surface over cells of the three-direction grid (remeshed scans).
 pub struct GridSpline {
     i0: i64,
     j0: i64,
@@ -115,6 +116,7 @@ impl GridSpline {
         grid
     }
 
+    /// The covered cells.
     pub fn cells(&self) -> &[Cell] {
         &self.cells
     }

@@ -418,7 +418,12 @@ impl<const K: usize> Gather<'_, K> {
 
 impl ScalarMatrix {
     /// N^T N + s L^T L and N^T p.
-    pub(crate) fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
+    pub(crate) fn assemble(
+        n: &Csr,
+        data: &[DVec3],
+        fairness: Option<Fairness>,
+        lower_only: bool,
+    ) -> Self {
         assemble::<1>(n, Self::weight(data), fairness, lower_only)
     }
 

@@ -157,6 +157,7 @@ impl std::fmt::Debug for LoopLimitSurface {
 }
 
 impl LoopLimitSurface {
+    /// Builds the surface of a manifold control mesh of `control_count` points.
     pub fn new(control_count: usize, faces: &[[u32; 3]]) -> Result<Self, LoopLimitError> {
         if faces.is_empty() {
             return Err(LoopLimitError::NoFaces);
