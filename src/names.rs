@@ -20,3 +20,41 @@ impl UnknownName {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::bspline::fit::GridMethod;
+    use crate::fit::Method;
+    use crate::io::iges::IgesUnits;
+    use crate::mesh::inverse::InverseMethod;
+
+    #[test]
+    fn every_name_parses_back_to_its_value_and_an_unknown_one_lists_them() {
+        for m in GridMethod::ALL {
+            assert_eq!(m.name().parse::<GridMethod>(), Ok(m));
+        }
+        for u in IgesUnits::ALL {
+            assert_eq!(u.to_string().parse::<IgesUnits>(), Ok(u));
+        }
+        for m in Method::ALL {
+            assert_eq!(m.name().parse::<Method>(), Ok(m));
+        }
+        for m in InverseMethod::ALL {
+            assert_eq!(m.name().parse::<InverseMethod>(), Ok(m));
+        }
+        let e = "cm".parse::<IgesUnits>().expect_err("not a unit");
+        assert_eq!(
+            e.to_string(),
+            "unknown name \"cm\"; expected one of: mm, m, in"
+        );
+        // The names in output files are the serde names.
+        assert_eq!(
+            serde_json::to_value(GridMethod::TwoPass).expect("serialises"),
+            GridMethod::TwoPass.name()
+        );
+        assert_eq!(
+            serde_json::to_value(Method::Lspia).expect("serialises"),
+            Method::Lspia.name()
+        );
+    }
+}

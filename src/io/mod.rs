@@ -256,3 +256,68 @@ pub(crate) fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<
         .and_then(|d| d.sync_all())
         .map_err(|e| err("", e))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kind_of(bytes: &[u8], format: Format) -> &'static str {
+        match read_mesh_bytes(bytes, format, "t", &LoadOptions::default()) {
+            Ok(_) => "ok",
+            Err(e) => e.kind(),
+        }
+    }
+
+    #[test]
+    fn readers_report_a_kind_per_failure_and_keep_the_file_and_place_in_the_message() {
+        let ply_header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+        let cases: [(&[u8], Format, &str); 9] = [
+            (b"", Format::Off, "empty"),
+            (b"OFF\n3 1 0\n0 0 0\n1 0 0\n", Format::Off, "truncated"),
+            (
+                b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+                Format::Off,
+                "index_out_of_range",
+            ),
+            (b"OFF\n99999 1 0\n", Format::Off, "too_large"),
+            (b"v 0 0 nan\n", Format::Obj, "non_finite"),
+            (b"v 0 0 x\n", Format::Obj, "malformed"),
+            (b"\xff\xfe", Format::Obj, "not_text"),
+            (
+                b"ply\nformat ascii 1.0\nelement vertex 1\nproperty int8x x\nend_header\n",
+                Format::Ply,
+                "bad_header",
+            ),
+            (b"{", Format::Gltf, "gltf"),
+        ];
+        for (bytes, format, kind) in cases {
+            assert_eq!(
+                kind_of(bytes, format),
+                kind,
+                "{}",
+                String::from_utf8_lossy(bytes)
+            );
+        }
+        let ply = format!("{ply_header}0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
+        let e = read_mesh_bytes(
+            ply.as_bytes(),
+            Format::Ply,
+            "scan.ply",
+            &LoadOptions::default(),
+        )
+        .expect_err("index 5 of 3 vertices");
+        assert_eq!(e.kind(), "index_out_of_range");
+        assert!(
+            e.to_string()
+                .starts_with("scan.ply (line 13): face 0: vertex index 5"),
+            "{e}"
+        );
+        let missing = read_mesh_file(Path::new("/nonexistent/x.ply"), &LoadOptions::default())
+            .expect_err("no such file");
+        assert_eq!(missing.kind(), "open");
+        assert!(std::error::Error::source(&missing.kind).is_some());
+        let unknown =
+            read_mesh_file(Path::new("x.xyz"), &LoadOptions::default()).expect_err("no reader");
+        assert_eq!(unknown.kind(), "unknown_extension");
+    }
+}

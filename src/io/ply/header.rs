@@ -66,7 +66,8 @@ pub(super) struct Header {
     pub(super) num_cols: Option<usize>,
     pub(super) num_rows: Option<usize>,
     pub(super) body_offset: usize,
-    pub(super) header_lines: usize,
+    /// Line number of the first body line (ascii error locations count from it).
+    pub(super) body_first_line: usize,
 }
 
 pub(super) fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
@@ -166,7 +167,8 @@ pub(super) fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> 
         num_cols,
         num_rows,
         body_offset,
-        header_lines: n + 1,
+        // n header lines before `end_header`, which is line n + 1.
+        body_first_line: n + 2,
     })
 }
 

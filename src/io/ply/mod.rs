@@ -20,7 +20,7 @@ pub(crate) fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<L
         bytes,
         pos: header.body_offset,
         encoding: header.encoding,
-        line: header.header_lines,
+        line: header.body_first_line,
         file,
     };
     let mut positions: Vec<DVec3> = Vec::new();
