@@ -640,3 +640,17 @@ pub fn adaptive_grid(
     }
     Ok(best)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_method_names_parse_back_and_are_the_serde_names() {
+        for m in GridMethod::ALL {
+            assert_eq!(m.name().parse::<GridMethod>(), Ok(m));
+            assert_eq!(serde_json::to_value(m).expect("serialises"), m.name());
+        }
+        assert!("two_pass".parse::<GridMethod>().is_err());
+    }
+}

@@ -491,3 +491,18 @@ pub fn umbrella_laplacian(control_count: usize, faces: &[[u32; 3]]) -> Csr {
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn method_names_parse_back_and_are_the_serde_names() {
+        for m in Method::ALL {
+            assert_eq!(m.name().parse::<Method>(), Ok(m));
+            assert_eq!(serde_json::to_value(m).expect("serialises"), m.name());
+        }
+        let e = "gauss".parse::<Method>().expect_err("no such method");
+        assert_eq!(e.expected, ["pia", "lspia", "cg", "direct"]);
+    }
+}

@@ -321,6 +321,18 @@ mod tests {
     use super::*;
 
     #[test]
+    fn unit_names_parse_back_and_an_unknown_one_lists_them() {
+        for u in IgesUnits::ALL {
+            assert_eq!(u.to_string().parse::<IgesUnits>(), Ok(u));
+        }
+        let e = "cm".parse::<IgesUnits>().expect_err("not a unit");
+        assert_eq!(
+            e.to_string(),
+            "unknown name \"cm\"; expected one of: mm, m, in"
+        );
+    }
+
+    #[test]
     fn reals_always_carry_a_decimal_point_and_round_trip() {
         for x in [0.0, 1.0, -2.5, 1e-300, 123456.789, 0.1 + 0.2, -7e22] {
             let s = real(x);

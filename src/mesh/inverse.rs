@@ -325,6 +325,14 @@ mod tests {
     use super::*;
 
     #[test]
+    fn inverse_method_names_parse_back() {
+        for m in InverseMethod::ALL {
+            assert_eq!(m.name().parse::<InverseMethod>(), Ok(m));
+        }
+        assert!("exactly".parse::<InverseMethod>().is_err());
+    }
+
+    #[test]
     fn weights_match_the_spec_table() {
         let (mu, eta) = inverse_weights(6);
         assert!((mu - 2.5).abs() < 1e-12 && (eta + 0.25).abs() < 1e-12);
