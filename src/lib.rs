@@ -11,6 +11,8 @@ pub mod daemon;
 pub mod fit;
 pub mod io;
 pub mod mesh;
+pub mod names;
+mod numeric;
 pub mod pipeline;
 pub mod remesh;
 pub mod surface;

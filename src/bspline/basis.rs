@@ -4,18 +4,19 @@
 //! functions that are non-zero on a span are ever formed), so a basis row costs O(p^2)
 //! and no 0/0 quotient is ever evaluated.
 
-use super::BSplineError;
+use super::error::BSplineError;
+pub use super::error::MAX_DEGREE;
 use glam::DVec3;
 
-/// Highest degree handled: basis rows live in fixed stack arrays of this size + 1.
-pub const MAX_DEGREE: usize = 15;
 const W: usize = MAX_DEGREE + 1;
 
 /// The basis functions N_{span-p..=span, p} and their derivatives up to order 2 at one
 /// parameter: `d[k][r]` is the k-th derivative of N_{span-p+r}.
 #[derive(Clone, Copy, Debug)]
 pub struct BasisRow {
+    /// The knot span s: the row's values belong to controls s - p ..= s.
     pub span: usize,
+    /// Basis values and their first and second derivatives, p + 1 each.
     pub d: [[f64; W]; 3],
 }
 
@@ -29,7 +30,7 @@ impl BasisRow {
 
 /// Checks a knot vector for `count` control points of degree `p`: length, order, clamping
 /// and a non-empty domain.
-pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSplineError> {
+pub(crate) fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSplineError> {
     if p == 0 || p > MAX_DEGREE {
         return Err(BSplineError::Degree(p));
     }
@@ -37,31 +38,28 @@ pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSpli
         return Err(BSplineError::TooFewControls { count, degree: p });
     }
     if count.checked_add(p + 1) != Some(knots.len()) {
-        return Err(BSplineError::Knots(format!(
-            "{} knots for {count} control points of degree {p} (need {} + {})",
-            knots.len(),
+        return Err(BSplineError::KnotCount {
+            knots: knots.len(),
             count,
-            p + 1
-        )));
+            degree: p,
+        });
     }
     if knots.iter().any(|k| !k.is_finite()) || knots.windows(2).any(|w| w[1] < w[0]) {
-        return Err(BSplineError::Knots(
-            "knots must be finite and non-decreasing".into(),
-        ));
+        return Err(BSplineError::KnotOrder);
     }
     let (a, b) = (knots[p], knots[count]);
     if b <= a {
-        return Err(BSplineError::Knots("empty parameter domain".into()));
+        return Err(BSplineError::EmptyDomain);
     }
     // Interior multiplicity above p would disconnect the curve.
     let mut run = 1;
     for w in knots[1..knots.len() - 1].windows(2) {
         run = if w[1] == w[0] { run + 1 } else { 1 };
         if run > p && w[0] > a && w[0] < b {
-            return Err(BSplineError::Knots(format!(
-                "interior knot {} repeated more than {p} times",
-                w[0]
-            )));
+            return Err(BSplineError::KnotMultiplicity {
+                knot: w[0],
+                degree: p,
+            });
         }
     }
     Ok(())
@@ -69,7 +67,7 @@ pub fn validate_knots(knots: &[f64], count: usize, p: usize) -> Result<(), BSpli
 
 /// The span index s with knots[s] <= t < knots[s + 1], p <= s < count; the domain's right
 /// end belongs to the last non-empty span. Parameters outside the domain are clamped.
-pub fn find_span(knots: &[f64], count: usize, p: usize, t: f64) -> usize {
+pub(crate) fn find_span(knots: &[f64], count: usize, p: usize, t: f64) -> usize {
     if t >= knots[count] {
         // Last span with a positive length.
         let mut s = count - 1;
@@ -237,7 +235,7 @@ pub fn parameters(points: &[DVec3], method: ParamMethod) -> Vec<f64> {
 
 /// Clamped knots for interpolation by de Boor's averaging: interior knot j is the mean of
 /// p consecutive parameters, which keeps the collocation matrix nonsingular.
-pub fn averaging_knots(params: &[f64], p: usize) -> Vec<f64> {
+pub(crate) fn averaging_knots(params: &[f64], p: usize) -> Vec<f64> {
     let n = params.len();
     let mut k = vec![0.0; p + 1];
     for j in 1..n - p {
@@ -266,7 +264,12 @@ pub fn approximation_knots(params: &[f64], count: usize, p: usize) -> Vec<f64> {
 
 /// Schoenberg-Whitney: a strictly increasing choice of parameters with N_i(t) > 0 for every
 /// basis function exists. Without it the least-squares matrix is rank deficient.
-pub fn schoenberg_whitney(knots: &[f64], count: usize, p: usize, sorted_params: &[f64]) -> bool {
+pub(crate) fn schoenberg_whitney(
+    knots: &[f64],
+    count: usize,
+    p: usize,
+    sorted_params: &[f64],
+) -> bool {
     // Greedy: give each function the first unused parameter past the start of its support.
     let mut k = 0;
     for i in 0..count {

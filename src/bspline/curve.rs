@@ -1,10 +1,11 @@
 //! B-spline curves: validated construction and evaluation with derivatives.
 
 use super::basis::{basis_row, validate_knots};
-use super::BSplineError;
+use super::error::BSplineError;
 use glam::DVec3;
 
 #[derive(Clone, Debug, PartialEq)]
+/// A clamped, non-rational B-spline curve.
 pub struct BSplineCurve {
     degree: usize,
     knots: Vec<f64>,
@@ -12,6 +13,7 @@ pub struct BSplineCurve {
 }
 
 impl BSplineCurve {
+    /// Checks the knots against the degree and control count and the controls for finiteness.
     pub fn new(degree: usize, knots: Vec<f64>, controls: Vec<DVec3>) -> Result<Self, BSplineError> {
         validate_knots(&knots, controls.len(), degree)?;
         if let Some(i) = controls.iter().position(|c| !c.is_finite()) {
@@ -24,12 +26,15 @@ impl BSplineCurve {
         })
     }
 
+    /// The degree p.
     pub fn degree(&self) -> usize {
         self.degree
     }
+    /// The knot vector (count + p + 1 values).
     pub fn knots(&self) -> &[f64] {
         &self.knots
     }
+    /// The control points.
     pub fn controls(&self) -> &[DVec3] {
         &self.controls
     }
@@ -39,6 +44,7 @@ impl BSplineCurve {
         (self.knots[self.degree], self.knots[self.controls.len()])
     }
 
+    /// The curve point at parameter t (clamped to the domain).
     pub fn point(&self, t: f64) -> DVec3 {
         self.derivatives(t, 0)[0]
     }

@@ -24,12 +24,16 @@ pub enum Ends {
 /// the data parameters, which bound the true point-to-surface distances from above.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct ErrorStats {
+    /// Largest error.
     pub max_error: f64,
+    /// Root mean square error.
     pub rms_error: f64,
+    /// Mean error.
     pub mean_error: f64,
 }
 
 impl ErrorStats {
+    /// Statistics of a list of point errors (all zero for an empty list).
     pub fn of(errors: &[f64]) -> Self {
         if errors.is_empty() {
             return Self::default();
@@ -135,9 +139,13 @@ fn check_points(points: &[DVec3]) -> Result<(), BSplineError> {
 /// A fitted curve with its data parameters and per-point errors.
 #[derive(Clone, Debug)]
 pub struct CurveFit {
+    /// The fitted curve.
     pub curve: BSplineCurve,
+    /// Parameter of every data point.
     pub params: Vec<f64>,
+    /// Distance of every data point to its curve point.
     pub errors: Vec<f64>,
+    /// Statistics of `errors`.
     pub stats: ErrorStats,
 }
 
@@ -320,20 +328,24 @@ pub fn adaptive_curve(
 /// Grid data: `rows x cols` points, row-major. Rows run along u, columns along v.
 #[derive(Clone, Copy, Debug)]
 pub struct Grid<'a> {
+    /// Number of rows (the u direction).
     pub rows: usize,
+    /// Points per row (the v direction).
     pub cols: usize,
+    /// The points, row-major: point (r, c) at `r * cols + c`.
     pub points: &'a [DVec3],
 }
 
 impl Grid<'_> {
     #[inline]
+    /// Point (r, c).
     pub fn at(&self, r: usize, c: usize) -> DVec3 {
         self.points[r * self.cols + c]
     }
 }
 
 /// Which least-squares problem a grid fit solves.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum GridMethod {
     /// The documents' approximation: columns then rows, each a least-squares curve fit with
@@ -342,6 +354,35 @@ pub enum GridMethod {
     /// The exact least-squares surface over all control points at once. On a grid it
     /// separates: P = A_u^+ D (A_v^+)^T, i.e. the same two passes with free ends.
     Lsq,
+}
+
+impl GridMethod {
+    /// Every method, in the order a user interface lists them.
+    pub const ALL: [GridMethod; 2] = [GridMethod::TwoPass, GridMethod::Lsq];
+
+    /// The method's name in output files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            GridMethod::TwoPass => "two-pass",
+            GridMethod::Lsq => "lsq",
+        }
+    }
+}
+
+impl std::fmt::Display for GridMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for GridMethod {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        GridMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| crate::names::UnknownName::new(s, GridMethod::ALL.map(GridMethod::name)))
+    }
 }
 
 /// Grid parameters: per direction, the average over all grid lines of their own
@@ -378,14 +419,18 @@ pub fn grid_parameters(grid: &Grid, method: ParamMethod) -> (Vec<f64>, Vec<f64>)
 /// A fitted surface with its data parameters and per-point errors (row-major, like the data).
 #[derive(Clone, Debug)]
 pub struct SurfaceFit {
+    /// The fitted surface.
     pub surface: BSplineSurface,
+    /// (u, v) of every grid point, row-major.
     pub params: Vec<(f64, f64)>,
+    /// Distance of every grid point to its surface point.
     pub errors: Vec<f64>,
+    /// Statistics of `errors`.
     pub stats: ErrorStats,
 }
 
 /// Fits a grid with given parameters and knots: the column pass, then the row pass.
-pub fn fit_grid_with(
+pub(crate) fn fit_grid_with(
     grid: &Grid,
     (us, vs): (&[f64], &[f64]),
     (knots_u, knots_v): (Vec<f64>, Vec<f64>),
@@ -424,7 +469,12 @@ pub fn fit_grid_with(
 }
 
 /// Distances between the data and the surface at the grid parameters, row-major.
-pub fn grid_errors(surface: &BSplineSurface, grid: &Grid, us: &[f64], vs: &[f64]) -> Vec<f64> {
+pub(crate) fn grid_errors(
+    surface: &BSplineSurface,
+    grid: &Grid,
+    us: &[f64],
+    vs: &[f64],
+) -> Vec<f64> {
     let rows_v: Vec<_> = vs.iter().map(|&v| surface.row_v(v, 0)).collect();
     let mut e = Vec::with_capacity(grid.points.len());
     for (r, &u) in us.iter().enumerate() {
@@ -589,4 +639,18 @@ pub fn adaptive_grid(
         }
     }
     Ok(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_method_names_parse_back_and_are_the_serde_names() {
+        for m in GridMethod::ALL {
+            assert_eq!(m.name().parse::<GridMethod>(), Ok(m));
+            assert_eq!(serde_json::to_value(m).expect("serialises"), m.name());
+        }
+        assert!("two_pass".parse::<GridMethod>().is_err());
+    }
 }

@@ -7,10 +7,10 @@
 //! factorisation, which is what makes the two-pass grid fit cheap: every column of a grid
 //! has the same parameters, so one factorisation serves all of them.
 
-use super::BSplineError;
+use super::error::BSplineError;
 
 #[derive(Clone, Debug)]
-pub struct BandedQr {
+pub(crate) struct BandedQr {
     n: usize,
     width: usize,
     nrhs: usize,
@@ -39,13 +39,9 @@ impl BandedQr {
         }
     }
 
-    pub fn unknowns(&self) -> usize {
-        self.n
-    }
-
     /// Adds the equation sum_k coeffs[k] x[first + k] = rhs (every right-hand side at once).
     /// `coeffs.len()` must not exceed the width and the row must end inside the unknowns.
-    pub fn add_row(&mut self, first: usize, coeffs: &[f64], rhs: &[f64]) {
+    pub(crate) fn add_row(&mut self, first: usize, coeffs: &[f64], rhs: &[f64]) {
         debug_assert!(coeffs.len() <= self.width && first + coeffs.len() <= self.n);
         debug_assert_eq!(rhs.len(), self.nrhs);
         let w = self.width;
@@ -95,7 +91,8 @@ impl BandedQr {
     }
 
     /// Sum of squared residuals of the least-squares solution, per right-hand side.
-    pub fn residual_sum_of_squares(&self) -> &[f64] {
+    #[cfg(test)]
+    pub(crate) fn residual_sum_of_squares(&self) -> &[f64] {
         &self.residual
     }
 

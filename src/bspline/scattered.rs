@@ -49,33 +49,46 @@ pub fn planar_parameters(points: &[DVec3]) -> Vec<(f64, f64)> {
 
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 #[serde(rename_all = "lowercase", tag = "solver")]
+/// How the scattered least-squares system is solved.
 pub enum ScatteredSolver {
     /// Banded QR of the whole system (exact least squares).
     Direct,
     /// Least-squares progressive iterative approximation from the direct fit's knots,
     /// started at the plane through the data.
-    Lspia { iterations: usize },
+    Lspia {
+        /// LSPIA steps.
+        iterations: usize,
+    },
 }
 
 #[derive(Clone, Copy, Debug)]
+/// What a scattered fit asks for.
 pub struct ScatteredOptions {
+    /// Control points along u and v.
     pub counts: (usize, usize),
+    /// Degrees along u and v.
     pub degrees: (usize, usize),
     /// Weight of the second-difference energy of the control net, relative to the data:
     /// the penalty rows are scaled by sqrt(smoothing * data points / control points) so a
     /// value means the same balance at any density. 0 = none. Direct solver only: LSPIA
     /// iterates on the data alone.
     pub smoothing: f64,
+    /// The solver.
     pub solver: ScatteredSolver,
     /// Rounds of foot-point projection of every point followed by a refit.
     pub parameter_correction: usize,
 }
 
 #[derive(Clone, Debug)]
+/// A scattered fit: the surface and how far each point is from it.
 pub struct ScatteredFit {
+    /// The fitted surface.
     pub surface: BSplineSurface,
+    /// (u, v) of every data point after the last parameter correction.
     pub params: Vec<(f64, f64)>,
+    /// Distance of every data point to its surface point.
     pub errors: Vec<f64>,
+    /// Statistics of `errors`.
     pub stats: ErrorStats,
 }
 
@@ -115,7 +128,7 @@ fn check(
 
 /// Knots at quantiles of the data parameters (the approximation averaging rule applied to
 /// the sorted parameters), so denser data gets more knots.
-pub fn scattered_knots(
+pub(crate) fn scattered_knots(
     params: &[(f64, f64)],
     (cu, cv): (usize, usize),
     (p, q): (usize, usize),
@@ -139,7 +152,7 @@ pub fn scattered_knots(
 }
 
 /// Direct least squares with given knots.
-pub fn solve_direct(
+pub(crate) fn solve_direct(
     points: &[DVec3],
     params: &[(f64, f64)],
     knots: (&[f64], &[f64]),
@@ -233,7 +246,7 @@ pub fn solve_direct(
 /// LSPIA: P <- P + mu N^T (D - N P) with mu = 1 / max column sum of N, which is below
 /// 2 / lambda_max(N^T N) because rows of N sum to 1. Converges to the least-squares
 /// solution when N has full rank, more slowly than the direct solve but in O(data) memory.
-pub fn solve_lspia(
+pub(crate) fn solve_lspia(
     points: &[DVec3],
     params: &[(f64, f64)],
     start: BSplineSurface,

@@ -2,12 +2,13 @@
 //! second partial derivatives, and separable evaluation on parameter grids.
 
 use super::basis::{basis_row, validate_knots, BasisRow};
-use super::BSplineError;
+use super::error::BSplineError;
 use crate::surface::Derivatives;
 use glam::DVec3;
 use rayon::prelude::*;
 
 #[derive(Clone, Debug, PartialEq)]
+/// A clamped, non-rational tensor-product B-spline surface.
 pub struct BSplineSurface {
     degree_u: usize,
     degree_v: usize,
@@ -20,6 +21,7 @@ pub struct BSplineSurface {
 }
 
 impl BSplineSurface {
+    /// Checks degrees, knots and control count (`counts.0 * counts.1`) and the controls for finiteness.
     pub fn new(
         (degree_u, degree_v): (usize, usize),
         knots_u: Vec<f64>,
@@ -49,18 +51,23 @@ impl BSplineSurface {
         })
     }
 
+    /// Degrees (p along u, q along v).
     pub fn degrees(&self) -> (usize, usize) {
         (self.degree_u, self.degree_v)
     }
+    /// Control points along u and along v.
     pub fn counts(&self) -> (usize, usize) {
         (self.count_u, self.count_v)
     }
+    /// The knot vector along u.
     pub fn knots_u(&self) -> &[f64] {
         &self.knots_u
     }
+    /// The knot vector along v.
     pub fn knots_v(&self) -> &[f64] {
         &self.knots_v
     }
+    /// The control points, row-major (see the module docs).
     pub fn controls(&self) -> &[DVec3] {
         &self.controls
     }
@@ -73,20 +80,23 @@ impl BSplineSurface {
         )
     }
 
+    /// Basis row along u at `u`, with `nd` derivatives (0..=2).
     pub fn row_u(&self, u: f64, nd: usize) -> BasisRow {
         basis_row(&self.knots_u, self.count_u, self.degree_u, u, nd)
     }
+    /// Basis row along v at `v`, with `nd` derivatives (0..=2).
     pub fn row_v(&self, v: f64, nd: usize) -> BasisRow {
         basis_row(&self.knots_v, self.count_v, self.degree_v, v, nd)
     }
 
+    /// The surface point at (u, v).
     pub fn point(&self, u: f64, v: f64) -> DVec3 {
         self.combine(&self.row_u(u, 0), &self.row_v(v, 0), false)
             .position
     }
 
     /// Position from precomputed basis rows (grids evaluate each row once).
-    pub fn point_from_rows(&self, ru: &BasisRow, rv: &BasisRow) -> DVec3 {
+    pub(crate) fn point_from_rows(&self, ru: &BasisRow, rv: &BasisRow) -> DVec3 {
         self.combine(ru, rv, false).position
     }
 
@@ -126,7 +136,7 @@ impl BSplineSurface {
 
     /// Derivatives at every (us[r], vs[c]), row-major in r. Basis rows are computed once per
     /// grid line, not once per point, and rows of the grid run in parallel.
-    pub fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
+    pub(crate) fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
         let rows_v: Vec<BasisRow> = vs.iter().map(|&v| self.row_v(v, 2)).collect();
         let mut out = vec![Derivatives::default(); us.len() * vs.len()];
         if vs.is_empty() {
@@ -246,7 +256,7 @@ impl BSplineSurface {
 
 /// Two counter-clockwise (in (u, v)) triangles per cell of a rows x cols vertex grid,
 /// row-major vertices, split along the (r, c)-(r + 1, c + 1) diagonal.
-pub fn grid_triangles(rows: usize, cols: usize) -> Vec<[u32; 3]> {
+pub(crate) fn grid_triangles(rows: usize, cols: usize) -> Vec<[u32; 3]> {
     let id = |r: usize, c: usize| (r * cols + c) as u32;
     let mut t = Vec::with_capacity(2 * rows.saturating_sub(1) * cols.saturating_sub(1));
     for r in 0..rows.saturating_sub(1) {

@@ -18,6 +18,28 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// A value parser for a core enum that names its choices: `--help` lists `names`, and the
+/// chosen one goes through the enum's own `FromStr` (the core carries no clap derive).
+fn named_parser<T>(
+    names: impl IntoIterator<Item = &'static str>,
+) -> impl clap::builder::TypedValueParser<Value = T>
+where
+    T: std::str::FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::error::Error + Send + Sync + 'static,
+{
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(names).try_map(|s| s.parse::<T>())
+}
+
+fn grid_method_parser() -> impl clap::builder::TypedValueParser<Value = GridMethod> {
+    named_parser(GridMethod::ALL.map(GridMethod::name))
+}
+
+/// The `--units` parser, shared with `curvature`.
+pub fn units_parser() -> impl clap::builder::TypedValueParser<Value = IgesUnits> {
+    named_parser(IgesUnits::ALL.map(IgesUnits::name))
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Param {
     Chord,
@@ -54,7 +76,7 @@ pub struct BsplineFitArgs {
     pub tolerance: Option<f64>,
     /// Grid fits: `lsq` is the exact least-squares surface; `two-pass` the documents'
     /// columns-then-rows approximation with interpolated ends.
-    #[arg(long, value_enum, default_value = "lsq")]
+    #[arg(long, value_parser = grid_method_parser(), default_value = "lsq")]
     pub method: GridMethod,
     #[arg(long, value_enum, default_value = "chord")]
     pub param: Param,
@@ -70,7 +92,7 @@ pub struct BsplineFitArgs {
     #[arg(long, default_value_t = 2)]
     pub correction: usize,
     /// Units declared in the IGES file (coordinates are written unscaled).
-    #[arg(long, value_enum, default_value = "mm")]
+    #[arg(long, value_parser = units_parser(), default_value = "mm")]
     pub units: IgesUnits,
     /// Segments per side of the tessellation in surface.glb.
     #[arg(long, default_value_t = 64)]

@@ -47,7 +47,7 @@ pub struct CurvatureArgs {
     #[arg(long, value_enum, default_value = "region")]
     pub colour: Colouring,
     /// Units declared in boundaries.igs.
-    #[arg(long, value_enum, default_value = "mm")]
+    #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "mm")]
     pub units: IgesUnits,
     #[arg(long)]
     pub out: PathBuf,

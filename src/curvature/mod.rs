@@ -8,6 +8,7 @@
 //!
 //! Sign convention (the document's): n = S_u x S_v / |S_u x S_v|; a cap bulging towards
 //! n has H < 0 and counts as convex.
+#![warn(missing_docs)]
 
 pub mod regions;
 
@@ -19,8 +20,11 @@ use rayon::prelude::*;
 /// The parameter domain of a surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Domain {
+    /// [u0, u1] x [v0, v1].
     Rectangle {
+        /// (u0, u1).
         u: (f64, f64),
+        /// (v0, v1).
         v: (f64, f64),
     },
     /// u, v >= 0, u + v <= 1.
@@ -47,7 +51,9 @@ pub struct OwnLattice {
 
 /// Position and first and second partial derivatives at a parameter.
 pub trait DerivativeSurface: Sync {
+    /// The parameter domain.
     fn domain(&self) -> Domain;
+    /// Position and derivatives at (u, v).
     fn derivatives(&self, u: f64, v: f64) -> Derivatives;
     /// Domains other than a rectangle or the triangle: a sampling with about `n` samples
     /// across.
@@ -62,7 +68,7 @@ pub trait DerivativeSurface: Sync {
             .map(|&(u, v)| self.derivatives(u, v))
             .collect()
     }
-    /// Derivatives at every (us[r], vs[c]), row-major in r.
+    /// Derivatives at every `(us[r], vs[c])`, row-major in r.
     fn derivatives_on_grid(&self, us: &[f64], vs: &[f64]) -> Vec<Derivatives> {
         let params: Vec<(f64, f64)> = us
             .iter()
@@ -86,7 +92,7 @@ impl DerivativeSurface for BSplineSurface {
 }
 
 /// The Loop surface over grid cells that `trispline fit` writes for scans.
-pub struct GridPatch {
+pub(crate) struct GridPatch {
     pub surface: crate::surface::grid_spline::GridSpline,
     pub controls: Vec<DVec3>,
 }
@@ -133,7 +139,9 @@ impl DerivativeSurface for GridPatch {
 /// curvature approached along that direction (at valence 3..5 the limit, at valence > 6
 /// large, as the surface's curvature is unbounded there).
 pub struct LoopMeshPatch {
+    /// The surface of the control mesh.
     pub surface: std::sync::Arc<crate::surface::loop_limit::LoopLimitSurface>,
+    /// Its control points.
     pub controls: Vec<DVec3>,
     /// Per control: an interior vertex of valence other than 6.
     irregular: Vec<bool>,
@@ -143,6 +151,7 @@ pub struct LoopMeshPatch {
 const IRREGULAR_NUDGE: f64 = 1.0 / (1u64 << 30) as f64;
 
 impl LoopMeshPatch {
+    /// Wraps a Loop surface and its controls, marking the irregular interior vertices.
     pub fn new(
         surface: std::sync::Arc<crate::surface::loop_limit::LoopLimitSurface>,
         controls: Vec<DVec3>,
@@ -201,12 +210,12 @@ impl LoopMeshPatch {
     }
 
     /// The packed parameter of (face, u, v).
-    pub fn pack(face: usize, u: f64, v: f64) -> (f64, f64) {
+    pub(crate) fn pack(face: usize, u: f64, v: f64) -> (f64, f64) {
         (2.0 * face as f64 + u, v)
     }
 
     /// The (face, u, v) of a packed parameter; faces out of range are clamped.
-    pub fn unpack(&self, s: f64, v: f64) -> SurfaceParam {
+    pub(crate) fn unpack(&self, s: f64, v: f64) -> SurfaceParam {
         let last = self.surface.faces().len().saturating_sub(1);
         let face = if s.is_finite() && s > 0.0 {
             ((s / 2.0).floor() as usize).min(last)
@@ -331,7 +340,9 @@ impl DerivativeSurface for LoopMeshPatch {
 /// A triangular surface (any [`TriSurface`] whose single domain triangle is the reference
 /// triangle, as `trispline fit` writes them) with its control points.
 pub struct Triangular<S: TriSurface> {
+    /// The surface.
     pub surface: S,
+    /// Its control points.
     pub controls: Vec<DVec3>,
 }
 
@@ -349,7 +360,9 @@ impl<S: TriSurface> DerivativeSurface for Triangular<S> {
 /// buffer per thread): the same surface as `Triangular<BezierTriangle>` without building
 /// basis rows, which dominates sampling at high degree.
 pub struct BezierPatch {
+    /// The patch's degree.
     pub degree: usize,
+    /// Its control points, in lattice order.
     pub controls: Vec<DVec3>,
 }
 
@@ -418,18 +431,27 @@ impl DerivativeSurface for BezierPatch {
 /// Differential geometry at one point.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Curvature {
+    /// Unit normal (du x dv normalised).
     pub normal: DVec3,
     /// First fundamental form.
     pub e: f64,
+    /// First fundamental form, du . dv.
     pub f: f64,
+    /// First fundamental form, dv . dv.
     pub g: f64,
     /// Second fundamental form.
     pub l: f64,
+    /// Second fundamental form, duv . normal.
     pub m: f64,
+    /// Second fundamental form, dvv . normal.
     pub n: f64,
+    /// Gaussian curvature K.
     pub gaussian: f64,
+    /// Mean curvature H (positive where the surface bends towards its normal).
     pub mean: f64,
+    /// Larger principal curvature.
     pub k_max: f64,
+    /// Smaller principal curvature.
     pub k_min: f64,
 }
 
@@ -475,6 +497,7 @@ pub enum RegionKind {
 }
 
 impl RegionKind {
+    /// The lowercase name used in output files.
     pub fn name(self) -> &'static str {
         match self {
             RegionKind::Convex => "convex",
@@ -488,7 +511,9 @@ impl RegionKind {
 /// units of 1/length^2 and 1/length).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct ZeroTolerance {
+    /// Largest |K| read as zero.
     pub gaussian: f64,
+    /// Largest |H| read as zero.
     pub mean: f64,
 }
 

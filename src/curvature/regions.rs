@@ -50,7 +50,9 @@ type FastSet<K> = HashSet<K, BuildHasherDefault<FxHasher>>;
 /// boundary as a counter-clockwise vertex loop.
 #[derive(Clone, Debug)]
 pub struct Lattice {
+    /// Sample parameters.
     pub params: Vec<(f64, f64)>,
+    /// Counter-clockwise triangles of samples.
     pub triangles: Vec<[u32; 3]>,
     /// Directed domain-boundary edges, the domain on their left (one loop for a rectangle
     /// or triangle, several for a union of grid cells with holes).
@@ -65,7 +67,7 @@ pub struct Lattice {
 
 impl Lattice {
     /// `n x n` samples over a rectangle (n >= 2), row-major with u along rows.
-    pub fn rectangle(u: (f64, f64), v: (f64, f64), n: usize) -> Self {
+    pub(crate) fn rectangle(u: (f64, f64), v: (f64, f64), n: usize) -> Self {
         let n = n.max(2);
         let at = |a: (f64, f64), k: usize| a.0 + (a.1 - a.0) * k as f64 / (n - 1) as f64;
         let params = (0..n * n).map(|k| (at(u, k / n), at(v, k % n))).collect();
@@ -181,6 +183,7 @@ impl Lattice {
 }
 
 #[derive(Clone, Debug)]
+/// How a surface is sampled and its regions cleaned up.
 pub struct AnalysisOptions {
     /// Samples per side of the parameter lattice.
     pub grid: usize,
@@ -202,9 +205,13 @@ impl Default for AnalysisOptions {
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
+/// A connected region of one type with its boundary loops.
 pub struct Region {
+    /// Region id (the index in `Analysis::regions`).
     pub id: u32,
+    /// Its type.
     pub kind: RegionKind,
+    /// Samples in it.
     pub samples: usize,
     /// Closed loops (last point = first) on the surface.
     pub loops: Vec<Vec<DVec3>>,
@@ -213,8 +220,11 @@ pub struct Region {
 }
 
 #[derive(Clone, Debug)]
+/// A curvature analysis: samples, their curvature and type, and the regions.
 pub struct Analysis {
+    /// The sampling.
     pub lattice: Lattice,
+    /// Surface point of every sample.
     pub positions: Vec<DVec3>,
     /// `None` at singular points of the parametrisation.
     pub curvature: Vec<Option<Curvature>>,
@@ -222,7 +232,9 @@ pub struct Analysis {
     pub kinds: Vec<RegionKind>,
     /// Region id per sample.
     pub region: Vec<u32>,
+    /// The regions, by id.
     pub regions: Vec<Region>,
+    /// The zero tolerance used.
     pub tolerance: ZeroTolerance,
     /// Milliseconds spent sampling (derivatives and curvature), labelling (classification,
     /// components, small-region merging) and tracing boundaries.
@@ -230,9 +242,13 @@ pub struct Analysis {
 }
 
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+/// Milliseconds per stage of an analysis.
 pub struct Timings {
+    /// Derivatives and curvature of every sample.
     pub sampling: f64,
+    /// Classification, components and small-region merging.
     pub labelling: f64,
+    /// Boundary loops.
     pub tracing: f64,
 }
 
@@ -428,6 +444,7 @@ fn mid(a: u32, b: u32) -> Node {
     Node::Mid(a.min(b), a.max(b))
 }
 
+/// The boundary loops of every region, as surface points and as parameters.
 fn trace(
     surface: &dyn DerivativeSurface,
     lattice: &Lattice,
@@ -442,12 +459,67 @@ fn trace(
         size[r as usize] += 1;
         kind_of[r as usize] = kinds[v];
     }
-    // Directed boundary segments, keyed by (region, start) -> end.
+    let segments = boundary_segments(lattice, region);
+    let loops = follow_loops(&segments.next, count);
+    let param = |n: Node| node_param(lattice, &segments.mid_param, n);
+    // Every loop point is on the surface: lattice vertices are sampled already, the rest
+    // (each shared by two loops) is evaluated once, in parallel.
+    let mut extra: Vec<Node> = loops
+        .iter()
+        .flatten()
+        .flatten()
+        .copied()
+        .filter(|n| !matches!(n, Node::Vertex(_)))
+        .collect();
+    extra.sort_unstable_by_key(|&n| node_order(n));
+    extra.dedup();
+    let extra_params: Vec<(f64, f64)> = extra.iter().map(|&n| param(n)).collect();
+    let extra_pos: Vec<DVec3> = surface
+        .derivatives_at(&extra_params)
+        .into_iter()
+        .map(|d| d.position)
+        .collect();
+    let position = |n: Node| match n {
+        Node::Vertex(v) => positions[v as usize],
+        other => {
+            let k = extra
+                .binary_search_by_key(&node_order(other), |&m| node_order(m))
+                .unwrap_or(0);
+            extra_pos[k]
+        }
+    };
+    (0..count)
+        .map(|r| Region {
+            id: r as u32,
+            kind: kind_of[r],
+            samples: size[r],
+            loops: loops[r]
+                .iter()
+                .map(|l| l.iter().map(|&n| position(n)).collect())
+                .collect(),
+            param_loops: loops[r]
+                .iter()
+                .map(|l| l.iter().map(|&n| param(n)).collect())
+                .collect(),
+        })
+        .collect()
+}
+
+/// Directed boundary segments of the regions, and the parameters of edge midpoints in the
+/// chart of a triangle holding them.
+struct Segments {
+    /// (region, start) -> end: the region lies to the left of each segment.
+    next: FastMap<(u32, Node), Node>,
+    /// With per-face charts the midpoint of an edge must be taken in the chart of a
+    /// triangle holding it (its ends' own `params` may be in different charts). Every edge
+    /// whose ends differ in region lies in a triangle met by `boundary_segments`, so this
+    /// map covers all midpoints of the loops; either triangle of an edge gives the same
+    /// surface point.
+    mid_param: FastMap<(u32, u32), (f64, f64)>,
+}
+
+fn boundary_segments(lattice: &Lattice, region: &[u32]) -> Segments {
     let mut next: FastMap<(u32, Node), Node> = FastMap::default();
-    // With per-face charts the midpoint of an edge must be taken in the chart of a
-    // triangle holding it (its ends' own `params` may be in different charts). Every edge
-    // whose ends differ in region lies in a triangle met below, so this map covers all
-    // midpoints of the loops; either triangle of an edge gives the same surface point.
     let mut mid_param: FastMap<(u32, u32), (f64, f64)> = FastMap::default();
     for (ti, t) in lattice.triangles.iter().enumerate() {
         let l = [
@@ -493,7 +565,12 @@ fn trace(
             next.insert((rc, mid(a, c)), Node::Vertex(c));
         }
     }
-    // Follow the segments into loops, starting from the smallest key for determinism.
+    Segments { next, mid_param }
+}
+
+/// Follows the segments into loops per region, starting from the smallest key for
+/// determinism.
+fn follow_loops(next: &FastMap<(u32, Node), Node>, count: usize) -> Vec<Vec<Vec<Node>>> {
     let mut starts: Vec<(u32, Node)> = next.keys().copied().collect();
     starts.sort_by_key(|&(r, n)| (r, node_order(n)));
     let mut used: FastSet<(u32, Node)> = FastSet::default();
@@ -515,67 +592,33 @@ fn trace(
         }
         loops[r as usize].push(lp);
     }
-    let param = |n: Node| -> (f64, f64) {
-        let p = &lattice.params;
-        match n {
-            Node::Vertex(v) => p[v as usize],
-            Node::Mid(a, b) => mid_param.get(&(a, b)).copied().unwrap_or_else(|| {
-                let (x, y) = (p[a as usize], p[b as usize]);
-                (0.5 * (x.0 + y.0), 0.5 * (x.1 + y.1))
-            }),
-            Node::Centroid(t) => {
-                let corners = match lattice.charts.as_ref().and_then(|c| c.get(t as usize)) {
-                    Some(ch) => *ch,
-                    None => lattice.triangles[t as usize].map(|v| p[v as usize]),
-                };
-                let s = corners
-                    .iter()
-                    .fold((0.0, 0.0), |s, c| (s.0 + c.0, s.1 + c.1));
-                (s.0 / 3.0, s.1 / 3.0)
-            }
-        }
-    };
-    // Every loop point is on the surface: lattice vertices are sampled already, the rest
-    // (each shared by two loops) is evaluated once, in parallel.
-    let mut extra: Vec<Node> = loops
-        .iter()
-        .flatten()
-        .flatten()
-        .copied()
-        .filter(|n| !matches!(n, Node::Vertex(_)))
-        .collect();
-    extra.sort_unstable_by_key(|&n| node_order(n));
-    extra.dedup();
-    let extra_params: Vec<(f64, f64)> = extra.iter().map(|&n| param(n)).collect();
-    let extra_pos: Vec<DVec3> = surface
-        .derivatives_at(&extra_params)
-        .into_iter()
-        .map(|d| d.position)
-        .collect();
-    let position = |n: Node| match n {
-        Node::Vertex(v) => positions[v as usize],
-        other => {
-            let k = extra
-                .binary_search_by_key(&node_order(other), |&m| node_order(m))
-                .unwrap_or(0);
-            extra_pos[k]
-        }
-    };
-    (0..count)
-        .map(|r| Region {
-            id: r as u32,
-            kind: kind_of[r],
-            samples: size[r],
-            loops: loops[r]
+    loops
+}
+
+/// A loop point's surface parameters.
+fn node_param(
+    lattice: &Lattice,
+    mid_param: &FastMap<(u32, u32), (f64, f64)>,
+    n: Node,
+) -> (f64, f64) {
+    let p = &lattice.params;
+    match n {
+        Node::Vertex(v) => p[v as usize],
+        Node::Mid(a, b) => mid_param.get(&(a, b)).copied().unwrap_or_else(|| {
+            let (x, y) = (p[a as usize], p[b as usize]);
+            (0.5 * (x.0 + y.0), 0.5 * (x.1 + y.1))
+        }),
+        Node::Centroid(t) => {
+            let corners = match lattice.charts.as_ref().and_then(|c| c.get(t as usize)) {
+                Some(ch) => *ch,
+                None => lattice.triangles[t as usize].map(|v| p[v as usize]),
+            };
+            let s = corners
                 .iter()
-                .map(|l| l.iter().map(|&n| position(n)).collect())
-                .collect(),
-            param_loops: loops[r]
-                .iter()
-                .map(|l| l.iter().map(|&n| param(n)).collect())
-                .collect(),
-        })
-        .collect()
+                .fold((0.0, 0.0), |s, c| (s.0 + c.0, s.1 + c.1));
+            (s.0 / 3.0, s.1 / 3.0)
+        }
+    }
 }
 
 fn node_order(n: Node) -> (u8, u32, u32) {

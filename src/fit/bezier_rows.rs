@@ -17,7 +17,8 @@
 //! thread count), and the transpose sums block partials in block order, so results are
 //! reproducible.
 
-use super::sparse::Csr;
+use super::csr::Csr;
+use super::simd::{axpy, axpy3, dot, dot3, wide};
 use crate::surface::bezier::{lattice_index, lattice_len};
 use crate::surface::SurfaceParam;
 use rayon::prelude::*;
@@ -30,7 +31,7 @@ const PARALLEL_WORK: usize = 200_000;
 const BLOCK_WORK: usize = 40_000;
 
 #[derive(Clone, Debug)]
-pub struct BezierRows {
+pub(crate) struct BezierRows {
     degree: usize,
     npoints: usize,
     /// Row r holds sorted positions `start[r]..start[r + 1]`.
@@ -63,98 +64,6 @@ fn bernstein(n: usize, t: f64, out: &mut [f64]) {
 fn binomial(n: usize, k: usize) -> f64 {
     let k = k.min(n - k);
     (0..k).fold(1.0, |acc, j| acc * (n - j) as f64 / (j + 1) as f64)
-}
-
-/// a * b + c, fused only when the caller was compiled for FMA (without the instruction
-/// `mul_add` is a slow library call).
-#[inline(always)]
-fn madd<const F: bool>(a: f64, b: f64, c: f64) -> f64 {
-    if F {
-        a.mul_add(b, c)
-    } else {
-        a * b + c
-    }
-}
-
-/// y += a x.
-#[inline(always)]
-fn axpy<const F: bool>(a: f64, x: &[f64], y: &mut [f64]) {
-    y.iter_mut()
-        .zip(x)
-        .for_each(|(y, x)| *y = madd::<F>(a, *x, *y));
-}
-
-/// Eight-accumulator dot product: lets the compiler use vector registers for a reduction
-/// it may not reorder on its own.
-#[inline(always)]
-fn dot<const F: bool>(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] = madd::<F>(x[k], y[k], acc[k]);
-        }
-    }
-    let tail: f64 = ra.iter().zip(rb).map(|(x, y)| x * y).sum();
-    let half = [
-        acc[0] + acc[4],
-        acc[1] + acc[5],
-        acc[2] + acc[6],
-        acc[3] + acc[7],
-    ];
-    (half[0] + half[1]) + (half[2] + half[3]) + tail
-}
-
-/// ys[l] += a[l] x for three lanes in one pass over x (x is the large operand).
-#[inline(always)]
-fn axpy3<const F: bool>(a: [f64; 3], x: &[f64], ys: &mut [f64]) {
-    let len = x.len();
-    let (y0, rest) = ys.split_at_mut(len);
-    let (y1, y2) = rest.split_at_mut(len);
-    for (((x, y0), y1), y2) in x.iter().zip(y0).zip(y1).zip(y2) {
-        *y0 = madd::<F>(a[0], *x, *y0);
-        *y1 = madd::<F>(a[1], *x, *y1);
-        *y2 = madd::<F>(a[2], *x, *y2);
-    }
-}
-
-/// Three dot products against one shared operand `a`, in one pass over it.
-#[inline(always)]
-fn dot3<const F: bool>(a: &[f64], ys: &[f64]) -> [f64; 3] {
-    let len = a.len();
-    let (y0, rest) = ys.split_at(len);
-    let (y1, y2) = rest.split_at(len);
-    let mut acc = [[0.0; 4]; 3];
-    let chunks = len / 4;
-    let quads = a
-        .chunks_exact(4)
-        .zip(y0.chunks_exact(4))
-        .zip(y1.chunks_exact(4).zip(y2.chunks_exact(4)));
-    for ((a, y0), (y1, y2)) in quads {
-        for (k, &ak) in a.iter().enumerate() {
-            acc[0][k] = madd::<F>(ak, y0[k], acc[0][k]);
-            acc[1][k] = madd::<F>(ak, y1[k], acc[1][k]);
-            acc[2][k] = madd::<F>(ak, y2[k], acc[2][k]);
-        }
-    }
-    let mut out = [0.0; 3];
-    for (l, y) in [y0, y1, y2].into_iter().enumerate() {
-        let tail: f64 = (4 * chunks..len).map(|p| a[p] * y[p]).sum();
-        out[l] = (acc[l][0] + acc[l][1]) + (acc[l][2] + acc[l][3]) + tail;
-    }
-    out
-}
-
-/// Whether this CPU has AVX2 and FMA (checked once; the answer cannot change).
-pub(crate) fn wide() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        static WIDE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        *WIDE.get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    false
 }
 
 impl BezierRows {
@@ -421,7 +330,7 @@ impl BezierRows {
     }
 
     /// y = N x.
-    pub fn mul<const L: usize>(&self, x: &[[f64; L]], y: &mut [[f64; L]]) {
+    pub(crate) fn mul<const L: usize>(&self, x: &[[f64; L]], y: &mut [[f64; L]]) {
         let q = self.grid(x);
         let sorted_out = |out: &mut [[f64; L]]| {
             if self.parallel() {
@@ -452,7 +361,7 @@ impl BezierRows {
     }
 
     /// x = N^T y.
-    pub fn mul_t<const L: usize>(&self, y: &[[f64; L]], x: &mut [[f64; L]]) {
+    pub(crate) fn mul_t<const L: usize>(&self, y: &[[f64; L]], x: &mut [[f64; L]]) {
         let grid = if self.parallel() {
             let parts: Vec<Vec<f64>> = self
                 .blocks
@@ -479,7 +388,7 @@ impl BezierRows {
     }
 
     /// The same operator as an explicit CSR matrix (for the direct solve and for tests).
-    pub fn to_csr(&self) -> Csr {
+    pub(crate) fn to_csr(&self) -> Csr {
         let n1 = self.degree + 1;
         let nc = self.ncols();
         let mut rows: Vec<Vec<(u32, f64)>> = vec![Vec::new(); self.npoints];

@@ -7,18 +7,26 @@ use rayon::prelude::*;
 const STATS_CHUNK: usize = 1 << 16;
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+/// When a fit may stop: error targets (any one met stops it) and limits.
 pub struct Budget {
     /// Absolute tolerance behind `within_tolerance_pct` (already resolved from a relative one).
     pub tolerance: f64,
+    /// Target for the largest error.
     pub max_error: Option<f64>,
+    /// Target for the mean error.
     pub mean_error: Option<f64>,
+    /// Target for the RMS error.
     pub rms_error: Option<f64>,
+    /// Target share of points within `tolerance`, in percent.
     pub within_tolerance_pct: Option<f64>,
+    /// Most steps.
     pub max_iterations: usize,
+    /// Most wall time, checked between steps.
     pub max_time_ms: Option<u64>,
     /// Stalled when the RMS improves by less than `stall_rel_improvement` (relative) over
     /// `stall_steps` consecutive steps.
     pub stall_steps: usize,
+    /// See `stall_steps`.
     pub stall_rel_improvement: f64,
 }
 
@@ -40,24 +48,40 @@ impl Default for Budget {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+/// How a fit ended.
 pub enum FitStatus {
+    /// A target was met (or there were none and the iteration converged or ran its steps).
     Met,
+    /// Stopped by the step or time limit before any target was met.
     Capped,
+    /// Stopped because further steps no longer improved the fit.
     Stalled,
 }
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+/// Residual statistics after one step.
 pub struct StepStats {
+    /// Step number (0 = the starting net).
     pub k: usize,
+    /// Largest point error.
     pub max_error: f64,
+    /// Mean point error.
     pub mean_error: f64,
+    /// RMS point error.
     pub rms_error: f64,
+    /// Share of points within the budget's tolerance, in percent.
     pub within_tolerance_pct: f64,
+    /// Milliseconds since the fit started.
     pub elapsed_ms: f64,
 }
 
 impl StepStats {
-    pub fn from_residuals(k: usize, residuals: &[DVec3], tolerance: f64, elapsed_ms: f64) -> Self {
+    pub(crate) fn from_residuals(
+        k: usize,
+        residuals: &[DVec3],
+        tolerance: f64,
+        elapsed_ms: f64,
+    ) -> Self {
         let n = residuals.len().max(1) as f64;
         let chunk = |rs: &[DVec3]| {
             let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
@@ -103,13 +127,14 @@ impl Budget {
         targets.iter().any(Option::is_some) && targets.iter().all(|t| t.unwrap_or(true))
     }
 
-    pub fn has_targets(&self) -> bool {
+    pub(crate) fn has_targets(&self) -> bool {
         self.max_error.is_some()
             || self.mean_error.is_some()
             || self.rms_error.is_some()
             || self.within_tolerance_pct.is_some()
     }
 
+    /// Whether the RMS improved by less than `stall_rel_improvement` over the last `stall_steps` steps.
     pub fn stalled(&self, history: &[StepStats]) -> bool {
         if self.stall_steps == 0 || history.len() <= self.stall_steps {
             return false;

@@ -14,11 +14,12 @@
 //! the surface, and the blocks, which see each control's local normal, take most of that
 //! spread out of the iteration.
 
+use super::collocation::Collocation;
+use super::csr::Csr;
 use super::normal_matrix::{BlockMatrix, Fairness};
-use super::sparse::{Collocation, Csr};
 use glam::DVec3;
 
-pub struct DistanceProblem<'a> {
+pub(crate) struct DistanceProblem<'a> {
     /// The collocation rows at the foot points.
     pub basis: &'a Csr,
     pub data: &'a [DVec3],
@@ -72,7 +73,7 @@ impl DistanceProblem<'_> {
 
 /// Block-preconditioned conjugate gradients from `start` until the residual of the normal
 /// equations drops by `rel_tol` or `max_iter` steps; returns the controls and the steps.
-pub fn solve_distance(
+pub(crate) fn solve_distance(
     p: &DistanceProblem,
     start: Vec<DVec3>,
     max_iter: usize,
@@ -85,7 +86,7 @@ pub fn solve_distance(
 /// (faer, fill-reducing ordering): on small nets one factorisation costs less than the
 /// 25-45 preconditioned CG steps a round needs, and it is exact. `None` when the matrix is
 /// not positive definite (controls no term holds): callers fall back to `solve_distance`.
-pub fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
+pub(crate) fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
     p.assemble(true).solve_direct().ok()
 }
 
@@ -266,7 +267,7 @@ mod tests {
             })
             .collect();
         let basis = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let fairness = Collocation::new(crate::fit::sparse::ring_laplacian(m, 7));
+        let fairness = Collocation::new(crate::fit::csr::ring_laplacian(m, 7));
         let data: Vec<DVec3> = (0..50).map(|j| DVec3::splat(j as f64)).collect();
         let normals: Vec<DVec3> = (0..50)
             .map(|j| DVec3::new((j as f64).cos(), 0.3, (j as f64).sin()).normalize())

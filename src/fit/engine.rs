@@ -2,69 +2,121 @@
 //! solve as ground truth. All minimise `|N P - p|^2 + s |L P|^2` (PIA only the first term).
 
 use super::budget::{Budget, FitStatus, StepStats};
+use super::collocation::Collocation;
+use super::csr::Csr;
 use super::normal_matrix::{Fairness, ScalarMatrix};
 use super::normal_solve::DirectFailure;
-use super::sparse::{Collocation, Csr};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::time::Instant;
 
+/// How the control points are found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Method {
+    /// Progressive iterative approximation through an inverse-subdivision operator.
     Pia,
+    /// Least-squares PIA: gradient steps of fixed size 1.9 / lambda_max.
     Lspia,
+    /// Conjugate gradients on the normal equations (CGLS).
     Cg,
+    /// Sparse Cholesky of the normal equations, in one step.
     Direct,
 }
 
-impl std::str::FromStr for Method {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "pia" => Ok(Self::Pia),
-            "lspia" => Ok(Self::Lspia),
-            "cg" => Ok(Self::Cg),
-            "direct" => Ok(Self::Direct),
-            _ => Err(format!("unknown method '{s}' (pia|lspia|cg|direct)")),
+impl Method {
+    /// Every method, in the order a user interface lists them.
+    pub const ALL: [Method; 4] = [Method::Pia, Method::Lspia, Method::Cg, Method::Direct];
+
+    /// The method's name in configs, output files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Pia => "pia",
+            Method::Lspia => "lspia",
+            Method::Cg => "cg",
+            Method::Direct => "direct",
         }
     }
 }
 
-#[derive(Debug, thiserror::Error)]
-pub enum FitError {
-    #[error("method pia needs an inverse-subdivision operator (data on the subdivision lattice)")]
-    NoPiaOperator,
-    #[error("{0} data points but the collocation matrix has {1} rows")]
-    Shape(usize, usize),
-    #[error("initial net has {0} points, the surface {1} control points")]
-    InitialShape(usize, usize),
-    #[error("direct solve: {0}")]
-    Direct(String),
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
 }
 
-pub type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
+impl std::str::FromStr for Method {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| crate::names::UnknownName::new(s, Method::ALL.map(Method::name)))
+    }
+}
 
+/// A fit that cannot start or cannot finish.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum FitError {
+    /// PIA was asked for without the operator it iterates with.
+    #[error("method pia needs an inverse-subdivision operator (data on the subdivision lattice)")]
+    NoPiaOperator,
+    /// The data do not match the collocation operator's rows (data count, rows).
+    #[error("{0} data points but the collocation matrix has {1} rows")]
+    Shape(usize, usize),
+    /// The starting net does not match the operator's columns (given, expected).
+    #[error("initial net has {0} points, the surface {1} control points")]
+    InitialShape(usize, usize),
+    /// The direct solve found no solution.
+    #[error("direct solve: {0}")]
+    Direct(#[source] DirectFailure),
+}
+
+impl FitError {
+    /// A stable snake_case name of the variant, for machine-readable reports.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::NoPiaOperator => "no_pia_operator",
+            Self::Shape(..) => "shape",
+            Self::InitialShape(..) => "initial_shape",
+            Self::Direct(_) => "direct_solve",
+        }
+    }
+}
+
+pub(crate) type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
+
+/// A fit's inputs: the operator, the data and the optional fairness and PIA terms.
 pub struct FitProblem<'a> {
+    /// The collocation operator N.
     pub basis: &'a Collocation,
+    /// Data points, one per row of N.
     pub data: &'a [DVec3],
+    /// Weight s of the fairness term s |L P|^2 (0 = none).
     pub smoothing: f64,
     /// Fairness operator L over control points (with its transpose).
     pub fairness: Option<&'a Collocation>,
+    /// PIA's update from data residuals to control corrections (method pia only).
     pub pia_operator: Option<PiaOperator<'a>>,
     /// Called with every step's statistics as soon as they exist (k = 0, the starting
     /// net, first), e.g. for a progress bar. Runs on the fitting thread between steps.
     pub on_step: Option<StepHook<'a>>,
 }
 
+/// Called with every step's statistics.
 pub type StepHook<'a> = &'a (dyn Fn(&StepStats) + Sync);
 
 #[derive(Clone, Debug)]
+/// A finished fit.
 pub struct FitOutcome {
+    /// The fitted control points.
     pub controls: Vec<DVec3>,
     /// k = 0 is the initial net.
     pub steps: Vec<StepStats>,
+    /// Why it stopped.
     pub status: FitStatus,
+    /// Steps taken (`steps.len() - 1`).
     pub iterations: usize,
 }
 
@@ -168,6 +220,8 @@ pub fn lambda_max(
     lambda
 }
 
+/// Fits the control points to the data from `initial` with `method` until `budget` is met,
+/// stalls or runs out (the outcome says which).
 pub fn fit(
     problem: &FitProblem,
     initial: Vec<DVec3>,
@@ -182,142 +236,42 @@ pub fn fit(
     if initial.len() != ncols {
         return Err(FitError::InitialShape(initial.len(), ncols));
     }
-    let report = |s: &StepStats| {
-        if let Some(hook) = problem.on_step {
-            hook(s);
-        }
+    let mut log = StepLog {
+        problem,
+        budget,
+        start: Instant::now(),
+        steps: Vec::new(),
     };
-    let start = Instant::now();
-    let elapsed = || start.elapsed().as_secs_f64() * 1e3;
     let a = Stacked {
         p: problem,
         root_s: problem.smoothing.max(0.0).sqrt(),
     };
-    let mut x = initial;
+    let x = initial;
     let mut r_data = vec![DVec3::ZERO; nrows];
     let mut r_fair = Vec::new();
     a.residuals(&x, &mut r_data, &mut r_fair);
-    let mut steps = vec![StepStats::from_residuals(
-        0,
-        &r_data,
-        budget.tolerance,
-        elapsed(),
-    )];
-    report(&steps[0]);
-    let time_up = |t: f64| budget.max_time_ms.is_some_and(|m| t >= m as f64);
-    let finish = |x: Vec<DVec3>, steps: Vec<StepStats>, status| {
-        let iterations = steps.len() - 1;
-        Ok(FitOutcome {
-            controls: x,
-            steps,
-            status,
-            iterations,
-        })
-    };
-    if budget.met(&steps[0]) {
-        return finish(x, steps, FitStatus::Met);
+    log.record(0, &r_data);
+    if budget.met(&log.steps[0]) {
+        return Ok(log.finish(x, FitStatus::Met));
     }
     if method == Method::Direct {
-        let x = direct_solve(problem)?;
-        let mut fitted = vec![DVec3::ZERO; nrows];
-        n.mul_vec3(&x, &mut fitted);
-        let res: Vec<DVec3> = problem
-            .data
-            .iter()
-            .zip(&fitted)
-            .map(|(p, f)| *p - *f)
-            .collect();
-        steps.push(StepStats::from_residuals(
-            1,
-            &res,
-            budget.tolerance,
-            elapsed(),
-        ));
-        report(&steps[1]);
-        let status = if budget.met(&steps[1]) || !budget.has_targets() {
-            FitStatus::Met
-        } else {
-            FitStatus::Stalled
-        };
-        return finish(x, steps, status);
+        return direct_fit(problem, log);
     }
     if method == Method::Pia && problem.pia_operator.is_none() {
         return Err(FitError::NoPiaOperator);
     }
     let mu = if method == Method::Lspia {
-        let estimate = || lambda_max(problem.basis, problem.fairness, problem.smoothing, 40);
-        let lambda = if problem.fairness.is_none() || problem.smoothing <= 0.0 {
-            problem.basis.cached_lambda_max(estimate)
-        } else {
-            estimate()
-        };
-        1.9 / (1.02 * lambda.max(1e-300))
+        lspia_step(problem)
     } else {
         0.0
     };
-    let nc = x.len();
-    let mut grad = vec![DVec3::ZERO; nc];
-    a.apply_t(&r_data, &r_fair, &mut grad);
-    let grad0 = dot3(&grad, &grad).max_element().max(1e-300);
-    let mut dir = grad.clone();
-    let mut gamma = dot3(&grad, &grad);
-    let mut q_data = vec![DVec3::ZERO; nrows];
-    let mut q_fair = Vec::new();
+    let mut state = Iterate::new(&a, x, r_data, r_fair);
     for k in 1..=budget.max_iterations {
-        match method {
-            Method::Cg => {
-                a.apply(&dir, &mut q_data, &mut q_fair);
-                let delta = dot3(&q_data, &q_data) + dot3(&q_fair, &q_fair);
-                let alpha = DVec3::select(delta.cmpgt(DVec3::ZERO), gamma / delta, DVec3::ZERO);
-                update(&mut x, &dir, |xi, d| *xi += alpha * d);
-                update(&mut r_data, &q_data, |r, q| *r -= alpha * q);
-                r_fair
-                    .iter_mut()
-                    .zip(&q_fair)
-                    .for_each(|(r, q)| *r -= alpha * *q);
-                a.apply_t(&r_data, &r_fair, &mut grad);
-                let gamma_new = dot3(&grad, &grad);
-                let beta = DVec3::select(gamma.cmpgt(DVec3::ZERO), gamma_new / gamma, DVec3::ZERO);
-                update(&mut dir, &grad, |d, g| *d = g + beta * *d);
-                gamma = gamma_new;
-            }
-            Method::Lspia => {
-                update(&mut x, &grad, |xi, g| *xi += g * mu);
-                a.residuals(&x, &mut r_data, &mut r_fair);
-                a.apply_t(&r_data, &r_fair, &mut grad);
-                gamma = dot3(&grad, &grad);
-            }
-            Method::Pia => {
-                let op = problem.pia_operator.ok_or(FitError::NoPiaOperator)?;
-                let delta = op(&r_data);
-                x.iter_mut().zip(&delta).for_each(|(xi, d)| *xi += *d);
-                a.residuals(&x, &mut r_data, &mut r_fair);
-                a.apply_t(&r_data, &r_fair, &mut grad);
-                gamma = dot3(&grad, &grad);
-            }
-            Method::Direct => unreachable!("handled above"),
-        }
-        let stats = StepStats::from_residuals(k, &r_data, budget.tolerance, elapsed());
-        let converged = gamma.max_element() <= 1e-26 * grad0;
-        report(&stats);
-        steps.push(stats);
-        let last = &steps[k];
-        if budget.met(last) {
-            return finish(x, steps, FitStatus::Met);
-        }
-        if converged {
-            let status = if budget.has_targets() {
-                FitStatus::Stalled
-            } else {
-                FitStatus::Met
-            };
-            return finish(x, steps, status);
-        }
-        if budget.has_targets() && budget.stalled(&steps) {
-            return finish(x, steps, FitStatus::Stalled);
-        }
-        if time_up(last.elapsed_ms) {
-            return finish(x, steps, FitStatus::Capped);
+        state.step(&a, method, mu)?;
+        let converged = state.gamma.max_element() <= CONVERGED * state.grad0;
+        log.record(k, &state.r_data);
+        if let Some(status) = log.stop(k, converged) {
+            return Ok(log.finish(state.x, status));
         }
     }
     let status = if budget.has_targets() {
@@ -325,7 +279,176 @@ pub fn fit(
     } else {
         FitStatus::Met
     };
-    finish(x, steps, status)
+    Ok(log.finish(state.x, status))
+}
+
+/// The iteration has converged when every coordinate's squared gradient fell below this
+/// fraction of its start: further steps would only move rounding noise.
+const CONVERGED: f64 = 1e-26;
+
+/// The steps so far, reported to the hook as they are recorded.
+struct StepLog<'a> {
+    problem: &'a FitProblem<'a>,
+    budget: &'a Budget,
+    start: Instant,
+    steps: Vec<StepStats>,
+}
+
+impl StepLog<'_> {
+    fn record(&mut self, k: usize, r_data: &[DVec3]) {
+        let elapsed = self.start.elapsed().as_secs_f64() * 1e3;
+        let stats = StepStats::from_residuals(k, r_data, self.budget.tolerance, elapsed);
+        if let Some(hook) = self.problem.on_step {
+            hook(&stats);
+        }
+        self.steps.push(stats);
+    }
+
+    /// Whether to stop after step `k`, and with which status.
+    fn stop(&self, k: usize, converged: bool) -> Option<FitStatus> {
+        let budget = self.budget;
+        let last = &self.steps[k];
+        if budget.met(last) {
+            return Some(FitStatus::Met);
+        }
+        if converged {
+            return Some(if budget.has_targets() {
+                FitStatus::Stalled
+            } else {
+                FitStatus::Met
+            });
+        }
+        if budget.has_targets() && budget.stalled(&self.steps) {
+            return Some(FitStatus::Stalled);
+        }
+        if budget
+            .max_time_ms
+            .is_some_and(|m| last.elapsed_ms >= m as f64)
+        {
+            return Some(FitStatus::Capped);
+        }
+        None
+    }
+
+    fn finish(self, controls: Vec<DVec3>, status: FitStatus) -> FitOutcome {
+        let iterations = self.steps.len() - 1;
+        FitOutcome {
+            controls,
+            steps: self.steps,
+            status,
+            iterations,
+        }
+    }
+}
+
+/// One direct solve, reported as step 1.
+fn direct_fit(problem: &FitProblem, mut log: StepLog) -> Result<FitOutcome, FitError> {
+    let x = direct_solve(problem)?;
+    let mut fitted = vec![DVec3::ZERO; problem.basis.nrows()];
+    problem.basis.mul_vec3(&x, &mut fitted);
+    let res: Vec<DVec3> = problem
+        .data
+        .iter()
+        .zip(&fitted)
+        .map(|(p, f)| *p - *f)
+        .collect();
+    log.record(1, &res);
+    let budget = log.budget;
+    let status = if budget.met(&log.steps[1]) || !budget.has_targets() {
+        FitStatus::Met
+    } else {
+        FitStatus::Stalled
+    };
+    Ok(log.finish(x, status))
+}
+
+/// LSPIA's step size, 1.9 / lambda_max(A^T A) with 2% margin on the estimate (a step of
+/// 2 / lambda_max would no longer converge). Without smoothing the estimate depends on N
+/// alone and is cached on it.
+fn lspia_step(problem: &FitProblem) -> f64 {
+    let estimate = || lambda_max(problem.basis, problem.fairness, problem.smoothing, 40);
+    let lambda = if problem.fairness.is_none() || problem.smoothing <= 0.0 {
+        problem.basis.cached_lambda_max(estimate)
+    } else {
+        estimate()
+    };
+    1.9 / (1.02 * lambda.max(1e-300))
+}
+
+/// The iterate and the vectors the methods carry from step to step.
+struct Iterate {
+    x: Vec<DVec3>,
+    r_data: Vec<DVec3>,
+    r_fair: Vec<DVec3>,
+    /// A^T r.
+    grad: Vec<DVec3>,
+    /// |A^T r|^2 per coordinate, at the start and now.
+    grad0: f64,
+    gamma: DVec3,
+    /// CG's search direction and A dir.
+    dir: Vec<DVec3>,
+    q_data: Vec<DVec3>,
+    q_fair: Vec<DVec3>,
+}
+
+impl Iterate {
+    fn new(a: &Stacked, x: Vec<DVec3>, r_data: Vec<DVec3>, r_fair: Vec<DVec3>) -> Self {
+        let nrows = r_data.len();
+        let mut grad = vec![DVec3::ZERO; x.len()];
+        a.apply_t(&r_data, &r_fair, &mut grad);
+        let grad0 = dot3(&grad, &grad).max_element().max(1e-300);
+        let dir = grad.clone();
+        let gamma = dot3(&grad, &grad);
+        Self {
+            x,
+            r_data,
+            r_fair,
+            grad,
+            grad0,
+            gamma,
+            dir,
+            q_data: vec![DVec3::ZERO; nrows],
+            q_fair: Vec::new(),
+        }
+    }
+
+    fn step(&mut self, a: &Stacked, method: Method, mu: f64) -> Result<(), FitError> {
+        match method {
+            Method::Cg => {
+                a.apply(&self.dir, &mut self.q_data, &mut self.q_fair);
+                let delta = dot3(&self.q_data, &self.q_data) + dot3(&self.q_fair, &self.q_fair);
+                let gamma = self.gamma;
+                let alpha = DVec3::select(delta.cmpgt(DVec3::ZERO), gamma / delta, DVec3::ZERO);
+                update(&mut self.x, &self.dir, |xi, d| *xi += alpha * d);
+                update(&mut self.r_data, &self.q_data, |r, q| *r -= alpha * q);
+                self.r_fair
+                    .iter_mut()
+                    .zip(&self.q_fair)
+                    .for_each(|(r, q)| *r -= alpha * *q);
+                a.apply_t(&self.r_data, &self.r_fair, &mut self.grad);
+                let gamma_new = dot3(&self.grad, &self.grad);
+                let beta = DVec3::select(gamma.cmpgt(DVec3::ZERO), gamma_new / gamma, DVec3::ZERO);
+                update(&mut self.dir, &self.grad, |d, g| *d = g + beta * *d);
+                self.gamma = gamma_new;
+            }
+            Method::Lspia => {
+                update(&mut self.x, &self.grad, |xi, g| *xi += g * mu);
+                a.residuals(&self.x, &mut self.r_data, &mut self.r_fair);
+                a.apply_t(&self.r_data, &self.r_fair, &mut self.grad);
+                self.gamma = dot3(&self.grad, &self.grad);
+            }
+            Method::Pia => {
+                let op = a.p.pia_operator.ok_or(FitError::NoPiaOperator)?;
+                let delta = op(&self.r_data);
+                self.x.iter_mut().zip(&delta).for_each(|(xi, d)| *xi += *d);
+                a.residuals(&self.x, &mut self.r_data, &mut self.r_fair);
+                a.apply_t(&self.r_data, &self.r_fair, &mut self.grad);
+                self.gamma = dot3(&self.grad, &self.grad);
+            }
+            Method::Direct => unreachable!("fit hands Direct to direct_fit before iterating"),
+        }
+        Ok(())
+    }
 }
 
 /// Sparse Cholesky (faer, fill-reducing ordering) of `N^T N + s L^T L`, assembled as the
@@ -338,15 +461,7 @@ fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
     });
     ScalarMatrix::assemble(problem.basis.n(), problem.data, fairness, true)
         .solve_direct()
-        .map_err(|failure| {
-            FitError::Direct(
-                match failure {
-                    DirectFailure::NotDefinite => "normal matrix is not positive definite: control points without data; add smoothing",
-                    DirectFailure::NotFinite => "the factorisation produced non-finite values (ill-conditioned normal matrix)",
-                }
-                .into(),
-            )
-        })
+        .map_err(FitError::Direct)
 }
 
 /// Umbrella Laplacian of a control net: row i is `P_i - mean(neighbours)`.
@@ -375,4 +490,19 @@ pub fn umbrella_laplacian(control_count: usize, faces: &[[u32; 3]]) -> Csr {
         })
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn method_names_parse_back_and_are_the_serde_names() {
+        for m in Method::ALL {
+            assert_eq!(m.name().parse::<Method>(), Ok(m));
+            assert_eq!(serde_json::to_value(m).expect("serialises"), m.name());
+        }
+        let e = "gauss".parse::<Method>().expect_err("no such method");
+        assert_eq!(e.expected, ["pia", "lspia", "cg", "direct"]);
+    }
 }

@@ -114,11 +114,14 @@ fn cholesky_solve(
 }
 
 /// Why a factorisation gave no solution.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
 pub enum DirectFailure {
     /// M is not positive definite: controls no term holds.
+    #[error("normal matrix is not positive definite: control points without data; add smoothing")]
     NotDefinite,
     /// The solve produced non-finite values (M is ill-conditioned).
+    #[error("the factorisation produced non-finite values (ill-conditioned normal matrix)")]
     NotFinite,
 }
 
@@ -132,7 +135,7 @@ fn finite(x: Vec<DVec3>) -> Result<Vec<DVec3>, DirectFailure> {
 
 impl ScalarMatrix {
     /// Jacobi-preconditioned CG.
-    pub fn solve_pcg(
+    pub(crate) fn solve_pcg(
         &self,
         start: Vec<DVec3>,
         max_iter: usize,
@@ -144,7 +147,7 @@ impl ScalarMatrix {
     }
 
     /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly.
-    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
+    pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
         let rows = self.idx.iter().map(|&j| j as usize).collect();
@@ -160,7 +163,7 @@ impl BlockMatrix {
     /// CG preconditioned by the inverse 3x3 diagonal blocks: with a small tangential share
     /// the system is much stiffer along the normals than along the surface, and the blocks,
     /// which see each control's normal, take most of that spread out of the iteration.
-    pub fn solve_pcg(
+    pub(crate) fn solve_pcg(
         &self,
         start: Vec<DVec3>,
         max_iter: usize,
@@ -172,7 +175,7 @@ impl BlockMatrix {
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
-    pub fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
+    pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let mut col_ptr = Vec::with_capacity(3 * m + 1);
         col_ptr.push(0);

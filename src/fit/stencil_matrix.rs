@@ -9,17 +9,17 @@
 //! The result is the same `NormalMatrix` as the general assembly's (same structure, same
 //! sums up to the order of floating-point additions), solved by the same code.
 
+use super::csr::Csr;
 use super::normal_matrix::{diagonal_lanes, BlockMatrix, Fairness, NormalMatrix, ScalarMatrix};
-use super::sparse::Csr;
 use glam::DVec3;
 use rayon::prelude::*;
 
 /// Controls per stencil (a box-spline cell).
-pub const WIDTH: usize = 12;
+pub(crate) const WIDTH: usize = 12;
 
 /// One data row per point: its stencil and the weights of the stencil's controls.
 #[derive(Clone, Debug, Default)]
-pub struct StencilRows {
+pub(crate) struct StencilRows {
     pub stencil: Vec<u32>,
     pub weights: Vec<[f64; WIDTH]>,
 }
@@ -85,7 +85,7 @@ struct StencilSums<'a, W> {
 
 /// The fixed part of every assembly over a set of stencils.
 #[derive(Clone, Debug)]
-pub struct StencilPlan {
+pub(crate) struct StencilPlan {
     controls: usize,
     stencils: Vec<[u32; WIDTH]>,
     ptr: Vec<usize>,
@@ -323,7 +323,7 @@ impl StencilPlan {
         work: &StencilSums<impl Fn(usize) -> ([f64; K], DVec3) + Sync>,
     ) {
         #[cfg(target_arch = "x86_64")]
-        if super::bezier_rows::wide() {
+        if super::simd::wide() {
             // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
             return unsafe { self.add_band_wide(band, lo, entries, rhs, work) };
         }
@@ -388,12 +388,12 @@ impl StencilPlan {
     }
 
     /// N^T N + s L^T L and N^T p (point-to-point).
-    pub fn assemble_scalar(&self, rows: &StencilRows, data: &[DVec3]) -> ScalarMatrix {
+    pub(crate) fn assemble_scalar(&self, rows: &StencilRows, data: &[DVec3]) -> ScalarMatrix {
         self.assemble::<1>(rows, ScalarMatrix::weight(data))
     }
 
     /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (squared distance).
-    pub fn assemble_blocks(
+    pub(crate) fn assemble_blocks(
         &self,
         rows: &StencilRows,
         data: &[DVec3],
@@ -421,7 +421,7 @@ impl StencilRows {
 
     /// The same rows as a general sparse matrix (zero weights dropped, as the general
     /// collocation does).
-    pub fn to_csr(&self, plan: &StencilPlan) -> Csr {
+    pub(crate) fn to_csr(&self, plan: &StencilPlan) -> Csr {
         let mut m = Csr {
             nrows: self.stencil.len(),
             ncols: plan.controls,
@@ -498,7 +498,7 @@ mod tests {
         let normals: Vec<DVec3> = (0..points)
             .map(|_| DVec3::new(rng.next() - 0.5, rng.next() - 0.5, 1.0).normalize())
             .collect();
-        let l = crate::fit::sparse::ring_laplacian(m, 9);
+        let l = crate::fit::csr::ring_laplacian(m, 9);
         let fairness = super::super::Collocation::new(l);
         let fair = Fairness {
             l: fairness.n(),

@@ -1,6 +1,6 @@
 //! Binary glTF writer: positions, optional normals and colours, u32 indices.
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -9,6 +9,7 @@ use std::path::Path;
 /// Optional per-vertex attributes for [`glb_bytes`].
 #[derive(Default)]
 pub struct GlbAttributes<'a> {
+    /// Unit normals, one per vertex.
     pub normals: Option<&'a [DVec3]>,
     /// Linear RGBA in 0..1.
     pub colors: Option<&'a [[f32; 4]]>,
@@ -152,9 +153,9 @@ pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
     out
 }
 
-pub fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
+pub(crate) fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
     std::fs::write(path, glb_bytes(mesh, attrs))
-        .map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
+        .map_err(|e| IoError::new(path.display().to_string(), None, IoErrorKind::Write(e)))
 }
 
 #[cfg(test)]

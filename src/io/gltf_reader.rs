@@ -1,6 +1,6 @@
 //! glTF 2.0 / GLB: every triangle primitive of every mesh node, with world transforms.
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::{DMat4, DVec3};
 use std::path::Path;
@@ -12,14 +12,14 @@ const COMPRESSED: [&str; 3] = [
 ];
 
 /// `base` is the folder for external buffers of a .gltf file (None for in-memory input).
-pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
-    let e = |r: String| IoError::new(file, None, r);
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|x| e(format!("glTF parse error: {x}")))?;
+pub(crate) fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
+    let e = |kind: IoErrorKind| IoError::new(file, None, kind);
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|x| e(IoErrorKind::Gltf(x)))?;
     for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
         if COMPRESSED.contains(&ext) {
-            return Err(e(format!(
+            return Err(e(IoErrorKind::unsupported(format!(
                 "compressed meshes ({ext}) are not supported; export without compression"
-            )));
+            ))));
         }
     }
     let mut buffers = Vec::new();
@@ -28,34 +28,42 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
             gltf::buffer::Source::Bin => gltf
                 .blob
                 .clone()
-                .ok_or_else(|| e("GLB has no binary chunk".into()))?,
+                .ok_or_else(|| e(IoErrorKind::malformed("GLB has no binary chunk")))?,
             gltf::buffer::Source::Uri(uri) => {
                 if let Some(rest) = uri.strip_prefix("data:") {
                     let b64 = rest
                         .split_once(";base64,")
                         .map(|x| x.1)
-                        .ok_or_else(|| e("unsupported data URI".into()))?;
-                    decode_base64(b64).ok_or_else(|| e("bad base64 in data URI".into()))?
+                        .ok_or_else(|| e(IoErrorKind::unsupported("unsupported data URI")))?;
+                    decode_base64(b64)
+                        .ok_or_else(|| e(IoErrorKind::malformed("bad base64 in data URI")))?
                 } else {
                     let dir = base.ok_or_else(|| {
-                        e(format!(
+                        e(IoErrorKind::unsupported(format!(
                             "external buffer '{uri}' cannot be resolved for streamed input"
-                        ))
+                        )))
                     })?;
                     if uri.contains("..") || uri.starts_with('/') {
-                        return Err(e(format!("buffer URI '{uri}' leaves the file's folder")));
+                        return Err(e(IoErrorKind::unsupported(format!(
+                            "buffer URI '{uri}' leaves the file's folder"
+                        ))));
                     }
-                    std::fs::read(dir.join(uri)).map_err(|x| e(format!("buffer '{uri}': {x}")))?
+                    std::fs::read(dir.join(uri)).map_err(|x| {
+                        e(IoErrorKind::ExternalBuffer {
+                            uri: uri.to_string(),
+                            source: x,
+                        })
+                    })?
                 }
             }
         };
         if data.len() < b.length() {
-            return Err(e(format!(
+            return Err(e(IoErrorKind::count_mismatch(format!(
                 "buffer {} is {} bytes, declared {}",
                 b.index(),
                 data.len(),
                 b.length()
-            )));
+            ))));
         }
         buffers.push(data);
     }
@@ -74,7 +82,9 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
     while let Some((node, parent)) = stack.pop() {
         visited += 1;
         if visited > 1_000_000 {
-            return Err(e("node hierarchy too deep or cyclic".into()));
+            return Err(e(IoErrorKind::malformed(
+                "node hierarchy too deep or cyclic",
+            )));
         }
         let m = node.transform().matrix();
         let local = DMat4::from_cols_array_2d(&m.map(|c| c.map(|x| x as f64)));
@@ -93,24 +103,26 @@ pub fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMes
                 let pos: Vec<DVec3> = reader
                     .read_positions()
                     .ok_or_else(|| {
-                        e(format!(
+                        e(IoErrorKind::malformed(format!(
                             "mesh '{}' primitive without positions",
                             gm.name().unwrap_or("")
-                        ))
+                        )))
                     })?
                     .map(|p| {
                         world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
                     })
                     .collect();
                 if pos.iter().any(|p| !p.is_finite()) {
-                    return Err(e("non-finite vertex coordinate".into()));
+                    return Err(e(IoErrorKind::non_finite("non-finite vertex coordinate")));
                 }
                 let idx: Vec<u32> = match reader.read_indices() {
                     Some(i) => i.into_u32().collect(),
                     None => (0..pos.len() as u32).collect(),
                 };
                 if idx.iter().any(|&i| i as usize >= pos.len()) {
-                    return Err(e("index out of range in a primitive".into()));
+                    return Err(e(IoErrorKind::index_out_of_range(
+                        "index out of range in a primitive",
+                    )));
                 }
                 let off = mesh.positions.len() as u32;
                 let flip = world.determinant() < 0.0;

@@ -10,14 +10,30 @@ use crate::bspline::{BSplineCurve, BSplineSurface};
 use glam::DVec3;
 use std::time::SystemTime;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+/// The length unit an IGES file declares (coordinates are written unscaled).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub enum IgesUnits {
+    /// Millimetres.
     Mm,
+    /// Metres.
     M,
+    /// Inches.
     In,
 }
 
 impl IgesUnits {
+    /// Every unit, in the order a user interface lists them.
+    pub const ALL: [IgesUnits; 3] = [IgesUnits::Mm, IgesUnits::M, IgesUnits::In];
+
+    /// The unit's short name ("mm", "m", "in").
+    pub fn name(self) -> &'static str {
+        match self {
+            IgesUnits::Mm => "mm",
+            IgesUnits::M => "m",
+            IgesUnits::In => "in",
+        }
+    }
+
     /// The global section's unit flag and unit name.
     fn flag_and_name(self) -> (u32, &'static str) {
         match self {
@@ -28,11 +44,30 @@ impl IgesUnits {
     }
 }
 
+impl std::fmt::Display for IgesUnits {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for IgesUnits {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        IgesUnits::ALL
+            .into_iter()
+            .find(|u| u.name() == s)
+            .ok_or_else(|| crate::names::UnknownName::new(s, IgesUnits::ALL.map(IgesUnits::name)))
+    }
+}
+
 #[derive(Clone, Debug)]
+/// What goes into an IGES file's global section.
 pub struct IgesOptions {
+    /// Declared length unit.
     pub units: IgesUnits,
     /// Written into the global section (truncated to 60 characters).
     pub file_name: String,
+    /// Written into the global section's author field.
     pub author: String,
     /// Generation time; `None` writes the Unix epoch (reproducible output for tests).
     pub time: Option<SystemTime>,
@@ -284,6 +319,18 @@ pub fn iges_bytes(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn unit_names_parse_back_and_an_unknown_one_lists_them() {
+        for u in IgesUnits::ALL {
+            assert_eq!(u.to_string().parse::<IgesUnits>(), Ok(u));
+        }
+        let e = "cm".parse::<IgesUnits>().expect_err("not a unit");
+        assert_eq!(
+            e.to_string(),
+            "unknown name \"cm\"; expected one of: mm, m, in"
+        );
+    }
 
     #[test]
     fn reals_always_carry_a_decimal_point_and_round_trip() {

@@ -1,7 +1,9 @@
 //! File formats. The only module that touches the filesystem for meshes.
+#![warn(missing_docs)]
 
+mod error;
 pub mod glb;
-pub mod gltf_reader;
+pub(crate) mod gltf_reader;
 pub mod iges;
 pub mod obj;
 pub mod off;
@@ -11,47 +13,32 @@ pub mod stl;
 pub mod surface_json;
 pub mod writers;
 
+pub use error::{IoError, IoErrorKind};
+
 use crate::mesh::TriMesh;
 use glam::DVec3;
 use std::path::Path;
 
-/// A reader or writer failure, always naming the file and, where known, where in it.
-#[derive(Debug, thiserror::Error)]
-#[error("{file}{}: {reason}", location.as_ref().map(|l| format!(" ({l})")).unwrap_or_default())]
-pub struct IoError {
-    pub file: String,
-    /// "line 12", "byte 4096", "element face 17": whatever the reader knows.
-    pub location: Option<String>,
-    pub reason: String,
-}
-
-impl IoError {
-    pub fn new(
-        file: impl Into<String>,
-        location: Option<String>,
-        reason: impl Into<String>,
-    ) -> Self {
-        Self {
-            file: file.into(),
-            location,
-            reason: reason.into(),
-        }
-    }
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
+/// A mesh file format, named by its extension.
 pub enum Format {
+    /// Wavefront OBJ.
     Obj,
+    /// glTF 2.0 JSON (buffers embedded or beside the file).
     Gltf,
+    /// Binary glTF.
     Glb,
+    /// PLY, ascii or binary, with Stanford range grids.
     Ply,
+    /// STL, ascii or binary.
     Stl,
+    /// Object File Format.
     Off,
 }
 
 impl Format {
-    pub fn from_path(path: &Path) -> Option<Format> {
+    pub(crate) fn from_path(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         Some(match ext.as_str() {
             "obj" => Format::Obj,
@@ -66,6 +53,7 @@ impl Format {
 }
 
 #[derive(Clone, Debug)]
+/// Options of the mesh readers.
 pub struct LoadOptions {
     /// Range grids: triangles with an edge longer than this multiple of the median grid
     /// spacing bridge depth jumps and are dropped.
@@ -83,14 +71,20 @@ impl Default for LoadOptions {
 /// A raw range image: `rows x cols` cells, each holding a point or nothing.
 #[derive(Clone, Debug)]
 pub struct RangeGrid {
+    /// Rows of the image.
     pub rows: usize,
+    /// Columns of the image.
     pub cols: usize,
+    /// Cell (r, c) at `r * cols + c`.
     pub points: Vec<Option<DVec3>>,
 }
 
 #[derive(Clone, Debug)]
+/// A mesh as read, with the range image it came from, if any.
 pub struct Loaded {
+    /// The triangles (range grids: triangulated from the image).
     pub mesh: TriMesh,
+    /// The range image of a Stanford range-grid PLY.
     pub grid: Option<RangeGrid>,
 }
 
@@ -101,10 +95,10 @@ pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError
         IoError::new(
             &name,
             None,
-            "unknown extension (obj, gltf, glb, ply, stl, off)",
+            IoErrorKind::UnknownExtension("unknown extension (obj, gltf, glb, ply, stl, off)"),
         )
     })?;
-    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, IoErrorKind::Open(e)))?;
     read_with_base(&bytes, format, &name, opts, path.parent())
 }
 
@@ -126,7 +120,7 @@ fn read_with_base(
     base: Option<&Path>,
 ) -> Result<Loaded, IoError> {
     if bytes.is_empty() {
-        return Err(IoError::new(name, None, "empty file"));
+        return Err(IoError::new(name, None, IoErrorKind::Empty));
     }
     let plain = |mesh: TriMesh| Loaded { mesh, grid: None };
     let loaded = match format {
@@ -137,13 +131,13 @@ fn read_with_base(
         Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base)?),
     };
     if loaded.mesh.positions.is_empty() {
-        return Err(IoError::new(name, None, "no vertices"));
+        return Err(IoError::new(name, None, IoErrorKind::NoVertices));
     }
     Ok(loaded)
 }
 
 /// Merges vertices with bit-identical coordinates (and drops none otherwise).
-pub fn weld_exact(mesh: TriMesh) -> TriMesh {
+pub(crate) fn weld_exact(mesh: TriMesh) -> TriMesh {
     let mut map = std::collections::HashMap::with_capacity(mesh.positions.len());
     let mut positions = Vec::new();
     let remap: Vec<u32> = mesh
@@ -180,7 +174,7 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
         _ => Err(IoError::new(
             path.display().to_string(),
             None,
-            "can write .obj, .ply or .glb only",
+            IoErrorKind::UnknownExtension("can write .obj, .ply or .glb only"),
         )),
     }
 }
@@ -190,7 +184,7 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     use std::io::Write;
     let name = path.display().to_string();
-    let err = |e: &dyn std::fmt::Display| IoError::new(&name, None, e.to_string());
+    let err = |e: std::io::Error| IoError::new(&name, None, IoErrorKind::Write(e));
     let dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
@@ -199,10 +193,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         .prefix(".trispline-")
         .suffix(".tmp")
         .tempfile_in(dir)
-        .map_err(|e| err(&e))?;
-    tmp.write_all(bytes).map_err(|e| err(&e))?;
-    tmp.as_file().sync_all().map_err(|e| err(&e))?;
-    tmp.persist(path).map_err(|e| err(&e.error))?;
+        .map_err(err)?;
+    tmp.write_all(bytes).map_err(err)?;
+    tmp.as_file().sync_all().map_err(err)?;
+    tmp.persist(path).map_err(|e| err(e.error))?;
     if let Ok(d) = std::fs::File::open(dir) {
         let _ = d.sync_all();
     }
@@ -214,10 +208,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
 /// then all are renamed in order and the folder is fsynced once. Each file on its own is
 /// old-complete or new-complete after a crash, as with `write_atomic`, and the last one is
 /// only durable together with the others because they share the folder's one fsync.
-pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
+pub(crate) fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoError> {
     use std::io::Write;
-    let err = |name: &str, e: &dyn std::fmt::Display| {
-        IoError::new(dir.join(name).display().to_string(), None, e.to_string())
+    let err = |name: &str, e: std::io::Error| {
+        IoError::new(
+            dir.join(name).display().to_string(),
+            None,
+            IoErrorKind::Write(e),
+        )
     };
     let temps: Vec<Result<tempfile::NamedTempFile, IoError>> = std::thread::scope(|scope| {
         let handles: Vec<_> = files
@@ -228,9 +226,9 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
                         .prefix(".trispline-")
                         .suffix(".tmp")
                         .tempfile_in(dir)
-                        .map_err(|e| err(name, &e))?;
-                    tmp.write_all(bytes).map_err(|e| err(name, &e))?;
-                    tmp.as_file().sync_all().map_err(|e| err(name, &e))?;
+                        .map_err(|e| err(name, e))?;
+                    tmp.write_all(bytes).map_err(|e| err(name, e))?;
+                    tmp.as_file().sync_all().map_err(|e| err(name, e))?;
                     Ok(tmp)
                 })
             })
@@ -239,8 +237,9 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
             .into_iter()
             .zip(files)
             .map(|(h, (name, _))| {
-                h.join()
-                    .unwrap_or_else(|_| Err(err(name, &"writer thread panicked")))
+                h.join().unwrap_or_else(|_| {
+                    Err(err(name, std::io::Error::other("writer thread panicked")))
+                })
             })
             .collect()
     });
@@ -251,9 +250,74 @@ pub fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<(), IoE
     }
     for (tmp, (name, _)) in ready.into_iter().zip(files) {
         tmp.persist(dir.join(name))
-            .map_err(|e| err(name, &e.error))?;
+            .map_err(|e| err(name, e.error))?;
     }
     std::fs::File::open(dir)
         .and_then(|d| d.sync_all())
-        .map_err(|e| err("", &e))
+        .map_err(|e| err("", e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kind_of(bytes: &[u8], format: Format) -> &'static str {
+        match read_mesh_bytes(bytes, format, "t", &LoadOptions::default()) {
+            Ok(_) => "ok",
+            Err(e) => e.kind(),
+        }
+    }
+
+    #[test]
+    fn readers_report_a_kind_per_failure_and_keep_the_file_and_place_in_the_message() {
+        let ply_header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+        let cases: [(&[u8], Format, &str); 9] = [
+            (b"", Format::Off, "empty"),
+            (b"OFF\n3 1 0\n0 0 0\n1 0 0\n", Format::Off, "truncated"),
+            (
+                b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+                Format::Off,
+                "index_out_of_range",
+            ),
+            (b"OFF\n99999 1 0\n", Format::Off, "too_large"),
+            (b"v 0 0 nan\n", Format::Obj, "non_finite"),
+            (b"v 0 0 x\n", Format::Obj, "malformed"),
+            (b"\xff\xfe", Format::Obj, "not_text"),
+            (
+                b"ply\nformat ascii 1.0\nelement vertex 1\nproperty int8x x\nend_header\n",
+                Format::Ply,
+                "bad_header",
+            ),
+            (b"{", Format::Gltf, "gltf"),
+        ];
+        for (bytes, format, kind) in cases {
+            assert_eq!(
+                kind_of(bytes, format),
+                kind,
+                "{}",
+                String::from_utf8_lossy(bytes)
+            );
+        }
+        let ply = format!("{ply_header}0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n");
+        let e = read_mesh_bytes(
+            ply.as_bytes(),
+            Format::Ply,
+            "scan.ply",
+            &LoadOptions::default(),
+        )
+        .expect_err("index 5 of 3 vertices");
+        assert_eq!(e.kind(), "index_out_of_range");
+        assert!(
+            e.to_string()
+                .starts_with("scan.ply (line 13): face 0: vertex index 5"),
+            "{e}"
+        );
+        let missing = read_mesh_file(Path::new("/nonexistent/x.ply"), &LoadOptions::default())
+            .expect_err("no such file");
+        assert_eq!(missing.kind(), "open");
+        assert!(std::error::Error::source(&missing.kind).is_some());
+        let unknown =
+            read_mesh_file(Path::new("x.xyz"), &LoadOptions::default()).expect_err("no reader");
+        assert_eq!(unknown.kind(), "unknown_extension");
+    }
 }

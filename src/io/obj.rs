@@ -4,19 +4,19 @@
 //! and objects share the file's one position list, polygons are fan-triangulated, and only
 //! position indices are used, so UV or normal seams never split a vertex.
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
-        IoError::new(
+        IoError::at(
             file,
-            Some(format!("byte {}", e.valid_up_to())),
-            "not UTF-8 text",
+            format!("byte {}", e.valid_up_to()),
+            IoErrorKind::NotText { what: "the file" },
         )
     })?;
-    let err = |n: usize, r: String| IoError::new(file, Some(format!("line {n}")), r);
+    let err = |n: usize, kind: IoErrorKind| IoError::at(file, format!("line {n}"), kind);
     let mut positions: Vec<DVec3> = Vec::new();
     let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
     for (n, raw) in text.lines().enumerate() {
@@ -27,16 +27,22 @@ pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
             Some("v") => {
                 let mut c = [0.0; 3];
                 for slot in &mut c {
-                    let w = words
-                        .next()
-                        .ok_or_else(|| err(n, "vertex with fewer than 3 coordinates".into()))?;
-                    *slot = w
-                        .parse()
-                        .map_err(|_| err(n, format!("'{w}' is not a number")))?;
+                    let w = words.next().ok_or_else(|| {
+                        err(
+                            n,
+                            IoErrorKind::malformed("vertex with fewer than 3 coordinates"),
+                        )
+                    })?;
+                    *slot = w.parse().map_err(|_| {
+                        err(n, IoErrorKind::malformed(format!("'{w}' is not a number")))
+                    })?;
                 }
                 let p = DVec3::from_array(c);
                 if !p.is_finite() {
-                    return Err(err(n, "non-finite vertex coordinate".into()));
+                    return Err(err(
+                        n,
+                        IoErrorKind::non_finite("non-finite vertex coordinate"),
+                    ));
                 }
                 positions.push(p);
             }
@@ -44,13 +50,16 @@ pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
                 let mut idx = Vec::new();
                 for w in words {
                     let first = w.split('/').next().unwrap_or("");
-                    let i: i64 = first
-                        .parse()
-                        .map_err(|_| err(n, format!("bad face index '{w}'")))?;
+                    let i: i64 = first.parse().map_err(|_| {
+                        err(n, IoErrorKind::malformed(format!("bad face index '{w}'")))
+                    })?;
                     idx.push(i);
                 }
                 if idx.len() < 3 {
-                    return Err(err(n, format!("face with {} vertices", idx.len())));
+                    return Err(err(
+                        n,
+                        IoErrorKind::malformed(format!("face with {} vertices", idx.len())),
+                    ));
                 }
                 faces.push((n, idx));
             }
@@ -83,7 +92,12 @@ pub fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
                 -1
             };
             if k < 0 || k >= nv {
-                return Err(err(*n, format!("vertex index {i} out of range (1..={nv})")));
+                return Err(err(
+                    *n,
+                    IoErrorKind::index_out_of_range(format!(
+                        "vertex index {i} out of range (1..={nv})"
+                    )),
+                ));
             }
             resolved.push(k as u32);
         }

@@ -2,19 +2,19 @@
 //! Line-based: a vertex line's first three numbers are its position and a face line's
 //! first number its size, so colour and normal columns are skipped whatever their count.
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
-        IoError::new(
+        IoError::at(
             file,
-            Some(format!("byte {}", e.valid_up_to())),
-            "not UTF-8 text",
+            format!("byte {}", e.valid_up_to()),
+            IoErrorKind::NotText { what: "the file" },
         )
     })?;
-    let err = |line: usize, r: String| IoError::new(file, Some(format!("line {line}")), r);
+    let err = |line: usize, kind: IoErrorKind| IoError::at(file, format!("line {line}"), kind);
     let mut lines = text
         .lines()
         .enumerate()
@@ -22,36 +22,45 @@ pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
         .filter(|(_, l)| !l.is_empty());
     let (line, first) = lines
         .next()
-        .ok_or_else(|| IoError::new(file, None, "empty file"))?;
+        .ok_or_else(|| IoError::new(file, None, IoErrorKind::Empty))?;
     let mut words = first.split_whitespace();
     let magic = words.next().unwrap_or("");
     if !matches!(magic, "OFF" | "COFF" | "NOFF" | "CNOFF" | "NCOFF") {
-        return Err(err(line, format!("'{magic}' is not an OFF header")));
+        return Err(err(
+            line,
+            IoErrorKind::bad_header(format!("'{magic}' is not an OFF header")),
+        ));
     }
     let rest: Vec<&str> = words.collect();
     let (count_line, counts): (usize, Vec<&str>) = if rest.is_empty() {
         let (n, l) = lines
             .next()
-            .ok_or_else(|| IoError::new(file, None, "no counts line"))?;
+            .ok_or_else(|| IoError::new(file, None, IoErrorKind::bad_header("no counts line")))?;
         (n, l.split_whitespace().collect())
     } else {
         (line, rest)
     };
     let count = |k: usize, what: &str| -> Result<usize, IoError> {
-        let t = counts
-            .get(k)
-            .ok_or_else(|| err(count_line, format!("missing {what} count")))?;
-        let v: usize = t
-            .parse()
-            .map_err(|_| err(count_line, format!("bad {what} count '{t}'")))?;
+        let t = counts.get(k).ok_or_else(|| {
+            err(
+                count_line,
+                IoErrorKind::bad_header(format!("missing {what} count")),
+            )
+        })?;
+        let v: usize = t.parse().map_err(|_| {
+            err(
+                count_line,
+                IoErrorKind::bad_header(format!("bad {what} count '{t}'")),
+            )
+        })?;
         // Every entry needs at least a few bytes: refuse counts the file cannot hold.
         if v > bytes.len() / 2 {
             return Err(err(
                 count_line,
-                format!(
+                IoErrorKind::too_large(format!(
                     "{what} count {v} exceeds what a {}-byte file can hold",
                     bytes.len()
-                ),
+                )),
             ));
         }
         Ok(v)
@@ -59,52 +68,79 @@ pub fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     let (nv, nf) = (count(0, "vertex")?, count(1, "face")?);
     let num = |n: usize, t: &str| -> Result<f64, IoError> {
         t.parse::<f64>()
-            .map_err(|_| err(n, format!("'{t}' is not a number")))
+            .map_err(|_| err(n, IoErrorKind::malformed(format!("'{t}' is not a number"))))
     };
     let mut positions = Vec::with_capacity(nv);
     for v in 0..nv {
-        let (n, l) = lines
-            .next()
-            .ok_or_else(|| IoError::new(file, None, format!("file ends at vertex {v} of {nv}")))?;
+        let (n, l) = lines.next().ok_or_else(|| {
+            IoError::new(
+                file,
+                None,
+                IoErrorKind::truncated(format!("file ends at vertex {v} of {nv}")),
+            )
+        })?;
         let w: Vec<&str> = l.split_whitespace().take(3).collect();
         if w.len() < 3 {
-            return Err(err(n, format!("vertex {v} has fewer than 3 coordinates")));
+            return Err(err(
+                n,
+                IoErrorKind::malformed(format!("vertex {v} has fewer than 3 coordinates")),
+            ));
         }
         let p = DVec3::new(num(n, w[0])?, num(n, w[1])?, num(n, w[2])?);
         if !p.is_finite() {
-            return Err(err(n, format!("vertex {v} has a non-finite coordinate")));
+            return Err(err(
+                n,
+                IoErrorKind::non_finite(format!("vertex {v} has a non-finite coordinate")),
+            ));
         }
         positions.push(p);
     }
     let mut triangles = Vec::with_capacity(nf);
     let mut idx = Vec::new();
     for f in 0..nf {
-        let (n, l) = lines
-            .next()
-            .ok_or_else(|| IoError::new(file, None, format!("file ends at face {f} of {nf}")))?;
+        let (n, l) = lines.next().ok_or_else(|| {
+            IoError::new(
+                file,
+                None,
+                IoErrorKind::truncated(format!("file ends at face {f} of {nf}")),
+            )
+        })?;
         let mut w = l.split_whitespace();
-        let k: usize = w
-            .next()
-            .and_then(|t| t.parse().ok())
-            .ok_or_else(|| err(n, format!("face {f}: bad vertex count")))?;
+        let k: usize = w.next().and_then(|t| t.parse().ok()).ok_or_else(|| {
+            err(
+                n,
+                IoErrorKind::malformed(format!("face {f}: bad vertex count")),
+            )
+        })?;
         idx.clear();
         for _ in 0..k {
-            let t = w
-                .next()
-                .ok_or_else(|| err(n, format!("face {f}: fewer than {k} indices")))?;
-            let i: usize = t
-                .parse()
-                .map_err(|_| err(n, format!("face {f}: bad index '{t}'")))?;
+            let t = w.next().ok_or_else(|| {
+                err(
+                    n,
+                    IoErrorKind::malformed(format!("face {f}: fewer than {k} indices")),
+                )
+            })?;
+            let i: usize = t.parse().map_err(|_| {
+                err(
+                    n,
+                    IoErrorKind::malformed(format!("face {f}: bad index '{t}'")),
+                )
+            })?;
             if i >= nv {
                 return Err(err(
                     n,
-                    format!("face {f}: vertex index {i} out of range (0..{nv})"),
+                    IoErrorKind::index_out_of_range(format!(
+                        "face {f}: vertex index {i} out of range (0..{nv})"
+                    )),
                 ));
             }
             idx.push(i as u32);
         }
         if k < 3 {
-            return Err(err(n, format!("face {f} has {k} vertices")));
+            return Err(err(
+                n,
+                IoErrorKind::malformed(format!("face {f} has {k} vertices")),
+            ));
         }
         for j in 1..k - 1 {
             triangles.push([idx[0], idx[j], idx[j + 1]]);

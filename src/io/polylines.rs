@@ -3,7 +3,7 @@
 use glam::DVec3;
 use std::fmt::Write;
 
-pub fn obj_polylines_bytes(lines: &[Vec<DVec3>]) -> Vec<u8> {
+pub(crate) fn obj_polylines_bytes(lines: &[Vec<DVec3>]) -> Vec<u8> {
     let mut s = String::from("# trispline polylines\n");
     let mut base = 1usize;
     for line in lines.iter().filter(|l| l.len() >= 2) {

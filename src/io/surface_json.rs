@@ -2,7 +2,7 @@
 //! a reader for every kind (`bezier`, `loop` with layout lattice, `grid` or `mesh`,
 //! `bspline`) for the tools that consume fitted surfaces (`trispline curvature`).
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::bspline::BSplineSurface;
 use crate::surface::bezier::lattice_len;
 use crate::surface::grid_spline::GridSpline;
@@ -10,50 +10,61 @@ use crate::surface::loop_limit::LoopLimitSurface;
 use glam::DVec3;
 use serde_json::{json, Value};
 
-pub const SCHEMA: &str = "trispline.surface/1";
+pub(crate) const SCHEMA: &str = "trispline.surface/1";
 
 /// A surface as described by a `surface.json`.
 #[derive(Clone, Debug)]
 pub enum SurfaceDescription {
     /// Triangular Bezier patch of the given degree, controls in lattice order.
     Bezier {
+        /// The degree.
         degree: usize,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface (quartic box spline) of a regular lattice net.
     Loop {
+        /// Domain lattice segments per side.
         domain_segments: usize,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface over cells of the three-direction grid (remeshed scans).
     LoopGrid {
+        /// The surface over the listed cells.
         surface: GridSpline,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Quartic Bezier patches over the cells of a grid (`bezier`, `layout: patches`): the
     /// same surface as `LoopGrid`, read from the box-spline form the file carries beside
     /// the patches.
     BezierPatches {
+        /// The box-spline form of the patches.
         surface: GridSpline,
+        /// Control points.
         controls: Vec<DVec3>,
     },
     /// Loop limit surface of an arbitrary manifold control mesh (`layout: mesh`): the
     /// control faces are the domain faces. Shared, since the surface memoises its
     /// subdivision nodes and is not cheap to rebuild.
     LoopMesh {
+        /// The surface of the control faces.
         surface: std::sync::Arc<LoopLimitSurface>,
+        /// Control points.
         controls: Vec<DVec3>,
     },
+    /// A tensor-product B-spline surface.
     BSpline(BSplineSurface),
 }
 
 /// `[[a, b, c], ...]` of integers as triples.
 fn int_rows<const N: usize>(v: &Value, key: &str, name: &str) -> Result<Vec<[i64; N]>, IoError> {
     let bad = || {
-        IoError::new(
+        IoError::at(
             name,
-            Some(format!("key {key}")),
-            format!("not a list of {N} integers each"),
+            format!("key {key}"),
+            IoErrorKind::schema(format!("not a list of {N} integers each")),
         )
     };
     field(v, key, name)?
@@ -72,7 +83,7 @@ fn int_rows<const N: usize>(v: &Value, key: &str, name: &str) -> Result<Vec<[i64
 }
 
 /// The JSON object of a B-spline surface (without fit statistics, which callers add).
-pub fn bspline_json(s: &BSplineSurface) -> Value {
+pub(crate) fn bspline_json(s: &BSplineSurface) -> Value {
     let (p, q) = s.degrees();
     let (nu, nv) = s.counts();
     json!({
@@ -91,7 +102,7 @@ pub fn bspline_json(s: &BSplineSurface) -> Value {
 
 fn field<'a>(v: &'a Value, key: &str, name: &str) -> Result<&'a Value, IoError> {
     v.get(key)
-        .ok_or_else(|| IoError::new(name, Some(format!("key {key}")), "missing"))
+        .ok_or_else(|| IoError::at(name, format!("key {key}"), IoErrorKind::schema("missing")))
 }
 
 fn uint(v: &Value, key: &str, name: &str) -> Result<usize, IoError> {
@@ -99,23 +110,32 @@ fn uint(v: &Value, key: &str, name: &str) -> Result<usize, IoError> {
         .as_u64()
         .map(|x| x as usize)
         .ok_or_else(|| {
-            IoError::new(
+            IoError::at(
                 name,
-                Some(format!("key {key}")),
-                "not a non-negative integer",
+                format!("key {key}"),
+                IoErrorKind::schema("not a non-negative integer"),
             )
         })
 }
 
 fn reals(v: &Value, key: &str, name: &str) -> Result<Vec<f64>, IoError> {
-    let arr = field(v, key, name)?
-        .as_array()
-        .ok_or_else(|| IoError::new(name, Some(format!("key {key}")), "not an array"))?;
+    let arr = field(v, key, name)?.as_array().ok_or_else(|| {
+        IoError::at(
+            name,
+            format!("key {key}"),
+            IoErrorKind::schema("not an array"),
+        )
+    })?;
     arr.iter()
         .enumerate()
         .map(|(k, x)| {
-            x.as_f64()
-                .ok_or_else(|| IoError::new(name, Some(format!("{key}[{k}]")), "not a number"))
+            x.as_f64().ok_or_else(|| {
+                IoError::at(
+                    name,
+                    format!("{key}[{k}]"),
+                    IoErrorKind::schema("not a number"),
+                )
+            })
         })
         .collect()
 }
@@ -123,20 +143,30 @@ fn reals(v: &Value, key: &str, name: &str) -> Result<Vec<f64>, IoError> {
 fn points(v: &Value, name: &str) -> Result<Vec<DVec3>, IoError> {
     let arr = field(v, "control_points", name)?
         .as_array()
-        .ok_or_else(|| IoError::new(name, Some("key control_points".into()), "not an array"))?;
+        .ok_or_else(|| {
+            IoError::at(
+                name,
+                "key control_points",
+                IoErrorKind::schema("not an array"),
+            )
+        })?;
     arr.iter()
         .enumerate()
         .map(|(k, p)| {
             let c = p.as_array().filter(|c| c.len() == 3).ok_or_else(|| {
-                IoError::new(name, Some(format!("control_points[{k}]")), "not [x, y, z]")
+                IoError::at(
+                    name,
+                    format!("control_points[{k}]"),
+                    IoErrorKind::schema("not [x, y, z]"),
+                )
             })?;
             let mut x = [0.0; 3];
             for (d, e) in x.iter_mut().zip(c) {
                 *d = e.as_f64().filter(|f| f.is_finite()).ok_or_else(|| {
-                    IoError::new(
+                    IoError::at(
                         name,
-                        Some(format!("control_points[{k}]")),
-                        "not a finite number",
+                        format!("control_points[{k}]"),
+                        IoErrorKind::non_finite("not a finite number"),
                     )
                 })?;
             }
@@ -147,10 +177,10 @@ fn points(v: &Value, name: &str) -> Result<Vec<DVec3>, IoError> {
 
 fn expect_len(name: &str, got: usize, want: usize, what: &str) -> Result<(), IoError> {
     if got != want {
-        return Err(IoError::new(
+        return Err(IoError::at(
             name,
-            Some("key control_points".into()),
-            format!("{got} control points, {what} needs {want}"),
+            "key control_points",
+            IoErrorKind::count_mismatch(format!("{got} control points, {what} needs {want}")),
         ));
     }
     Ok(())
@@ -159,172 +189,185 @@ fn expect_len(name: &str, got: usize, want: usize, what: &str) -> Result<(), IoE
 /// Reads a `surface.json`; `name` is used in errors.
 pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription, IoError> {
     let v: Value = serde_json::from_slice(bytes).map_err(|e| {
-        IoError::new(
+        IoError::at(
             name,
-            Some(format!("line {}, column {}", e.line(), e.column())),
-            e.to_string(),
+            format!("line {}, column {}", e.line(), e.column()),
+            IoErrorKind::Json(e),
         )
     })?;
     match v.get("schema").and_then(Value::as_str) {
         Some(SCHEMA) => {}
         other => {
-            return Err(IoError::new(
+            return Err(IoError::at(
                 name,
-                Some("key schema".into()),
-                format!("expected {SCHEMA:?}, found {other:?}"),
+                "key schema",
+                IoErrorKind::schema(format!("expected {SCHEMA:?}, found {other:?}")),
             ))
         }
     }
     let kind = field(&v, "kind", name)?.as_str().unwrap_or_default();
-    match kind {
-        "bezier" if v.get("layout").and_then(Value::as_str) != Some("patches") => {
-            let degree = uint(&v, "degree", name)?;
-            if degree == 0 || degree > 64 {
-                return Err(IoError::new(
-                    name,
-                    Some("key degree".into()),
-                    "degree outside 1..=64",
-                ));
-            }
-            let controls = points(&v, name)?;
-            expect_len(
-                name,
-                controls.len(),
-                lattice_len(degree),
-                "a triangular Bezier patch of this degree",
-            )?;
-            Ok(SurfaceDescription::Bezier { degree, controls })
-        }
-        // Bezier patches carry the box-spline form of the same surface beside them.
-        "loop" | "bezier"
-            if matches!(
-                (kind, v.get("layout").and_then(Value::as_str)),
-                ("loop", Some("grid")) | ("bezier", Some("patches"))
-            ) =>
-        {
-            let cells = int_rows::<3>(&v, "cells", name)?;
-            let coords = int_rows::<2>(&v, "control_coords", name)?;
-            let surface = GridSpline::new(cells.iter().map(|c| (c[0], c[1], c[2] != 0)));
-            let same = surface.control_coords().len() == coords.len()
-                && surface
-                    .control_coords()
-                    .iter()
-                    .zip(&coords)
-                    .all(|(a, b)| a.0 == b[0] && a.1 == b[1]);
-            if !same {
-                return Err(IoError::new(
-                    name,
-                    Some("key control_coords".into()),
-                    "not the control points of the listed cells (in row order)",
-                ));
-            }
-            let controls = points(&v, name)?;
-            expect_len(
-                name,
-                controls.len(),
-                coords.len(),
-                "the grid's control list",
-            )?;
-            Ok(if kind == "bezier" {
-                SurfaceDescription::BezierPatches { surface, controls }
-            } else {
-                SurfaceDescription::LoopGrid { surface, controls }
-            })
-        }
-        "loop" if v.get("layout").and_then(Value::as_str) == Some("mesh") => {
-            let controls = points(&v, name)?;
-            let faces = int_rows::<3>(&v, "control_faces", name)?
-                .into_iter()
-                .enumerate()
-                .map(|(f, t)| {
-                    // Range-check here so the error names the row; LoopLimitSurface::new
-                    // checks again against the control count.
-                    let mut out = [0u32; 3];
-                    for (o, &i) in out.iter_mut().zip(&t) {
-                        *o = u32::try_from(i)
-                            .ok()
-                            .filter(|&i| (i as usize) < controls.len())
-                            .ok_or_else(|| {
-                                IoError::new(
-                                    name,
-                                    Some(format!("control_faces[{f}]")),
-                                    format!(
-                                        "index {i} is not one of the {} control points",
-                                        controls.len()
-                                    ),
-                                )
-                            })?;
-                    }
-                    Ok(out)
-                })
-                .collect::<Result<Vec<_>, IoError>>()?;
-            let surface = LoopLimitSurface::new(controls.len(), &faces)
-                .map_err(|e| IoError::new(name, Some("key control_faces".into()), e.to_string()))?;
-            Ok(SurfaceDescription::LoopMesh {
-                surface: std::sync::Arc::new(surface),
-                controls,
-            })
-        }
-        "loop" => {
-            let n = uint(&v, "domain_segments", name)?;
-            if n == 0 || n > 4096 {
-                return Err(IoError::new(
-                    name,
-                    Some("key domain_segments".into()),
-                    "outside 1..=4096",
-                ));
-            }
-            let controls = points(&v, name)?;
-            expect_len(
-                name,
-                controls.len(),
-                lattice_len(n + 3),
-                "a regular lattice net of n + 3 segments",
-            )?;
-            Ok(SurfaceDescription::Loop {
-                domain_segments: n,
-                controls,
-            })
-        }
-        "bspline" => {
-            let (p, q) = (uint(&v, "degree_u", name)?, uint(&v, "degree_v", name)?);
-            let grid = reals(&v, "control_grid", name)?;
-            let (nu, nv) = match grid[..] {
-                [a, b]
-                    if (1.0..=1e7).contains(&a)
-                        && (1.0..=1e7).contains(&b)
-                        && a.fract() == 0.0
-                        && b.fract() == 0.0 =>
-                {
-                    (a as usize, b as usize)
-                }
-                _ => {
-                    return Err(IoError::new(
-                        name,
-                        Some("key control_grid".into()),
-                        "not [count_u, count_v] with counts in 1..=10^7",
-                    ))
-                }
-            };
-            let ku = reals(&v, "knots_u", name)?;
-            let kv = reals(&v, "knots_v", name)?;
-            let controls = points(&v, name)?;
-            BSplineSurface::new((p, q), ku, kv, (nu, nv), controls)
-                .map(SurfaceDescription::BSpline)
-                .map_err(|e| IoError::new(name, None, e.to_string()))
-        }
-        other => Err(IoError::new(
+    let layout = v.get("layout").and_then(Value::as_str);
+    match (kind, layout) {
+        ("bezier", Some("patches")) | ("loop", Some("grid")) => grid_surface(&v, kind, name),
+        ("bezier", _) => bezier_patch(&v, name),
+        ("loop", Some("mesh")) => loop_mesh(&v, name),
+        ("loop", _) => loop_lattice(&v, name),
+        ("bspline", _) => bspline_surface(&v, name),
+        (other, _) => Err(IoError::at(
             name,
-            Some("key kind".into()),
-            format!("unknown surface kind {other:?} (bezier, loop, bspline)"),
+            "key kind",
+            IoErrorKind::schema(format!(
+                "unknown surface kind {other:?} (bezier, loop, bspline)"
+            )),
         )),
     }
+}
+
+/// `kind: bezier`: one triangular Bezier patch, controls in lattice order.
+fn bezier_patch(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    let degree = uint(v, "degree", name)?;
+    if degree == 0 || degree > 64 {
+        return Err(IoError::at(
+            name,
+            "key degree",
+            IoErrorKind::schema("degree outside 1..=64"),
+        ));
+    }
+    let controls = points(v, name)?;
+    expect_len(
+        name,
+        controls.len(),
+        lattice_len(degree),
+        "a triangular Bezier patch of this degree",
+    )?;
+    Ok(SurfaceDescription::Bezier { degree, controls })
+}
+
+/// `kind: loop, layout: grid` and `kind: bezier, layout: patches`: the box-spline form
+/// over the listed grid cells (Bezier patches carry it beside the patches).
+fn grid_surface(v: &Value, kind: &str, name: &str) -> Result<SurfaceDescription, IoError> {
+    let cells = int_rows::<3>(v, "cells", name)?;
+    let coords = int_rows::<2>(v, "control_coords", name)?;
+    let surface = GridSpline::new(cells.iter().map(|c| (c[0], c[1], c[2] != 0)));
+    let same = surface.control_coords().len() == coords.len()
+        && surface
+            .control_coords()
+            .iter()
+            .zip(&coords)
+            .all(|(a, b)| a.0 == b[0] && a.1 == b[1]);
+    if !same {
+        return Err(IoError::at(
+            name,
+            "key control_coords",
+            IoErrorKind::schema("not the control points of the listed cells (in row order)"),
+        ));
+    }
+    let controls = points(v, name)?;
+    expect_len(
+        name,
+        controls.len(),
+        coords.len(),
+        "the grid's control list",
+    )?;
+    Ok(if kind == "bezier" {
+        SurfaceDescription::BezierPatches { surface, controls }
+    } else {
+        SurfaceDescription::LoopGrid { surface, controls }
+    })
+}
+
+/// `kind: loop, layout: mesh`: the Loop limit surface of an arbitrary manifold control mesh.
+fn loop_mesh(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    let controls = points(v, name)?;
+    let faces = int_rows::<3>(v, "control_faces", name)?
+        .into_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            // Range-check here so the error names the row; LoopLimitSurface::new
+            // checks again against the control count.
+            let mut out = [0u32; 3];
+            for (o, &i) in out.iter_mut().zip(&t) {
+                *o = u32::try_from(i)
+                    .ok()
+                    .filter(|&i| (i as usize) < controls.len())
+                    .ok_or_else(|| {
+                        IoError::at(
+                            name,
+                            format!("control_faces[{f}]"),
+                            IoErrorKind::index_out_of_range(format!(
+                                "index {i} is not one of the {} control points",
+                                controls.len()
+                            )),
+                        )
+                    })?;
+            }
+            Ok(out)
+        })
+        .collect::<Result<Vec<_>, IoError>>()?;
+    let surface = LoopLimitSurface::new(controls.len(), &faces)
+        .map_err(|e| IoError::at(name, "key control_faces", IoErrorKind::LoopSurface(e)))?;
+    Ok(SurfaceDescription::LoopMesh {
+        surface: std::sync::Arc::new(surface),
+        controls,
+    })
+}
+
+/// `kind: loop` without a layout: the regular lattice net of `domain_segments`.
+fn loop_lattice(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    let n = uint(v, "domain_segments", name)?;
+    if n == 0 || n > 4096 {
+        return Err(IoError::at(
+            name,
+            "key domain_segments",
+            IoErrorKind::schema("outside 1..=4096"),
+        ));
+    }
+    let controls = points(v, name)?;
+    expect_len(
+        name,
+        controls.len(),
+        lattice_len(n + 3),
+        "a regular lattice net of n + 3 segments",
+    )?;
+    Ok(SurfaceDescription::Loop {
+        domain_segments: n,
+        controls,
+    })
+}
+
+/// `kind: bspline`: a clamped tensor-product B-spline surface.
+fn bspline_surface(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    let (p, q) = (uint(v, "degree_u", name)?, uint(v, "degree_v", name)?);
+    let grid = reals(v, "control_grid", name)?;
+    let (nu, nv) = match grid[..] {
+        [a, b]
+            if (1.0..=1e7).contains(&a)
+                && (1.0..=1e7).contains(&b)
+                && a.fract() == 0.0
+                && b.fract() == 0.0 =>
+        {
+            (a as usize, b as usize)
+        }
+        _ => {
+            return Err(IoError::at(
+                name,
+                "key control_grid",
+                IoErrorKind::schema("not [count_u, count_v] with counts in 1..=10^7"),
+            ))
+        }
+    };
+    let ku = reals(v, "knots_u", name)?;
+    let kv = reals(v, "knots_v", name)?;
+    let controls = points(v, name)?;
+    BSplineSurface::new((p, q), ku, kv, (nu, nv), controls)
+        .map(SurfaceDescription::BSpline)
+        .map_err(|e| IoError::new(name, None, IoErrorKind::BSpline(e)))
 }
 
 /// Reads a `surface.json` file.
 pub fn read_surface_json(path: &std::path::Path) -> Result<SurfaceDescription, IoError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, e.to_string()))?;
+    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, IoErrorKind::Open(e)))?;
     parse_surface_json(&bytes, &name)
 }
 

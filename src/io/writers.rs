@@ -1,10 +1,11 @@
 //! OBJ and binary PLY writers (full f64 precision in both).
 
-use super::IoError;
+use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
 use std::io::Write;
 use std::path::Path;
 
+/// The mesh as OBJ text.
 pub fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
     let mut out = Vec::with_capacity(mesh.positions.len() * 60 + mesh.triangles.len() * 24);
     out.extend_from_slice(b"# written by trispline\n");
@@ -18,6 +19,7 @@ pub fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
     out
 }
 
+/// The mesh as binary little-endian PLY.
 pub fn ply_bytes(mesh: &TriMesh) -> Vec<u8> {
     let mut out = Vec::with_capacity(256 + mesh.positions.len() * 24 + mesh.triangles.len() * 13);
     let _ = write!(
@@ -42,13 +44,14 @@ pub fn ply_bytes(mesh: &TriMesh) -> Vec<u8> {
 
 fn write(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
     std::fs::write(path, bytes)
-        .map_err(|e| IoError::new(path.display().to_string(), None, e.to_string()))
+        .map_err(|e| IoError::new(path.display().to_string(), None, IoErrorKind::Write(e)))
 }
 
+/// Writes the mesh as OBJ.
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     write(path, &obj_bytes(mesh))
 }
 
-pub fn write_ply(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
+pub(crate) fn write_ply(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     write(path, &ply_bytes(mesh))
 }

@@ -8,25 +8,37 @@ use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 #[derive(Clone, Debug, Default)]
+/// How `clean` repairs a mesh.
 pub struct CleanOptions {
     /// Merge vertices closer than this; `None` merges only bit-identical positions.
     pub weld_tolerance: Option<f64>,
 }
 
 #[derive(Clone, Debug, Default, serde::Serialize)]
+/// What `clean` changed, by kind of repair.
 pub struct CleanReport {
+    /// Vertices merged into another.
     pub welded_vertices: usize,
+    /// Faces with an out-of-range index, a repeated vertex (after welding) or zero area, removed.
     pub degenerate_faces_removed: usize,
+    /// Faces repeating another's vertices removed.
     pub duplicate_faces_removed: usize,
+    /// Edges with more than two faces, split apart.
     pub non_manifold_edges_split: usize,
+    /// Vertices whose faces formed several fans, split into one per fan.
     pub pinch_vertices_split: usize,
+    /// Faces reversed to agree with their neighbours.
     pub faces_flipped: usize,
+    /// Components that cannot be oriented consistently (Moebius-like).
     pub non_orientable_components: usize,
+    /// Vertices no face used, dropped.
     pub unreferenced_vertices_removed: usize,
 }
 
 #[derive(Clone, Debug)]
+/// A cleaned mesh and how it relates to its input.
 pub struct Cleaned {
+    /// The manifold, consistently oriented mesh.
     pub mesh: TriMesh,
     /// Cleaned vertex -> input vertex (a split vertex maps to the vertex it came from).
     pub original_vertex: Vec<u32>,
@@ -34,9 +46,11 @@ pub struct Cleaned {
     /// the components found while orienting, so that splitting the mesh into them needs no
     /// second edge table.
     pub face_component: Vec<u32>,
+    /// What was changed.
     pub report: CleanReport,
 }
 
+/// Repairs a scan mesh into a manifold, consistently oriented one (see the module docs).
 pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
     let mut report = CleanReport::default();
     let nv = input.positions.len();
@@ -425,11 +439,6 @@ fn split_pinches(
         }
     }
     pinches.len()
-}
-
-/// An undirected edge as one hashable word.
-pub fn edge_key(a: u32, b: u32) -> u64 {
-    ((a.min(b) as u64) << 32) | a.max(b) as u64
 }
 
 /// The undirected edges of a triangle list and the faces on each, built without hashing:

@@ -3,16 +3,39 @@
 
 use super::topology::{next, Topology, TopologyError, NONE};
 
+/// Why a mesh is not read as a Loop subdivision (levels count from the finest, 0).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
 pub enum DetectError {
+    /// The mesh at this level is not a manifold triangle mesh.
     #[error("level {level}: {source}")]
-    Topology { level: usize, source: TopologyError },
+    Topology {
+        /// Subdivision level being read.
+        level: usize,
+        /// What is wrong with the connectivity.
+        #[source]
+        source: TopologyError,
+    },
+    /// The connectivity is not a 1-to-4 split of any coarser mesh.
     #[error("level {level}: no subdivision connectivity around vertex {vertex}: {reason}")]
     NotSubdivided {
+        /// Subdivision level being read.
         level: usize,
+        /// A fine vertex where the pattern breaks.
         vertex: u32,
+        /// How it breaks.
         reason: String,
     },
+}
+
+impl DetectError {
+    /// A stable snake_case name of the variant, for machine-readable reports.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::Topology { .. } => "topology",
+            Self::NotSubdivided { .. } => "not_subdivided",
+        }
+    }
 }
 
 /// One level of recovered structure: a fine mesh seen as the 1-to-4 split of `coarse`.
@@ -44,11 +67,30 @@ fn fail(level: usize, vertex: u32, reason: impl Into<String>) -> DetectError {
 
 /// Tries to read the fine mesh `topo` as one Loop subdivision step; `level` only labels errors.
 pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError> {
+    let label = even_odd_labels(topo, level)?;
+    let (fine_to_coarse, coarse_to_fine) = coarse_numbering(&label);
+    let odd_endpoints = odd_edge_endpoints(topo, &label, &fine_to_coarse, level)?;
+    let numbering = Numbering {
+        fine_to_coarse: &fine_to_coarse,
+        odd_endpoints: &odd_endpoints,
+    };
+    let (coarse_triangles, face_parent) = coarse_faces(topo, &coarse_to_fine, numbering, level)?;
+    Ok(Level {
+        coarse_triangles,
+        coarse_to_fine,
+        fine_to_coarse,
+        odd_endpoints,
+        face_parent,
+    })
+}
+
+/// EVEN or ODD for every vertex. Vertices are grouped into components by the propagation
+/// itself: each unlabelled vertex starts a new component whose seed candidates are tried
+/// in turn.
+fn even_odd_labels(topo: &Topology, level: usize) -> Result<Vec<u8>, DetectError> {
     let nv = topo.vertex_count;
     let mut label = vec![UNKNOWN; nv];
     let mut component_done = vec![false; nv];
-    // Vertices are grouped into components by the propagation itself: each unlabelled
-    // vertex starts a new component whose seed candidates are tried in turn.
     for start in 0..nv as u32 {
         if component_done[start as usize] || topo.ring(start).is_empty() {
             continue;
@@ -83,15 +125,32 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             *l = EVEN;
         }
     }
-    let mut fine_to_coarse = vec![NONE; nv];
+    Ok(label)
+}
+
+/// Even vertices numbered as coarse vertices in increasing fine index:
+/// (fine -> coarse or NONE, coarse -> fine).
+fn coarse_numbering(label: &[u8]) -> (Vec<u32>, Vec<u32>) {
+    let mut fine_to_coarse = vec![NONE; label.len()];
     let mut coarse_to_fine = Vec::new();
-    for v in 0..nv {
-        if label[v] == EVEN {
+    for (v, &l) in label.iter().enumerate() {
+        if l == EVEN {
             fine_to_coarse[v] = coarse_to_fine.len() as u32;
             coarse_to_fine.push(v as u32);
         }
     }
-    let mut odd_endpoints = vec![[NONE, NONE]; nv];
+    (fine_to_coarse, coarse_to_fine)
+}
+
+/// For every odd vertex, the coarse endpoints of the edge it splits (its two even
+/// neighbours); `[NONE, NONE]` for even vertices.
+fn odd_edge_endpoints(
+    topo: &Topology,
+    label: &[u8],
+    fine_to_coarse: &[u32],
+    level: usize,
+) -> Result<Vec<[u32; 2]>, DetectError> {
+    let mut odd_endpoints = vec![[NONE, NONE]; label.len()];
     for (v, ends) in odd_endpoints.iter_mut().enumerate() {
         if label[v] != ODD {
             continue;
@@ -118,17 +177,61 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             fine_to_coarse[evens[1] as usize],
         ];
     }
-    let far = |a: u32, m: u32| -> u32 {
-        let [p, q] = odd_endpoints[m as usize];
-        if p == fine_to_coarse[a as usize] {
+    Ok(odd_endpoints)
+}
+
+/// The fine-to-coarse maps the face recovery reads.
+#[derive(Clone, Copy)]
+struct Numbering<'a> {
+    fine_to_coarse: &'a [u32],
+    odd_endpoints: &'a [[u32; 2]],
+}
+
+impl Numbering<'_> {
+    /// The coarse vertex at the other end of odd vertex `m`'s edge, seen from even `a`.
+    fn far(&self, a: u32, m: u32) -> u32 {
+        let [p, q] = self.odd_endpoints[m as usize];
+        if p == self.fine_to_coarse[a as usize] {
             q
         } else {
             p
         }
-    };
+    }
+
+    /// Barycentric coordinates of fine vertex `v` in coarse face `face`: a corner, or the
+    /// midpoint of an edge. None when `v` is not on the face.
+    fn barycentric(&self, v: u32, face: [u32; 3]) -> Option<[f64; 3]> {
+        let c = self.fine_to_coarse[v as usize];
+        if c != NONE {
+            return face.iter().position(|&x| x == c).map(|i| {
+                let mut b = [0.0; 3];
+                b[i] = 1.0;
+                b
+            });
+        }
+        let [p, q] = self.odd_endpoints[v as usize];
+        let i = face.iter().position(|&x| x == p)?;
+        let j = face.iter().position(|&x| x == q)?;
+        let mut b = [0.0; 3];
+        b[i] = 0.5;
+        b[j] = 0.5;
+        Some(b)
+    }
+}
+
+/// Coarse faces, each found once from its lowest-numbered corner, with every fine face's
+/// parent and corner weights; fails unless the fine faces are exactly four per coarse face.
+#[allow(clippy::type_complexity)]
+fn coarse_faces(
+    topo: &Topology,
+    coarse_to_fine: &[u32],
+    numbering: Numbering,
+    level: usize,
+) -> Result<(Vec<[u32; 3]>, Vec<(u32, [[f64; 3]; 3])>), DetectError> {
+    let fine_to_coarse = numbering.fine_to_coarse;
     let mut coarse_triangles = Vec::new();
     let mut face_parent = vec![(NONE, [[0.0; 3]; 3]); topo.triangles.len()];
-    for &a in &coarse_to_fine {
+    for &a in coarse_to_fine {
         let ring = topo.ring(a);
         let hs = topo.ring_halfedges(a);
         for k in 0..hs.len() {
@@ -139,63 +242,18 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             let m1 = ring[k];
             let m2 = ring[(k + 1) % ring.len()];
             let ca = fine_to_coarse[a as usize];
-            let (cb, cc) = (far(a, m1), far(a, m2));
+            let (cb, cc) = (numbering.far(a, m1), numbering.far(a, m2));
             if ca > cb || ca > cc {
                 continue;
             }
             let d = coarse_triangles.len() as u32;
             coarse_triangles.push([ca, cb, cc]);
-            // The four children: the corner face at a, the central face across (m1, m2),
-            // and the corner faces across the central face's other two edges.
-            let corner_a = h / 3;
-            let h_mid = next(h); // m1 -> m2 in the corner face
-            let t = topo.twin[h_mid as usize];
-            if t == NONE {
-                return Err(fail(
-                    level,
-                    m1,
-                    "central face of a split triangle is missing",
-                ));
-            }
-            let central = t / 3;
-            let bary_of = |v: u32| -> Option<[f64; 3]> {
-                let c = fine_to_coarse[v as usize];
-                if c != NONE {
-                    return [ca, cb, cc].iter().position(|&x| x == c).map(|i| {
-                        let mut b = [0.0; 3];
-                        b[i] = 1.0;
-                        b
-                    });
-                }
-                let [p, q] = odd_endpoints[v as usize];
-                let i = [ca, cb, cc].iter().position(|&x| x == p)?;
-                let j = [ca, cb, cc].iter().position(|&x| x == q)?;
-                let mut b = [0.0; 3];
-                b[i] = 0.5;
-                b[j] = 0.5;
-                Some(b)
-            };
-            let mut children = [corner_a, central, NONE, NONE];
-            let mut count = 2;
-            for e in 0..3u32 {
-                let tw = topo.twin[(central * 3 + e) as usize];
-                if tw != NONE && tw / 3 != corner_a && count < 4 {
-                    children[count] = tw / 3;
-                    count += 1;
-                }
-            }
-            if count != 4 {
-                return Err(fail(
-                    level,
-                    a,
-                    "a coarse face does not split into four fine faces",
-                ));
-            }
-            for f in children {
+            for f in four_children(topo, h, a, m1, level)? {
                 let tri = topo.triangles[f as usize];
                 let mut corners = [[0.0; 3]; 3];
                 for (slot, &v) in corners.iter_mut().zip(tri.iter()) {
-                    *slot = bary_of(v)
+                    *slot = numbering
+                        .barycentric(v, [ca, cb, cc])
                         .ok_or_else(|| fail(level, v, "fine face leaves its coarse face"))?;
                 }
                 if face_parent[f as usize].0 != NONE {
@@ -220,13 +278,47 @@ pub fn detect_level(topo: &Topology, level: usize) -> Result<Level, DetectError>
             ),
         ));
     }
-    Ok(Level {
-        coarse_triangles,
-        coarse_to_fine,
-        fine_to_coarse,
-        odd_endpoints,
-        face_parent,
-    })
+    Ok((coarse_triangles, face_parent))
+}
+
+/// The four fine faces of the coarse face at even vertex `a` whose corner face holds
+/// half-edge `h` (from `a` to odd `m1`): the corner face at a, the central face across
+/// (m1, m2), and the corner faces across the central face's other two edges.
+fn four_children(
+    topo: &Topology,
+    h: u32,
+    a: u32,
+    m1: u32,
+    level: usize,
+) -> Result<[u32; 4], DetectError> {
+    let corner_a = h / 3;
+    let h_mid = next(h); // m1 -> m2 in the corner face
+    let t = topo.twin[h_mid as usize];
+    if t == NONE {
+        return Err(fail(
+            level,
+            m1,
+            "central face of a split triangle is missing",
+        ));
+    }
+    let central = t / 3;
+    let mut children = [corner_a, central, NONE, NONE];
+    let mut count = 2;
+    for e in 0..3u32 {
+        let tw = topo.twin[(central * 3 + e) as usize];
+        if tw != NONE && tw / 3 != corner_a && count < 4 {
+            children[count] = tw / 3;
+            count += 1;
+        }
+    }
+    if count != 4 {
+        return Err(fail(
+            level,
+            a,
+            "a coarse face does not split into four fine faces",
+        ));
+    }
+    Ok(children)
 }
 
 /// Vertices of the component of `start`, marking them in `seen`.
@@ -333,6 +425,7 @@ fn propagate(
 /// A hierarchy of `levels.len()` detected levels, finest first.
 #[derive(Debug, Clone)]
 pub struct Hierarchy {
+    /// The levels, finest first.
     pub levels: Vec<Level>,
 }
 
@@ -362,6 +455,7 @@ impl Hierarchy {
         (Hierarchy { levels }, None)
     }
 
+    /// Number of levels found.
     pub fn depth(&self) -> usize {
         self.levels.len()
     }

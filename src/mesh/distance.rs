@@ -6,6 +6,7 @@ use super::TriMesh;
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// Closest-point queries against a triangle mesh through a uniform grid of buckets.
 pub struct MeshDistance<'a> {
     mesh: &'a TriMesh,
     cell: f64,
@@ -13,6 +14,7 @@ pub struct MeshDistance<'a> {
 }
 
 impl<'a> MeshDistance<'a> {
+    /// Buckets the triangles of `mesh` (cells two mean edges wide).
     pub fn new(mesh: &'a TriMesh) -> Self {
         let p = &mesh.positions;
         let mean_edge = mesh
@@ -89,7 +91,7 @@ impl<'a> MeshDistance<'a> {
 }
 
 /// Closest point of triangle abc to p (Voronoi regions of vertices, edges, face).
-pub fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {

@@ -8,40 +8,83 @@ use super::TriMesh;
 use glam::DVec3;
 use std::collections::HashMap;
 
+/// How coarse positions are recovered from fine ones.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum InverseMethod {
+    /// The exact inverse of the subdivision rules (the fine mesh must be a subdivision).
     Exact,
+    /// The coarse points whose subdivision is closest to the fine ones in least squares.
     Lsq,
 }
 
-impl std::str::FromStr for InverseMethod {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "exact" => Ok(Self::Exact),
-            "lsq" => Ok(Self::Lsq),
-            _ => Err(format!("unknown inverse method '{s}' (exact|lsq)")),
+impl InverseMethod {
+    /// Every method, in the order a user interface lists them.
+    pub const ALL: [InverseMethod; 2] = [InverseMethod::Exact, InverseMethod::Lsq];
+
+    /// The method's name in configs and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            InverseMethod::Exact => "exact",
+            InverseMethod::Lsq => "lsq",
         }
     }
 }
 
+impl std::fmt::Display for InverseMethod {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for InverseMethod {
+    type Err = crate::names::UnknownName;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        InverseMethod::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| {
+                crate::names::UnknownName::new(s, InverseMethod::ALL.map(InverseMethod::name))
+            })
+    }
+}
+
+/// Why a mesh cannot be coarsened as asked.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum InverseError {
+    /// Fewer subdivision levels were found than asked for; `reason` is the detector's
+    /// account of the first level that failed, when there is one.
     #[error(
-        "input has no Loop subdivision connectivity at depth {wanted} (found {found}): {reason}"
+        "input has no Loop subdivision connectivity at depth {wanted} (found {found}): {}",
+        reason.as_ref().map_or_else(|| "unknown".to_string(), ToString::to_string)
     )]
     NotSubdivided {
+        /// Levels asked for.
         wanted: usize,
+        /// Levels found.
         found: usize,
-        reason: String,
+        /// Why the next level was not found.
+        #[source]
+        reason: Option<DetectError>,
     },
+    /// The mesh (or a recovered coarse mesh) is not a manifold.
     #[error(transparent)]
     Topology(#[from] TopologyError),
 }
 
+impl InverseError {
+    /// A stable snake_case name of the variant, for machine-readable reports.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::NotSubdivided { .. } => "not_subdivided",
+            Self::Topology(_) => "topology",
+        }
+    }
+}
+
 /// Paper's equation 1 weights (mu, eta) for an interior even vertex of valence `l`.
-pub fn inverse_weights(l: usize) -> (f64, f64) {
+pub(crate) fn inverse_weights(l: usize) -> (f64, f64) {
     let beta = loop_beta(l);
     let alpha = 1.0 - l as f64 * beta;
     let mu = 5.0 / (8.0 * alpha - 3.0);
@@ -57,7 +100,7 @@ pub fn exact_inverse_operator(fine: &Topology, level: &Level) -> SparseOperator 
 /// `exact_inverse_operator` for a fine mesh whose coarse vertices are known without
 /// detection (a resampling lattice's): `coarse_to_fine` maps each coarse vertex to its
 /// even fine vertex. The rule reads only that vertex's ring in `fine`.
-pub fn exact_inverse_rows(fine: &Topology, coarse_to_fine: &[u32]) -> SparseOperator {
+pub(crate) fn exact_inverse_rows(fine: &Topology, coarse_to_fine: &[u32]) -> SparseOperator {
     let mut op = SparseOperator {
         input_len: fine.vertex_count,
         row_start: vec![0],
@@ -181,7 +224,9 @@ fn lsq_level(
 
 /// Result of coarsening: the coarse mesh and the hierarchy that produced it.
 pub struct Coarsened {
+    /// The coarsest mesh.
     pub mesh: TriMesh,
+    /// The levels recovered on the way.
     pub hierarchy: Hierarchy,
 }
 
@@ -197,7 +242,7 @@ pub fn coarsen(
         return Err(InverseError::NotSubdivided {
             wanted: levels,
             found: hierarchy.depth(),
-            reason: err.map_or_else(|| "unknown".to_string(), |e: DetectError| e.to_string()),
+            reason: err,
         });
     }
     let mut positions = mesh.positions.clone();
@@ -248,7 +293,7 @@ fn identity(n: usize) -> SparseOperator {
 }
 
 /// `outer * inner` as one operator.
-pub fn compose(outer: &SparseOperator, inner: &SparseOperator) -> SparseOperator {
+pub(crate) fn compose(outer: &SparseOperator, inner: &SparseOperator) -> SparseOperator {
     let mut op = SparseOperator {
         input_len: inner.input_len,
         row_start: vec![0],
@@ -278,6 +323,14 @@ pub fn compose(outer: &SparseOperator, inner: &SparseOperator) -> SparseOperator
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn inverse_method_names_parse_back() {
+        for m in InverseMethod::ALL {
+            assert_eq!(m.name().parse::<InverseMethod>(), Ok(m));
+        }
+        assert!("exactly".parse::<InverseMethod>().is_err());
+    }
 
     #[test]
     fn weights_match_the_spec_table() {

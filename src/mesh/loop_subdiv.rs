@@ -14,22 +14,29 @@ pub fn loop_beta(l: usize) -> f64 {
 /// A sparse linear operator: row i of the output is `sum w * input[j]`.
 #[derive(Clone, Debug, Default)]
 pub struct SparseOperator {
+    /// Length of the input vector.
     pub input_len: usize,
+    /// Row i's entries are `row_start[i]..row_start[i + 1]`.
     pub row_start: Vec<u32>,
+    /// Input index of every entry.
     pub cols: Vec<u32>,
+    /// Weight of every entry.
     pub weights: Vec<f64>,
 }
 
 impl SparseOperator {
+    /// Number of output rows.
     pub fn rows(&self) -> usize {
         self.row_start.len().saturating_sub(1)
     }
 
+    /// Row i as (input indices, weights).
     pub fn row(&self, i: usize) -> (&[u32], &[f64]) {
         let (a, b) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
         (&self.cols[a..b], &self.weights[a..b])
     }
 
+    /// The operator applied to points.
     pub fn apply(&self, x: &[DVec3]) -> Vec<DVec3> {
         (0..self.rows())
             .map(|i| {
@@ -51,7 +58,9 @@ impl SparseOperator {
 /// One level of subdivision: the fine connectivity and the operator fine = S * coarse.
 #[derive(Clone, Debug)]
 pub struct LoopStep {
+    /// The fine triangles.
     pub triangles: Vec<[u32; 3]>,
+    /// Fine positions = operator * coarse positions.
     pub operator: SparseOperator,
 }
 

@@ -1,4 +1,5 @@
 //! Triangle meshes: the in-memory form every reader produces and every stage consumes.
+#![warn(missing_docs)]
 
 use glam::DVec3;
 
@@ -15,11 +16,14 @@ pub mod topology;
 /// counter-clockwise order of the three corners.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TriMesh {
+    /// Vertex positions.
     pub positions: Vec<DVec3>,
+    /// Counter-clockwise triangles of vertex indices.
     pub triangles: Vec<[u32; 3]>,
 }
 
 impl TriMesh {
+    /// A mesh of these vertices and triangles (not checked: see `clean` and `Topology`).
     pub fn new(positions: Vec<DVec3>, triangles: Vec<[u32; 3]>) -> Self {
         Self {
             positions,
@@ -27,16 +31,18 @@ impl TriMesh {
         }
     }
 
+    /// Number of vertices.
     pub fn vertex_count(&self) -> usize {
         self.positions.len()
     }
 
+    /// Number of triangles.
     pub fn face_count(&self) -> usize {
         self.triangles.len()
     }
 
     /// Axis-aligned bounds, or `None` for a mesh without vertices.
-    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+    pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
         let first = *self.positions.first()?;
         Some(
             self.positions

@@ -6,21 +6,35 @@ use super::TriMesh;
 use std::collections::HashMap;
 
 #[derive(Clone, Debug, serde::Serialize)]
+/// Counts that describe a mesh's state, for `mesh stats` and reports.
 pub struct MeshStats {
+    /// Vertices.
     pub vertices: usize,
+    /// Faces.
     pub faces: usize,
+    /// Edge-connected components.
     pub components: usize,
+    /// Boundary loops.
     pub boundary_loops: usize,
+    /// Edges with one face.
     pub boundary_edges: usize,
+    /// Edges with more than two faces.
     pub non_manifold_edges: usize,
+    /// Vertices whose faces form more than one fan.
     pub non_manifold_vertices: usize,
+    /// Faces repeating another's vertices.
     pub duplicate_faces: usize,
+    /// Faces with a repeated vertex.
     pub degenerate_faces: usize,
+    /// Vertices no face uses.
     pub unreferenced_vertices: usize,
+    /// V - E + F.
     pub euler_characteristic: i64,
+    /// No boundary edge.
     pub closed: bool,
     /// Genus of a single closed orientable manifold component, else `None`.
     pub genus: Option<i64>,
+    /// Loop subdivision levels detected (0 = none).
     pub subdivision_depth: usize,
     /// Why detection stopped at `subdivision_depth`.
     pub subdivision_note: Option<String>,
@@ -173,7 +187,7 @@ pub fn mesh_stats(mesh: &TriMesh, max_depth: usize) -> MeshStats {
     }
 }
 
-pub struct UnionFind {
+pub(crate) struct UnionFind {
     parent: Vec<usize>,
 }
 
@@ -190,7 +204,7 @@ impl UnionFind {
         }
         x
     }
-    pub fn union(&mut self, a: usize, b: usize) {
+    pub(crate) fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         if ra != rb {
             self.parent[ra.max(rb)] = ra.min(rb);

@@ -1,24 +1,82 @@
 //! From an arbitrary disk-like scan component to a planar map: boundary loops, hole filling
 //! (virtual faces, never data), the least-fold projection (`planar`) and its bijective
 //! fallback, Floater's mean-value map onto a disk (`param`), and point location in the map.
+#![warn(missing_docs)]
 
 mod band;
 pub mod param;
 pub mod planar;
-pub mod warp;
+mod plane2d;
+pub(crate) mod warp;
 
-use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::topology::{Topology, TopologyError, NONE};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
 
+/// Why a scan component gets no planar map.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum RemeshError {
+    /// The component's triangles do not form a manifold mesh.
     #[error("not a manifold mesh: {0}")]
-    NotManifold(String),
-    #[error("not disk-like: {0}")]
-    NotDisk(String),
+    NotManifold(#[source] TopologyError),
+    /// A closed surface has no boundary to map onto a disk.
+    #[error("not disk-like: closed surface (no boundary)")]
+    Closed,
+    /// Filling the holes left something other than a disk (a handle or several sheets).
+    #[error("not disk-like: Euler characteristic {chi} after filling {holes} holes (a disk has 1; genus {genus})")]
+    NotDisk {
+        /// V - E + F of the filled patch.
+        chi: i64,
+        /// Holes filled (boundary loops but the outer one).
+        holes: usize,
+        /// The genus that characteristic means for one sheet.
+        genus: i64,
+    },
+    /// The map onto the plane could not be computed or folds.
     #[error("parameterization failed: {0}")]
-    Parameterization(String),
+    Parameterization(#[source] MapFailure),
+}
+
+impl RemeshError {
+    /// A stable snake_case name of the variant, for machine-readable reports.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::NotManifold(_) => "not_manifold",
+            Self::Closed => "closed",
+            Self::NotDisk { .. } => "not_disk",
+            Self::Parameterization(_) => "parameterization",
+        }
+    }
+}
+
+/// How the mean-value map failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum MapFailure {
+    /// A free vertex whose neighbour weights sum to zero or are not finite.
+    #[error("vertex {vertex} has no usable neighbours")]
+    NoUsableNeighbours {
+        /// The vertex.
+        vertex: usize,
+    },
+    /// The sparse solver refused the system (its message).
+    #[error("mean-value system: {detail}")]
+    Solver {
+        /// What the solver reported.
+        detail: String,
+    },
+    /// The solution is not finite.
+    #[error("the mean-value system is singular (a part without a path to the boundary?)")]
+    Singular,
+    /// The disk map still folds triangles.
+    #[error(
+        "{count} folded triangles remain after the mean-value map (degenerate input triangles?)"
+    )]
+    FoldsRemain {
+        /// Folded triangles.
+        count: usize,
+    },
 }
 
 /// Boundary loops as ordered vertex lists, walking boundary half-edges (face on the left).
@@ -58,10 +116,13 @@ fn loop_length(positions: &[DVec3], l: &[u32]) -> f64 {
 /// A disk-like patch ready for parameterization: the input plus virtual hole fans.
 #[derive(Clone, Debug)]
 pub struct FilledPatch {
+    /// The patch with the virtual fans appended.
     pub mesh: TriMesh,
     /// Vertices at index >= `real_vertices` are virtual hole centres.
     pub real_vertices: usize,
+    /// The outer boundary loop (the longest), which goes onto the disk's rim.
     pub outer: Vec<u32>,
+    /// Number of holes filled.
     pub holes: usize,
     /// Triangles at index >= `real_triangles` are the virtual fans.
     pub real_triangles: usize,
@@ -72,10 +133,10 @@ pub struct FilledPatch {
 /// Picks the longest boundary loop as the outer boundary and closes every other loop with a
 /// fan around a virtual centre vertex.
 pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
-    let topo = Topology::from_mesh(mesh).map_err(|e| RemeshError::NotManifold(e.to_string()))?;
+    let topo = Topology::from_mesh(mesh).map_err(RemeshError::NotManifold)?;
     let mut loops = boundary_loops(&topo);
     if loops.is_empty() {
-        return Err(RemeshError::NotDisk("closed surface (no boundary)".into()));
+        return Err(RemeshError::Closed);
     }
     // Longest first; equal lengths keep their order (a stable sort on cached lengths).
     let lengths: Vec<f64> = loops
@@ -118,11 +179,11 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
     let e = (topo.edge_count() + fan_faces) as i64;
     let chi = v - e + filled.triangles.len() as i64;
     if chi != 1 {
-        return Err(RemeshError::NotDisk(format!(
-            "Euler characteristic {chi} after filling {} holes (a disk has 1; genus {})",
-            loops.len() - 1,
-            (1 - chi) / 2
-        )));
+        return Err(RemeshError::NotDisk {
+            chi,
+            holes: loops.len() - 1,
+            genus: (1 - chi) / 2,
+        });
     }
     Ok(FilledPatch {
         mesh: filled,
@@ -136,7 +197,7 @@ pub fn fill_holes(mesh: &TriMesh) -> Result<FilledPatch, RemeshError> {
 
 /// An equilateral triangle of side 1; the mean-value disk map puts the boundary on (a
 /// slightly shrunk copy of) its inscribed circle.
-pub const DOMAIN: [DVec2; 3] = [
+pub(crate) const DOMAIN: [DVec2; 3] = [
     DVec2::new(1.0, 0.0),
     DVec2::new(0.5, 0.866_025_403_784_438_6),
     DVec2::new(0.0, 0.0),

@@ -2,7 +2,7 @@
 //! map is bijective): the fallback of `planar` for patches that are no height field; and
 //! point location in a planar triangulation.
 
-use super::{FilledPatch, RemeshError, DOMAIN};
+use super::{FilledPatch, MapFailure, RemeshError, DOMAIN};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -67,9 +67,9 @@ pub(crate) fn mean_value_disk(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshE
     for (k, &v) in free.iter().enumerate() {
         let total: f64 = weights[v].iter().map(|w| w.1).sum();
         if !(total > 0.0 && total.is_finite()) {
-            return Err(RemeshError::Parameterization(format!(
-                "vertex {v} has no usable neighbours"
-            )));
+            return Err(RemeshError::Parameterization(
+                MapFailure::NoUsableNeighbours { vertex: v },
+            ));
         }
         let mut row = Vec::with_capacity(weights[v].len());
         for &(j, w) in &weights[v] {
@@ -92,7 +92,7 @@ pub(crate) fn mean_value_disk(patch: &FilledPatch) -> Result<Vec<DVec2>, RemeshE
 /// Solves (I - W) x = b for the mean-value system by a sparse LU factorisation (faer,
 /// fill-reducing column ordering): the system is not symmetric. Each coordinate is solved
 /// on its own: faer's multi-column sparse solve is the slower here.
-fn solve_mean_value(rows: &[Vec<(usize, f64)>], b: &[DVec2]) -> Result<Vec<DVec2>, String> {
+fn solve_mean_value(rows: &[Vec<(usize, f64)>], b: &[DVec2]) -> Result<Vec<DVec2>, MapFailure> {
     use faer::linalg::solvers::Solve;
     use faer::sparse::{SparseColMat, Triplet};
     let n = rows.len();
@@ -101,11 +101,15 @@ fn solve_mean_value(rows: &[Vec<(usize, f64)>], b: &[DVec2]) -> Result<Vec<DVec2
         triplets.push(Triplet::new(i, i, 1.0));
         triplets.extend(row.iter().map(|&(j, w)| Triplet::new(i, j, -w)));
     }
-    let matrix = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets)
-        .map_err(|e| format!("mean-value system: {e:?}"))?;
-    let lu = matrix
-        .sp_lu()
-        .map_err(|e| format!("mean-value system not factorisable: {e:?}"))?;
+    let matrix =
+        SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).map_err(|e| {
+            MapFailure::Solver {
+                detail: format!("{e:?}"),
+            }
+        })?;
+    let lu = matrix.sp_lu().map_err(|e| MapFailure::Solver {
+        detail: format!("not factorisable: {e:?}"),
+    })?;
     let mut x = vec![DVec2::ZERO; n];
     for axis in 0..2 {
         let mut column = faer::Mat::<f64>::from_fn(n, 1, |i, _| b[i][axis]);
@@ -117,12 +121,12 @@ fn solve_mean_value(rows: &[Vec<(usize, f64)>], b: &[DVec2]) -> Result<Vec<DVec2
     if x.iter().all(|p| p.is_finite()) {
         Ok(x)
     } else {
-        Err("the mean-value system is singular (a part without a path to the boundary?)".into())
+        Err(MapFailure::Singular)
     }
 }
 
 /// Point location in the planar triangulation through a uniform grid of buckets.
-pub struct Locator<'a> {
+pub(crate) struct Locator<'a> {
     tris: &'a [[u32; 3]],
     plane: &'a [DVec2],
     lo: DVec2,

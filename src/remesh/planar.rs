@@ -12,8 +12,10 @@
 //! provably bijective, and verified to have no triangle of non-positive area.
 
 use super::param::mean_value_disk;
+pub(crate) use super::plane2d::doubled_area;
+pub use super::plane2d::folded_triangles;
 use super::warp::PlaneWarp;
-use super::{FilledPatch, RemeshError};
+use super::{FilledPatch, MapFailure, RemeshError};
 use crate::mesh::TriMesh;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -22,8 +24,11 @@ use rayon::prelude::*;
 /// warm-start state so that a new version of a patch is projected the same way.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlaneFrame {
+    /// A point of the plane (the data's centroid).
     pub origin: DVec3,
+    /// First axis.
     pub e1: DVec3,
+    /// Second axis.
     pub e2: DVec3,
 }
 
@@ -127,11 +132,13 @@ impl PlaneFrame {
         })
     }
 
+    /// Coordinates of p's orthogonal projection in the frame.
     pub fn project(&self, p: DVec3) -> DVec2 {
         let d = p - self.origin;
         DVec2::new(d.dot(self.e1), d.dot(self.e2))
     }
 
+    /// The plane's unit normal.
     pub fn normal(&self) -> DVec3 {
         self.e1.cross(self.e2)
     }
@@ -139,6 +146,7 @@ impl PlaneFrame {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
+/// Which planar map a patch got.
 pub enum MapMethod {
     /// Orthogonal projection (folded triangles, if any, left out of the mapped mesh).
     Projection,
@@ -147,6 +155,7 @@ pub enum MapMethod {
 }
 
 #[derive(Clone, Debug)]
+/// A patch mapped onto the plane.
 pub struct PlanarMap {
     /// The filled patch as mapped: the projection closes holes by ear clipping in the plane
     /// (no fold by construction) where the fans of `fill_holes` would fold; virtual
@@ -154,6 +163,7 @@ pub struct PlanarMap {
     pub mesh: TriMesh,
     /// Plane position of every vertex of `mesh` (real, then virtual).
     pub plane: Vec<DVec2>,
+    /// The map used.
     pub method: MapMethod,
     /// Folded triangles of the projection (left out of `mesh` when the projection is used).
     pub folds_projected: usize,
@@ -165,31 +175,14 @@ pub struct PlanarMap {
     pub folds_warped: usize,
 }
 
-/// Twice the signed area of a triangle in the map (positive counter-clockwise).
-pub fn doubled_area(plane: &[DVec2], t: &[u32; 3]) -> f64 {
-    let (a, b, c) = (
-        plane[t[0] as usize],
-        plane[t[1] as usize],
-        plane[t[2] as usize],
-    );
-    (b - a).perp_dot(c - a)
-}
-
-/// Triangles with non-positive signed area in the map.
-pub fn folded_triangles(tris: &[[u32; 3]], plane: &[DVec2]) -> Vec<usize> {
-    tris.iter()
-        .enumerate()
-        .filter(|(_, t)| doubled_area(plane, t) <= 0.0)
-        .map(|(f, _)| f)
-        .collect()
-}
-
 /// Longest hole rim closed by ear clipping.
 const MAX_EAR_CLIP: usize = 1000;
 
 /// Above this share of folded triangles the patch is no height field over the plane.
 const MAX_FOLD_FRACTION: f64 = 0.01;
 
+/// The projection onto `frame` (holes closed in the plane) if it folds little enough,
+/// otherwise the mean-value disk map.
 pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, RemeshError> {
     let plane: Vec<DVec2> = patch
         .mesh
@@ -251,10 +244,9 @@ pub fn planar_map(patch: &FilledPatch, frame: &PlaneFrame) -> Result<PlanarMap, 
     }
     let left = folded_triangles(&patch.mesh.triangles, &disk);
     if !left.is_empty() {
-        return Err(RemeshError::Parameterization(format!(
-            "{} folded triangles remain after the mean-value map (degenerate input triangles?)",
-            left.len()
-        )));
+        return Err(RemeshError::Parameterization(MapFailure::FoldsRemain {
+            count: left.len(),
+        }));
     }
     Ok(PlanarMap {
         near_fold: vec![false; disk.len()],
@@ -279,7 +271,7 @@ const WARP_ITERATIONS: usize = 5;
 /// alone fold more than the share of triangles a projection map may fold: `planar_map`
 /// then falls back to the disk, which is not warped (should it not, `evened_out` builds
 /// the warp itself, the same one).
-pub fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
+pub(crate) fn projection_warp(data: &TriMesh, frame: &PlaneFrame) -> Option<PlaneWarp> {
     let plane: Vec<DVec2> = data.positions.iter().map(|&p| frame.project(p)).collect();
     let folds = folded_triangles(&data.triangles, &plane).len();
     if folds as f64 > MAX_FOLD_FRACTION * data.triangles.len() as f64 {

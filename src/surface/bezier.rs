@@ -7,7 +7,6 @@
 //! where factorials times powers lose everything.
 
 use super::{BasisDerivRows, SurfaceParam, TriSurface};
-use glam::DVec3;
 
 /// Index of lattice point (i, j) in a triangular lattice with n segments a side: rows of
 /// constant j, i = 0..=n-j.
@@ -46,11 +45,14 @@ pub fn lattice_triangles(n: usize) -> Vec<[u32; 3]> {
 }
 
 #[derive(Clone, Debug)]
+/// A triangular Bezier patch of one degree over the reference triangle.
 pub struct BezierTriangle {
+    /// The degree n ((n + 1)(n + 2) / 2 controls).
     pub degree: usize,
 }
 
 impl BezierTriangle {
+    /// A patch of degree `degree`.
     pub fn new(degree: usize) -> Self {
         Self { degree }
     }
@@ -163,27 +165,28 @@ impl TriSurface for BezierTriangle {
     }
 }
 
-/// Independent reference: repeated de Casteljau on control points (for tests).
-pub fn de_casteljau(n: usize, controls: &[DVec3], u: f64, v: f64) -> DVec3 {
-    let w = 1.0 - u - v;
-    let mut pts = controls.to_vec();
-    for r in (1..=n).rev() {
-        let mut next = vec![DVec3::ZERO; lattice_len(r - 1)];
-        for j in 0..r {
-            for i in 0..r - j {
-                next[lattice_index(r - 1, i, j)] = pts[lattice_index(r, i + 1, j)] * u
-                    + pts[lattice_index(r, i, j + 1)] * v
-                    + pts[lattice_index(r, i, j)] * w;
-            }
-        }
-        pts = next;
-    }
-    pts[0]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::DVec3;
+
+    /// Independent reference: repeated de Casteljau on control points (for tests).
+    fn de_casteljau(n: usize, controls: &[DVec3], u: f64, v: f64) -> DVec3 {
+        let w = 1.0 - u - v;
+        let mut pts = controls.to_vec();
+        for r in (1..=n).rev() {
+            let mut next = vec![DVec3::ZERO; lattice_len(r - 1)];
+            for j in 0..r {
+                for i in 0..r - j {
+                    next[lattice_index(r - 1, i, j)] = pts[lattice_index(r, i + 1, j)] * u
+                        + pts[lattice_index(r, i, j + 1)] * v
+                        + pts[lattice_index(r, i, j)] * w;
+                }
+            }
+            pts = next;
+        }
+        pts[0]
+    }
 
     fn controls(n: usize) -> Vec<DVec3> {
         lattice_points(n)

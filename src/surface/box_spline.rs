@@ -20,7 +20,7 @@ use glam::DVec3;
 use std::sync::OnceLock;
 
 /// Offsets of the 12 control points of the up triangle (0,0),(1,0),(0,1).
-pub const STENCIL: [(i64, i64); 12] = [
+pub(crate) const STENCIL: [(i64, i64); 12] = [
     (0, 0),
     (1, 0),
     (0, 1),
@@ -139,7 +139,7 @@ fn derive_matrix() -> [[f64; 12]; 15] {
 /// Value and (u, v) derivative weights of the 12 stencil points at local coordinates
 /// (lu, lv) of an up triangle, or of a down triangle reflected onto one (its first
 /// derivatives change sign). `scale` is the number of lattice cells per unit parameter.
-pub fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 12] {
+pub(crate) fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 12] {
     let m = bezier_from_stencil();
     let bern = quartic_bernstein(lu, lv);
     let (s1, s2) = if down {
@@ -164,7 +164,7 @@ pub fn stencil_weights(lu: f64, lv: f64, down: bool, scale: f64) -> [[f64; 6]; 1
 
 /// Value weights alone of the 12 stencil points (see `stencil_weights`): collocation rows
 /// need no derivatives.
-pub fn stencil_values(lu: f64, lv: f64) -> [f64; 12] {
+pub(crate) fn stencil_values(lu: f64, lv: f64) -> [f64; 12] {
     let m = bezier_from_stencil();
     let bern = quartic_bernstein_values(lu, lv);
     let mut out = [0.0; 12];
@@ -207,7 +207,7 @@ const QUARTIC_MULTINOMIALS: [f64; 15] = {
 /// The 15 Bezier ordinates (lattice order of degree 4) of the patch over the up triangle
 /// whose stencil points, in `STENCIL` order, are `stencil`: computed once per cell and control
 /// set, they make every later evaluation a 15-term sum.
-pub fn bezier_ordinates(stencil: &[DVec3; 12]) -> [DVec3; 15] {
+pub(crate) fn bezier_ordinates(stencil: &[DVec3; 12]) -> [DVec3; 15] {
     let m = bezier_from_stencil();
     let mut out = [DVec3::ZERO; 15];
     for (o, row) in out.iter_mut().zip(m.iter()) {
@@ -218,7 +218,7 @@ pub fn bezier_ordinates(stencil: &[DVec3; 12]) -> [DVec3; 15] {
 
 /// Value and derivatives of a patch from its Bezier ordinates, with the local coordinates,
 /// orientation and scale of `stencil_weights`.
-pub fn evaluate_ordinates(
+pub(crate) fn evaluate_ordinates(
     net: &[DVec3; 15],
     lu: f64,
     lv: f64,
@@ -328,12 +328,14 @@ fn quartic_bernstein(u: f64, v: f64) -> [[f64; 6]; 15] {
 }
 
 #[derive(Clone, Debug)]
+/// The Loop limit surface of a regular triangular lattice net (a quartic box spline).
 pub struct LatticeSpline {
     /// Domain lattice segments per side.
     pub n: usize,
 }
 
 impl LatticeSpline {
+    /// The surface over a domain lattice of `n` segments a side (at least 1).
     pub fn new(n: usize) -> Self {
         Self { n: n.max(1) }
     }
@@ -344,7 +346,7 @@ impl LatticeSpline {
     }
 
     /// Control index of domain-lattice coordinates (i, j), i, j >= -1, i + j <= n + 1.
-    pub fn control_index(&self, i: i64, j: i64) -> usize {
+    pub(crate) fn control_index(&self, i: i64, j: i64) -> usize {
         lattice_index(self.control_segments(), (i + 1) as usize, (j + 1) as usize)
     }
 

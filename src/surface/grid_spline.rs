@@ -12,13 +12,17 @@ use super::box_spline::{
     bezier_ordinates, evaluate_ordinates, stencil_values, stencil_weights, STENCIL,
 };
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
+use crate::numeric::floor;
+/// Re-exported for the scan domain, which rounds grid coordinates the same way.
+pub(crate) use crate::numeric::floor_i64;
 use glam::DVec3;
 use rayon::prelude::*;
 
 /// A grid cell: lower-left vertex (i, j) and whether it is the down triangle.
-pub type Cell = (i64, i64, bool);
+pub(crate) type Cell = (i64, i64, bool);
 
 #[derive(Clone, Debug)]
+/// The Loop limit surface over cells of the three-direction grid (remeshed scans).
 pub struct GridSpline {
     i0: i64,
     j0: i64,
@@ -34,7 +38,7 @@ pub struct GridSpline {
 }
 
 /// The 12 control vertices a cell's patch depends on, in `STENCIL` order.
-pub fn cell_stencil((i, j, down): Cell) -> [(i64, i64); 12] {
+pub(crate) fn cell_stencil((i, j, down): Cell) -> [(i64, i64); 12] {
     STENCIL.map(|(di, dj)| {
         if down {
             (i + 1 - di, j + 1 - dj)
@@ -44,31 +48,8 @@ pub fn cell_stencil((i, j, down): Cell) -> [(i64, i64); 12] {
     })
 }
 
-/// `x.floor()` for |x| < 2^63 without the libm call that `floor` is on baseline x86-64
-/// (no SSE4.1 rounding instruction): every surface evaluation locates its cell.
-#[inline(always)]
-pub(crate) fn floor(x: f64) -> f64 {
-    let t = x as i64 as f64;
-    if t > x {
-        t - 1.0
-    } else {
-        t
-    }
-}
-
-/// `x.floor() as i64` (saturating, NaN to 0) without the libm call.
-#[inline(always)]
-pub(crate) fn floor_i64(x: f64) -> i64 {
-    let t = x as i64;
-    if (t as f64) > x {
-        t - 1
-    } else {
-        t
-    }
-}
-
 /// The cell containing grid point (x, y) and the local coordinates of its up-triangle form.
-pub fn cell_at(x: f64, y: f64) -> (Cell, f64, f64) {
+pub(crate) fn cell_at(x: f64, y: f64) -> (Cell, f64, f64) {
     let (i, j) = (floor(x), floor(y));
     let (fx, fy) = (x - i, y - j);
     let (i, j) = (i as i64, j as i64);
@@ -135,6 +116,7 @@ impl GridSpline {
         grid
     }
 
+    /// The covered cells.
     pub fn cells(&self) -> &[Cell] {
         &self.cells
     }
@@ -144,7 +126,7 @@ impl GridSpline {
         &self.coords
     }
 
-    pub fn control_at(&self, i: i64, j: i64) -> Option<u32> {
+    pub(crate) fn control_at(&self, i: i64, j: i64) -> Option<u32> {
         let (a, b) = (i - self.i0, j - self.j0);
         if a < 0 || b < 0 || a as usize >= self.width || b as usize >= self.height {
             return None;
@@ -166,7 +148,7 @@ impl GridSpline {
     /// integer coordinates on the grid refined k times (vertex (a, b) sits at grid point
     /// (a / k, b / k)) and the counter-clockwise triangles. Used for resampling (k = 2^L)
     /// and, through `sample_lattice`, for tessellation and curvature sampling.
-    pub fn refined_lattice(&self, k: usize) -> (Vec<(i64, i64)>, Vec<[u32; 3]>) {
+    pub(crate) fn refined_lattice(&self, k: usize) -> (Vec<(i64, i64)>, Vec<[u32; 3]>) {
         let k = k.max(1);
         let ki = k as i64;
         // Shared vertices found through a dense index over the cells' refined bounding box
@@ -206,7 +188,7 @@ impl GridSpline {
     }
 
     /// `refined_lattice` with its vertices as surface parameters.
-    pub fn sample_lattice(&self, k: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+    pub(crate) fn sample_lattice(&self, k: usize) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
         let k = k.max(1);
         let (coords, triangles) = self.refined_lattice(k);
         let params = coords
@@ -245,7 +227,7 @@ impl GridSpline {
 /// One control set's Bezier ordinates for every cell of the grid: a foot-point search
 /// evaluates each data point's patch several times per round, and 15 ordinates per cell
 /// replace the 12 stencil weights through the 15x12 matrix at every evaluation.
-pub struct GridEvaluator<'a> {
+pub(crate) struct GridEvaluator<'a> {
     grid: &'a GridSpline,
     controls: &'a [DVec3],
     /// Net index of cell (i, j, down) at `2 * (row * width + column) + down`, over the
@@ -311,14 +293,14 @@ impl<'a> GridEvaluator<'a> {
 impl GridSpline {
     /// The quartic Bezier net of `cell` for `controls` (lattice order of degree 4 over the
     /// cell's local coordinates, see `cell_at`; missing stencil points count as zero).
-    pub fn cell_bezier_net(&self, controls: &[DVec3], cell: Cell) -> [DVec3; 15] {
+    pub(crate) fn cell_bezier_net(&self, controls: &[DVec3], cell: Cell) -> [DVec3; 15] {
         GridEvaluator::net(self, controls, cell)
     }
 
     /// Every covered cell's controls (`STENCIL` order), and per cell slot the index of its
     /// stencil in that list (`u32::MAX` where the cell is not covered): what fits whose
     /// rows are all cell stencils (`fit::stencil_matrix`) plan their assembly with.
-    pub fn stencil_table(&self) -> (Vec<[u32; 12]>, Vec<u32>) {
+    pub(crate) fn stencil_table(&self) -> (Vec<[u32; 12]>, Vec<u32>) {
         let mut stencils = Vec::new();
         let of_slot = (0..self.covered.len())
             .map(|k| {
@@ -338,7 +320,7 @@ impl GridSpline {
 
     /// The stencil (index into `stencil_table`'s list, via its `of_slot`) and the 12 value
     /// weights at p; `None` where p is not in a covered cell.
-    pub fn stencil_row(&self, of_slot: &[u32], p: SurfaceParam) -> Option<(u32, [f64; 12])> {
+    pub(crate) fn stencil_row(&self, of_slot: &[u32], p: SurfaceParam) -> Option<(u32, [f64; 12])> {
         if !(p.u.is_finite() && p.v.is_finite()) {
             return None;
         }

@@ -42,7 +42,7 @@ pub(super) enum VertexKind {
 impl VertexKind {
     /// Interior of valence 6 or boundary with 3 faces: the box spline (with ghost points)
     /// is exact around such a vertex.
-    pub fn is_regular(&self) -> bool {
+    pub(crate) fn is_regular(&self) -> bool {
         match self {
             VertexKind::Interior(r) => r.len() == 6,
             VertexKind::Boundary(r) => r.len() == 4,
@@ -50,7 +50,7 @@ impl VertexKind {
     }
 
     /// Loop's limit-position mask.
-    pub fn limit_mask(&self, v: u32) -> Vec<Term> {
+    pub(crate) fn limit_mask(&self, v: u32) -> Vec<Term> {
         match self {
             VertexKind::Interior(r) => {
                 let n = r.len();
@@ -85,14 +85,14 @@ fn odd(a: u32, b: u32) -> Fine {
 
 impl Net {
     /// A vertex's weights minus those of vertex 0.
-    pub fn diff(&self, v: u32) -> &[f64] {
+    pub(crate) fn diff(&self, v: u32) -> &[f64] {
         let s = v as usize * self.nsup;
         &self.rows[s..s + self.nsup]
     }
 
     /// Adds `w` times the differences (from vertex 0) of the combination `terms` to `acc`:
     /// the whole combination when its coefficients sum to 0, else all but the base part.
-    pub fn add_diff(&self, terms: &[Term], w: f64, acc: &mut [f64]) {
+    pub(crate) fn add_diff(&self, terms: &[Term], w: f64, acc: &mut [f64]) {
         for &(v, c) in terms {
             if v == 0 {
                 continue;
@@ -105,7 +105,7 @@ impl Net {
 
     /// Ring and boundary status of a vertex whose faces are all in the net, or `None` if
     /// some are missing.
-    pub fn vertex_kind(&self, v: u32) -> Option<VertexKind> {
+    pub(crate) fn vertex_kind(&self, v: u32) -> Option<VertexKind> {
         // Around v, a face (v, next, prev) goes counter-clockwise from next to prev.
         let mut links: Vec<(u32, u32)> = Vec::with_capacity(8);
         for t in &self.tris {
@@ -275,7 +275,7 @@ impl Net {
     /// boundary corners joined by a boundary edge. Points beyond the boundary are ghosts
     /// `v + a - b` continuing the lattice (a boundary vertex's missing ring slots are the
     /// reflections of its inner neighbours); a dyadic test checks this is exact.
-    pub fn regular_stencil(&self) -> Option<Vec<Vec<Term>>> {
+    pub(crate) fn regular_stencil(&self) -> Option<Vec<Vec<Term>>> {
         let kinds: Vec<VertexKind> = (0..3u32)
             .map(|v| self.vertex_kind(v))
             .collect::<Option<_>>()?;

@@ -64,7 +64,7 @@ impl RegularPatch {
 
     /// Adds the patch's rows at local (a, b), derivatives mapped by `jac`, to `acc`
     /// (indexed by column position).
-    pub fn add_rows(&self, a: f64, b: f64, jac: &Jac, acc: &mut [[f64; 6]]) {
+    pub(crate) fn add_rows(&self, a: f64, b: f64, jac: &Jac, acc: &mut [[f64; 6]]) {
         let sw = stencil_weights(a, b, false, 1.0);
         match &self.mat {
             None => {
@@ -105,7 +105,7 @@ pub(super) fn add6(acc: &mut [f64; 6], w: &[f64; 6], s: f64) {
 pub(super) struct Jac([[f64; 2]; 2]);
 
 impl Jac {
-    pub const ID: Jac = Jac([[1.0, 0.0], [0.0, 1.0]]);
+    pub(crate) const ID: Jac = Jac([[1.0, 0.0], [0.0, 1.0]]);
 
     pub fn then(&self, j: [[f64; 2]; 2]) -> Jac {
         let m = &self.0;

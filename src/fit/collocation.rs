@@ -1,114 +1,12 @@
-//! The collocation matrix N (rows = data points, columns = control points) in CSR form,
-//! with its transpose kept so that both products run row-parallel.
+//! The collocation operator N (rows = data points, columns = control points): a stored
+//! CSR matrix with its transpose kept so that both products run row-parallel, or the
+//! matrix-free Bezier factorisation of `bezier_rows`.
 
 use super::bezier_rows::BezierRows;
+use super::csr::Csr;
 use crate::surface::SurfaceParam;
 use glam::DVec3;
-use rayon::prelude::*;
 use std::sync::OnceLock;
-
-/// Below this many rows a product is cheaper on one thread than split across the pool.
-const PARALLEL_ROWS: usize = 20_000;
-
-#[derive(Clone, Debug, Default)]
-pub struct Csr {
-    pub nrows: usize,
-    pub ncols: usize,
-    pub row_ptr: Vec<usize>,
-    pub col_idx: Vec<u32>,
-    pub values: Vec<f64>,
-}
-
-impl Csr {
-    pub fn from_rows<'a>(ncols: usize, rows: impl IntoIterator<Item = &'a [(u32, f64)]>) -> Csr {
-        let mut m = Csr {
-            ncols,
-            row_ptr: vec![0],
-            ..Default::default()
-        };
-        for row in rows {
-            for &(c, w) in row {
-                if w != 0.0 {
-                    m.col_idx.push(c);
-                    m.values.push(w);
-                }
-            }
-            m.row_ptr.push(m.col_idx.len());
-        }
-        m.nrows = m.row_ptr.len() - 1;
-        m
-    }
-
-    pub fn transpose(&self) -> Csr {
-        let mut counts = vec![0usize; self.ncols + 1];
-        for &c in &self.col_idx {
-            counts[c as usize + 1] += 1;
-        }
-        for i in 0..self.ncols {
-            counts[i + 1] += counts[i];
-        }
-        let mut fill = counts.clone();
-        let mut col_idx = vec![0u32; self.col_idx.len()];
-        let mut values = vec![0.0; self.values.len()];
-        for r in 0..self.nrows {
-            for k in self.row_ptr[r]..self.row_ptr[r + 1] {
-                let c = self.col_idx[k] as usize;
-                col_idx[fill[c]] = r as u32;
-                values[fill[c]] = self.values[k];
-                fill[c] += 1;
-            }
-        }
-        Csr {
-            nrows: self.ncols,
-            ncols: self.nrows,
-            row_ptr: counts,
-            col_idx,
-            values,
-        }
-    }
-
-    #[inline]
-    fn row_dot(&self, r: usize, x: &[DVec3]) -> DVec3 {
-        let mut acc = DVec3::ZERO;
-        for k in self.row_ptr[r]..self.row_ptr[r + 1] {
-            acc += x[self.col_idx[k] as usize] * self.values[k];
-        }
-        acc
-    }
-
-    /// y = A x.
-    pub fn mul_vec3(&self, x: &[DVec3], y: &mut [DVec3]) {
-        if self.nrows >= PARALLEL_ROWS {
-            y.par_iter_mut()
-                .enumerate()
-                .for_each(|(r, out)| *out = self.row_dot(r, x));
-        } else {
-            for (r, out) in y.iter_mut().enumerate() {
-                *out = self.row_dot(r, x);
-            }
-        }
-    }
-
-    /// y = A x for one scalar field.
-    pub fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
-        let row = |r: usize| -> f64 {
-            (self.row_ptr[r]..self.row_ptr[r + 1])
-                .map(|k| self.values[k] * x[self.col_idx[k] as usize])
-                .sum()
-        };
-        if self.nrows >= PARALLEL_ROWS {
-            y.par_iter_mut()
-                .enumerate()
-                .for_each(|(r, out)| *out = row(r));
-        } else {
-            y.iter_mut().enumerate().for_each(|(r, out)| *out = row(r));
-        }
-    }
-
-    pub fn nnz(&self) -> usize {
-        self.values.len()
-    }
-}
 
 /// How N is applied: a stored matrix with its transpose, or a matrix-free factorisation.
 #[derive(Clone, Debug)]
@@ -188,16 +86,18 @@ impl Collocation {
         }
     }
 
+    /// Rows: data points.
     pub fn nrows(&self) -> usize {
         self.nrows
     }
 
+    /// Columns: control points.
     pub fn ncols(&self) -> usize {
         self.ncols
     }
 
     /// The LSPIA step's lambda_max of N^T N alone, computed by `estimate` on first use.
-    pub fn cached_lambda_max(&self, estimate: impl FnOnce() -> f64) -> f64 {
+    pub(crate) fn cached_lambda_max(&self, estimate: impl FnOnce() -> f64) -> f64 {
         *self.lambda.get_or_init(estimate)
     }
 
@@ -253,7 +153,7 @@ impl Collocation {
     }
 
     /// y = N x for one scalar field.
-    pub fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
+    pub(crate) fn mul_scalar(&self, x: &[f64], y: &mut [f64]) {
         match &self.op {
             Operator::Sparse => self.n().mul_scalar(x, y),
             Operator::BezierRows(op) => {
@@ -266,7 +166,7 @@ impl Collocation {
     }
 
     /// x = N^T y for one scalar field.
-    pub fn mul_t_scalar(&self, y: &[f64], x: &mut [f64]) {
+    pub(crate) fn mul_t_scalar(&self, y: &[f64], x: &mut [f64]) {
         match &self.op {
             Operator::Sparse => self.nt().mul_scalar(y, x),
             Operator::BezierRows(op) => {
@@ -277,20 +177,4 @@ impl Collocation {
             }
         }
     }
-}
-
-/// A test fairness operator: row i is control i minus half of each of two neighbours on a
-/// ring of m controls, at offsets 1 and `far`.
-#[cfg(test)]
-pub(crate) fn ring_laplacian(m: usize, far: u32) -> Csr {
-    let rows: Vec<Vec<(u32, f64)>> = (0..m as u32)
-        .map(|i| {
-            vec![
-                (i, 1.0),
-                ((i + 1) % m as u32, -0.5),
-                ((i + far) % m as u32, -0.5),
-            ]
-        })
-        .collect();
-    Csr::from_rows(m, rows.iter().map(|r| r.as_slice()))
 }

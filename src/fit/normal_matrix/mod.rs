@@ -16,7 +16,7 @@
 //! Assembled in that form, a CG product reads the entries as they are (no repacking per
 //! solve) and a row costs six multiplies per pair.
 
-use super::sparse::Csr;
+use super::csr::Csr;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -49,7 +49,7 @@ pub(super) fn packed_index(a: usize, b: usize, k: usize) -> usize {
 /// Row-wise sparse storage of M: for control c its neighbours `idx[ptr[c]..ptr[c + 1]]`
 /// (sorted) and the sums of each pair.
 #[derive(Clone, Debug)]
-pub struct NormalMatrix<const K: usize> {
+pub(crate) struct NormalMatrix<const K: usize> {
     pub ptr: Vec<usize>,
     pub idx: Vec<u32>,
     pub entries: Vec<[f64; K]>,
@@ -58,13 +58,13 @@ pub struct NormalMatrix<const K: usize> {
 }
 
 /// Point-to-point: the same matrix for all three coordinates.
-pub type ScalarMatrix = NormalMatrix<1>;
+pub(crate) type ScalarMatrix = NormalMatrix<1>;
 /// Squared distance: symmetric 3x3 blocks, six sums each (`BlockMatrix::block`).
-pub type BlockMatrix = NormalMatrix<6>;
+pub(crate) type BlockMatrix = NormalMatrix<6>;
 
 /// The fairness term s L^T L: L by rows and by columns (its transpose).
 #[derive(Clone, Copy)]
-pub struct Fairness<'a> {
+pub(crate) struct Fairness<'a> {
     pub l: &'a Csr,
     pub lt: &'a Csr,
     pub smoothing: f64,
@@ -134,7 +134,7 @@ pub(super) fn accumulate<const K: usize>(
     rhs: &mut [DVec3],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if super::bezier_rows::wide() {
+    if super::simd::wide() {
         // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
         unsafe { accumulate_wide(n, rows, k, weight, pairs, rhs) };
         return;
@@ -329,7 +329,7 @@ impl<const K: usize> Gather<'_, K> {
         entries: &mut Vec<[f64; K]>,
     ) -> DVec3 {
         #[cfg(target_arch = "x86_64")]
-        if super::bezier_rows::wide() {
+        if super::simd::wide() {
             // SAFETY: `wide()` checked that the CPU supports AVX2 and FMA.
             return unsafe { self.row_wide(c, scratch, idx, entries) };
         }
@@ -418,7 +418,12 @@ impl<const K: usize> Gather<'_, K> {
 
 impl ScalarMatrix {
     /// N^T N + s L^T L and N^T p.
-    pub fn assemble(n: &Csr, data: &[DVec3], fairness: Option<Fairness>, lower_only: bool) -> Self {
+    pub(crate) fn assemble(
+        n: &Csr,
+        data: &[DVec3],
+        fairness: Option<Fairness>,
+        lower_only: bool,
+    ) -> Self {
         assemble::<1>(n, Self::weight(data), fairness, lower_only)
     }
 
@@ -434,7 +439,7 @@ impl ScalarMatrix {
     }
 
     /// Inverse diagonal (1 where a control has no term).
-    pub fn jacobi(&self) -> Vec<f64> {
+    pub(crate) fn jacobi(&self) -> Vec<f64> {
         (0..self.ptr.len() - 1)
             .map(|c| {
                 let range = self.ptr[c]..self.ptr[c + 1];
@@ -452,7 +457,7 @@ impl ScalarMatrix {
 impl BlockMatrix {
     /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (`tangential`: t_j per
     /// data row).
-    pub fn assemble(
+    pub(crate) fn assemble(
         n: &Csr,
         data: &[DVec3],
         normals: &[DVec3],
@@ -510,7 +515,7 @@ impl BlockMatrix {
 
     /// Inverses of the diagonal blocks; one that cannot be inverted (no data, no fairness)
     /// becomes the identity.
-    pub fn block_jacobi(&self) -> Vec<DMat3> {
+    pub(crate) fn block_jacobi(&self) -> Vec<DMat3> {
         (0..self.ptr.len() - 1)
             .into_par_iter()
             .map(|c| {
@@ -554,148 +559,4 @@ fn row_products(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use nalgebra::{DMatrix, DVector};
-
-    fn dense(n: &Csr) -> DMatrix<f64> {
-        let mut a = DMatrix::zeros(n.nrows, n.ncols);
-        for r in 0..n.nrows {
-            for k in n.row_ptr[r]..n.row_ptr[r + 1] {
-                a[(r, n.col_idx[k] as usize)] += n.values[k];
-            }
-        }
-        a
-    }
-
-    fn to_dense(m: &ScalarMatrix) -> DMatrix<f64> {
-        let size = m.rhs.len();
-        let mut d = DMatrix::zeros(size, size);
-        for c in 0..size {
-            for k in m.ptr[c]..m.ptr[c + 1] {
-                d[(c, m.idx[k] as usize)] = m.entries[k][0];
-            }
-        }
-        d
-    }
-
-    /// Rows repeating a few column patterns (one given in a different order, one with a
-    /// repeated column), weights varying per row, a fairness term: M, b and both solvers
-    /// against dense normal equations.
-    #[test]
-    fn scalar_assembly_and_solves_match_dense_normal_equations() {
-        let m = 10;
-        let patterns: [&[u32]; 4] = [&[0, 1, 2, 5], &[5, 2, 1, 0], &[3, 4, 4, 9], &[6, 7, 8]];
-        let rows: Vec<Vec<(u32, f64)>> = (0..300)
-            .map(|j| {
-                let pat = patterns[j % 4];
-                pat.iter()
-                    .enumerate()
-                    .map(|(k, &c)| (c, 0.1 + ((j * 7 + k * 3) % 11) as f64 * 0.05))
-                    .collect()
-            })
-            .collect();
-        let n = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let l = crate::fit::sparse::ring_laplacian(m, 9);
-        let lt = l.transpose();
-        let s = 0.3;
-        let fair = Some(Fairness {
-            l: &l,
-            lt: &lt,
-            smoothing: s,
-        });
-        let data: Vec<DVec3> = (0..300)
-            .map(|j| DVec3::new((j as f64 * 0.37).sin(), j as f64 * 0.01, (j % 13) as f64))
-            .collect();
-        let full = ScalarMatrix::assemble(&n, &data, fair, false);
-        let (a, ld) = (dense(&n), dense(&l));
-        let want = a.transpose() * &a + (ld.transpose() * &ld) * s;
-        let got = to_dense(&full);
-        assert!(
-            (&got - &want).amax() < 1e-12 * want.amax(),
-            "{got} vs {want}"
-        );
-        for axis in 0..3 {
-            let p = DVector::from_iterator(300, data.iter().map(|d| d[axis]));
-            let b = a.transpose() * &p;
-            let x = want.clone().cholesky().expect("definite").solve(&b);
-            let (pcg, steps) = full.solve_pcg(vec![DVec3::ZERO; m], 200, 1e-14);
-            let direct = ScalarMatrix::assemble(&n, &data, fair, true)
-                .solve_direct()
-                .expect("definite");
-            assert!(steps < 200);
-            for c in 0..m {
-                assert!((full.rhs[c][axis] - b[c]).abs() < 1e-12 * b.amax().max(1.0));
-                assert!(
-                    (pcg[c][axis] - x[c]).abs() < 1e-9,
-                    "{} vs {}",
-                    pcg[c][axis],
-                    x[c]
-                );
-                assert!((direct[c][axis] - x[c]).abs() < 1e-10);
-            }
-        }
-    }
-
-    /// One pattern shared by enough rows to be summed in parallel chunks (a single Bezier
-    /// patch), with normals: the blocks against the dense 3m x 3m matrix.
-    #[test]
-    fn one_large_pattern_summed_in_parallel_matches_dense_blocks() {
-        let m = 40;
-        let rows_count = 3000;
-        let rows: Vec<Vec<(u32, f64)>> = (0..rows_count)
-            .map(|j| {
-                (0..m as u32)
-                    .map(|c| (c, 1.0 + ((j * 31 + c as usize * 17) % 23) as f64 / 23.0))
-                    .collect()
-            })
-            .collect();
-        assert!(rows_count * packed_len(m) >= PARALLEL_PATTERN_WORK);
-        let n = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
-        let data: Vec<DVec3> = (0..rows_count)
-            .map(|j| DVec3::new(j as f64, (j as f64).cos(), 1.0))
-            .collect();
-        let normals: Vec<DVec3> = (0..rows_count)
-            .map(|j| DVec3::new((j as f64).sin(), 0.5, 1.0).normalize())
-            .collect();
-        // Each row its own tangential share, as near and far from the data's edges.
-        let t: Vec<f64> = (0..rows_count).map(|j| [0.005, 0.05][j % 2]).collect();
-        let blocks = BlockMatrix::assemble(&n, &data, &normals, &t, None, false);
-        let mut want = DMatrix::<f64>::zeros(3 * m, 3 * m);
-        let mut rhs = DVector::<f64>::zeros(3 * m);
-        for (j, row) in rows.iter().enumerate() {
-            let q = normals[j];
-            let w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t[j];
-            let wp = w * data[j];
-            for &(a, wa) in row {
-                for r in 0..3 {
-                    rhs[3 * a as usize + r] += wa * wp[r];
-                }
-                for &(b, wb) in row {
-                    for r in 0..3 {
-                        for c in 0..3 {
-                            want[(3 * a as usize + r, 3 * b as usize + c)] += wa * wb * w.col(c)[r];
-                        }
-                    }
-                }
-            }
-        }
-        let scale = want.amax();
-        for c in 0..m {
-            assert_eq!(blocks.ptr[c + 1] - blocks.ptr[c], m, "every pair present");
-            for k in blocks.ptr[c]..blocks.ptr[c + 1] {
-                let j = blocks.idx[k] as usize;
-                let b = BlockMatrix::block(&blocks.entries[k]);
-                for r in 0..3 {
-                    for q in 0..3 {
-                        let d = (b[3 * r + q] - want[(3 * c + r, 3 * j + q)]).abs();
-                        assert!(d < 1e-11 * scale, "block ({c},{j}) [{r},{q}] off by {d}");
-                    }
-                }
-            }
-            for r in 0..3 {
-                assert!((blocks.rhs[c][r] - rhs[3 * c + r]).abs() < 1e-11 * rhs.amax());
-            }
-        }
-    }
-}
+mod tests;
