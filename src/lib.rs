@@ -13,6 +13,7 @@ pub mod io;
 pub mod mesh;
 pub mod pipeline;
 pub mod remesh;
+pub mod scattered_fit;
 pub mod surface;
 pub mod testdata;
 
