@@ -240,6 +240,10 @@ pub fn foot_points(
                 }
                 let mut du = -(h[2] * g[0] - h[1] * g[1]) / det;
                 let mut dv = -(h[0] * g[1] - h[1] * g[0]) / det;
+                // Converged: a step this small in barycentric units moves nothing visible.
+                if du.abs() + dv.abs() < 1e-10 {
+                    break;
+                }
                 let mut moved = false;
                 for _ in 0..5 {
                     let q = surface.step(p, du, dv);
@@ -252,7 +256,7 @@ pub fn foot_points(
                     du *= 0.5;
                     dv *= 0.5;
                 }
-                if !moved || du.abs() + dv.abs() < 1e-13 {
+                if !moved {
                     break;
                 }
             }

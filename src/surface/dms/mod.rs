@@ -26,8 +26,8 @@ pub use knots::KnotRule;
 
 use super::bezier::{lattice_index, lattice_len, lattice_points, lattice_triangles};
 use super::simplex_spline::{det2, Jet, SimplexError, SimplexFamily};
-use super::{BasisDerivRows, SurfaceParam, TriSurface};
-use glam::DVec2;
+use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
+use glam::{DVec2, DVec3};
 use locate::BoxGrid;
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -100,6 +100,7 @@ pub struct DmsSpline {
 
 thread_local! {
     static SCRATCH: RefCell<(Vec<Jet>, Vec<Jet>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+    static ROWS: RefCell<Vec<(u32, Jet)>> = const { RefCell::new(Vec::new()) };
 }
 
 /// Halvings of the rule's spread tried before giving up.
@@ -337,6 +338,36 @@ impl TriSurface for DmsSpline {
                 hess(eu, ev),
                 hess(ev, ev),
             ]);
+        }
+    }
+
+    /// Accumulates the jets directly (no row buffers): foot-point searches call this at
+    /// every Newton step.
+    fn evaluate(&self, controls: &[DVec3], p: SurfaceParam) -> Derivatives {
+        let (x, dir) = self.param_point_and_direction(p);
+        let [a, b, c] = self.corners(p.face as usize);
+        let (eu, ev) = (a - c, b - c);
+        let mut sum = [DVec3::ZERO; 6];
+        ROWS.with(|cell| {
+            let mut rows = cell.borrow_mut();
+            self.basis_at::<true>(x, dir, &mut rows);
+            for (i, j) in rows.iter() {
+                let c = controls[*i as usize];
+                for (s, w) in sum.iter_mut().zip(j) {
+                    *s += c * *w;
+                }
+            }
+        });
+        let hess = |p: DVec2, q: DVec2| {
+            (sum[3] * q.x + sum[4] * q.y) * p.x + (sum[4] * q.x + sum[5] * q.y) * p.y
+        };
+        Derivatives {
+            position: sum[0],
+            du: sum[1] * eu.x + sum[2] * eu.y,
+            dv: sum[1] * ev.x + sum[2] * ev.y,
+            duu: hess(eu, eu),
+            duv: hess(eu, ev),
+            dvv: hess(ev, ev),
         }
     }
 
