@@ -548,3 +548,98 @@ fn dms_rejects_bad_domains_and_clouds_with_typed_errors() {
         Err(DmsError::VertexIndex { vertex: 99, .. })
     ));
 }
+
+#[test]
+fn records_round_trip_through_json() {
+    use trispline::surface::dms::record::{BPatchRecord, DmsRecord};
+    let bp = BPatch::outward(3, domain_triangle(), 0.5).expect("valid");
+    let c = wavy_controls(3);
+    let json = serde_json::to_string(&BPatchRecord::new(&bp, &c)).expect("serialises");
+    let back: BPatchRecord = serde_json::from_str(&json).expect("parses");
+    let (bp2, c2) = back.surface().expect("valid record");
+    let p = SurfaceParam {
+        face: 0,
+        u: 0.3,
+        v: 0.2,
+    };
+    // serde_json's default float parsing may be off by an ulp.
+    assert!(close(
+        bp.evaluate(&c, p).position,
+        bp2.evaluate(&c2, p).position,
+        1e-14
+    ));
+
+    let s = random_dms(2, 8);
+    let controls: Vec<DVec3> = (0..s.control_count())
+        .map(|i| DVec3::splat(i as f64))
+        .collect();
+    let json = serde_json::to_string(&DmsRecord::new(&s, &controls)).expect("serialises");
+    let mut back: DmsRecord = serde_json::from_str(&json).expect("parses");
+    let (s2, c2) = back.clone().surface().expect("valid record");
+    let mut rng = Rng(4);
+    for _ in 0..20 {
+        let p = rng.param(s.domain_face_count());
+        let (a, b) = (
+            s.evaluate(&controls, p).position,
+            s2.evaluate(&c2, p).position,
+        );
+        assert!(close(a, b, 1e-13), "{a} vs {b}");
+    }
+    back.control_points.pop();
+    assert!(back.surface().is_err());
+}
+
+#[test]
+fn dms_is_continuous_across_domain_edges_with_its_derivatives_to_order_n_minus_1() {
+    for degree in [2, 3] {
+        let s = random_dms(degree, 60 + degree as u64);
+        let c: Vec<DVec3> = (0..s.control_count())
+            .map(|i| {
+                DVec3::new(
+                    (i as f64 * 0.7).sin(),
+                    (i as f64 * 0.3).cos(),
+                    i as f64 * 0.01,
+                )
+            })
+            .collect();
+        // Every interior edge point seen from both faces: the limits from the two sides.
+        let tris = s.triangles();
+        for (f, t) in tris.iter().enumerate() {
+            for (g, q) in tris.iter().enumerate().skip(f + 1) {
+                let shared: Vec<usize> = (0..3).filter(|&k| q.contains(&t[k])).collect();
+                if shared.len() != 2 {
+                    continue;
+                }
+                let x = s.vertices()[t[shared[0]] as usize] * 0.37
+                    + s.vertices()[t[shared[1]] as usize] * 0.63;
+                let from = |face: usize| -> (DVec3, [f64; 2]) {
+                    // x in `face`'s barycentrics: the limit from that side.
+                    let mut p = s.locate(x).expect("inside");
+                    let [a, b, cc] = tris[face].map(|v| s.vertices()[v as usize]);
+                    let d = (b - a).perp_dot(cc - a);
+                    p.face = face as u32;
+                    p.u = (b - x).perp_dot(cc - x) / d;
+                    p.v = (cc - x).perp_dot(a - x) / d;
+                    let e = s.evaluate(&c, p);
+                    // The domain gradient of z from the face's (u, v) derivatives.
+                    let (eu, ev) = (a - cc, b - cc);
+                    let m = eu.x * ev.y - eu.y * ev.x;
+                    let gx = (e.du.z * ev.y - e.dv.z * eu.y) / m;
+                    let gy = (e.dv.z * eu.x - e.du.z * ev.x) / m;
+                    (e.position, [gx, gy])
+                };
+                let (pf, gf) = from(f);
+                let (pg, gg) = from(g);
+                assert!(
+                    close(pf, pg, 1e-11),
+                    "degree {degree} value across edge {f}/{g}: {pf} vs {pg}"
+                );
+                assert!(
+                    (gf[0] - gg[0]).abs() + (gf[1] - gg[1]).abs()
+                        < 1e-8 * (1.0 + gf[0].abs() + gf[1].abs()),
+                    "degree {degree} gradient across edge {f}/{g}: {gf:?} vs {gg:?}"
+                );
+            }
+        }
+    }
+}

@@ -21,6 +21,7 @@
 
 mod knots;
 mod locate;
+pub mod record;
 
 pub use knots::KnotRule;
 
