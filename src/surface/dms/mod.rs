@@ -311,10 +311,12 @@ impl TriSurface for DmsSpline {
 
     fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
         let (x, dir) = self.param_point_and_direction(p);
-        let mut rows = Vec::new();
-        self.basis_at::<false>(x, dir, &mut rows);
         out.clear();
-        out.extend(rows.iter().map(|(i, j)| (*i, j[0])));
+        ROWS.with(|cell| {
+            let mut rows = cell.borrow_mut();
+            self.basis_at::<false>(x, dir, &mut rows);
+            out.extend(rows.iter().map(|(i, j)| (*i, j[0])));
+        });
     }
 
     fn basis_rows_with_derivatives(&self, p: SurfaceParam, out: &mut BasisDerivRows) {
