@@ -551,7 +551,8 @@ fn dms_rejects_bad_domains_and_clouds_with_typed_errors() {
 
 #[test]
 fn records_round_trip_through_json() {
-    use trispline::surface::dms::record::{BPatchRecord, DmsRecord};
+    use trispline::surface::bpatch::BPatchRecord;
+    use trispline::surface::dms::record::DmsRecord;
     let bp = BPatch::outward(3, domain_triangle(), 0.5).expect("valid");
     let c = wavy_controls(3);
     let json = serde_json::to_string(&BPatchRecord::new(&bp, &c)).expect("serialises");

@@ -21,6 +21,7 @@
 //! the domain: the basis is non-negative there and the recursion a convex combination.
 
 use super::bezier::{lattice_index, lattice_len, lattice_points, lattice_triangles};
+use super::dms::record::{pts2, pts3, vec2, vec3};
 use super::dms::PlanarSurface;
 use super::simplex_spline::{barycentric_affine, det2};
 use super::{BasisDerivRows, SurfaceParam, TriSurface};
@@ -45,6 +46,8 @@ pub enum BPatchError {
     KnotTriangle(usize, usize, usize),
     #[error("knot spread {0} must be finite and non-negative")]
     Spread(f64),
+    #[error("{found} control points, the surface has {expected}")]
+    ControlCount { found: usize, expected: usize },
 }
 
 /// One knot triangle's affine barycentric coordinates in terms of the surface parameter:
@@ -314,5 +317,58 @@ impl PlanarSurface for BPatch {
         edges.sort_unstable();
         edges.dedup();
         edges
+    }
+}
+
+/// The `bpatch` kind's `surface.json` record (schema in `dms::record`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BPatchKnots {
+    pub r: Vec<[f64; 2]>,
+    pub s: Vec<[f64; 2]>,
+    pub t: Vec<[f64; 2]>,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct BPatchRecord {
+    pub degree: usize,
+    pub domain_triangle: [[f64; 2]; 3],
+    pub knots: BPatchKnots,
+    pub control_points: Vec<[f64; 3]>,
+}
+
+impl BPatchRecord {
+    pub fn new(patch: &BPatch, controls: &[DVec3]) -> Self {
+        let [r, s, t] = patch.knots();
+        Self {
+            degree: patch.degree(),
+            domain_triangle: patch.domain().map(|p| p.to_array()),
+            knots: BPatchKnots {
+                r: pts2(r),
+                s: pts2(s),
+                t: pts2(t),
+            },
+            control_points: pts3(controls),
+        }
+    }
+
+    /// The checked surface and its controls.
+    pub fn surface(&self) -> Result<(BPatch, Vec<DVec3>), BPatchError> {
+        let patch = BPatch::new(
+            self.degree,
+            self.domain_triangle.map(DVec2::from_array),
+            [
+                vec2(&self.knots.r),
+                vec2(&self.knots.s),
+                vec2(&self.knots.t),
+            ],
+        )?;
+        let expected = (self.degree + 1) * (self.degree + 2) / 2;
+        if self.control_points.len() != expected {
+            return Err(BPatchError::ControlCount {
+                found: self.control_points.len(),
+                expected,
+            });
+        }
+        Ok((patch, vec3(&self.control_points)))
     }
 }

@@ -86,6 +86,8 @@ pub enum DmsError {
     },
     #[error("basis compilation")]
     Simplex(#[from] SimplexError),
+    #[error("{found} control points, the surface has {expected}")]
+    ControlCount { found: usize, expected: usize },
 }
 
 #[derive(Clone, Debug)]
