@@ -320,7 +320,7 @@ impl PlanarSurface for BPatch {
     }
 }
 
-/// The `bpatch` kind's `surface.json` record (schema in `dms::record`).
+/// The knot sequences of a `BPatchRecord`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BPatchKnots {
     pub r: Vec<[f64; 2]>,
@@ -328,6 +328,7 @@ pub struct BPatchKnots {
     pub t: Vec<[f64; 2]>,
 }
 
+/// The `bpatch` kind's `surface.json` record (schema in `dms::record`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BPatchRecord {
     pub degree: usize,
