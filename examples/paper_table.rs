@@ -19,7 +19,17 @@
 //! the stored CSR matrix are timed alongside for comparison and must print the same rows.
 //! Last, steps (and time) each method needs to reach a max-error budget.
 //!
+//! B-patch and DMS rows (issue 24; cases documented in `examples/bpatch_dms/cases.rs`): the
+//! paper's B-patch case (91 lattice points of the same surface, 2 inverse levels, degree 3,
+//! PIA = the inverse Loop of the residuals in the B-patch's controls) and DMS case (453
+//! scattered points, 13 domain triangles, degree 2, PIA = the column-average update, the
+//! affine start net), the same 10-step rows with times; the collocation assembly and the
+//! direct solve are timed alongside.
+//!
 //! Run: cargo run --release --example paper_table
+
+#[path = "bpatch_dms/cases.rs"]
+mod cases;
 
 use glam::DVec3;
 use std::time::Instant;
@@ -110,6 +120,102 @@ fn main() {
         degree,
         &|res: &[DVec3]| r.apply(res),
     );
+    bpatch_rows();
+    dms_rows();
+}
+
+/// Min / median over `runs` of `f` in ms.
+fn time_ms(runs: usize, mut f: impl FnMut()) -> (f64, f64) {
+    let mut times: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    (times[0], times[times.len() / 2])
+}
+
+/// The direct least-squares solve of `problem` from `start`: time and its table row.
+fn direct_row(label: &str, problem: &FitProblem, start: &[DVec3]) {
+    let budget = Budget {
+        tolerance: 0.002,
+        ..Budget::default()
+    };
+    let mut last = None;
+    let (min, median) = time_ms(15, || {
+        last = Some(fit(problem, start.to_vec(), Method::Direct, &budget).expect("direct"));
+    });
+    if let Some(s) = last.as_ref().and_then(|o| o.steps.last()) {
+        println!(
+            "\n{label}direct least squares: {min:.3} ms min, {median:.3} ms median; max {:.6}, mean {:.6}, N% {:.3}",
+            s.max_error, s.mean_error, s.within_tolerance_pct
+        );
+    }
+}
+
+fn bpatch_rows() {
+    let t = Instant::now();
+    let case = cases::BPatchCase::new(0.5);
+    let col = Collocation::new(trispline::scattered_fit::collocation_matrix(
+        &case.patch,
+        &case.params,
+    ));
+    let setup_ms = t.elapsed().as_secs_f64() * 1e3;
+    let pia = |res: &[DVec3]| case.pia_update(res);
+    let problem = FitProblem {
+        basis: &col,
+        data: &case.data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: Some(&pia),
+        on_step: None,
+    };
+    println!(
+        "\nbpatch: B-patch of degree 3 (outward knots, spread 0.5), {} lattice points, {} controls from 2 inverse Loop levels; setup (topology, inverse Loop, knots, collocation) {setup_ms:.2} ms",
+        case.data.len(),
+        case.start.len()
+    );
+    run_methods("bpatch ", &problem, &case.start);
+    direct_row("bpatch ", &problem, &case.start);
+    steps_to_budget("bpatch", &problem, &case.start, &[8e-2, 6e-2]);
+}
+
+fn dms_rows() {
+    let t = Instant::now();
+    let case = cases::DmsCase::paper();
+    let build_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    let col = Collocation::new(trispline::scattered_fit::collocation_matrix(
+        &case.spline,
+        &case.params,
+    ));
+    let start = trispline::scattered_fit::initial_net(
+        &case.spline,
+        &case.params,
+        &case.data,
+        &trispline::scattered_fit::InitialNet::Affine,
+    );
+    let assembly_ms = t.elapsed().as_secs_f64() * 1e3;
+    let pia = |res: &[DVec3]| trispline::scattered_fit::column_average_update(&col, res);
+    let problem = FitProblem {
+        basis: &col,
+        data: &case.data,
+        smoothing: 0.0,
+        fairness: None,
+        pia_operator: Some(&pia),
+        on_step: None,
+    };
+    println!(
+        "\ndms: DMS spline of degree 2 over {} domain triangles ({} controls), {} scattered points; spline (knots, recurrences, grids) and parameters {build_ms:.2} ms, collocation and affine start {assembly_ms:.2} ms",
+        case.spline.domain_face_count(),
+        case.spline.control_count(),
+        case.data.len()
+    );
+    run_methods("dms ", &problem, &start);
+    direct_row("dms ", &problem, &start);
+    steps_to_budget("dms", &problem, &start, &[2e-2, 1e-2, 8e-3]);
 }
 
 /// The data points' parameters: lattice point (i, j) at (i / n, j / n).

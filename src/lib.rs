@@ -15,6 +15,7 @@ pub mod names;
 mod numeric;
 pub mod pipeline;
 pub mod remesh;
+pub mod scattered_fit;
 pub mod surface;
 pub mod testdata;
 

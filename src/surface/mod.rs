@@ -3,8 +3,11 @@
 
 pub mod bezier;
 pub mod box_spline;
+pub mod bpatch;
+pub mod dms;
 pub mod grid_spline;
 pub mod loop_limit;
+pub mod simplex_spline;
 
 use glam::DVec3;
 
