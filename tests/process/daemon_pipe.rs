@@ -1,8 +1,7 @@
 //! The pipe source as a process: stdin with path and inline records and malformed ones in
 //! between (framing kept, bad bytes quarantined), and a FIFO reopened after each writer.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use std::io::Write;
 use std::process::{Command, Stdio};
 

@@ -1,8 +1,7 @@
 //! Operations as a process: SIGTERM with work in flight loses nothing, a config change
 //! refits unchanged inputs, SIGHUP with good and bad configs, sd_notify, /metrics.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use std::io::{Read, Write};
 use std::os::unix::net::UnixDatagram;
 use std::process::Stdio;

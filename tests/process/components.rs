@@ -2,8 +2,7 @@
 //! ids suffixed, each warm-started from the previous version's piece in the same place;
 //! through the library, the CLI, the daemon and on a Stanford scan.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::pipeline::scan::components::ComponentMode;
 use trispline::pipeline::worker::{run_input, ComponentsConfig, FitConfig, WorkerConfig};

@@ -1,8 +1,7 @@
 //! The folder source as a process: files dropped whole, renamed in, written slowly, held
 //! open; native and poll watching; bursts; quick versions; corrupt files; processed policy.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use std::io::Write;
 use std::time::Duration;
 use trispline::daemon::state::content_hash;

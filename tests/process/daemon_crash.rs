@@ -2,8 +2,7 @@
 //! afterwards is a complete one (the previous version's or the new one's), temp files never
 //! count as outputs, and the next start cleans up and finishes the work.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use std::collections::HashSet;
 use std::path::Path;
 use std::time::{Duration, SystemTime};

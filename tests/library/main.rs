@@ -1,0 +1,19 @@
+//! In-process tests of the library: formats, mesh, surfaces, fitting, pipeline.
+//! One binary (a module per area) links faster than one binary per file.
+
+mod bpatch_dms;
+mod bspline;
+mod curvature;
+mod fit_engine;
+mod fit_operator;
+mod iges;
+mod io_formats;
+mod io_malformed;
+mod io_shared_data;
+mod loop_fit;
+mod loop_limit;
+mod mesh_clean;
+mod mesh_elephant;
+mod mesh_roundtrip;
+mod object_fit;
+mod scan_pipeline;

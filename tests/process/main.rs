@@ -1,0 +1,16 @@
+//! Tests that run the `trispline` binary as a process (CLI commands, the daemon).
+//! Kept apart from the in-process numeric tests so that their timing-sensitive checks
+//! do not share the cores with heavy solves.
+
+mod cli_bspline;
+mod cli_curvature;
+mod cli_fit;
+mod cli_fit_scan;
+mod cli_mesh;
+mod components;
+mod daemon_crash;
+mod daemon_ops;
+mod daemon_pipe;
+mod daemon_process;
+mod daemon_support;
+mod daemon_watch;
