@@ -6,7 +6,7 @@
 //! the blossom of the polynomial at (r_0..r_{b0-1}, s_0..s_{b1-1}, t_0..t_{b2-1}). The value
 //! at a domain point x is the de Boor-like recursion: for l = 1..n and |b| = n - l,
 //! `P_b^l = sum_j lambda_j(x | D_b) P_{b+e_j}^{l-1}`, D_b the knot triangle
-//! [r_{b0}, s_{b1}, t_{b2}]. Knots on the corners give the Bezier patch (every D_b = [A,B,C]).
+//! [r_{b0}, s_{b1}, t_{b2}]. Knots on the corners give the Bezier patch (every D_b = [A, B, C]).
 //!
 //! Basis rows come from running the recursion top-down on weights (a node's weight times
 //! lambda_j flows to child b + e_j); the lambdas are affine in the parameter, so first and
@@ -27,33 +27,52 @@ use super::simplex_spline::{barycentric_affine, det2};
 use super::{BasisDerivRows, SurfaceParam, TriSurface};
 use glam::{DVec2, DVec3};
 
+/// Why a B-patch or its record was refused.
 #[derive(Debug, thiserror::Error, PartialEq)]
 #[non_exhaustive]
 pub enum BPatchError {
+    /// The degree is outside 1..=32.
     #[error("degree {0}: a B-patch needs degree 1..=32")]
     Degree(usize),
+    /// A knot sequence does not have exactly `degree` points.
     #[error("knot sequence {name} has {found} points, degree {degree} needs {degree}")]
     KnotCount {
+        /// Which sequence: `'r'`, `'s'` or `'t'`.
         name: char,
+        /// Points it has.
         found: usize,
+        /// The patch degree, which is also the points it needs.
         degree: usize,
     },
+    /// The named sequence's first knot is not its domain corner (r at A, s at B, t at C).
     #[error("knot sequence {0} does not start at its domain corner")]
     KnotNotAtCorner(char),
+    /// The domain triangle has zero or negative (clockwise) area, or is not finite.
     #[error("the domain triangle is degenerate or clockwise")]
     Domain,
+    /// Knot triangle `[r_i, s_j, t_k]` (the indices) is near-degenerate or flipped
+    /// relative to the domain, so its barycentric coordinates are undefined or unstable.
     #[error("knot triangle [r{0}, s{1}, t{2}] is degenerate or not oriented like the domain")]
     KnotTriangle(usize, usize, usize),
+    /// The `outward` spread is negative or not finite.
     #[error("knot spread {0} must be finite and non-negative")]
     Spread(f64),
+    /// A record's control point count is not `(n + 1)(n + 2) / 2` for its degree n.
     #[error("{found} control points, the surface has {expected}")]
-    ControlCount { found: usize, expected: usize },
+    ControlCount {
+        /// Control points in the record.
+        found: usize,
+        /// Control points the degree needs.
+        expected: usize,
+    },
 }
 
 /// One knot triangle's affine barycentric coordinates in terms of the surface parameter:
 /// `lambda_j(u, v) = c[j][0] + c[j][1] u + c[j][2] v`.
 type ParamAffine = [[f64; 3]; 3];
 
+/// A checked B-patch: degree, domain triangle, knots and the precomputed knot-triangle
+/// coordinates its evaluation needs (control points are kept apart).
 #[derive(Clone, Debug)]
 pub struct BPatch {
     degree: usize,
@@ -143,10 +162,12 @@ impl BPatch {
         Self::new(degree, domain, knots)
     }
 
+    /// The polynomial degree n.
     pub fn degree(&self) -> usize {
         self.degree
     }
 
+    /// The domain triangle `[A, B, C]`, counter-clockwise.
     pub fn domain(&self) -> [DVec2; 3] {
         self.domain
     }
@@ -323,21 +344,29 @@ impl PlanarSurface for BPatch {
 /// The knot sequences of a `BPatchRecord`.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BPatchKnots {
+    /// Knots r_0..r_{n-1}, r_0 at domain corner A.
     pub r: Vec<[f64; 2]>,
+    /// Knots s_0..s_{n-1}, s_0 at domain corner B.
     pub s: Vec<[f64; 2]>,
+    /// Knots t_0..t_{n-1}, t_0 at domain corner C.
     pub t: Vec<[f64; 2]>,
 }
 
 /// The `bpatch` kind's `surface.json` record (schema in `dms::record`).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct BPatchRecord {
+    /// Polynomial degree n.
     pub degree: usize,
+    /// Domain corners `[A, B, C]`, counter-clockwise.
     pub domain_triangle: [[f64; 2]; 3],
+    /// The three knot sequences, n points each.
     pub knots: BPatchKnots,
+    /// `(n + 1)(n + 2) / 2` control points in lattice order (`lattice_index`).
     pub control_points: Vec<[f64; 3]>,
 }
 
 impl BPatchRecord {
+    /// The record of `patch` with control points `controls` (not checked against the patch).
     pub fn new(patch: &BPatch, controls: &[DVec3]) -> Self {
         let [r, s, t] = patch.knots();
         Self {

@@ -195,11 +195,14 @@ pub struct SimplexFamily {
 /// Knot masks address at most this many knots.
 pub const MAX_KNOTS: usize = 16;
 
+/// Why a `SimplexFamily` could not be compiled.
 #[derive(Debug, thiserror::Error, PartialEq)]
 #[non_exhaustive]
 pub enum SimplexError {
+    /// The pool has more knots than a `u16` mask can address (`MAX_KNOTS`).
     #[error("{0} knots in one family: at most {MAX_KNOTS}")]
     TooManyKnots(usize),
+    /// Root number `.0` selects only `.1` knots; a planar simplex spline needs 3 or more.
     #[error("root knot set {0} has {1} knots: a simplex spline needs at least 3")]
     TooFewKnots(usize, u32),
 }
@@ -304,10 +307,12 @@ impl SimplexFamily {
         })
     }
 
+    /// Nodes in the shared recurrence DAG (a measure of evaluation cost).
     pub fn node_count(&self) -> usize {
         self.nodes.len()
     }
 
+    /// Root splines compiled, in the order of `compile`'s `roots`.
     pub fn root_count(&self) -> usize {
         self.roots.len()
     }

@@ -34,6 +34,7 @@ pub use summary::SurfaceTopology;
 /// Marks an input vertex that was collapsed away (`Simplified::control_of`).
 pub const REMOVED: u32 = u32::MAX;
 
+/// Target size and the guards a collapse must pass (see the module docs).
 #[derive(Clone, Debug)]
 pub struct SimplifyOptions {
     /// Vertices left at the end (at least 4; fewer if no further collapse is allowed).
@@ -76,30 +77,43 @@ impl Default for SimplifyOptions {
 /// its corners 0 and 1 (corner 2 has `1 - u - v`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Landing {
+    /// Index into the simplified mesh's `triangles`.
     pub face: u32,
+    /// Barycentric weight of the face's corner 0.
     pub u: f64,
+    /// Barycentric weight of the face's corner 1.
     pub v: f64,
 }
 
+/// The result of [`simplify`]: the control mesh and how the input vertices map onto it.
 #[derive(Clone, Debug)]
 pub struct Simplified {
+    /// The simplified mesh, vertices renumbered densely (input order kept).
     pub mesh: TriMesh,
     /// Per input vertex: the vertex of `mesh` it became, or `REMOVED`.
     pub control_of: Vec<u32>,
     /// Per input vertex: where it lies on `mesh`.
     pub landing: Vec<Landing>,
+    /// Edge collapses performed (input vertices minus output vertices).
     pub collapses: usize,
     /// Boundary vertices locked as corners.
     pub locked_corners: usize,
 }
 
+/// Why [`simplify`] refused a mesh.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[non_exhaustive]
 pub enum SimplifyError {
+    /// The mesh has no triangles.
     #[error("the mesh has no faces")]
     NoFaces,
+    /// A vertex is used by no triangle, so it could never land on the simplified mesh.
     #[error("vertex {vertex} belongs to no face")]
-    IsolatedVertex { vertex: usize },
+    IsolatedVertex {
+        /// Index of the unused vertex in the input mesh.
+        vertex: usize,
+    },
+    /// No half-edge topology could be built: a bad face or a non-manifold edge.
     #[error("the mesh is not a manifold")]
     NonManifold(#[source] TopologyError),
 }

@@ -7,13 +7,18 @@ use crate::mesh::TriMesh;
 /// (orientable surfaces: `2 c - chi - b = 2 g`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct SurfaceTopology {
+    /// Euler characteristic `V - E + F`, counting only vertices used by a face.
     pub euler: i64,
+    /// Closed chains of boundary edges (holes).
     pub boundary_loops: usize,
+    /// Edge-connected pieces.
     pub components: usize,
+    /// Total genus of all components, from the formula above (exact for orientable meshes).
     pub genus: i64,
 }
 
 impl SurfaceTopology {
+    /// Counts the topology of `mesh`; fails where no half-edge topology can be built.
     pub fn of(mesh: &TriMesh) -> Result<SurfaceTopology, TopologyError> {
         let topo = Topology::from_mesh(mesh)?;
         let used: Vec<u32> = (0..mesh.positions.len() as u32)

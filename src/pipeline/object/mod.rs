@@ -32,11 +32,14 @@ use std::time::Instant;
 /// stop.
 const MAX_REFUSALS: usize = 3;
 
+/// Budget, cleaning, simplification and fitting settings of [`fit_object`].
 #[derive(Clone, Debug)]
 pub struct ObjectOptions {
     /// Control points as a percentage of the data points (when `target_controls` is unset).
     pub target_controls_pct: f64,
+    /// Control points wanted, overriding the percentage (clamped to 4..=data points).
     pub target_controls: Option<usize>,
+    /// Cleaning applied before the largest component is kept.
     pub clean: CleanOptions,
     /// Guards of the simplification; its `target_vertices` is set from the targets above.
     pub simplify: SimplifyOptions,
@@ -52,6 +55,7 @@ pub struct ObjectOptions {
     /// there the residual runs past the surface's edge, along it, where the point-to-plane
     /// term does not pull.
     pub tangential_edge: f64,
+    /// Width, in vertex rings from the data's boundary, of the band using `tangential_edge`.
     pub edge_rings: usize,
     /// CG steps where a sparse factorisation fails.
     pub max_iterations: usize,
@@ -82,41 +86,65 @@ impl Default for ObjectOptions {
     }
 }
 
+/// Why an object fit failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ObjectError {
+    /// Cleaning left no faces.
     #[error("the mesh has no faces left after cleaning")]
     Empty,
+    /// The data component or the control mesh has no half-edge topology.
     #[error("the cleaned component is not a manifold")]
     NotManifold(#[source] TopologyError),
+    /// The simplification to a control mesh refused the component.
     #[error("simplifying to a control mesh failed")]
     Simplify(#[source] SimplifyError),
+    /// The control mesh does not define a Loop limit surface.
     #[error("the control mesh has no Loop limit surface")]
     Surface(#[source] LoopLimitError),
+    /// [`fit_on_control_mesh`] was given a parameter count different from the data's.
     #[error("{params} initial parameters for {points} data points")]
-    ParamCount { params: usize, points: usize },
+    ParamCount {
+        /// Initial parameters given.
+        params: usize,
+        /// Data points (component vertices).
+        points: usize,
+    },
+    /// A least-squares solve produced no finite control points.
     #[error("the {stage} solve gave no finite control points")]
-    Solve { stage: &'static str },
+    Solve {
+        /// Which solve failed (`"first"`: the initial point fit).
+        stage: &'static str,
+    },
 }
 
 /// Stage times in milliseconds.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct ObjectTimes {
+    /// Cleaning and extracting the largest component.
     pub clean_ms: f64,
+    /// Simplifying the component to the control mesh.
     pub simplify_ms: f64,
+    /// Topology counts, the limit surface and the fairness operator.
     pub surface_ms: f64,
+    /// Initial parameters, the first point fit and its foot points.
     pub first_fit_ms: f64,
+    /// All foot-point/distance rounds, refused ones included.
     pub rounds_ms: f64,
+    /// The whole fit, end to end.
     pub total_ms: f64,
 }
 
 /// RMS and max distance of the data to the surface after a stage.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct RoundReport {
+    /// Root mean square distance, in the data's units.
     pub rms: f64,
+    /// Largest distance, in the data's units.
     pub max: f64,
 }
 
+/// A fitted object: the surface, its controls, and how well it fits the data.
 pub struct ObjectFit {
     /// The data points fitted: the vertices of the kept component.
     pub data: Vec<DVec3>,
@@ -125,22 +153,30 @@ pub struct ObjectFit {
     /// The simplification before fitting: the control faces at their initial positions
     /// (also the quadric-decimated mesh with as many vertices as there are controls).
     pub simplified: TriMesh,
+    /// The limit surface's structure (faces and evaluation), independent of positions.
     pub surface: LoopLimitSurface,
+    /// Fitted control point positions, one per control mesh vertex.
     pub controls: Vec<DVec3>,
     /// Foot point of every data point on the final surface.
     pub params: Vec<SurfaceParam>,
     /// Distance of every data point to its foot point.
     pub distances: Vec<f64>,
+    /// Root mean square of `distances`.
     pub rms: f64,
+    /// Largest of `distances`.
     pub max: f64,
     /// After the first fit, then after each round.
     pub rounds: Vec<RoundReport>,
+    /// Topology of the data component.
     pub data_topology: SurfaceTopology,
+    /// Topology of the control mesh (equal to the data's when simplification kept it).
     pub control_topology: SurfaceTopology,
+    /// Stage times.
     pub times: ObjectTimes,
 }
 
 impl ObjectFit {
+    /// The control mesh at the fitted positions.
     pub fn control_mesh(&self) -> TriMesh {
         TriMesh::new(self.controls.clone(), self.surface.faces().to_vec())
     }

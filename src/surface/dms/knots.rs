@@ -20,10 +20,14 @@ use crate::surface::simplex_spline::orient_sign;
 use glam::DVec2;
 use std::collections::HashMap;
 
+/// How knot clouds are placed around the domain vertices (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum KnotRule {
     /// Clouds of radius `spread` times the shortest incident edge (0.3 is a good start).
-    Perturbed { spread: f64 },
+    Perturbed {
+        /// Cloud radius as a fraction of the vertex's shortest edge; halved on failure.
+        spread: f64,
+    },
 }
 
 impl Default for KnotRule {

@@ -30,16 +30,23 @@ pub(crate) fn vec3(v: &[[f64; 3]]) -> Vec<DVec3> {
     v.iter().map(|p| DVec3::from_array(*p)).collect()
 }
 
+/// The `dms` kind's `surface.json` record (schema above).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DmsRecord {
+    /// Polynomial degree n.
     pub degree: usize,
+    /// Domain vertices (2D).
     pub domain_vertices: Vec<[f64; 2]>,
+    /// Domain triangles as vertex ids, counter-clockwise.
     pub domain_triangles: Vec<[u32; 3]>,
+    /// Per domain vertex, n + 1 knots, the vertex first.
     pub knot_clouds: Vec<Vec<[f64; 2]>>,
+    /// Control points, triangle by triangle, lattice order within each.
     pub control_points: Vec<[f64; 3]>,
 }
 
 impl DmsRecord {
+    /// The record of `spline` with control points `controls` (not checked against it).
     pub fn new(spline: &DmsSpline, controls: &[DVec3]) -> Self {
         Self {
             degree: spline.degree(),
