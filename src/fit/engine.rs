@@ -85,7 +85,9 @@ impl FitError {
     }
 }
 
-pub(crate) type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
+/// The paper's PIA step operator: maps data residuals to control-point corrections (the
+/// inverse subdivision of the residuals); a fit's `pia` term.
+pub type PiaOperator<'a> = &'a (dyn Fn(&[DVec3]) -> Vec<DVec3> + Sync);
 
 /// A fit's inputs: the operator, the data and the optional fairness and PIA terms.
 pub struct FitProblem<'a> {
