@@ -15,7 +15,7 @@
 //! outer side of both boundary edges). When the result breaks a condition the spread is
 //! halved, up to eight times.
 
-use super::DmsError;
+use super::error::DmsError;
 use crate::surface::simplex_spline::orient_sign;
 use glam::DVec2;
 use std::collections::HashMap;
