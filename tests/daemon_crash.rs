@@ -89,7 +89,7 @@ fn aimed_kills_in_the_output_window_never_leave_a_mixed_set() {
         | 1;
     println!("seed {seed}");
     let mut rng = Rng(seed);
-    let rounds = 30;
+    let rounds = 100;
     let mut landed = 0;
     for round in 0..rounds {
         let mut child = s.spawn(&[]);
@@ -98,16 +98,22 @@ fn aimed_kills_in_the_output_window_never_leave_a_mixed_set() {
             &format!("scan@{round:03}.ply"),
             &patch_ply(30, round as u32),
         );
+        // Aimed: from a new version folder (its files are written next) or the switch of
+        // the link, whichever is seen first, plus a little.
         let versions = s.out.join(".versions/scan");
-        let before: Vec<_> = std::fs::read_dir(&versions)
-            .map(|d| d.flatten().map(|e| e.file_name()).collect())
-            .unwrap_or_default();
+        let link_before = std::fs::read_link(s.out.join("scan")).ok();
+        let names = |d: &Path| -> Vec<std::ffi::OsString> {
+            std::fs::read_dir(d)
+                .map(|d| d.flatten().map(|e| e.file_name()).collect())
+                .unwrap_or_default()
+        };
+        let before = names(&versions);
+        let writing = || {
+            std::fs::read_link(s.out.join("scan")).ok() != link_before
+                || names(&versions).iter().any(|n| !before.contains(n))
+        };
         let deadline = std::time::Instant::now() + Duration::from_secs(20);
-        while std::time::Instant::now() < deadline
-            && std::fs::read_dir(&versions)
-                .map(|d| d.flatten().all(|e| before.contains(&e.file_name())))
-                .unwrap_or(true)
-        {
+        while !writing() && std::time::Instant::now() < deadline {
             std::thread::sleep(Duration::from_micros(200));
         }
         std::thread::sleep(Duration::from_micros(rng.below(4000)));
@@ -165,21 +171,19 @@ fn kill_9_mid_write_leaves_only_complete_outputs() {
             // Anywhere from before detection to after the commit.
             std::thread::sleep(Duration::from_millis(rng.below(150)));
         } else {
-            // Inside the writes: as soon as a temp file shows up in a version folder (or a
-            // new version folder), plus a little.
+            // Inside the writes: as soon as a new version folder shows up (or the link
+            // switched), plus a little.
             let versions = s.out.join(".versions/scan");
-            let before = std::fs::read_dir(&versions).map_or(0, |d| d.count());
+            let link_before = std::fs::read_link(s.out.join("scan")).ok();
+            let names = |d: &Path| -> Vec<std::ffi::OsString> {
+                std::fs::read_dir(d)
+                    .map(|d| d.flatten().map(|e| e.file_name()).collect())
+                    .unwrap_or_default()
+            };
+            let before = names(&versions);
             let writing = || {
-                std::fs::read_dir(&versions).is_ok_and(|d| {
-                    let dirs: Vec<_> = d.flatten().collect();
-                    dirs.len() > before
-                        || dirs.iter().any(|v| {
-                            std::fs::read_dir(v.path()).is_ok_and(|f| {
-                                f.flatten()
-                                    .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
-                            })
-                        })
-                })
+                std::fs::read_link(s.out.join("scan")).ok() != link_before
+                    || names(&versions).iter().any(|n| !before.contains(n))
             };
             let deadline = std::time::Instant::now() + Duration::from_secs(10);
             while !writing() && std::time::Instant::now() < deadline {

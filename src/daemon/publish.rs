@@ -84,8 +84,13 @@ pub(crate) fn publish(
     };
     let base = out.join(VERSIONS).join(id);
     std::fs::create_dir_all(&base).map_err(fs_err(&base))?;
-    // Numbers only grow, so a folder left half-written by a kill is never reused.
-    let n = versions(&base).last().map_or(1, |last| last + 1);
+    // Numbers only grow, and start from the clock (microseconds) so that a number is not
+    // given out again after start-up repair removed a folder a kill left half-written: a
+    // name then always means one set of files.
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as u64);
+    let n = versions(&base).last().map_or(now, |last| now.max(last + 1));
     let dir = base.join(n.to_string());
     std::fs::create_dir(&dir).map_err(fs_err(&dir))?;
     step(Step::VersionFolderMade)?;
