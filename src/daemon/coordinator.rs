@@ -235,7 +235,7 @@ impl Loop {
             Reloaded::Refused { reason } => {
                 tracing::error!(%reason, "config reload refused; the old config stays");
                 self.metrics.reload_failures.fetch_add(1, Ordering::Relaxed);
-                self.metrics.error(&format!("config reload: {reason}"));
+                self.metrics.error("config_rejected");
                 let _ = self.wtx.send(WriterMsg::Event(json!({
                     "status": "config_rejected", "reason": reason,
                 })));

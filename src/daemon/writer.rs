@@ -284,7 +284,7 @@ impl Writer {
                     // reported, not quarantined, since the input stays in use.
                     let id = format!("{}{suffix}", a.id);
                     tracing::warn!(patch = %id, reason, "component not fitted");
-                    self.metrics.error(&format!("{} ({id}): {reason}", a.label));
+                    self.metrics.error("component_failed");
                     self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "component_failed", "reason": reason}));
                 }
                 if !written_all {
@@ -351,8 +351,7 @@ impl Writer {
         if let Err(e) = written {
             // The input is fine and stays where it is; the output folder is not.
             tracing::error!(patch = id, error = %e, "cannot write outputs");
-            self.metrics
-                .error(&format!("{}: cannot write outputs: {e}", a.label));
+            self.metrics.error("write_failed");
             self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "write_failed", "reason": e}));
             return false;
         }
@@ -415,8 +414,7 @@ impl Writer {
     fn reject(&mut self, id: &str, label: &str, keep: Keep, kind: &'static str, reason: &str) {
         tracing::warn!(patch = id, input = label, kind, reason, "rejected");
         self.summary.rejected += 1;
-        self.metrics.rejected.fetch_add(1, Ordering::Relaxed);
-        self.metrics.error(&format!("{label}: {reason}"));
+        self.metrics.rejected(kind);
         let q = &self.quarantine;
         let kept: Result<Option<PathBuf>, String> = match keep {
             Keep::Nothing => Ok(None),
