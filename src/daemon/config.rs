@@ -36,6 +36,10 @@ pub struct DaemonSection {
     /// `/metrics` and `/healthz` on this loopback address; absent: off. Needs a restart.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metrics_addr: Option<String>,
+    /// Folders a pipe path record may name (and the processed policy may touch); empty:
+    /// the watch folder only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pipe_roots: Vec<PathBuf>,
 }
 
 fn default_stop_timeout_ms() -> u64 {

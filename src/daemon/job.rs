@@ -2,6 +2,7 @@
 //! Writing is left to the writer thread; everything here runs under `catch_unwind`.
 
 use super::config::DaemonConfig;
+use super::kinds::{rejection_kind, Cause};
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
 use crate::io::{read_mesh_bytes, Format, LoadOptions};
@@ -23,10 +24,10 @@ pub enum Outcome {
         hash: u64,
     },
     /// Same content and same output-shaping config as the last fit.
-    Unchanged {
-        hash: u64,
-    },
+    Unchanged { hash: u64 },
     Rejected {
+        /// `kinds::rejection_kind` of the cause.
+        kind: &'static str,
         reason: String,
     },
 }
@@ -71,6 +72,7 @@ pub fn run_job(job: Job, store: &StateStore) -> JobDone {
             .or_else(|| payload.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "unknown panic".into());
         Outcome::Rejected {
+            kind: rejection_kind(&Cause::Panic),
             reason: format!("the fitting worker panicked: {what}"),
         }
     });
@@ -85,38 +87,50 @@ pub fn run_job(job: Job, store: &StateStore) -> JobDone {
 fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let a = &job.arrival;
     let limits = &job.cfg.daemon;
-    let reject = |reason: String| Outcome::Rejected { reason };
+    let reject = |cause: Cause, reason: String| Outcome::Rejected {
+        kind: rejection_kind(&cause),
+        reason,
+    };
     let start = Instant::now();
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
         Input::File(path) => {
             let Some(format) = Format::from_path(path) else {
-                return reject("unknown extension (obj, gltf, glb, ply, stl, off)".into());
+                return reject(
+                    Cause::UnknownFormat,
+                    "unknown extension (obj, gltf, glb, ply, stl, off)".into(),
+                );
             };
             // Refuse before reading: the limit exists so that one file cannot exhaust memory.
             match std::fs::metadata(path) {
                 Ok(m) if m.len() > limits.max_file_bytes => {
-                    return reject(format!(
-                        "{} bytes exceeds daemon.max_file_bytes = {}",
-                        m.len(),
-                        limits.max_file_bytes
-                    ))
+                    return reject(
+                        Cause::TooLarge,
+                        format!(
+                            "{} bytes exceeds daemon.max_file_bytes = {}",
+                            m.len(),
+                            limits.max_file_bytes
+                        ),
+                    )
                 }
                 Ok(_) => {}
-                Err(e) => return reject(format!("cannot read: {e}")),
+                Err(e) => return reject(Cause::Read(&e), format!("cannot read: {e}")),
             }
             match std::fs::read(path) {
                 Ok(b) => (Arc::new(b), format),
-                Err(e) => return reject(format!("cannot read: {e}")),
+                Err(e) => return reject(Cause::Read(&e), format!("cannot read: {e}")),
             }
         }
     };
     if bytes.len() as u64 > limits.max_file_bytes {
-        return reject(format!(
-            "{} bytes exceeds daemon.max_file_bytes = {}",
-            bytes.len(),
-            limits.max_file_bytes
-        ));
+        return reject(
+            Cause::TooLarge,
+            format!(
+                "{} bytes exceeds daemon.max_file_bytes = {}",
+                bytes.len(),
+                limits.max_file_bytes
+            ),
+        );
     }
     let hash = content_hash(&bytes);
     t.read_ms = ms(start);
@@ -131,14 +145,17 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let start = Instant::now();
     let mesh = match read_mesh_bytes(&bytes, format, &a.label, &LoadOptions::default()) {
         Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
-            return reject(format!(
-                "{} vertices exceeds daemon.max_vertices = {}",
-                l.mesh.positions.len(),
-                limits.max_vertices
-            ))
+            return reject(
+                Cause::TooManyVertices,
+                format!(
+                    "{} vertices exceeds daemon.max_vertices = {}",
+                    l.mesh.positions.len(),
+                    limits.max_vertices
+                ),
+            )
         }
         Ok(l) => l.mesh,
-        Err(e) => return reject(e.to_string()),
+        Err(e) => return reject(Cause::Parse(&e), e.to_string()),
     };
     drop(bytes);
     t.parse_ms = ms(start);
@@ -151,6 +168,6 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             outputs: Box::new(outputs),
             hash,
         },
-        Err(e) => reject(e.to_string()),
+        Err(e) => reject(Cause::Pipeline(&e), e.to_string()),
     }
 }

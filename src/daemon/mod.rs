@@ -1,60 +1,120 @@
 //! The daemon: sources (folder watcher, pipe) -> scheduler (coalescing by patch id, on the
 //! calling thread) -> bounded job queue -> worker pool -> writer thread. See ARCHITECTURE.md
 //! for the threads and their invariants.
+#![warn(missing_docs)]
 
+// The config's fields are documented where the TOML keys are (config/default.toml); their
+// Rust docs come with the config's regrouping into sections.
+#[allow(missing_docs)]
 pub mod config;
+mod confine;
+mod coordinator;
 mod job;
-pub mod ops;
-pub mod pipe;
+mod kinds;
+pub(crate) mod ops;
+pub(crate) mod pipe;
+mod publish;
 mod reload;
-pub mod scheduler;
+pub(crate) mod scheduler;
 pub mod state;
 mod watcher;
 mod writer;
 
 use crate::io::Format;
-use crate::pipeline::worker::WarmStart;
 use config::DaemonConfig;
-use crossbeam_channel::{RecvTimeoutError, Sender};
-use job::{Job, JobDone, Outcome};
+use coordinator::{Loop, Sources};
+use crossbeam_channel::{Receiver, Sender};
+use job::{Job, JobDone};
 use ops::metrics::Metrics;
 use ops::sdnotify;
-use pipe::{PipeSource, PipeSpec};
-use reload::{ConfigCell, Reloaded, Reloader};
-use scheduler::{Arrival, Input, Scheduler};
-use serde_json::json;
+use pipe::PipeSource;
+pub use pipe::PipeSpec;
+use reload::{ConfigCell, Reloader};
+use scheduler::{Arrival, Scheduler};
 use state::StateStore;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 use watcher::FolderWatcher;
 use writer::{Writer, WriterMsg};
 
+/// Why the daemon could not start.
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum DaemonError {
-    #[error("{path}: {reason}")]
-    Folder { path: String, reason: String },
-    #[error("metrics on {addr}: {reason}")]
-    Metrics { addr: String, reason: String },
+    /// A folder it needs cannot be created, listed or resolved.
+    #[error("{}: {source}", path.display())]
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// What the filesystem said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The metrics address cannot be bound (taken, not permitted).
+    #[error("metrics on {addr}: {source}")]
+    Metrics {
+        /// The configured address.
+        addr: String,
+        /// What binding said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A thread could not be started (a process or memory limit).
+    #[error("cannot start the {name} thread: {source}")]
+    Spawn {
+        /// The thread's name.
+        name: String,
+        /// What the system said.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
+impl DaemonError {
+    /// A machine-readable name of the failure.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            DaemonError::Folder { .. } => "folder",
+            DaemonError::Metrics { .. } => "metrics_bind",
+            DaemonError::Spawn { .. } => "thread_spawn",
+        }
+    }
+}
+
+fn folder_err(path: &Path) -> impl FnOnce(std::io::Error) -> DaemonError + '_ {
+    move |source| DaemonError::Folder {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// What `run` is asked to do.
 pub struct DaemonOptions {
+    /// The folder whose mesh files are fitted.
     pub watch_dir: PathBuf,
+    /// Where the outputs, the event log and the quarantine go.
     pub out_dir: PathBuf,
+    /// Warm-start states.
     pub state_dir: PathBuf,
+    /// Fit what is there (and what the pipe sends until it ends), then return.
     pub once: bool,
+    /// The config in effect at the start.
     pub config: DaemonConfig,
     /// Watched for changes and re-read on SIGHUP.
     pub config_path: Option<PathBuf>,
+    /// A pipe to read records from as well.
     pub pipe: Option<PipeSpec>,
 }
 
 /// Signals from outside: set by signal handlers, read by the scheduler loop.
 #[derive(Default)]
 pub struct Control {
+    /// Stop gracefully (SIGTERM, SIGINT).
     pub stop: Arc<AtomicBool>,
+    /// Re-read the config (SIGHUP).
     pub reload: Arc<AtomicBool>,
     /// Applies a new log filter (the subscriber belongs to the caller).
     #[allow(clippy::type_complexity)]
@@ -64,53 +124,84 @@ pub struct Control {
 /// What one run did, for `--once` callers and tests.
 #[derive(Debug, Default, Clone)]
 pub struct Summary {
+    /// Surfaces fitted and written.
     pub fitted: usize,
+    /// Inputs and records rejected.
     pub rejected: usize,
+    /// Versions skipped for a newer one.
     pub superseded: usize,
+    /// Inputs skipped as identical to their last fit.
     pub unchanged: usize,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Source {
+pub(crate) enum Source {
     Folder,
     Stdin,
     Fifo,
 }
 
 /// Everything the scheduler loop hears about.
-pub enum Msg {
+pub(crate) enum Msg {
     Arrivals(Vec<Arrival>),
     SourceDone(Source),
-    Fitted(JobDone),
+    Fitted(Box<JobDone>),
     /// The writer is done with the patch's version.
     Written(String),
 }
 
-/// A patch id from a pipe record or a file stem: restricted to [A-Za-z0-9_.-] so that it can
-/// never escape the output folder. `None` when nothing usable is left.
-pub fn sanitize_id(raw: &str) -> Option<String> {
-    let id: String = raw
+/// Output names a patch folder must never take: OUT holds them beside the patch folders.
+const RESERVED_IDS: [&str; 3] = ["quarantine", "processed", "events.ndjson"];
+
+/// A patch id from a pipe record or a file stem, safe as a folder name in OUT: letters and
+/// digits of any script, `_`, `-` and `.` are kept; anything else (and a leading or trailing
+/// dot, a reserved name, an overlong id) is replaced and marked with `~` and a hash of the
+/// raw id. `~` never survives sanitising, so a marked id cannot equal a clean one and two
+/// raw ids differ after sanitising unless their hashes collide. `None` for an empty id.
+pub(crate) fn sanitize_id(raw: &str) -> Option<String> {
+    const MAX_CHARS: usize = 120;
+    if raw.is_empty() {
+        return None;
+    }
+    let mut changed = false;
+    let mut id: String = raw
         .chars()
         .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.' {
+            if c.is_alphanumeric() || c == '_' || c == '-' || c == '.' {
                 c
             } else {
+                changed = true;
                 '_'
             }
         })
         .collect();
-    let id = id.trim_matches('.').to_string();
-    (!id.is_empty() && !id.contains("..") && id.len() <= 200).then_some(id)
+    let trimmed = id.trim_matches('.');
+    if trimmed.len() != id.len() {
+        changed = true;
+        id = trimmed.to_string();
+    }
+    if id.chars().count() > MAX_CHARS {
+        changed = true;
+        id = id.chars().take(MAX_CHARS).collect();
+    }
+    let reserved = RESERVED_IDS
+        .iter()
+        .any(|r| id == *r || id.starts_with(&format!("{r}.")));
+    if changed || reserved {
+        let hash = state::content_hash(raw.as_bytes());
+        id = format!("{id}~{:08x}", hash as u32 ^ (hash >> 32) as u32);
+    }
+    Some(id)
 }
 
 /// Patch id of a file: the stem up to the first '@', sanitised.
-pub fn patch_id(path: &Path) -> Option<String> {
+pub(crate) fn patch_id(path: &Path) -> Option<String> {
     let stem = path.file_stem()?.to_str()?;
     sanitize_id(stem.split('@').next().unwrap_or(stem))
 }
 
 /// Names that are still being written or are not meshes.
-pub fn ignored(path: &Path) -> bool {
+pub(crate) fn ignored(path: &Path) -> bool {
     let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
         return true;
     };
@@ -136,16 +227,9 @@ fn remove_stale_temps(dir: &Path) {
     }
 }
 
+/// Runs the daemon until a stop (or, with `once`, until the work is done).
 pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
-    let folder_err = |p: &Path, e: &dyn std::fmt::Display| DaemonError::Folder {
-        path: p.display().to_string(),
-        reason: e.to_string(),
-    };
-    for d in [&opts.out_dir, &opts.state_dir] {
-        std::fs::create_dir_all(d).map_err(|e| folder_err(d, &e))?;
-        remove_stale_temps(d);
-    }
-    std::fs::read_dir(&opts.watch_dir).map_err(|e| folder_err(&opts.watch_dir, &e))?;
+    let opts = prepare_folders(opts)?;
     let quarantine = opts
         .config
         .output
@@ -153,18 +237,18 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         .clone()
         .unwrap_or_else(|| opts.out_dir.join("quarantine"));
     let workers = opts.config.worker_threads();
-    let kind = opts.config.daemon.watcher;
-    let metrics_addr = opts.config.daemon.metrics_addr.clone();
-    let cell = Arc::new(ConfigCell::new(opts.config));
     let metrics = Arc::new(Metrics::default());
-    if let Some(addr) = &metrics_addr {
-        let local =
-            ops::http::serve(addr, Arc::clone(&metrics)).map_err(|e| DaemonError::Metrics {
+    if let Some(addr) = &opts.config.daemon.metrics_addr {
+        let local = ops::http::serve(addr, Arc::clone(&metrics)).map_err(|source| {
+            DaemonError::Metrics {
                 addr: addr.clone(),
-                reason: e.to_string(),
-            })?;
+                source,
+            }
+        })?;
         tracing::info!(addr = %local, "serving /metrics and /healthz");
     }
+    let kind = opts.config.daemon.watcher;
+    let cell = Arc::new(ConfigCell::new(opts.config.clone()));
     let store = Arc::new(StateStore::new(opts.state_dir.clone()));
     let (tx, inbox) = crossbeam_channel::unbounded::<Msg>();
     let (wtx, wrx) = crossbeam_channel::unbounded::<WriterMsg>();
@@ -176,24 +260,18 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         metrics: Arc::clone(&metrics),
         acks: tx.clone(),
         summary: Summary::default(),
+        cell: Arc::clone(&cell),
+        seen: writer::SeenVersions::load(&opts.state_dir),
     };
     let writer = spawn("writer", move || writer.run(wrx))?;
-    // Capacity = workers: the scheduler only hands out a job when a worker is free, so this
-    // never blocks it, and versions wait in the scheduler where they can still coalesce.
-    let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
-    for k in 0..workers {
-        let (rx, tx, store) = (job_rx.clone(), tx.clone(), Arc::clone(&store));
-        spawn(&format!("worker-{k}"), move || {
-            for job in rx {
-                if tx.send(Msg::Fitted(job::run_job(job, &store))).is_err() {
-                    break;
-                }
-            }
-        })?;
-    }
+    let job_tx = start_workers(workers, &store, &tx)?;
     let intake_stop = Arc::new(AtomicBool::new(false));
-    let mut open_sources = 1;
+    let partial = Arc::new(Mutex::new(None));
     let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);
+    let mut sources = Sources {
+        open: 1,
+        stdin_done: false,
+    };
     let folder = FolderWatcher {
         dir: opts.watch_dir.clone(),
         cell: Arc::clone(&cell),
@@ -206,7 +284,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     };
     spawn("watcher", move || folder.run())?;
     if let Some(spec) = opts.pipe.clone() {
-        open_sources += 1;
+        sources.open += 1;
         let source = PipeSource {
             spec,
             cell: Arc::clone(&cell),
@@ -215,6 +293,9 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
             writer: wtx.clone(),
             stop: Arc::clone(&intake_stop),
             quarantine,
+            watch_dir: opts.watch_dir.clone(),
+            partial: Arc::clone(&partial),
+            held: Default::default(),
         };
         // Never joined: it may sit in a blocking read of a pipe nobody writes to.
         spawn("pipe", move || source.run())?;
@@ -223,11 +304,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     tracing::info!(
         dir = %opts.watch_dir.display(), out = %opts.out_dir.display(), workers, "started"
     );
-    // READY only once files renamed in from now on are certain to be seen.
-    if ready_rx.recv_timeout(Duration::from_secs(30)).is_err() {
-        tracing::warn!("the folder watcher is slow to start");
-    }
-    sdnotify::notify("READY=1");
+    announce_ready(&ready_rx);
     let mut lp = Loop {
         sched: Scheduler::default(),
         in_flight: 0,
@@ -239,74 +316,18 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         workers,
     };
     let mut reloader = Reloader::new(opts.config_path.clone());
-    let mut stop_by: Option<Instant> = None;
-    let mut stdin_done = false;
-    let tick = Duration::from_millis(100);
-    loop {
-        match inbox.recv_timeout(tick) {
-            Ok(m) => {
-                lp.handle(m, stop_by.is_some(), &mut open_sources, &mut stdin_done);
-                // Take everything already waiting before handing out jobs: versions that
-                // arrived together coalesce.
-                while let Ok(m) = inbox.try_recv() {
-                    lp.handle(m, stop_by.is_some(), &mut open_sources, &mut stdin_done);
-                }
-            }
-            Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => break,
-        }
-        if stop_by.is_none() && ctl.stop.load(Ordering::Relaxed) {
-            sdnotify::notify("STOPPING=1");
-            lp.metrics.stopping.store(true, Ordering::Relaxed);
-            intake_stop.store(true, Ordering::Relaxed);
-            let bound = Duration::from_millis(lp.cell.get().daemon.stop_timeout_ms);
-            stop_by = Some(Instant::now() + bound);
-            let waiting = lp.sched.drain_pending();
-            tracing::info!(
-                in_flight = lp.sched.busy_len(),
-                waiting = waiting.len(),
-                "stopping: intake closed, waiting for fits in progress"
-            );
-            for a in waiting {
-                lp.spill(a);
-            }
-        }
-        let reload_asked = ctl.reload.swap(false, Ordering::Relaxed);
-        if stop_by.is_none() && (reload_asked || reloader.file_changed()) {
-            lp.reload(&mut reloader, ctl);
-        }
-        if stop_by.is_none() {
-            lp.dispatch();
-        }
-        lp.metrics
-            .queue_depth
-            .store(lp.sched.pending_len() as u64, Ordering::Relaxed);
-        lp.metrics
-            .in_flight
-            .store(lp.sched.busy_len() as u64, Ordering::Relaxed);
-        let idle = lp.sched.idle();
-        if let Some(deadline) = stop_by {
-            if lp.sched.busy_len() == 0 {
-                break;
-            }
-            if Instant::now() >= deadline {
-                tracing::warn!(
-                    in_flight = lp.sched.busy_len(),
-                    "stop bound reached; leaving fits in progress"
-                );
-                let busy: Vec<Arrival> = lp.sched.busy().cloned().collect();
-                for a in busy {
-                    lp.spill(a);
-                }
-                break;
-            }
-        } else if idle && ((opts.once && open_sources == 0) || stdin_done) {
-            break;
-        }
-    }
+    lp.drive(
+        &inbox,
+        ctl,
+        &mut reloader,
+        &intake_stop,
+        opts.once,
+        &mut sources,
+    );
     // Sources may still hold writer senders (a pipe thread blocked in a read), so the
     // writer is told to finish rather than waiting for every sender to go.
     intake_stop.store(true, Ordering::Relaxed);
+    report_partial_record(&partial, &lp.wtx);
     drop(lp.job_tx);
     let _ = lp.wtx.send(WriterMsg::Shutdown);
     let summary = writer.join().unwrap_or_default();
@@ -320,6 +341,72 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     Ok(summary)
 }
 
+/// Creates OUT and the state folder, cleans up after a crash, and resolves the watch
+/// folder.
+fn prepare_folders(opts: DaemonOptions) -> Result<DaemonOptions, DaemonError> {
+    for d in [&opts.out_dir, &opts.state_dir] {
+        std::fs::create_dir_all(d).map_err(folder_err(d))?;
+        remove_stale_temps(d);
+    }
+    publish::repair(&opts.out_dir);
+    std::fs::read_dir(&opts.watch_dir).map_err(folder_err(&opts.watch_dir))?;
+    // Once, here: the watcher hears absolute, symlink-free paths from inotify, and matching
+    // them against a relative or symlinked folder name would miss every renamed-in file.
+    let watch_dir = std::fs::canonicalize(&opts.watch_dir).map_err(folder_err(&opts.watch_dir))?;
+    Ok(DaemonOptions { watch_dir, ..opts })
+}
+
+/// The worker pool; returns the job queue's sender.
+fn start_workers(
+    workers: usize,
+    store: &Arc<StateStore>,
+    tx: &Sender<Msg>,
+) -> Result<Sender<Job>, DaemonError> {
+    // Capacity = workers: the scheduler only hands out a job when a worker is free, so this
+    // never blocks it, and versions wait in the scheduler where they can still coalesce.
+    let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
+    for k in 0..workers {
+        let (rx, tx, store) = (job_rx.clone(), tx.clone(), Arc::clone(store));
+        spawn(&format!("worker-{k}"), move || {
+            for job in rx {
+                if tx
+                    .send(Msg::Fitted(Box::new(job::run_job(job, &store))))
+                    .is_err()
+                {
+                    break;
+                }
+            }
+        })?;
+    }
+    Ok(job_tx)
+}
+
+/// READY only once files renamed in from now on are certain to be seen.
+fn announce_ready(ready: &Receiver<()>) {
+    if ready.recv_timeout(Duration::from_secs(30)).is_err() {
+        tracing::warn!("the folder watcher is slow to start");
+    }
+    sdnotify::notify("READY=1");
+}
+
+/// A pipe record whose payload was still arriving when the daemon stopped: its bytes go
+/// with the process, so at least the event log says so.
+fn report_partial_record(partial: &Mutex<Option<pipe::Partial>>, wtx: &Sender<WriterMsg>) {
+    let taken = partial.lock().unwrap_or_else(|e| e.into_inner()).take();
+    if let Some(p) = taken {
+        let _ = wtx.send(WriterMsg::Reject {
+            id: p.id,
+            label: p.label,
+            keep: writer::Keep::Nothing,
+            kind: kinds::rejection_kind(&kinds::Cause::Record(kinds::RecordFault::Truncated)),
+            reason: format!(
+                "the daemon stopped after {} of {} bytes of the record; resend it",
+                p.got, p.want
+            ),
+        });
+    }
+}
+
 fn spawn<T: Send + 'static>(
     name: &str,
     f: impl FnOnce() -> T + Send + 'static,
@@ -327,139 +414,56 @@ fn spawn<T: Send + 'static>(
     std::thread::Builder::new()
         .name(name.to_string())
         .spawn(f)
-        .map_err(|e| DaemonError::Folder {
-            path: format!("thread {name}"),
-            reason: e.to_string(),
+        .map_err(|source| DaemonError::Spawn {
+            name: name.to_string(),
+            source,
         })
 }
 
-/// The scheduler loop's state.
-struct Loop {
-    sched: Scheduler,
-    /// Versions a worker holds: bounds dispatch to the pool size.
-    in_flight: usize,
-    /// Warm starts of fits dropped as stale, for the next version of the same patch.
-    warm: HashMap<String, WarmStart>,
-    cell: Arc<ConfigCell>,
-    metrics: Arc<Metrics>,
-    wtx: Sender<WriterMsg>,
-    job_tx: Sender<Job>,
-    workers: usize,
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-impl Loop {
-    fn handle(&mut self, m: Msg, stopping: bool, open: &mut usize, stdin_done: &mut bool) {
-        match m {
-            Msg::Arrivals(batch) => {
-                for a in batch {
-                    if stopping {
-                        // Intake is closed: files stay for the next start, records spill.
-                        self.spill(a);
-                    } else if let Some(s) = self.sched.add(a) {
-                        let _ = self.wtx.send(WriterMsg::Superseded {
-                            loser: s.loser,
-                            by: s.by,
-                        });
-                    }
-                }
-            }
-            Msg::SourceDone(kind) => {
-                *open = open.saturating_sub(1);
-                *stdin_done |= kind == Source::Stdin;
-            }
-            Msg::Fitted(done) => {
-                self.in_flight = self.in_flight.saturating_sub(1);
-                let stale = match &done.outcome {
-                    Outcome::Fitted { .. } => {
-                        self.sched.has_newer(&done.arrival.id, &done.arrival.key)
-                    }
-                    _ => None,
-                };
-                match (stale, done.outcome) {
-                    (Some(by), Outcome::Fitted { outputs, .. }) => {
-                        // A newer version waits: writing this one would only publish a
-                        // result already out of date. Its control net still seeds the next.
-                        self.warm.insert(done.arrival.id.clone(), outputs.warm);
-                        self.sched.finish(&done.arrival.id);
-                        let _ = self.wtx.send(WriterMsg::Superseded {
-                            loser: done.arrival,
-                            by,
-                        });
-                    }
-                    (_, outcome) => {
-                        let _ = self.wtx.send(WriterMsg::Done(JobDone { outcome, ..done }));
-                    }
-                }
-            }
-            Msg::Written(id) => self.sched.finish(&id),
+    #[test]
+    fn patch_ids_are_safe_and_distinct() {
+        let ids: Vec<String> = [
+            "测试",
+            "例子",
+            "ear",
+            "ear_",
+            "ear?",
+            "ear*",
+            "a/b",
+            "a_b",
+            "..",
+            ".hidden",
+            "quarantine",
+            "processed",
+            "events.ndjson",
+            "events.ndjson.torn",
+            "x~1",
+        ]
+        .iter()
+        .map(|raw| sanitize_id(raw).expect("an id"))
+        .collect();
+        assert_eq!(ids[0], "测试");
+        assert_eq!(ids[2], "ear");
+        let unique: std::collections::HashSet<&String> = ids.iter().collect();
+        assert_eq!(unique.len(), ids.len(), "{ids:?}");
+        for id in &ids {
+            assert!(
+                !id.contains('/') && !id.starts_with('.') && !id.is_empty(),
+                "{id}"
+            );
+            assert!(!RESERVED_IDS.contains(&id.as_str()), "{id}");
         }
-    }
-
-    fn dispatch(&mut self) {
-        while self.in_flight < self.workers {
-            let Some(a) = self.sched.next_ready() else {
-                break;
-            };
-            self.in_flight += 1;
-            let job = Job {
-                warm: self.warm.remove(&a.id),
-                arrival: a,
-                cfg: self.cell.get(),
-            };
-            if let Err(e) = self.job_tx.try_send(job) {
-                // Cannot happen while in_flight bounds the queue; if it does, the version
-                // goes back to wait rather than being lost.
-                tracing::error!("job queue refused a job; retrying later");
-                let job = e.into_inner();
-                self.in_flight -= 1;
-                self.sched.finish(&job.arrival.id);
-                if let Some(w) = job.warm {
-                    self.warm.insert(job.arrival.id.clone(), w);
-                }
-                self.sched.add(job.arrival);
-                break;
-            }
-        }
-    }
-
-    fn spill(&mut self, a: Arrival) {
-        if matches!(a.input, Input::Inline { .. }) {
-            let _ = self.wtx.send(WriterMsg::Spill(a));
-        }
-    }
-
-    fn reload(&mut self, reloader: &mut Reloader, ctl: &Control) {
-        sdnotify::notify("RELOADING=1");
-        match reloader.reload(&self.cell) {
-            Reloaded::Applied { restart_needed } => {
-                let cfg = self.cell.get();
-                if let Some(set) = &ctl.set_log_level {
-                    if let Err(e) = set(&cfg.log.level) {
-                        tracing::warn!(error = %e, "cannot apply log.level");
-                    }
-                }
-                self.metrics.reloads.fetch_add(1, Ordering::Relaxed);
-                if restart_needed.is_empty() {
-                    tracing::info!("config reloaded");
-                } else {
-                    tracing::warn!(
-                        ?restart_needed,
-                        "config reloaded; some changes need a restart"
-                    );
-                }
-                let _ = self.wtx.send(WriterMsg::Event(json!({
-                    "status": "config_reloaded", "restart_needed": restart_needed,
-                })));
-            }
-            Reloaded::Refused { reason } => {
-                tracing::error!(%reason, "config reload refused; the old config stays");
-                self.metrics.reload_failures.fetch_add(1, Ordering::Relaxed);
-                self.metrics.error(&format!("config reload: {reason}"));
-                let _ = self.wtx.send(WriterMsg::Event(json!({
-                    "status": "config_rejected", "reason": reason,
-                })));
-            }
-        }
-        sdnotify::notify("READY=1");
+        assert!(ids[3] == "ear_" && ids[4].starts_with("ear_~"), "{ids:?}");
+        assert_eq!(sanitize_id(""), None);
+        let long = "x".repeat(500);
+        assert!(sanitize_id(&long).expect("id").len() < 140);
+        assert_eq!(
+            patch_id(Path::new("/in/测试@0003.obj")).as_deref(),
+            Some("测试")
+        );
     }
 }

@@ -2,36 +2,84 @@
 //! `{"patch": ID, "path": FILE}` or `{"patch": ID, "format": FMT, "bytes": N}` followed by
 //! exactly N raw bytes. A bad record is reported and skipped while keeping the framing when
 //! the header says how many bytes follow; bytes that came with a bad record are quarantined.
+//! A length that cannot be read loses the framing: everything up to the next line that is a
+//! record header goes, as one rejection, into one quarantine file.
+//!
+//! Memory: payloads read but not yet fitted are bounded by `daemon.max_file_bytes` (plus the
+//! record being read); while the budget is full the reader stops reading, and the writer on
+//! the other end of the pipe blocks.
 
+use super::confine::Roots;
+use super::kinds::{rejection_kind, Cause, RecordFault};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
 use super::{sanitize_id, Msg, Source};
 use crate::io::Format;
 use crossbeam_channel::Sender;
-use std::io::{BufRead, Read};
-use std::path::PathBuf;
+use std::cell::RefCell;
+use std::io::{BufRead, Read, Write};
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant, SystemTime};
 
 /// Longer header lines are not records (a writer that forgot the framing sent raw bytes).
 const MAX_LINE: usize = 64 * 1024;
 
+/// Payload bytes are read in pieces of this size, so that a stop sees how far a record got.
+const READ_PIECE: usize = 1 << 20;
+
+/// Where pipe records come from.
 #[derive(Clone, Debug)]
 pub enum PipeSpec {
+    /// The daemon's standard input; its EOF ends the daemon once the work is done.
     Stdin,
+    /// A named pipe, opened again after each writer closes it.
     Fifo(PathBuf),
 }
 
-pub struct PipeSource {
-    pub spec: PipeSpec,
-    pub cell: Arc<ConfigCell>,
-    pub once: bool,
-    pub tx: Sender<Msg>,
-    pub writer: Sender<WriterMsg>,
-    pub stop: Arc<AtomicBool>,
-    pub quarantine: PathBuf,
+/// A record whose payload is being read: reported if the daemon stops before it is whole.
+#[derive(Clone, Debug)]
+pub(crate) struct Partial {
+    pub(crate) id: String,
+    pub(crate) label: String,
+    pub(crate) got: u64,
+    pub(crate) want: u64,
+}
+
+pub(crate) struct PipeSource {
+    pub(crate) spec: PipeSpec,
+    pub(crate) cell: Arc<ConfigCell>,
+    pub(crate) once: bool,
+    pub(crate) tx: Sender<Msg>,
+    pub(crate) writer: Sender<WriterMsg>,
+    pub(crate) stop: Arc<AtomicBool>,
+    pub(crate) quarantine: PathBuf,
+    /// Canonical; the default root of path records.
+    pub(crate) watch_dir: PathBuf,
+    pub(crate) partial: Arc<Mutex<Option<Partial>>>,
+    /// Payloads handed on and possibly still held (by the scheduler, a worker or the
+    /// writer): what the memory budget counts. Dead entries are dropped as they are seen.
+    pub(crate) held: RefCell<Vec<Weak<Vec<u8>>>>,
+}
+
+/// What the reader does after a record.
+enum After {
+    Next,
+    /// The stream ended inside the record.
+    Ended,
+    /// Resynchronising found this header line: it is the next record.
+    Header(Vec<u8>),
+}
+
+/// A parsed header and what is already wrong with it.
+struct Header {
+    json: serde_json::Value,
+    id: String,
+    /// Kind and reason.
+    problem: Option<(&'static str, String)>,
+    stamp: String,
 }
 
 enum Line {
@@ -85,7 +133,7 @@ fn unix_ms() -> u128 {
 }
 
 impl PipeSource {
-    pub fn run(self) {
+    pub(crate) fn run(self) {
         let name = match &self.spec {
             PipeSpec::Stdin => "stdin".to_string(),
             PipeSpec::Fifo(p) => p.display().to_string(),
@@ -122,14 +170,18 @@ impl PipeSource {
     }
 
     /// Reads records until EOF (or a read error, which ends this opening of the pipe).
-    fn records(&self, r: &mut impl BufRead, name: &str, record: &mut u64) {
+    pub(crate) fn records(&self, r: &mut impl BufRead, name: &str, record: &mut u64) {
+        let mut found: Option<Vec<u8>> = None;
         while !self.stop.load(Ordering::Relaxed) {
-            let line = match read_line(r) {
-                Ok(l) => l,
-                Err(e) => {
-                    tracing::error!(error = %e, pipe = name, "pipe read failed");
-                    return;
-                }
+            let line = match found.take() {
+                Some(header) => Line::Text(header),
+                None => match read_line(r) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        tracing::error!(error = %e, pipe = name, "pipe read failed");
+                        return;
+                    }
+                },
             };
             *record += 1;
             let label = format!("pipe:{name}#{record}");
@@ -139,14 +191,10 @@ impl PipeSource {
                     return;
                 }
                 Line::TooLong => {
-                    self.reject(
-                        "",
-                        &label,
-                        Keep::Nothing,
-                        format!(
-                            "header line longer than {MAX_LINE} bytes; skipped to the next newline"
-                        ),
+                    let reason = format!(
+                        "header line longer than {MAX_LINE} bytes; skipped to the next newline"
                     );
+                    self.reject_record("", &label, Keep::Nothing, RecordFault::LineTooLong, reason);
                     continue;
                 }
                 Line::Text(t) if t.iter().all(|b| b.is_ascii_whitespace()) => {
@@ -155,32 +203,48 @@ impl PipeSource {
                 }
                 Line::Text(t) => t,
             };
-            if !self.record(r, &text, &label, *record) {
-                return;
+            match self.record(r, &text, &label, *record) {
+                After::Next => {}
+                After::Ended => return,
+                After::Header(h) => found = Some(h),
             }
         }
     }
 
-    /// Handles one record; false when the stream ended inside it.
-    fn record(&self, r: &mut impl BufRead, text: &[u8], label: &str, seq: u64) -> bool {
+    /// Handles one record.
+    fn record(&self, r: &mut impl BufRead, text: &[u8], label: &str, seq: u64) -> After {
+        let Some(header) = self.header(text, label, seq) else {
+            return After::Next;
+        };
+        if header.json.get("bytes").is_some() {
+            self.inline_record(r, text, header, label, seq)
+        } else {
+            self.path_record(text, header, label, seq);
+            After::Next
+        }
+    }
+
+    /// Parses the header line and finds what is wrong with its id and keys; `None` when it
+    /// is not a JSON object at all (rejected here).
+    fn header(&self, text: &[u8], label: &str, seq: u64) -> Option<Header> {
         let stamp = format!("{}-{seq}", unix_ms());
-        let header: serde_json::Value = match serde_json::from_slice(text) {
+        let kept = || Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{stamp}.record"));
+        let json: serde_json::Value = match serde_json::from_slice(text) {
             Ok(v @ serde_json::Value::Object(_)) => v,
             Ok(_) => {
-                let keep = Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{stamp}.record"));
-                self.reject("", label, keep, "record is not a JSON object".into());
-                return true;
+                let reason = "record is not a JSON object".into();
+                self.reject_record("", label, kept(), RecordFault::NotJson, reason);
+                return None;
             }
             Err(e) => {
-                let keep = Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{stamp}.record"));
-                self.reject("", label, keep, format!("record is not JSON: {e}"));
-                return true;
+                let reason = format!("record is not JSON: {e}");
+                self.reject_record("", label, kept(), RecordFault::NotJson, reason);
+                return None;
             }
         };
-        let raw_id = header["patch"].as_str();
+        let raw_id = json["patch"].as_str();
         let id = raw_id.and_then(sanitize_id);
-        let bytes = header.get("bytes");
-        let unknown: Vec<&String> = header
+        let unknown: Vec<&String> = json
             .as_object()
             .map(|o| {
                 o.keys()
@@ -188,84 +252,91 @@ impl PipeSource {
                     .collect()
             })
             .unwrap_or_default();
-        let mut problem = match (raw_id, &id) {
-            (None, _) => Some("record has no \"patch\" string".to_string()),
-            (Some(raw), None) => Some(format!("patch id {raw:?} has no usable characters")),
+        let problem = match (raw_id, &id) {
+            (None, _) => Some((
+                record_kind(RecordFault::NoPatch),
+                "record has no \"patch\" string".into(),
+            )),
+            (Some(raw), None) => Some((
+                record_kind(RecordFault::NoPatch),
+                format!("patch id {raw:?} has no usable characters"),
+            )),
+            _ if !unknown.is_empty() => Some((
+                record_kind(RecordFault::UnknownKeys),
+                format!("unknown record keys {unknown:?}"),
+            )),
             _ => None,
         };
-        if problem.is_none() && !unknown.is_empty() {
-            problem = Some(format!("unknown record keys {unknown:?}"));
+        Some(Header {
+            id: id.unwrap_or_default(),
+            json,
+            problem,
+            stamp,
+        })
+    }
+
+    /// `{"patch", "path"}`: the file must be a regular file under the pipe roots; anything
+    /// else is refused and left alone (never moved to quarantine, never deleted).
+    fn path_record(&self, text: &[u8], h: Header, label: &str, seq: u64) {
+        let Some(path) = h.json["path"].as_str() else {
+            let (kind, reason) = h.problem.unwrap_or((
+                record_kind(RecordFault::NoPathNorBytes),
+                "record has neither \"path\" nor \"bytes\"".into(),
+            ));
+            let keep = Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{}.record", h.stamp));
+            self.reject(&h.id, label, keep, kind, reason);
+            return;
+        };
+        if let Some((kind, reason)) = h.problem.or_else(|| {
+            h.json.get("format").map(|_| {
+                (
+                    record_kind(RecordFault::BadFormat),
+                    "a path record takes no \"format\" (the extension says it)".into(),
+                )
+            })
+        }) {
+            self.reject(&h.id, label, Keep::Nothing, kind, reason);
+            return;
         }
-        let id = id.unwrap_or_default();
-        let Some(bytes) = bytes else {
-            // A path record.
-            let Some(path) = header["path"].as_str() else {
-                let p =
-                    problem.unwrap_or_else(|| "record has neither \"path\" nor \"bytes\"".into());
-                self.reject(
-                    &id,
-                    label,
-                    Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{stamp}.record")),
-                    p,
-                );
-                return true;
+        let cfg = self.cell.get();
+        let path =
+            match Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots).confine(Path::new(path)) {
+                Ok(p) => p,
+                Err(refusal) => {
+                    let kind = rejection_kind(&Cause::Path(&refusal));
+                    self.reject(&h.id, label, Keep::Nothing, kind, refusal.to_string());
+                    return;
+                }
             };
-            if let Some(p) = problem.or_else(|| {
-                header
-                    .get("format")
-                    .map(|_| "a path record takes no \"format\" (the extension says it)".into())
-            }) {
-                self.reject(&id, label, Keep::Nothing, p);
-                return true;
-            }
-            let path = PathBuf::from(path);
-            match std::fs::metadata(&path) {
-                Ok(m) if m.is_file() => {}
-                Ok(_) => {
-                    self.reject(
-                        &id,
-                        label,
-                        Keep::Nothing,
-                        format!("{} is not a file", path.display()),
-                    );
-                    return true;
-                }
-                Err(e) => {
-                    self.reject(
-                        &id,
-                        label,
-                        Keep::Nothing,
-                        format!("{}: {e}", path.display()),
-                    );
-                    return true;
-                }
-            }
-            let version = path
-                .file_name()
-                .map(|n| n.to_string_lossy().to_string())
-                .unwrap_or_default();
-            self.arrive(Arrival {
-                id,
-                input: Input::File(path.clone()),
-                key: self.key(seq),
-                version,
-                label: format!("{label} ({})", path.display()),
-                detected: Instant::now(),
-            });
-            return true;
-        };
+        let version = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        self.arrive(Arrival {
+            id: h.id,
+            input: Input::File(path.clone()),
+            key: self.key(seq),
+            version,
+            label: format!("{label} ({})", path.display()),
+            detected: Instant::now(),
+        });
+    }
+
+    /// `{"patch", "format", "bytes": N}` and N raw bytes.
+    fn inline_record(
+        &self,
+        r: &mut impl BufRead,
+        text: &[u8],
+        mut h: Header,
+        label: &str,
+        seq: u64,
+    ) -> After {
+        let bytes = &h.json["bytes"];
         let Some(n) = bytes.as_u64() else {
-            // The length is unreadable: the framing is lost; the following raw bytes will be
-            // rejected line by line until a record parses again.
-            self.reject(
-                &id,
-                label,
-                Keep::Bytes(Arc::new(text.to_vec()), format!("pipe-{stamp}.record")),
-                format!("\"bytes\" must be a non-negative integer, got {bytes}"),
-            );
-            return true;
+            let reason = format!("\"bytes\" must be a non-negative integer, got {bytes}");
+            return self.resync(r, text, &h, label, reason);
         };
-        let ext = header["format"].as_str().unwrap_or("");
+        let ext = h.json["format"].as_str().unwrap_or("");
         let format = match ext {
             "ply" => Some(Format::Ply),
             "glb" => Some(Format::Glb),
@@ -275,77 +346,231 @@ impl PipeSource {
             _ => None,
         };
         let max = self.cell.get().daemon.max_file_bytes;
-        if problem.is_none() {
-            problem = match (format, header.get("path")) {
-                (None, _) => Some(format!(
-                    "\"format\" must be one of ply, glb, obj, stl, off; got {}",
-                    header["format"]
+        if h.problem.is_none() {
+            h.problem = match (format, h.json.get("path")) {
+                (None, _) => Some((
+                    record_kind(RecordFault::BadFormat),
+                    format!(
+                        "\"format\" must be one of ply, glb, obj, stl, off; got {}",
+                        h.json["format"]
+                    ),
                 )),
-                (_, Some(_)) => Some("a record has \"path\" or \"bytes\", not both".into()),
-                _ if n > max => Some(format!("{n} bytes exceeds daemon.max_file_bytes = {max}")),
+                (_, Some(_)) => Some((
+                    record_kind(RecordFault::PathAndBytes),
+                    "a record has \"path\" or \"bytes\", not both".into(),
+                )),
+                _ if n > max => Some((
+                    rejection_kind(&Cause::TooLarge),
+                    format!("{n} bytes exceeds daemon.max_file_bytes = {max}"),
+                )),
                 _ => None,
             };
         }
-        let prefix = if id.is_empty() {
-            "pipe".to_string()
+        let prefix = if h.id.is_empty() {
+            "pipe"
         } else {
-            id.clone()
+            h.id.as_str()
         };
         let safe_ext = if format.is_some() { ext } else { "bin" };
-        let name = format!("{prefix}@pipe-{stamp}.{safe_ext}");
-        if let Some(reason) = problem {
-            // The header is bad but says how long the payload is: stream it to quarantine
-            // without holding it (it may be over the size limit) and keep the framing.
-            let target = self.quarantine.join(&name);
-            let kept = std::fs::create_dir_all(&self.quarantine)
-                .and_then(|_| std::fs::File::create(&target))
-                .and_then(|mut f| {
-                    let copied = std::io::copy(&mut r.by_ref().take(n), &mut f)?;
-                    f.sync_all()?;
-                    Ok(copied)
-                });
-            let (keep, complete) = match kept {
-                Ok(c) => (Keep::Already(target), c == n),
-                Err(e) => {
-                    tracing::error!(error = %e, "cannot quarantine pipe bytes; discarding them to keep the framing");
-                    let skipped =
-                        std::io::copy(&mut r.by_ref().take(n), &mut std::io::sink()).unwrap_or(0);
-                    (Keep::Nothing, skipped == n)
-                }
-            };
-            self.reject(&id, label, keep, reason);
-            return complete;
+        let name = format!("{prefix}@pipe-{}.{safe_ext}", h.stamp);
+        if let Some((kind, reason)) = h.problem.take() {
+            return self.skip_payload(r, n, &h.id, label, &name, kind, reason);
         }
-        let Some(format) = format else { return true };
+        let Some(format) = format else {
+            return After::Next;
+        };
+        if !self.wait_for_budget(n, max) {
+            return After::Ended;
+        }
+        self.read_payload(r, n, format, h.id, label, name, seq)
+    }
+
+    /// The header is bad but says how long the payload is: streams it to quarantine without
+    /// holding it (it may be over the size limit) and keeps the framing.
+    #[allow(clippy::too_many_arguments)]
+    fn skip_payload(
+        &self,
+        r: &mut impl BufRead,
+        n: u64,
+        id: &str,
+        label: &str,
+        name: &str,
+        kind: &'static str,
+        reason: String,
+    ) -> After {
+        let target = self.quarantine.join(name);
+        let kept = std::fs::create_dir_all(&self.quarantine)
+            .and_then(|_| std::fs::File::create(&target))
+            .and_then(|mut f| {
+                let copied = std::io::copy(&mut r.by_ref().take(n), &mut f)?;
+                f.sync_all()?;
+                Ok(copied)
+            });
+        let (keep, complete) = match kept {
+            Ok(c) => (Keep::Already(target), c == n),
+            Err(e) => {
+                tracing::error!(error = %e, "cannot quarantine pipe bytes; discarding them to keep the framing");
+                let skipped =
+                    std::io::copy(&mut r.by_ref().take(n), &mut std::io::sink()).unwrap_or(0);
+                (Keep::Nothing, skipped == n)
+            }
+        };
+        self.reject(id, label, keep, kind, reason);
+        if complete {
+            After::Next
+        } else {
+            After::Ended
+        }
+    }
+
+    /// The length is unreadable, so where the payload ends is unknown: everything up to the
+    /// next line that is a record header (a JSON object with a "patch") is this record's,
+    /// kept in one quarantine file and reported once. Rejecting those lines one by one would
+    /// turn one bad record into thousands of rejections.
+    fn resync(
+        &self,
+        r: &mut impl BufRead,
+        text: &[u8],
+        h: &Header,
+        label: &str,
+        reason: String,
+    ) -> After {
+        let target = self.quarantine.join(format!("pipe-{}.record", h.stamp));
+        let mut file = std::fs::create_dir_all(&self.quarantine)
+            .and_then(|_| std::fs::File::create(&target))
+            .map_err(|e| tracing::error!(error = %e, "cannot quarantine a bad pipe record"))
+            .ok();
+        let mut keep = |line: &[u8]| {
+            if let Some(f) = file.as_mut() {
+                if f.write_all(line).and_then(|_| f.write_all(b"\n")).is_err() {
+                    file = None;
+                }
+            }
+        };
+        keep(text);
+        let (mut skipped, mut next) = (0u64, After::Ended);
+        while !self.stop.load(Ordering::Relaxed) {
+            match read_line(r) {
+                Ok(Line::Text(t)) if is_header(&t) => {
+                    next = After::Header(t);
+                    break;
+                }
+                Ok(Line::Text(t)) => {
+                    skipped += t.len() as u64 + 1;
+                    keep(&t);
+                }
+                Ok(Line::TooLong) => skipped += MAX_LINE as u64,
+                Ok(Line::Eof) | Err(_) => break,
+            }
+        }
+        let kept = file.take().and_then(|f| f.sync_all().ok()).map(|_| target);
+        let reason = format!("{reason}; skipped {skipped} bytes to the next record header");
+        let kind = rejection_kind(&Cause::Record(RecordFault::BadLength));
+        let keep = kept.map_or(Keep::Nothing, Keep::Already);
+        self.reject(&h.id, label, keep, kind, reason);
+        next
+    }
+
+    /// Waits while the payloads still held plus this one would exceed the budget; one
+    /// payload is always let through, so a record of `max_file_bytes` never waits forever.
+    /// False when the daemon stops while waiting.
+    fn wait_for_budget(&self, n: u64, budget: u64) -> bool {
+        let mut told = false;
+        loop {
+            let live: u64 = {
+                let mut held = self.held.borrow_mut();
+                held.retain(|w| w.strong_count() > 0);
+                held.iter()
+                    .filter_map(Weak::upgrade)
+                    .map(|d| d.len() as u64)
+                    .sum()
+            };
+            if live == 0 || live.saturating_add(n) <= budget {
+                return true;
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            if !told {
+                tracing::info!(
+                    held = live,
+                    next = n,
+                    budget,
+                    "pipe payload budget full; pausing reads"
+                );
+                told = true;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn read_payload(
+        &self,
+        r: &mut impl BufRead,
+        n: u64,
+        format: Format,
+        id: String,
+        label: &str,
+        name: String,
+        seq: u64,
+    ) -> After {
+        tracing::debug!(patch = %id, bytes = n, "reading a record's payload");
         // n <= max_file_bytes here, so reserving it is within the configured budget.
         let mut data = Vec::with_capacity(n as usize);
-        let got = r.by_ref().take(n).read_to_end(&mut data);
-        match got {
-            Ok(k) if k as u64 == n => {
-                self.arrive(Arrival {
-                    id,
-                    input: Input::Inline {
-                        data: Arc::new(data),
-                        format,
-                    },
-                    key: self.key(seq),
-                    version: name,
-                    label: label.to_string(),
-                    detected: Instant::now(),
-                });
-                true
-            }
-            Ok(k) => {
-                let reason = format!("stream ended after {k} of {n} bytes");
-                self.reject(&id, label, Keep::Bytes(Arc::new(data), name), reason);
-                false
-            }
-            Err(e) => {
-                let reason = format!("read failed after {} of {n} bytes: {e}", data.len());
-                self.reject(&id, label, Keep::Bytes(Arc::new(data), name), reason);
-                false
+        self.set_partial(Some(Partial {
+            id: id.clone(),
+            label: label.to_string(),
+            got: 0,
+            want: n,
+        }));
+        let mut failure = None;
+        while (data.len() as u64) < n {
+            let piece = (n - data.len() as u64).min(READ_PIECE as u64);
+            match r.by_ref().take(piece).read_to_end(&mut data) {
+                Ok(0) => break,
+                Ok(_) => {
+                    if let Some(p) = self
+                        .partial
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .as_mut()
+                    {
+                        p.got = data.len() as u64;
+                    }
+                }
+                Err(e) => {
+                    failure = Some(e);
+                    break;
+                }
             }
         }
+        self.set_partial(None);
+        let k = data.len();
+        if k as u64 == n {
+            let data = Arc::new(data);
+            self.held.borrow_mut().push(Arc::downgrade(&data));
+            self.arrive(Arrival {
+                id,
+                input: Input::Inline { data, format },
+                key: self.key(seq),
+                version: name,
+                label: label.to_string(),
+                detected: Instant::now(),
+            });
+            return After::Next;
+        }
+        let reason = match failure {
+            Some(e) => format!("read failed after {k} of {n} bytes: {e}"),
+            None => format!("stream ended after {k} of {n} bytes"),
+        };
+        let kind = rejection_kind(&Cause::Record(RecordFault::Truncated));
+        self.reject(&id, label, Keep::Bytes(Arc::new(data), name), kind, reason);
+        After::Ended
+    }
+
+    fn set_partial(&self, p: Option<Partial>) {
+        *self.partial.lock().unwrap_or_else(|e| e.into_inner()) = p;
     }
 
     /// Later records are newer versions, whatever the files' mtimes say.
@@ -360,28 +585,36 @@ impl PipeSource {
         let _ = self.tx.send(Msg::Arrivals(vec![a]));
     }
 
-    fn reject(&self, id: &str, label: &str, keep: Keep, reason: String) {
+    fn reject_record(&self, id: &str, label: &str, keep: Keep, fault: RecordFault, reason: String) {
+        self.reject(
+            id,
+            label,
+            keep,
+            rejection_kind(&Cause::Record(fault)),
+            reason,
+        );
+    }
+
+    fn reject(&self, id: &str, label: &str, keep: Keep, kind: &'static str, reason: String) {
         let _ = self.writer.send(WriterMsg::Reject {
             id: id.to_string(),
             label: label.to_string(),
             keep,
+            kind,
             reason,
         });
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn lines_are_bounded_and_framing_survives_a_long_one() {
-        let mut input = vec![b'x'; MAX_LINE + 10];
-        input.extend_from_slice(b"\n{\"a\":1}\nlast");
-        let mut r = std::io::BufReader::with_capacity(1000, input.as_slice());
-        assert!(matches!(read_line(&mut r).expect("reads"), Line::TooLong));
-        assert!(matches!(read_line(&mut r).expect("reads"), Line::Text(t) if t == b"{\"a\":1}"));
-        assert!(matches!(read_line(&mut r).expect("reads"), Line::Text(t) if t == b"last"));
-        assert!(matches!(read_line(&mut r).expect("reads"), Line::Eof));
-    }
+fn record_kind(fault: RecordFault) -> &'static str {
+    rejection_kind(&Cause::Record(fault))
 }
+
+/// Whether a line is a record header: a JSON object naming a patch.
+fn is_header(line: &[u8]) -> bool {
+    serde_json::from_slice::<serde_json::Value>(line)
+        .is_ok_and(|v| v.get("patch").is_some_and(serde_json::Value::is_string))
+}
+
+#[cfg(test)]
+mod tests;

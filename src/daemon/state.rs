@@ -1,4 +1,5 @@
-//! Per-patch state for warm starts, one JSON file per patch, written atomically.
+//! Per-patch state for warm starts, one JSON file per patch, written atomically; and the
+//! content hash that tells versions apart.
 
 use crate::io::write_atomic;
 use crate::pipeline::worker::WarmStart;
@@ -7,17 +8,17 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-pub struct PatchState {
-    pub version: String,
-    pub input_hash: u64,
+pub(crate) struct PatchState {
+    pub(crate) version: String,
+    pub(crate) input_hash: u64,
     /// `DaemonConfig::output_hash` of the fit: a config change refits an unchanged input.
     /// States written before it existed read as 0, which matches no config.
     #[serde(default)]
-    pub config_hash: u64,
-    pub warm: WarmStart,
+    pub(crate) config_hash: u64,
+    pub(crate) warm: WarmStart,
 }
 
-pub struct StateStore {
+pub(crate) struct StateStore {
     dir: PathBuf,
     /// The states of the most recently fitted patches: a new version's job reads its
     /// predecessor's state from here instead of parsing the file again (a scan's state
@@ -48,7 +49,7 @@ impl Recent {
 }
 
 impl StateStore {
-    pub fn new(dir: PathBuf) -> Self {
+    pub(crate) fn new(dir: PathBuf) -> Self {
         Self {
             dir,
             recent: Mutex::new(Recent::default()),
@@ -65,7 +66,7 @@ impl StateStore {
     }
 
     /// The saved state, or `None` (missing or unreadable state only costs a cold start).
-    pub fn load(&self, id: &str) -> Option<Arc<PatchState>> {
+    pub(crate) fn load(&self, id: &str) -> Option<Arc<PatchState>> {
         if let Some(s) = self.recent().states.get(id) {
             return Some(Arc::clone(s));
         }
@@ -77,26 +78,27 @@ impl StateStore {
 
     /// Served from memory at once; `persist` writes it to its file. Until then (or if that
     /// fails) a restart finds the previous file and refits the input: nothing is lost.
-    pub fn remember(&self, id: &str, state: PatchState) -> Arc<PatchState> {
+    pub(crate) fn remember(&self, id: &str, state: PatchState) -> Arc<PatchState> {
         let state = Arc::new(state);
         self.recent().insert(id, Arc::clone(&state));
         state
     }
 
     /// Writes a state to its file (atomically).
-    pub fn persist(&self, id: &str, state: &PatchState) -> Result<(), crate::io::IoError> {
+    pub(crate) fn persist(&self, id: &str, state: &PatchState) -> Result<(), crate::io::IoError> {
         let bytes = serde_json::to_vec(state).unwrap_or_default();
         write_atomic(&self.path(id), &bytes)
     }
 
     /// `remember` and `persist`.
-    pub fn save(&self, id: &str, state: PatchState) -> Result<(), crate::io::IoError> {
+    #[cfg(test)]
+    pub(crate) fn save(&self, id: &str, state: PatchState) -> Result<(), crate::io::IoError> {
         let state = self.remember(id, state);
         self.persist(id, &state)
     }
 }
 
-/// FNV-1a 64 over little-endian 8-byte words (then the tail bytes), each step rotated so that
+/// A 64-bit hash of a file's bytes. FNV-1a 64 over little-endian 8-byte words (then the tail bytes), each step rotated so that
 /// the multiplication's carries, which only run upwards, reach the low bits of later steps:
 /// stable across runs and platforms, enough to tell versions apart, and 8x fewer
 /// multiplications than byte-wise FNV (hashing a 1.7 MB scan took ~2 ms of every job's

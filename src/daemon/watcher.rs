@@ -6,6 +6,7 @@
 //! waits for fitting.
 
 use super::config::WatcherKind;
+use super::kinds::{rejection_kind, Cause};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
@@ -56,6 +57,81 @@ struct Tracker {
     /// The stamp each file had when handed on, so that a rescan does not repeat it.
     emitted: HashMap<PathBuf, Stamp>,
     batch: Vec<Arrival>,
+    /// Entries left alone and why, so that each is reported once (again only if the reason
+    /// changes or the entry comes back after going away).
+    skipped: HashMap<PathBuf, Skip>,
+}
+
+/// Why the watcher leaves an entry alone.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Skip {
+    NonUtf8Name,
+    SymlinkLoop,
+    DanglingSymlink,
+    Directory,
+    Fifo,
+    Device,
+    Socket,
+    /// Not a regular file for another reason, or its metadata cannot be read.
+    Unreadable,
+    /// A name with no mesh extension: reported at debug level only (a README beside the
+    /// scans is normal).
+    NotAMesh,
+}
+
+impl Skip {
+    fn kind(self) -> &'static str {
+        match self {
+            Skip::NonUtf8Name => "non_utf8_name",
+            Skip::SymlinkLoop => "symlink_loop",
+            Skip::DanglingSymlink => "dangling_symlink",
+            Skip::Directory => "directory",
+            Skip::Fifo => "fifo",
+            Skip::Device => "device",
+            Skip::Socket => "socket",
+            Skip::Unreadable => "unreadable",
+            Skip::NotAMesh => "not_a_mesh",
+        }
+    }
+}
+
+/// Why an entry of the watch folder is not an input, or `None` when it is one (or is a
+/// temporary name that will be renamed into one).
+pub(crate) fn skip_reason(path: &Path) -> Option<Skip> {
+    use std::os::unix::fs::FileTypeExt;
+    let name = path.file_name()?;
+    let Some(name) = name.to_str() else {
+        return Some(Skip::NonUtf8Name);
+    };
+    if name.starts_with('.') || name.ends_with(".tmp") || name.ends_with(".part") {
+        return None;
+    }
+    if ignored(path) {
+        return Some(Skip::NotAMesh);
+    }
+    let link = std::fs::symlink_metadata(path).ok()?;
+    let meta = if link.file_type().is_symlink() {
+        match std::fs::metadata(path) {
+            Ok(m) => m,
+            // ELOOP: the standard library has no ErrorKind for it on every toolchain.
+            Err(e) if e.raw_os_error() == Some(40) => return Some(Skip::SymlinkLoop),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Some(Skip::DanglingSymlink)
+            }
+            Err(_) => return Some(Skip::Unreadable),
+        }
+    } else {
+        link
+    };
+    let t = meta.file_type();
+    match () {
+        _ if t.is_file() => None,
+        _ if t.is_dir() => Some(Skip::Directory),
+        _ if t.is_fifo() => Some(Skip::Fifo),
+        _ if t.is_block_device() || t.is_char_device() => Some(Skip::Device),
+        _ if t.is_socket() => Some(Skip::Socket),
+        _ => Some(Skip::Unreadable),
+    }
 }
 
 impl FolderWatcher {
@@ -64,6 +140,7 @@ impl FolderWatcher {
             settling: HashMap::new(),
             emitted: HashMap::new(),
             batch: Vec::new(),
+            skipped: HashMap::new(),
         };
         // Keep the watcher alive for the whole loop; it is created before the first scan so
         // that nothing arriving in between is missed.
@@ -143,6 +220,7 @@ impl FolderWatcher {
                 for p in &ev.paths {
                     t.settling.remove(p);
                     t.emitted.remove(p);
+                    t.skipped.remove(p);
                 }
             }
             EventKind::Create(_) | EventKind::Modify(_) => {
@@ -156,7 +234,7 @@ impl FolderWatcher {
 
     /// A file that is known to be complete (renamed in, or closed after writing).
     fn complete(&self, t: &mut Tracker, path: &Path) {
-        if path.parent() != Some(self.dir.as_path()) || ignored(path) {
+        if path.parent() != Some(self.dir.as_path()) || self.skips(t, path) || ignored(path) {
             return;
         }
         t.settling.remove(path);
@@ -167,7 +245,8 @@ impl FolderWatcher {
 
     /// A file that may still be written: starts or restarts its settle clock.
     fn seen(&self, t: &mut Tracker, path: &Path, now: Instant) {
-        if ignored(path) {
+        if self.skips(t, path) || ignored(path) {
+            t.settling.remove(path);
             return;
         }
         let Some(s) = stamp(path) else {
@@ -207,6 +286,27 @@ impl FolderWatcher {
         }
         t.emitted.retain(|p, _| present.contains(p));
         t.settling.retain(|p, _| present.contains(p));
+        t.skipped.retain(|p, _| present.contains(p));
+    }
+
+    /// Whether the entry is skipped; reports it the first time (per reason).
+    fn skips(&self, t: &mut Tracker, path: &Path) -> bool {
+        let Some(why) = skip_reason(path) else {
+            t.skipped.remove(path);
+            return false;
+        };
+        if t.skipped.insert(path.to_path_buf(), why) != Some(why) {
+            let input = path.display().to_string();
+            if why == Skip::NotAMesh {
+                tracing::debug!(input, "not a mesh file name; skipped");
+            } else {
+                tracing::warn!(input, kind = why.kind(), "skipped");
+                let _ = self.writer.send(WriterMsg::Event(serde_json::json!({
+                    "input": input, "status": "skipped", "kind": why.kind(),
+                })));
+            }
+        }
+        true
     }
 
     fn settle(&self, t: &mut Tracker, settle: Duration) {
@@ -243,6 +343,7 @@ impl FolderWatcher {
                 id: String::new(),
                 label,
                 keep: Keep::Move(path.to_path_buf()),
+                kind: rejection_kind(&Cause::NoPatchId),
                 reason: "file name gives no usable patch id".into(),
             });
             return;

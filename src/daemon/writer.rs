@@ -4,12 +4,16 @@
 
 use super::config::DaemonConfig;
 use super::config::ProcessedPolicy;
+use super::confine::Roots;
 use super::job::{JobDone, Outcome, Timings};
 use super::ops::metrics::Metrics;
+use super::publish::publish;
+use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input};
+use super::state::content_hash;
 use super::state::{PatchState, StateStore};
 use super::{Msg, Summary};
-use crate::io::{write_atomic, write_atomic_group};
+use crate::io::write_atomic;
 use crate::pipeline::worker::{InputOutputs, PatchOutputs};
 use crossbeam_channel::{Receiver, Sender};
 use serde_json::json;
@@ -39,6 +43,8 @@ pub enum WriterMsg {
         id: String,
         label: String,
         keep: Keep,
+        /// Machine-readable (`kinds::rejection_kind`).
+        kind: &'static str,
         reason: String,
     },
     Event(serde_json::Value),
@@ -57,6 +63,65 @@ pub struct Writer {
     pub metrics: Arc<Metrics>,
     pub acks: Sender<Msg>,
     pub summary: Summary,
+    /// For `daemon.pipe_roots`: inputs are moved or deleted only inside the roots.
+    pub cell: Arc<ConfigCell>,
+    pub seen: SeenVersions,
+}
+
+/// Superseded file versions already in the event log, kept across starts in the state
+/// folder: the older versions left in the watch folder lose again at every start, and the
+/// log should say so once. A line per version: patch, path, mtime in ns; lines of files that
+/// are gone are dropped when the list is read, so it stays as long as the folder's listing.
+pub(crate) struct SeenVersions {
+    path: PathBuf,
+    keys: std::collections::HashSet<String>,
+}
+
+impl SeenVersions {
+    pub(crate) fn load(state_dir: &Path) -> Self {
+        let path = state_dir.join("superseded.tsv");
+        let keys: std::collections::HashSet<String> = std::fs::read_to_string(&path)
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.split('\t').nth(1).is_some_and(|p| Path::new(p).exists()))
+            .map(str::to_string)
+            .collect();
+        let text: String = keys.iter().map(|k| format!("{k}\n")).collect();
+        if let Err(e) = write_atomic(&path, text.as_bytes()) {
+            tracing::warn!(error = %e, "cannot rewrite the list of superseded versions");
+        }
+        Self { path, keys }
+    }
+
+    /// Whether this is the first time the version is recorded (pipe records always are).
+    fn first_time(&mut self, a: &Arrival) -> bool {
+        use std::io::Write;
+        let Input::File(file) = &a.input else {
+            return true;
+        };
+        let nanos = a
+            .key
+            .time
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos());
+        let key = format!("{}\t{}\t{nanos}", a.id, file.display());
+        if key.contains('\n') {
+            // Cannot be kept as a line: recorded every time rather than corrupting the list.
+            return true;
+        }
+        if !self.keys.insert(key.clone()) {
+            return false;
+        }
+        let appended = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&self.path)
+            .and_then(|mut f| f.write_all(format!("{key}\n").as_bytes()));
+        if let Err(e) = appended {
+            tracing::warn!(error = %e, "cannot note a superseded version");
+        }
+        true
+    }
 }
 
 fn secs(t: SystemTime) -> f64 {
@@ -149,14 +214,19 @@ impl Writer {
                     tracing::info!(patch = %loser.id, input = %loser.label, by = %by, "superseded");
                     self.summary.superseded += 1;
                     self.metrics.superseded.fetch_add(1, Ordering::Relaxed);
+                    if !self.seen.first_time(&loser) {
+                        // The same file lost to a newer one at an earlier start already.
+                        continue;
+                    }
                     self.event(json!({"patch": loser.id, "version": loser.version, "input": loser.label, "status": "superseded", "by": by}));
                 }
                 WriterMsg::Reject {
                     id,
                     label,
                     keep,
+                    kind,
                     reason,
-                } => self.reject(&id, &label, keep, &reason),
+                } => self.reject(&id, &label, keep, kind, &reason),
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
                 WriterMsg::Shutdown => break,
@@ -172,16 +242,17 @@ impl Writer {
         let span = tracing::info_span!("patch", patch = %a.id, version = %a.version);
         let _guard = span.enter();
         match done.outcome {
-            Outcome::Rejected { reason } => {
+            Outcome::Rejected { kind, reason } => {
                 let keep = match &a.input {
                     Input::File(p) => Keep::Move(p.clone()),
                     Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
                 };
-                self.reject(&a.id, &a.label, keep, &reason);
+                self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
             }
-            Outcome::Unchanged { .. } => {
-                tracing::info!("unchanged since the last fit; skipped");
+            Outcome::Unchanged { hash } => {
+                let input_hash = format!("{hash:016x}");
+                tracing::info!(input_hash, "unchanged since the last fit; skipped");
                 self.summary.unchanged += 1;
                 self.metrics.unchanged.fetch_add(1, Ordering::Relaxed);
                 // Its content was fitted, so the processed-file policy applies.
@@ -213,7 +284,7 @@ impl Writer {
                     // reported, not quarantined, since the input stays in use.
                     let id = format!("{}{suffix}", a.id);
                     tracing::warn!(patch = %id, reason, "component not fitted");
-                    self.metrics.error(&format!("{} ({id}): {reason}", a.label));
+                    self.metrics.error("component_failed");
                     self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "component_failed", "reason": reason}));
                 }
                 if !written_all {
@@ -258,8 +329,14 @@ impl Writer {
         let surface = dir.join("surface.json");
         let out = &cfg.output;
         let to_json = |v: &serde_json::Value| serde_json::to_vec_pretty(v).unwrap_or_default();
-        let report_bytes = out.report.then(|| to_json(&outputs.report));
         let surface_bytes = to_json(&outputs.surface);
+        // So that a reader (and the crash tests) can check that the files belong together.
+        let mut hashes = json!({"surface.json": format!("{:016x}", content_hash(&surface_bytes))});
+        if out.glb {
+            hashes["surface.glb"] = json!(format!("{:016x}", content_hash(&outputs.glb)));
+        }
+        outputs.report["output_hashes"] = hashes;
+        let report_bytes = out.report.then(|| to_json(&outputs.report));
         let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
         if out.glb {
             group.push(("surface.glb", &outputs.glb));
@@ -267,20 +344,14 @@ impl Writer {
         if let Some(r) = &report_bytes {
             group.push(("report.json", r));
         }
-        // Last: its presence says the version is complete.
         group.push(("surface.json", &surface_bytes));
-        let written = std::fs::create_dir_all(&dir)
-            .map_err(|e| format!("{}: {e}", dir.display()))
-            .and_then(|_| remove_disabled(&glb, out.glb))
-            .and_then(|_| remove_disabled(&report, out.report))
-            .and_then(|_| write_atomic_group(&dir, &group).map_err(|e| e.to_string()));
+        let written = publish(&self.out_dir, id, &group, &mut |_| true).map_err(|e| e.to_string());
         // The part of the write that a client waiting for surface.json waits for.
         let outputs_ms = start.elapsed().as_secs_f64() * 1e3;
         if let Err(e) = written {
             // The input is fine and stays where it is; the output folder is not.
             tracing::error!(patch = id, error = %e, "cannot write outputs");
-            self.metrics
-                .error(&format!("{}: cannot write outputs: {e}", a.label));
+            self.metrics.error("write_failed");
             self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "write_failed", "reason": e}));
             return false;
         }
@@ -309,8 +380,22 @@ impl Writer {
         true
     }
 
+    /// Whether the writer may move or delete this input: the watch folder's files and pipe
+    /// path records' files are under the roots when read, but the folders may have changed.
+    fn may_touch(&self, path: &Path) -> bool {
+        let cfg = self.cell.get();
+        let inside = Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots).holds_entry(path);
+        if !inside {
+            tracing::warn!(input = %path.display(), "outside the watch folder and pipe roots; left in place");
+        }
+        inside
+    }
+
     fn processed(&self, a: &Arrival, policy: ProcessedPolicy) {
         let Input::File(path) = &a.input else { return };
+        if policy == ProcessedPolicy::Leave || !self.may_touch(path) {
+            return;
+        }
         let result = match policy {
             ProcessedPolicy::Leave => return,
             ProcessedPolicy::Delete => std::fs::remove_file(path),
@@ -326,15 +411,15 @@ impl Writer {
     }
 
     /// Moves or writes the bad input to quarantine with `<name>.error.json`, and records it.
-    fn reject(&mut self, id: &str, label: &str, keep: Keep, reason: &str) {
-        tracing::warn!(patch = id, input = label, reason, "rejected");
+    fn reject(&mut self, id: &str, label: &str, keep: Keep, kind: &'static str, reason: &str) {
+        tracing::warn!(patch = id, input = label, kind, reason, "rejected");
         self.summary.rejected += 1;
-        self.metrics.rejected.fetch_add(1, Ordering::Relaxed);
-        self.metrics.error(&format!("{label}: {reason}"));
+        self.metrics.rejected(kind);
         let q = &self.quarantine;
         let kept: Result<Option<PathBuf>, String> = match keep {
             Keep::Nothing => Ok(None),
             Keep::Already(p) => Ok(Some(p)),
+            Keep::Move(path) if !self.may_touch(&path) => Ok(None),
             Keep::Move(path) => {
                 let target = free_name(q, &path);
                 std::fs::create_dir_all(q)
@@ -361,14 +446,13 @@ impl Writer {
                 .file_name()
                 .map(|n| n.to_string_lossy().to_string())
                 .unwrap_or_default();
-            let note =
-                json!({"input": label, "patch": id, "reason": reason, "quarantined_as": target});
+            let note = json!({"input": label, "patch": id, "kind": kind, "reason": reason, "quarantined_as": target});
             let _ = write_atomic(
                 &q.join(format!("{name}.error.json")),
                 &serde_json::to_vec_pretty(&note).unwrap_or_default(),
             );
         }
-        self.event(json!({"patch": id, "input": label, "status": "rejected", "reason": reason, "quarantined_as": kept}));
+        self.event(json!({"patch": id, "input": label, "status": "rejected", "kind": kind, "reason": reason, "quarantined_as": kept}));
     }
 
     fn spill(&mut self, a: &Arrival) {
@@ -427,20 +511,6 @@ fn free_name(dir: &Path, path: &Path) -> PathBuf {
         .map(|n| dir.join(format!("{stem}~{n}{ext}")))
         .find(|p| !p.exists())
         .unwrap_or(first)
-}
-
-/// Removes an optional output that the config no longer asks for, so that the folder never
-/// mixes versions.
-fn remove_disabled(path: &Path, enabled: bool) -> Result<(), String> {
-    if enabled {
-        return Ok(());
-    }
-    match std::fs::remove_file(path) {
-        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-            Err(format!("{}: {e}", path.display()))
-        }
-        _ => Ok(()),
-    }
 }
 
 #[cfg(test)]

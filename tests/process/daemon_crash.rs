@@ -57,6 +57,85 @@ fn check_outputs(dir: &Path, hashes: &HashSet<String>, round: usize) {
             n => panic!("round {round}: unexpected file {n} in the output folder"),
         }
     }
+    assert_one_version(dir, round);
+}
+
+/// The files in `dir` are one version's: the report names the hashes of the other files
+/// written with it.
+fn assert_one_version(dir: &Path, round: usize) {
+    let Ok(bytes) = std::fs::read(dir.join("report.json")) else {
+        return;
+    };
+    let report: serde_json::Value = serde_json::from_slice(&bytes).expect("report json");
+    for name in ["surface.json", "surface.glb"] {
+        let file = std::fs::read(dir.join(name)).expect("the set is complete");
+        assert_eq!(
+            report["output_hashes"][name],
+            format!("{:016x}", content_hash(&file)),
+            "round {round}: {name} is not of the report's version (a mixed set)"
+        );
+    }
+}
+
+/// kill -9 aimed at the output window, each time with a new version to commit over the old
+/// one: never a mixed set.
+#[test]
+fn aimed_kills_in_the_output_window_never_leave_a_mixed_set() {
+    let s = setup(&config(0, "native", "").replace("tessellation = 8", "tessellation = 200"));
+    let seed = SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(1, |d| d.as_nanos() as u64)
+        | 1;
+    println!("seed {seed}");
+    let mut rng = Rng(seed);
+    let rounds = 100;
+    let mut landed = 0;
+    for round in 0..rounds {
+        let mut child = s.spawn(&[]);
+        drop_file(
+            &s.inbox,
+            &format!("scan@{round:03}.ply"),
+            &patch_ply(30, round as u32),
+        );
+        // Aimed: from a new version folder (its files are written next) or the switch of
+        // the link, whichever is seen first, plus a little.
+        let versions = s.out.join(".versions/scan");
+        let link_before = std::fs::read_link(s.out.join("scan")).ok();
+        let names = |d: &Path| -> Vec<std::ffi::OsString> {
+            std::fs::read_dir(d)
+                .map(|d| d.flatten().map(|e| e.file_name()).collect())
+                .unwrap_or_default()
+        };
+        let before = names(&versions);
+        let writing = || {
+            std::fs::read_link(s.out.join("scan")).ok() != link_before
+                || names(&versions).iter().any(|n| !before.contains(n))
+        };
+        let deadline = std::time::Instant::now() + Duration::from_secs(20);
+        while !writing() && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_micros(200));
+        }
+        std::thread::sleep(Duration::from_micros(rng.below(4000)));
+        let _ = child.kill();
+        let _ = child.wait();
+        let report = std::fs::read(s.out.join("scan/report.json")).ok();
+        let hash = report
+            .and_then(|r| serde_json::from_slice::<serde_json::Value>(&r).ok())
+            .and_then(|r| r["input_hash"].as_str().map(str::to_string));
+        if hash
+            != Some(format!(
+                "{:016x}",
+                content_hash(&patch_ply(30, round as u32))
+            ))
+        {
+            landed += 1;
+        }
+        assert_one_version(&s.out.join("scan"), round);
+    }
+    println!("{landed} of {rounds} kills landed before this round's commit");
+    let o = s.once();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_one_version(&s.out.join("scan"), rounds);
 }
 
 /// Every newline-terminated line of the event log is a JSON value.
@@ -91,13 +170,19 @@ fn kill_9_mid_write_leaves_only_complete_outputs() {
             // Anywhere from before detection to after the commit.
             std::thread::sleep(Duration::from_millis(rng.below(150)));
         } else {
-            // Inside the writes: as soon as a temp file shows up, plus a little.
-            let dir = s.out.join("scan");
+            // Inside the writes: as soon as a new version folder shows up (or the link
+            // switched), plus a little.
+            let versions = s.out.join(".versions/scan");
+            let link_before = std::fs::read_link(s.out.join("scan")).ok();
+            let names = |d: &Path| -> Vec<std::ffi::OsString> {
+                std::fs::read_dir(d)
+                    .map(|d| d.flatten().map(|e| e.file_name()).collect())
+                    .unwrap_or_default()
+            };
+            let before = names(&versions);
             let writing = || {
-                std::fs::read_dir(&dir).is_ok_and(|d| {
-                    d.flatten()
-                        .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
-                })
+                std::fs::read_link(s.out.join("scan")).ok() != link_before
+                    || names(&versions).iter().any(|n| !before.contains(n))
             };
             let deadline = std::time::Instant::now() + Duration::from_secs(10);
             while !writing() && std::time::Instant::now() < deadline {

@@ -263,7 +263,12 @@ fn metrics_and_health_on_loopback() {
     assert!(m.contains("trispline_patches_rejected_total 1"), "{m}");
     assert!(m.contains("trispline_fit_duration_seconds_count 2"), "{m}");
     assert!(m.contains("trispline_queue_depth 0"), "{m}");
-    assert!(m.contains("bad.ply"), "last error names the file: {m}");
+    // Labels are kinds, never file names or reasons (one series per input otherwise).
+    assert!(
+        m.contains("trispline_rejections_total{kind=\"parse_failed\"} 1"),
+        "{m}"
+    );
+    assert!(!m.contains("bad.ply"), "{m}");
     assert!(http_get(port, "/healthz").ends_with("ok\n"));
     assert!(stop(child).is_some_and(|st| st.success()));
     let refused = bin()

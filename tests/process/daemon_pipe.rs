@@ -26,6 +26,13 @@ fn stdin_records_of_both_kinds_with_malformed_ones_between() {
     );
     let outside = s.out.parent().expect("tmp").join("elsewhere.obj");
     std::fs::write(&outside, patch_obj(12, 1)).expect("write");
+    // Path records reach only files under the pipe roots: here the folder above the inbox.
+    let roots = format!("pipe_roots = [{:?}]", s.out.parent().expect("tmp"));
+    std::fs::write(
+        &s.cfg,
+        config(0, "native", &roots).replace("max_file_bytes = 10000000", "max_file_bytes = 200000"),
+    )
+    .expect("config");
     let mut child = bin()
         .args(s.args())
         .args(["--pipe", "-"])

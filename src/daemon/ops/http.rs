@@ -1,29 +1,62 @@
 //! A minimal HTTP/1.1 responder for `/metrics` and `/healthz`: one request per connection,
-//! answered and closed. Loopback only (checked in config validation), no authentication.
+//! answered and closed, each connection on a thread of its own (at most `MAX_CONNECTIONS`
+//! at once) so that a slow client cannot hold `/healthz` from a supervisor. Loopback only
+//! (checked in config validation), no authentication.
 
 use super::metrics::Metrics;
 use std::io::{Read, Write};
 use std::net::{TcpListener, TcpStream};
-use std::sync::atomic::Ordering;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
+
+/// Connections served at once; more are closed at once (a client retries).
+const MAX_CONNECTIONS: usize = 32;
+/// The whole request must arrive within this, however slowly it trickles in.
+const REQUEST_DEADLINE: Duration = Duration::from_secs(2);
+
+/// Counts a connection's thread while it lives.
+struct Slot(Arc<AtomicUsize>);
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
 
 /// Binds now (so that a taken port fails the start-up, not some later moment) and serves
 /// on a thread of its own.
-pub fn serve(addr: &str, metrics: Arc<Metrics>) -> std::io::Result<std::net::SocketAddr> {
+pub(crate) fn serve(addr: &str, metrics: Arc<Metrics>) -> std::io::Result<std::net::SocketAddr> {
     let listener = TcpListener::bind(addr)?;
     let local = listener.local_addr()?;
+    let open = Arc::new(AtomicUsize::new(0));
     std::thread::Builder::new()
         .name("metrics".into())
         .spawn(move || {
             for conn in listener.incoming() {
-                match conn {
-                    Ok(stream) => {
+                let stream = match conn {
+                    Ok(s) => s,
+                    Err(e) => {
+                        tracing::debug!(error = %e, "metrics accept");
+                        continue;
+                    }
+                };
+                if open.fetch_add(1, Ordering::Relaxed) >= MAX_CONNECTIONS {
+                    open.fetch_sub(1, Ordering::Relaxed);
+                    continue;
+                }
+                let slot = Slot(Arc::clone(&open));
+                let metrics = Arc::clone(&metrics);
+                let spawned = std::thread::Builder::new()
+                    .name("metrics-conn".into())
+                    .spawn(move || {
+                        let _slot = slot;
                         if let Err(e) = answer(stream, &metrics) {
                             tracing::debug!(error = %e, "metrics connection");
                         }
-                    }
-                    Err(e) => tracing::debug!(error = %e, "metrics accept"),
+                    });
+                if let Err(e) = spawned {
+                    tracing::warn!(error = %e, "cannot serve a metrics connection");
                 }
             }
         })?;
@@ -36,7 +69,16 @@ fn answer(mut stream: TcpStream, metrics: &Metrics) -> std::io::Result<()> {
     stream.set_write_timeout(Some(Duration::from_secs(2)))?;
     let mut buf = Vec::with_capacity(1024);
     let mut chunk = [0u8; 1024];
+    let deadline = Instant::now() + REQUEST_DEADLINE;
     while !buf.windows(4).any(|w| w == b"\r\n\r\n") && buf.len() < 8192 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                "request not complete in time",
+            ));
+        }
+        stream.set_read_timeout(Some(left))?;
         let n = stream.read(&mut chunk)?;
         if n == 0 {
             break;
@@ -101,5 +143,23 @@ mod tests {
         m.stopping.store(true, Ordering::Relaxed);
         let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 503"), "{r}");
+    }
+
+    /// Clients that connect and send part of a request (or nothing) and keep the connection
+    /// open do not hold the health check: it is answered while they are still connected.
+    #[test]
+    fn a_silent_client_does_not_hold_health_checks() {
+        let m = Arc::new(Metrics::default());
+        let addr = serve("127.0.0.1:0", m).expect("binds");
+        let mut silent: Vec<TcpStream> = (0..4)
+            .map(|_| TcpStream::connect(addr).expect("connects"))
+            .collect();
+        silent[0].write_all(b"GET /heal").expect("sends part");
+        let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
+        assert!(r.starts_with("HTTP/1.1 200"), "{r}");
+        // The slow clients are cut off by the deadline: their reads end (no hang).
+        let mut rest = Vec::new();
+        let _ = silent[0].read_to_end(&mut rest);
+        assert!(rest.is_empty(), "no answer to a request never completed");
     }
 }

@@ -30,7 +30,11 @@ pub struct Metrics {
     pub reload_failures: AtomicU64,
     pub stopping: AtomicBool,
     fit: Mutex<Histogram>,
-    last_error: Mutex<Option<(f64, String)>>,
+    /// When and of which kind the last error was.
+    last_error: Mutex<Option<(f64, &'static str)>>,
+    /// Rejections per kind: a fixed, small set of label values (never a file name or a
+    /// reason, which would make one series per input).
+    rejections: Mutex<std::collections::BTreeMap<&'static str, u64>>,
 }
 
 fn now_secs() -> f64 {
@@ -66,9 +70,22 @@ impl Metrics {
         h.sum += seconds;
     }
 
-    pub fn error(&self, reason: &str) {
-        *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) =
-            Some((now_secs(), reason.to_string()));
+    /// An error of this kind (a `kinds::rejection_kind`, or `write_failed`,
+    /// `component_failed`, `config_rejected`) happened now.
+    pub(crate) fn error(&self, kind: &'static str) {
+        *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some((now_secs(), kind));
+    }
+
+    /// A rejection of this kind (also counted as the last error).
+    pub(crate) fn rejected(&self, kind: &'static str) {
+        self.rejected.fetch_add(1, Ordering::Relaxed);
+        *self
+            .rejections
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .entry(kind)
+            .or_default() += 1;
+        self.error(kind);
     }
 
     pub fn render(&self) -> String {
@@ -138,20 +155,25 @@ impl Metrics {
             let _ = writeln!(s, "{name}_bucket{{le=\"+Inf\"}} {}", h.count);
             let _ = writeln!(s, "{name}_sum {}\n{name}_count {}", h.sum, h.count);
         }
-        let last = self
-            .last_error
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone();
+        let last = *self.last_error.lock().unwrap_or_else(|p| p.into_inner());
         let name = "trispline_last_error_timestamp_seconds";
-        let _ = writeln!(s, "# HELP {name} When the last error happened; its reason is the label.\n# TYPE {name} gauge");
+        let _ = writeln!(s, "# HELP {name} When the last error happened; its kind is the label (the reason is in events.ndjson).\n# TYPE {name} gauge");
         match last {
-            Some((t, reason)) => {
-                let _ = writeln!(s, "{name}{{reason=\"{}\"}} {t}", label(&reason));
+            Some((t, kind)) => {
+                let _ = writeln!(s, "{name}{{kind=\"{}\"}} {t}", label(kind));
             }
             None => {
-                let _ = writeln!(s, "{name}{{reason=\"\"}} 0");
+                let _ = writeln!(s, "{name}{{kind=\"\"}} 0");
             }
+        }
+        let name = "trispline_rejections_total";
+        let _ = writeln!(
+            s,
+            "# HELP {name} Inputs or records rejected, by kind.\n# TYPE {name} counter"
+        );
+        let by_kind = self.rejections.lock().unwrap_or_else(|p| p.into_inner());
+        for (kind, n) in by_kind.iter() {
+            let _ = writeln!(s, "{name}{{kind=\"{}\"}} {n}", label(kind));
         }
         s
     }
@@ -167,15 +189,21 @@ mod tests {
         m.observe_fit(0.003);
         m.observe_fit(0.2);
         m.fitted.fetch_add(2, Ordering::Relaxed);
-        m.error("bad \"file\"\nhere");
+        m.rejected("parse_failed");
+        m.rejected("parse_failed");
+        m.rejected("too_large");
         let text = m.render();
         assert!(text.contains("trispline_patches_fitted_total 2"));
         assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"0.005\"} 1"));
         assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"0.25\"} 2"));
         assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"+Inf\"} 2"));
+        assert!(text.contains("trispline_rejections_total{kind=\"parse_failed\"} 2"));
+        assert!(text.contains("trispline_rejections_total{kind=\"too_large\"} 1"));
+        assert!(text.contains("trispline_patches_rejected_total 3"));
         assert!(
-            text.contains("reason=\"bad \\\"file\\\"\\nhere\""),
+            text.contains("trispline_last_error_timestamp_seconds{kind=\"too_large\"}"),
             "{text}"
         );
+        assert_eq!(label("a\"b\\c\nd"), "a\\\"b\\\\c\\nd");
     }
 }

@@ -1,0 +1,246 @@
+//! The scheduler loop: hears arrivals, finished fits and the writer's acknowledgements,
+//! coalesces versions by patch id and hands jobs to the pool; stops, reloads.
+
+use super::job::{Job, JobDone, Outcome};
+use super::ops::metrics::Metrics;
+use super::ops::sdnotify;
+use super::reload::{ConfigCell, Reloaded, Reloader};
+use super::scheduler::{Arrival, Input, Scheduler};
+use super::writer::WriterMsg;
+use super::{Control, Msg, Source};
+use crate::pipeline::worker::WarmStart;
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use serde_json::json;
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// The scheduler loop's state.
+pub(crate) struct Loop {
+    pub(crate) sched: Scheduler,
+    /// Versions a worker holds: bounds dispatch to the pool size.
+    pub(crate) in_flight: usize,
+    /// Warm starts of fits dropped as stale, for the next version of the same patch.
+    pub(crate) warm: HashMap<String, WarmStart>,
+    pub(crate) cell: Arc<ConfigCell>,
+    pub(crate) metrics: Arc<Metrics>,
+    pub(crate) wtx: Sender<WriterMsg>,
+    pub(crate) job_tx: Sender<Job>,
+    pub(crate) workers: usize,
+}
+
+/// The sources still open and whether stdin ended (which ends the daemon once idle).
+#[derive(Default)]
+pub(crate) struct Sources {
+    pub(crate) open: usize,
+    pub(crate) stdin_done: bool,
+}
+
+impl Loop {
+    /// Runs until the work is done (`--once`, stdin ended) or a stop has waited for the
+    /// fits in progress (or for its time bound).
+    pub(crate) fn drive(
+        &mut self,
+        inbox: &Receiver<Msg>,
+        ctl: &Control,
+        reloader: &mut Reloader,
+        intake_stop: &AtomicBool,
+        once: bool,
+        sources: &mut Sources,
+    ) {
+        let mut stop_by: Option<Instant> = None;
+        let tick = Duration::from_millis(100);
+        loop {
+            match inbox.recv_timeout(tick) {
+                Ok(m) => {
+                    self.handle(m, stop_by.is_some(), sources);
+                    // Take everything already waiting before handing out jobs: versions that
+                    // arrived together coalesce.
+                    while let Ok(m) = inbox.try_recv() {
+                        self.handle(m, stop_by.is_some(), sources);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            if stop_by.is_none() && ctl.stop.load(Ordering::Relaxed) {
+                stop_by = Some(self.begin_stop(intake_stop));
+            }
+            let reload_asked = ctl.reload.swap(false, Ordering::Relaxed);
+            if stop_by.is_none() && (reload_asked || reloader.file_changed()) {
+                self.reload(reloader, ctl);
+            }
+            if stop_by.is_none() {
+                self.dispatch();
+            }
+            self.metrics
+                .queue_depth
+                .store(self.sched.pending_len() as u64, Ordering::Relaxed);
+            self.metrics
+                .in_flight
+                .store(self.sched.busy_len() as u64, Ordering::Relaxed);
+            let done = match stop_by {
+                Some(deadline) => self.stopped_by(deadline),
+                None => self.sched.idle() && ((once && sources.open == 0) || sources.stdin_done),
+            };
+            if done {
+                break;
+            }
+        }
+    }
+
+    /// Closes intake and spills what waits; returns when the stop's time bound runs out.
+    fn begin_stop(&mut self, intake_stop: &AtomicBool) -> Instant {
+        sdnotify::notify("STOPPING=1");
+        self.metrics.stopping.store(true, Ordering::Relaxed);
+        intake_stop.store(true, Ordering::Relaxed);
+        let bound = Duration::from_millis(self.cell.get().daemon.stop_timeout_ms);
+        let waiting = self.sched.drain_pending();
+        tracing::info!(
+            in_flight = self.sched.busy_len(),
+            waiting = waiting.len(),
+            "stopping: intake closed, waiting for fits in progress"
+        );
+        for a in waiting {
+            self.spill(a);
+        }
+        Instant::now() + bound
+    }
+
+    /// Whether a stop is complete: nothing in progress, or the time bound reached (what
+    /// is still in progress is then spilled).
+    fn stopped_by(&mut self, deadline: Instant) -> bool {
+        if self.sched.busy_len() == 0 {
+            return true;
+        }
+        if Instant::now() < deadline {
+            return false;
+        }
+        tracing::warn!(
+            in_flight = self.sched.busy_len(),
+            "stop bound reached; leaving fits in progress"
+        );
+        let busy: Vec<Arrival> = self.sched.busy().cloned().collect();
+        for a in busy {
+            self.spill(a);
+        }
+        true
+    }
+
+    fn handle(&mut self, m: Msg, stopping: bool, sources: &mut Sources) {
+        match m {
+            Msg::Arrivals(batch) => {
+                for a in batch {
+                    if stopping {
+                        // Intake is closed: files stay for the next start, records spill.
+                        self.spill(a);
+                    } else if let Some(s) = self.sched.add(a) {
+                        let _ = self.wtx.send(WriterMsg::Superseded {
+                            loser: s.loser,
+                            by: s.by,
+                        });
+                    }
+                }
+            }
+            Msg::SourceDone(kind) => {
+                sources.open = sources.open.saturating_sub(1);
+                sources.stdin_done |= kind == Source::Stdin;
+            }
+            Msg::Fitted(done) => {
+                let done = *done;
+                self.in_flight = self.in_flight.saturating_sub(1);
+                let stale = match &done.outcome {
+                    Outcome::Fitted { .. } => {
+                        self.sched.has_newer(&done.arrival.id, &done.arrival.key)
+                    }
+                    _ => None,
+                };
+                match (stale, done.outcome) {
+                    (Some(by), Outcome::Fitted { outputs, .. }) => {
+                        // A newer version waits: writing this one would only publish a
+                        // result already out of date. Its control net still seeds the next.
+                        self.warm.insert(done.arrival.id.clone(), outputs.warm);
+                        self.sched.finish(&done.arrival.id);
+                        let _ = self.wtx.send(WriterMsg::Superseded {
+                            loser: done.arrival,
+                            by,
+                        });
+                    }
+                    (_, outcome) => {
+                        let _ = self.wtx.send(WriterMsg::Done(JobDone { outcome, ..done }));
+                    }
+                }
+            }
+            Msg::Written(id) => self.sched.finish(&id),
+        }
+    }
+
+    fn dispatch(&mut self) {
+        while self.in_flight < self.workers {
+            let Some(a) = self.sched.next_ready() else {
+                break;
+            };
+            self.in_flight += 1;
+            let job = Job {
+                warm: self.warm.remove(&a.id),
+                arrival: a,
+                cfg: self.cell.get(),
+            };
+            if let Err(e) = self.job_tx.try_send(job) {
+                // Cannot happen while in_flight bounds the queue; if it does, the version
+                // goes back to wait rather than being lost.
+                tracing::error!("job queue refused a job; retrying later");
+                let job = e.into_inner();
+                self.in_flight -= 1;
+                self.sched.finish(&job.arrival.id);
+                if let Some(w) = job.warm {
+                    self.warm.insert(job.arrival.id.clone(), w);
+                }
+                self.sched.add(job.arrival);
+                break;
+            }
+        }
+    }
+
+    fn spill(&mut self, a: Arrival) {
+        if matches!(a.input, Input::Inline { .. }) {
+            let _ = self.wtx.send(WriterMsg::Spill(a));
+        }
+    }
+
+    fn reload(&mut self, reloader: &mut Reloader, ctl: &Control) {
+        sdnotify::notify("RELOADING=1");
+        match reloader.reload(&self.cell) {
+            Reloaded::Applied { restart_needed } => {
+                let cfg = self.cell.get();
+                if let Some(set) = &ctl.set_log_level {
+                    if let Err(e) = set(&cfg.log.level) {
+                        tracing::warn!(error = %e, "cannot apply log.level");
+                    }
+                }
+                self.metrics.reloads.fetch_add(1, Ordering::Relaxed);
+                if restart_needed.is_empty() {
+                    tracing::info!("config reloaded");
+                } else {
+                    tracing::warn!(
+                        ?restart_needed,
+                        "config reloaded; some changes need a restart"
+                    );
+                }
+                let _ = self.wtx.send(WriterMsg::Event(json!({
+                    "status": "config_reloaded", "restart_needed": restart_needed,
+                })));
+            }
+            Reloaded::Refused { reason } => {
+                tracing::error!(%reason, "config reload refused; the old config stays");
+                self.metrics.reload_failures.fetch_add(1, Ordering::Relaxed);
+                self.metrics.error("config_rejected");
+                let _ = self.wtx.send(WriterMsg::Event(json!({
+                    "status": "config_rejected", "reason": reason,
+                })));
+            }
+        }
+        sdnotify::notify("READY=1");
+    }
+}

@@ -1,0 +1,251 @@
+//! The hardening points of the daemon as a process: a relative watch folder sees renamed-in
+//! files; pipe path records cannot reach outside their roots; odd entries are reported once
+//! and odd names get distinct, safe folders; superseded versions are recorded once across
+//! starts; a record half-received at a stop is reported.
+
+mod daemon_support;
+use daemon_support::*;
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+fn count(out: &std::path::Path, f: impl Fn(&serde_json::Value) -> bool) -> usize {
+    events(out).iter().filter(|e| f(e)).count()
+}
+
+/// `trispline watch in --out out` started from the folder above, then `mv in/.x.part
+/// in/a.obj`: fitted at once, with a settle time far too long for the settle fallback to
+/// be what took it.
+#[test]
+fn a_relative_watch_folder_sees_renamed_in_files() {
+    let s = setup(&config(3_000_000, "native", ""));
+    let root = s.out.parent().expect("tmp").to_path_buf();
+    let log = std::fs::File::create(root.join("daemon.log")).expect("log");
+    let child = bin()
+        .current_dir(&root)
+        .args(["watch", "in", "--out", "out", "--config", "daemon.toml"])
+        .stdin(Stdio::null())
+        .stderr(log)
+        .spawn()
+        .expect("spawns");
+    assert!(
+        wait_until(|| s.log().contains("watching")),
+        "started: {}",
+        s.log()
+    );
+    std::fs::write(s.inbox.join(".x.part"), patch_obj(12, 1)).expect("write");
+    let moved = Command::new("mv")
+        .current_dir(&root)
+        .args(["in/.x.part", "in/a.obj"])
+        .status()
+        .expect("mv");
+    assert!(moved.success());
+    assert!(
+        wait_until(|| s.out.join("a/surface.json").exists()),
+        "a renamed-in file is fitted: {}",
+        s.log()
+    );
+    assert!(stop(child).is_some_and(|st| st.success()));
+}
+
+/// `../`, an absolute path elsewhere and a symlink out of the folder name a victim file:
+/// each is refused with a kind, and the victim is neither moved nor deleted although the
+/// processed policy is `delete`; a file inside the folder is fitted and deleted.
+#[test]
+fn pipe_path_records_cannot_reach_outside_the_roots() {
+    let s = setup(&format!(
+        "{}\n[output]\nprocessed = \"delete\"\n",
+        config(3_000_000, "native", "")
+    ));
+    let root = s.out.parent().expect("tmp").to_path_buf();
+    let victim = root.join("victim.obj");
+    std::fs::write(&victim, patch_obj(12, 2)).expect("victim");
+    let sub = s.inbox.join("sub");
+    std::fs::create_dir(&sub).expect("sub");
+    std::os::unix::fs::symlink(&victim, sub.join("link.obj")).expect("symlink");
+    std::fs::write(sub.join("mine.obj"), patch_obj(12, 3)).expect("inside");
+    let mut child = bin()
+        .args(s.args())
+        .args(["--pipe", "-"])
+        .stdin(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawns");
+    let mut w = child.stdin.take().expect("stdin");
+    let records = [
+        ("dotdot", format!("{}/../victim.obj", s.inbox.display())),
+        ("absolute", victim.display().to_string()),
+        ("symlink", sub.join("link.obj").display().to_string()),
+        ("inside", sub.join("mine.obj").display().to_string()),
+    ];
+    for (patch, path) in &records {
+        let line = serde_json::json!({"patch": patch, "path": path}).to_string();
+        write_all(&mut w, format!("{line}\n").as_bytes());
+    }
+    drop(w);
+    assert!(wait_exit(&mut child).is_some_and(|st| st.success()));
+    let ev = events(&s.out);
+    for patch in ["dotdot", "absolute", "symlink"] {
+        let e = ev
+            .iter()
+            .find(|e| e["patch"] == patch)
+            .unwrap_or_else(|| panic!("{patch}: {ev:?}"));
+        assert_eq!(e["status"], "rejected", "{e}");
+        assert_eq!(e["kind"], "path_outside_roots", "{e}");
+        assert!(e["quarantined_as"].is_null(), "{e}");
+    }
+    assert!(victim.exists(), "the victim stays where it is");
+    assert!(sub.join("link.obj").exists(), "the symlink is left too");
+    assert!(s.out.join("inside/surface.json").exists());
+    assert!(
+        !sub.join("mine.obj").exists(),
+        "the processed policy applies inside the roots"
+    );
+}
+
+/// A symlink loop, symlinks to a folder and to a device, a folder and a FIFO with mesh
+/// names, a non-UTF-8 name: each reported once (one event, however many scans), never
+/// fitted. Names that used to collide or land on OUT's own entries get folders of their own.
+#[test]
+fn odd_entries_are_reported_once_and_odd_names_get_their_own_folders() {
+    use std::os::unix::ffi::OsStrExt;
+    let s = setup(&config(200, "poll", ""));
+    let inbox = &s.inbox;
+    std::os::unix::fs::symlink("loop.obj", inbox.join("loop.obj")).expect("loop");
+    std::os::unix::fs::symlink(inbox.parent().expect("tmp"), inbox.join("todir.obj"))
+        .expect("dir link");
+    std::os::unix::fs::symlink("/dev/zero", inbox.join("zero.ply")).expect("device link");
+    std::fs::create_dir(inbox.join("dir.obj")).expect("dir");
+    assert!(Command::new("mkfifo")
+        .arg(inbox.join("fifo.ply"))
+        .status()
+        .expect("mkfifo")
+        .success());
+    let raw = std::ffi::OsStr::from_bytes(b"bad\xffname.obj");
+    std::fs::write(inbox.join(raw), patch_obj(10, 1)).expect("non-utf8");
+    let names = [
+        "测试.obj",
+        "例子.obj",
+        "quarantine.obj",
+        "processed.obj",
+        "events.ndjson.obj",
+    ];
+    for (k, n) in names.iter().enumerate() {
+        std::fs::write(inbox.join(n), patch_obj(10, k as u32 + 2)).expect("write");
+    }
+    let child = s.spawn(&[]);
+    let fitted = || count(&s.out, is_fitted);
+    assert!(
+        wait_until(|| fitted() == names.len()),
+        "{:?} {}",
+        events(&s.out),
+        s.log()
+    );
+    // Many more scans happen while a late file is settled and fitted.
+    drop_file(inbox, "late.obj", &patch_obj(10, 9));
+    assert!(wait_until(|| s.out.join("late/surface.json").exists()));
+    assert!(stop(child).is_some_and(|st| st.success()));
+    let skipped: Vec<(String, String)> = events(&s.out)
+        .iter()
+        .filter(|e| e["status"] == "skipped")
+        .map(|e| {
+            let input = e["input"].as_str().unwrap_or("");
+            let name = input.rsplit('/').next().unwrap_or("").to_string();
+            (name, e["kind"].as_str().unwrap_or("").to_string())
+        })
+        .collect();
+    let mut want = vec![
+        ("loop.obj".to_string(), "symlink_loop".to_string()),
+        ("todir.obj".into(), "directory".into()),
+        ("zero.ply".into(), "device".into()),
+        ("dir.obj".into(), "directory".into()),
+        ("fifo.ply".into(), "fifo".into()),
+        ("bad\u{fffd}name.obj".into(), "non_utf8_name".into()),
+    ];
+    let mut got = skipped.clone();
+    want.sort();
+    got.sort();
+    assert_eq!(got, want, "each once");
+    let folders: std::collections::HashSet<String> = events(&s.out)
+        .iter()
+        .filter(|e| is_fitted(e))
+        .map(|e| e["patch"].as_str().unwrap_or("").to_string())
+        .collect();
+    assert_eq!(folders.len(), names.len() + 1, "{folders:?}");
+    assert!(
+        folders.contains("测试") && folders.contains("例子"),
+        "{folders:?}"
+    );
+    for reserved in ["quarantine", "processed", "events.ndjson"] {
+        assert!(!folders.contains(reserved), "{folders:?}");
+    }
+    assert!(s.out.join("events.ndjson").is_file());
+    assert!(!s.out.join("quarantine/surface.json").exists());
+}
+
+/// Older versions left in the folder lose to the newest again at every start; the event
+/// log says so once per version.
+#[test]
+fn superseded_versions_are_recorded_once_across_starts() {
+    let s = setup(&config(0, "native", ""));
+    for k in 0..3u32 {
+        std::fs::write(s.inbox.join(format!("scan@{k}.obj")), patch_obj(10, k)).expect("write");
+        // Distinct mtimes, oldest first.
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    for _ in 0..3 {
+        let o = s.once();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    for k in 0..2 {
+        let version = format!("scan@{k}.obj");
+        let n = count(&s.out, |e| {
+            e["status"] == "superseded" && e["version"] == version.as_str()
+        });
+        assert_eq!(n, 1, "{version}: {:?}", events(&s.out));
+    }
+    assert_eq!(count(&s.out, is_fitted), 1);
+}
+
+/// SIGTERM while a record's payload is still arriving: the event log says which record
+/// was cut and how far it got.
+#[test]
+fn a_record_half_received_at_stop_is_reported() {
+    let s = setup(&format!(
+        "{}\n[log]\nlevel = \"debug\"\n",
+        config(0, "native", "")
+    ));
+    let log = std::fs::File::create(s.out.parent().expect("tmp").join("daemon.log")).expect("log");
+    let mut child = bin()
+        .args(s.args())
+        .args(["--pipe", "-"])
+        .stdin(Stdio::piped())
+        .stderr(log)
+        .spawn()
+        .expect("spawns");
+    let mut w = child.stdin.take().expect("stdin");
+    w.write_all(b"{\"patch\": \"cut\", \"format\": \"obj\", \"bytes\": 100000}\n")
+        .expect("header");
+    w.write_all(&[b'#'; 1000]).expect("part");
+    w.flush().expect("flush");
+    assert!(
+        wait_until(|| s.log().contains("reading a record's payload")),
+        "{}",
+        s.log()
+    );
+    signal(&child, "TERM");
+    assert!(wait_exit(&mut child).is_some_and(|st| st.success()));
+    drop(w);
+    let ev = events(&s.out);
+    let cut = ev
+        .iter()
+        .find(|e| e["patch"] == "cut")
+        .unwrap_or_else(|| panic!("{ev:?}"));
+    assert_eq!(cut["status"], "rejected");
+    assert_eq!(cut["kind"], "record_truncated");
+    assert!(
+        cut["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("of 100000 bytes")),
+        "{cut}"
+    );
+}
