@@ -1,14 +1,14 @@
 //! The machine-readable `kind` of a rejection, beside the human `reason` in events and as
 //! the only label of the rejection metrics (free text would make one series per file).
 //!
-//! Classified here, in one place: when the reader and pipeline errors carry a `kind()` of
-//! their own, `Cause::Parse` and `Cause::Pipeline` ask them instead.
+//! Classified here, in one place. The reader's and the pipeline's errors name their own
+//! kind (`IoError::kind`, `PipelineError::kind`: stable snake_case names from a fixed set),
+//! so a rejection says which refusal it was ("truncated", "not_disk_like"), not only that
+//! parsing or fitting failed.
 
 use super::confine::Refusal;
 
-/// What went wrong with an input or a pipe record. The errors ride along although only
-/// their variant is read today: they are what `rejection_kind` will ask for their own kind.
-#[allow(dead_code)]
+/// What went wrong with an input or a pipe record.
 pub(crate) enum Cause<'a> {
     /// The file could not be read (gone, permissions).
     Read(&'a std::io::Error),
@@ -50,13 +50,17 @@ pub(crate) enum RecordFault {
 /// The `kind` string of a rejection.
 pub(crate) fn rejection_kind(cause: &Cause<'_>) -> &'static str {
     match cause {
-        Cause::Read(_) => "read_failed",
+        Cause::Read(e) => match e.kind() {
+            std::io::ErrorKind::NotFound => "read_not_found",
+            std::io::ErrorKind::PermissionDenied => "read_permission_denied",
+            _ => "read_failed",
+        },
         Cause::TooLarge => "too_large",
         Cause::TooManyVertices => "too_many_vertices",
         Cause::UnknownFormat => "unknown_format",
         Cause::NoPatchId => "no_patch_id",
-        Cause::Parse(_) => "parse_failed",
-        Cause::Pipeline(_) => "pipeline_refused",
+        Cause::Parse(e) => e.kind(),
+        Cause::Pipeline(e) => e.kind(),
         Cause::Panic => "panic",
         Cause::Path(r) => r.kind(),
         Cause::Record(f) => match f {

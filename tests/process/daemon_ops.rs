@@ -263,9 +263,15 @@ fn metrics_and_health_on_loopback() {
     assert!(m.contains("trispline_patches_rejected_total 1"), "{m}");
     assert!(m.contains("trispline_fit_duration_seconds_count 2"), "{m}");
     assert!(m.contains("trispline_queue_depth 0"), "{m}");
-    // Labels are kinds, never file names or reasons (one series per input otherwise).
+    // Labels are kinds, never file names or reasons (one series per input otherwise): the
+    // reader's own kind for a header that never ends, the same one the event carries.
+    let rejected = events(&s.out)
+        .into_iter()
+        .find(|e| e["status"] == "rejected")
+        .expect("a rejection event");
+    assert_eq!(rejected["kind"], "bad_header", "{rejected}");
     assert!(
-        m.contains("trispline_rejections_total{kind=\"parse_failed\"} 1"),
+        m.contains("trispline_rejections_total{kind=\"bad_header\"} 1"),
         "{m}"
     );
     assert!(!m.contains("bad.ply"), "{m}");

@@ -9,6 +9,7 @@ mod cli_fit_scan;
 mod cli_mesh;
 mod components;
 mod daemon_crash;
+mod daemon_harden;
 mod daemon_ops;
 mod daemon_pipe;
 mod daemon_process;

@@ -3,8 +3,7 @@
 //! and odd names get distinct, safe folders; superseded versions are recorded once across
 //! starts; a record half-received at a stop is reported.
 
-mod daemon_support;
-use daemon_support::*;
+use crate::daemon_support::*;
 use std::io::Write;
 use std::process::{Command, Stdio};
 
