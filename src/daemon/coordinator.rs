@@ -2,12 +2,12 @@
 //! coalesces versions by patch id and hands jobs to the pool; stops, reloads.
 
 use super::job::{Job, JobDone, Outcome};
+use super::messages::{Control, Msg, Source};
 use super::ops::metrics::Metrics;
 use super::ops::sdnotify;
 use super::reload::{ConfigCell, Reloaded, Reloader};
 use super::scheduler::{Arrival, Input, Scheduler};
 use super::writer::WriterMsg;
-use super::{Control, Msg, Source};
 use crate::pipeline::worker::WarmStart;
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use serde_json::json;

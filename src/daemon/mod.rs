@@ -11,6 +11,7 @@ mod confine;
 mod coordinator;
 mod job;
 mod kinds;
+mod messages;
 pub(crate) mod ops;
 pub(crate) mod pipe;
 mod publish;
@@ -20,17 +21,18 @@ pub mod state;
 mod watcher;
 mod writer;
 
-use crate::io::Format;
 use config::DaemonConfig;
 use coordinator::{Loop, Sources};
 use crossbeam_channel::{Receiver, Sender};
-use job::{Job, JobDone};
+use job::Job;
+use messages::Msg;
+pub use messages::{Control, Summary};
 use ops::metrics::Metrics;
 use ops::sdnotify;
 use pipe::PipeSource;
 pub use pipe::PipeSpec;
 use reload::{ConfigCell, Reloader};
-use scheduler::{Arrival, Scheduler};
+use scheduler::Scheduler;
 use state::StateStore;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -107,108 +109,6 @@ pub struct DaemonOptions {
     pub config_path: Option<PathBuf>,
     /// A pipe to read records from as well.
     pub pipe: Option<PipeSpec>,
-}
-
-/// Signals from outside: set by signal handlers, read by the scheduler loop.
-#[derive(Default)]
-pub struct Control {
-    /// Stop gracefully (SIGTERM, SIGINT).
-    pub stop: Arc<AtomicBool>,
-    /// Re-read the config (SIGHUP).
-    pub reload: Arc<AtomicBool>,
-    /// Applies a new log filter (the subscriber belongs to the caller).
-    #[allow(clippy::type_complexity)]
-    pub set_log_level: Option<Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>>,
-}
-
-/// What one run did, for `--once` callers and tests.
-#[derive(Debug, Default, Clone)]
-pub struct Summary {
-    /// Surfaces fitted and written.
-    pub fitted: usize,
-    /// Inputs and records rejected.
-    pub rejected: usize,
-    /// Versions skipped for a newer one.
-    pub superseded: usize,
-    /// Inputs skipped as identical to their last fit.
-    pub unchanged: usize,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Source {
-    Folder,
-    Stdin,
-    Fifo,
-}
-
-/// Everything the scheduler loop hears about.
-pub(crate) enum Msg {
-    Arrivals(Vec<Arrival>),
-    SourceDone(Source),
-    Fitted(Box<JobDone>),
-    /// The writer is done with the patch's version.
-    Written(String),
-}
-
-/// Output names a patch folder must never take: OUT holds them beside the patch folders.
-const RESERVED_IDS: [&str; 3] = ["quarantine", "processed", "events.ndjson"];
-
-/// A patch id from a pipe record or a file stem, safe as a folder name in OUT: letters and
-/// digits of any script, `_`, `-` and `.` are kept; anything else (and a leading or trailing
-/// dot, a reserved name, an overlong id) is replaced and marked with `~` and a hash of the
-/// raw id. `~` never survives sanitising, so a marked id cannot equal a clean one and two
-/// raw ids differ after sanitising unless their hashes collide. `None` for an empty id.
-pub(crate) fn sanitize_id(raw: &str) -> Option<String> {
-    const MAX_CHARS: usize = 120;
-    if raw.is_empty() {
-        return None;
-    }
-    let mut changed = false;
-    let mut id: String = raw
-        .chars()
-        .map(|c| {
-            if c.is_alphanumeric() || c == '_' || c == '-' || c == '.' {
-                c
-            } else {
-                changed = true;
-                '_'
-            }
-        })
-        .collect();
-    let trimmed = id.trim_matches('.');
-    if trimmed.len() != id.len() {
-        changed = true;
-        id = trimmed.to_string();
-    }
-    if id.chars().count() > MAX_CHARS {
-        changed = true;
-        id = id.chars().take(MAX_CHARS).collect();
-    }
-    let reserved = RESERVED_IDS
-        .iter()
-        .any(|r| id == *r || id.starts_with(&format!("{r}.")));
-    if changed || reserved {
-        let hash = state::content_hash(raw.as_bytes());
-        id = format!("{id}~{:08x}", hash as u32 ^ (hash >> 32) as u32);
-    }
-    Some(id)
-}
-
-/// Patch id of a file: the stem up to the first '@', sanitised.
-pub(crate) fn patch_id(path: &Path) -> Option<String> {
-    let stem = path.file_stem()?.to_str()?;
-    sanitize_id(stem.split('@').next().unwrap_or(stem))
-}
-
-/// Names that are still being written or are not meshes.
-pub(crate) fn ignored(path: &Path) -> bool {
-    let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
-        return true;
-    };
-    name.starts_with('.')
-        || name.ends_with(".tmp")
-        || name.ends_with(".part")
-        || Format::from_path(path).is_none()
 }
 
 /// Temp files of writes cut short by a crash: never outputs, removed at start-up.
@@ -418,52 +318,4 @@ fn spawn<T: Send + 'static>(
             name: name.to_string(),
             source,
         })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn patch_ids_are_safe_and_distinct() {
-        let ids: Vec<String> = [
-            "测试",
-            "例子",
-            "ear",
-            "ear_",
-            "ear?",
-            "ear*",
-            "a/b",
-            "a_b",
-            "..",
-            ".hidden",
-            "quarantine",
-            "processed",
-            "events.ndjson",
-            "events.ndjson.torn",
-            "x~1",
-        ]
-        .iter()
-        .map(|raw| sanitize_id(raw).expect("an id"))
-        .collect();
-        assert_eq!(ids[0], "测试");
-        assert_eq!(ids[2], "ear");
-        let unique: std::collections::HashSet<&String> = ids.iter().collect();
-        assert_eq!(unique.len(), ids.len(), "{ids:?}");
-        for id in &ids {
-            assert!(
-                !id.contains('/') && !id.starts_with('.') && !id.is_empty(),
-                "{id}"
-            );
-            assert!(!RESERVED_IDS.contains(&id.as_str()), "{id}");
-        }
-        assert!(ids[3] == "ear_" && ids[4].starts_with("ear_~"), "{ids:?}");
-        assert_eq!(sanitize_id(""), None);
-        let long = "x".repeat(500);
-        assert!(sanitize_id(&long).expect("id").len() < 140);
-        assert_eq!(
-            patch_id(Path::new("/in/测试@0003.obj")).as_deref(),
-            Some("测试")
-        );
-    }
 }

@@ -11,10 +11,10 @@
 
 use super::confine::Roots;
 use super::kinds::{rejection_kind, Cause, RecordFault};
+use super::messages::{sanitize_id, Msg, Source};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
-use super::{sanitize_id, Msg, Source};
 use crate::io::Format;
 use crossbeam_channel::Sender;
 use std::cell::RefCell;

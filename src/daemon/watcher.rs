@@ -7,10 +7,10 @@
 
 use super::config::WatcherKind;
 use super::kinds::{rejection_kind, Cause};
+use super::messages::{ignored, patch_id, Msg, Source};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
-use super::{ignored, patch_id, Msg, Source};
 use crossbeam_channel::{RecvTimeoutError, Sender};
 use notify::event::{AccessKind, AccessMode, ModifyKind, RenameMode};
 use notify::{EventKind, RecursiveMode, Watcher};
