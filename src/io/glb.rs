@@ -275,10 +275,17 @@ impl ErrorRamp {
                 k as f64 / n as f64
             ));
         }
+        // Three significant digits on the largest label, the same decimals on all.
+        let largest = self.stop_error(n, tolerance);
+        let decimals = if largest > 0.0 && largest.is_finite() {
+            (2.0 - largest.log10().floor()).clamp(0.0, 12.0) as usize
+        } else {
+            3
+        };
         let mut ticks = String::new();
         for k in 0..=n {
             let x = bar_x + bar_w * k as f64 / n as f64;
-            let label = format!("{:.3}", self.stop_error(k, tolerance));
+            let label = format!("{:.decimals$}", self.stop_error(k, tolerance));
             let label = if k == n {
                 format!("\u{2265} {label}")
             } else {
@@ -289,7 +296,7 @@ impl ErrorRamp {
             ));
         }
         format!(
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"110\" viewBox=\"0 0 {w} 110\" font-family=\"sans-serif\" font-size=\"12\"><rect width=\"{w}\" height=\"110\" fill=\"white\"/><defs><linearGradient id=\"ramp\">{gradient}</linearGradient></defs><text x=\"{bar_x}\" y=\"22\" font-size=\"13\">{}</text><rect x=\"{bar_x}\" y=\"32\" width=\"{bar_w}\" height=\"30\" fill=\"url(#ramp)\" stroke=\"#222\"/>{ticks}<text x=\"{bar_x}\" y=\"102\">{} (tolerance {:.3} {})</text></svg>\n",
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"110\" viewBox=\"0 0 {w} 110\" font-family=\"sans-serif\" font-size=\"12\"><rect width=\"{w}\" height=\"110\" fill=\"white\"/><defs><linearGradient id=\"ramp\">{gradient}</linearGradient></defs><text x=\"{bar_x}\" y=\"22\" font-size=\"13\">{}</text><rect x=\"{bar_x}\" y=\"32\" width=\"{bar_w}\" height=\"30\" fill=\"url(#ramp)\" stroke=\"#222\"/>{ticks}<text x=\"{bar_x}\" y=\"102\">{} (tolerance {:.decimals$} {})</text></svg>\n",
             xml_escape(title),
             xml_escape(unit),
             tolerance,
@@ -389,7 +396,7 @@ mod tests {
         assert!(!near(0.5 * t, 2));
         let svg = ERROR_RAMP.legend_svg(t, "mm", "error <b>");
         assert!(
-            svg.contains("error &lt;b&gt;") && svg.contains(">4.000<"),
+            svg.contains("error &lt;b&gt;") && svg.contains(">\u{2265} 4.00<"),
             "{svg}"
         );
     }
