@@ -55,12 +55,12 @@ impl IgesUnits {
     }
 
     /// A warning when data whose largest bounding-box side is `extent` (in this unit) would
-    /// be an implausible size for a scanned object: under 1 mm or over 100 m. A unit
+    /// be an implausible size for a scanned object: under 1 cm or over 100 m. A unit
     /// mismatch is a factor of 1000 (or 25.4), so it lands far outside that range for
-    /// anything from a coin to a building, while a correct unit rarely does.
+    /// anything from a coin to a house, while a correct unit rarely does.
     pub fn size_warning(self, extent: f64) -> Option<String> {
         let metres = extent * self.metres();
-        if !metres.is_finite() || metres <= 0.0 || (1e-3..=100.0).contains(&metres) {
+        if !metres.is_finite() || metres <= 0.0 || (1e-2..=100.0).contains(&metres) {
             return None;
         }
         let likely = IgesUnits::ALL
