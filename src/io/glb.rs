@@ -265,7 +265,7 @@ impl ErrorRamp {
     /// An SVG legend: the ramp as a horizontal bar with each stop's error in `unit`.
     /// Colours are converted to sRGB, as a viewer displays the linear vertex colours.
     pub fn legend_svg(&self, tolerance: f64, unit: &str, title: &str) -> String {
-        let (w, bar_x, bar_w) = (420.0, 20.0, 380.0);
+        let (w, bar_x, bar_w) = (480.0, 40.0, 380.0);
         let n = self.stops.len() - 1;
         let mut gradient = String::new();
         for (k, rgb) in self.stops.iter().enumerate() {
