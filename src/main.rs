@@ -34,6 +34,8 @@ enum Command {
     BsplineFit(cli::bspline_fit::BsplineFitArgs),
     /// Curvature, convex/concave/saddle regions and their boundaries of a surface.json.
     Curvature(cli::curvature::CurvatureArgs),
+    /// Convert a surface.json of any kind to STEP AP214 (and IGES) for CAD tools.
+    Export(cli::export::ExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Watch(a) => cli::watch::run_watch(a),
         Command::BsplineFit(a) => cli::bspline_fit::run(a),
         Command::Curvature(a) => cli::curvature::run(a),
+        Command::Export(a) => cli::export::run(a),
     };
     match result {
         Ok(code) => code,

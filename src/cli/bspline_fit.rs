@@ -1,5 +1,5 @@
 //! `trispline bspline-fit`: grid or scattered points in; `surface.json`, `surface.igs`,
-//! `surface.glb` and `report.json` out.
+//! `surface.stp`, `surface.glb` and `report.json` out.
 
 use crate::bspline::basis::ParamMethod;
 use crate::bspline::fit::{adaptive_grid, fit_grid, ErrorStats, Grid, GridMethod};
@@ -9,6 +9,7 @@ use crate::bspline::scattered::{
 use crate::bspline::BSplineSurface;
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
+use crate::io::step::{step_bytes, StepOptions};
 use crate::io::surface_json::bspline_json;
 use crate::io::{read_mesh_file, write_atomic, LoadOptions};
 use anyhow::{bail, Context};
@@ -91,8 +92,10 @@ pub struct BsplineFitArgs {
     /// Scattered fits: rounds of foot-point parameter correction.
     #[arg(long, default_value_t = 2)]
     pub correction: usize,
-    /// Units declared in the IGES file (coordinates are written unscaled).
-    #[arg(long, value_parser = units_parser(), default_value = "mm")]
+    /// The input's length unit, declared in surface.igs and surface.stp so that CAD tools
+    /// read true size (coordinates are written unscaled). Stanford scans are in metres.
+    /// A warning is printed when the data's size is implausible in this unit.
+    #[arg(long, value_parser = units_parser(), default_value = "m")]
     pub units: IgesUnits,
     /// Segments per side of the tessellation in surface.glb.
     #[arg(long, default_value_t = 64)]
@@ -170,6 +173,15 @@ fn scattered_points(args: &BsplineFitArgs) -> anyhow::Result<Vec<DVec3>> {
     })
 }
 
+/// The largest side of the points' axis-aligned bounding box.
+pub(crate) fn largest_side(points: &[DVec3]) -> f64 {
+    let (lo, hi) = points.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    (hi - lo).max_element().max(0.0)
+}
+
 pub fn run(args: &BsplineFitArgs) -> anyhow::Result<ExitCode> {
     let t0 = Instant::now();
     let param = match args.param {
@@ -241,6 +253,9 @@ pub fn run(args: &BsplineFitArgs) -> anyhow::Result<ExitCode> {
             ms,
         )
     };
+    if let Some(w) = args.units.size_warning(largest_side(surface.controls())) {
+        eprintln!("warning: {w}");
+    }
     write_outputs(args, &surface, stats, points, layout, fit_ms, t0)?;
     Ok(ExitCode::SUCCESS)
 }
@@ -284,7 +299,16 @@ fn write_outputs(
             ..Default::default()
         },
     );
+    let step = step_bytes(
+        &[surface],
+        &StepOptions {
+            units: args.units,
+            file_name: "surface.stp".into(),
+            time: Some(std::time::SystemTime::now()),
+        },
+    );
     write_atomic(&args.out.join("surface.igs"), &iges)?;
+    write_atomic(&args.out.join("surface.stp"), &step)?;
     write_atomic(&args.out.join("surface.glb"), &glb)?;
     let report = json!({
         "input": args.input.display().to_string(),
@@ -293,6 +317,7 @@ fn write_outputs(
         "degree": [surface.degrees().0, surface.degrees().1],
         "control_grid": [cu, cv],
         "control_points": cu * cv,
+        "units": args.units.name(),
         "method": if args.grid.is_some() { json!(args.method) } else { json!("scattered-lsq") },
         "tolerance": args.tolerance,
         "within_tolerance": within,

@@ -1,6 +1,7 @@
 //! Subcommand implementations; main.rs only dispatches.
 pub mod bspline_fit;
 pub mod curvature;
+pub mod export;
 pub mod fit;
 pub mod mesh_tools;
 pub mod progress;

@@ -1,4 +1,5 @@
-//! Binary glTF writer: positions, optional normals and colours, u32 indices.
+//! Binary glTF writer: positions, optional normals and colours, u32 indices, one
+//! non-metallic material; the error colour ramp, its scale and an SVG legend for it.
 
 use super::{IoError, IoErrorKind};
 use crate::mesh::TriMesh;
@@ -61,9 +62,35 @@ impl ViewData<'_> {
     }
 }
 
+/// The material every primitive uses. glTF's default material is fully metallic, which
+/// renders vertex colours almost black under standard image-based lighting; a white,
+/// non-metallic, fairly rough base lets `COLOR_0` (which multiplies the base colour) show
+/// as written. Double-sided: fitted patches are open surfaces seen from both sides.
+fn material() -> serde_json::Value {
+    json!({
+        "name": "trispline-vertex-colours",
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [1.0, 1.0, 1.0, 1.0],
+            "metallicFactor": 0.0,
+            "roughnessFactor": 0.8,
+        },
+        "doubleSided": true,
+    })
+}
+
 /// Encodes a triangle mesh as GLB. glTF stores f32: coordinates are written as given,
 /// with no axis swap or scaling.
 pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
+    glb_bytes_with_extras(mesh, attrs, None)
+}
+
+/// [`glb_bytes`] with application data in the mesh's `extras` (e.g.
+/// [`ErrorRamp::extras`], so that a viewer or script can read what the colours mean).
+pub fn glb_bytes_with_extras<'a>(
+    mesh: &'a TriMesh,
+    attrs: &GlbAttributes<'a>,
+    extras: Option<serde_json::Value>,
+) -> Vec<u8> {
     // The views' sizes are known up front: the JSON chunk (which lists their offsets) is
     // made first and each view is then encoded once, in place in the output, instead of
     // into a buffer of its own that is copied into the binary chunk and that into the file.
@@ -115,19 +142,27 @@ pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
     }
     let iv = push_view(ViewData::Indices(&mesh.triangles), 34963);
     accessors.push(json!({"bufferView": iv, "componentType": 5125, "count": mesh.triangles.len() * 3, "type": "SCALAR"}));
-    let mut primitives =
-        vec![json!({"attributes": attributes, "indices": accessors.len() - 1, "mode": 4})];
+    let mut primitives = vec![
+        json!({"attributes": attributes, "indices": accessors.len() - 1, "mode": 4, "material": 0}),
+    ];
     for line in attrs.polylines.iter().filter(|l| l.len() >= 2) {
         let v = push_view(ViewData::Vec3(line), 34962);
         accessors.push(vec3_accessor(v, line, true));
-        primitives.push(json!({"attributes": {"POSITION": accessors.len() - 1}, "mode": 3}));
+        primitives.push(
+            json!({"attributes": {"POSITION": accessors.len() - 1}, "mode": 3, "material": 0}),
+        );
+    }
+    let mut gltf_mesh = json!({"primitives": primitives});
+    if let Some(e) = extras {
+        gltf_mesh["extras"] = e;
     }
     let doc = json!({
         "asset": {"version": "2.0", "generator": "trispline"},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0}],
-        "meshes": [{"primitives": primitives}],
+        "meshes": [gltf_mesh],
+        "materials": [material()],
         "buffers": [{"byteLength": bin_len}],
         "bufferViews": views,
         "accessors": accessors,
@@ -151,6 +186,138 @@ pub fn glb_bytes<'a>(mesh: &'a TriMesh, attrs: &GlbAttributes<'a>) -> Vec<u8> {
     }
     debug_assert_eq!(out.len(), total);
     out
+}
+
+/// The error heatmap's colour ramp: linear RGB stops evenly spaced over
+/// `error / tolerance` in [0, `max_ratio`], larger errors clamped to the last stop. Blue is
+/// exact, green half the tolerance, yellow the tolerance, red twice it or more.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ErrorRamp {
+    /// Linear RGB colours, evenly spaced from ratio 0 to `max_ratio`.
+    pub stops: [[f32; 3]; 5],
+    /// The ratio error / tolerance at the last stop.
+    pub max_ratio: f64,
+}
+
+/// The ramp the fitted surfaces' GLB heatmaps use.
+pub const ERROR_RAMP: ErrorRamp = ErrorRamp {
+    stops: [
+        [0.10, 0.25, 0.90],
+        [0.10, 0.75, 0.30],
+        [0.95, 0.90, 0.10],
+        [0.95, 0.50, 0.10],
+        [0.85, 0.10, 0.10],
+    ],
+    max_ratio: 2.0,
+};
+
+impl ErrorRamp {
+    /// The error at stop `k` for this tolerance.
+    pub fn stop_error(&self, k: usize, tolerance: f64) -> f64 {
+        tolerance * self.max_ratio * k as f64 / (self.stops.len() - 1) as f64
+    }
+
+    /// The linear RGBA colour of an error.
+    pub fn colour(&self, error: f64, tolerance: f64) -> [f32; 4] {
+        let t = if tolerance > 0.0 {
+            (error / tolerance).clamp(0.0, self.max_ratio) / self.max_ratio
+        } else {
+            0.0
+        } as f32;
+        let spans = self.stops.len() - 1;
+        let x = t * spans as f32;
+        let i = (x.floor() as usize).min(spans - 1);
+        let f = x - i as f32;
+        let (a, b) = (self.stops[i], self.stops[i + 1]);
+        [
+            a[0] + (b[0] - a[0]) * f,
+            a[1] + (b[1] - a[1]) * f,
+            a[2] + (b[2] - a[2]) * f,
+            1.0,
+        ]
+    }
+
+    /// The ramp and its scale as JSON for a GLB's `extras` or a report: every stop's
+    /// error in `unit` and its colour.
+    pub fn extras(&self, tolerance: f64, unit: &str, quantity: &str) -> serde_json::Value {
+        let stops: Vec<_> = self
+            .stops
+            .iter()
+            .enumerate()
+            .map(|(k, rgb)| {
+                json!({
+                    "error": self.stop_error(k, tolerance),
+                    "ratio_to_tolerance": self.max_ratio * k as f64 / (self.stops.len() - 1) as f64,
+                    "linear_rgb": rgb,
+                })
+            })
+            .collect();
+        json!({"error_ramp": {
+            "quantity": quantity,
+            "unit": unit,
+            "tolerance": tolerance,
+            "interpolation": "linear between stops in linear RGB; errors above the last stop take its colour",
+            "attribute": "COLOR_0",
+            "stops": stops,
+        }})
+    }
+
+    /// An SVG legend: the ramp as a horizontal bar with each stop's error in `unit`.
+    /// Colours are converted to sRGB, as a viewer displays the linear vertex colours.
+    pub fn legend_svg(&self, tolerance: f64, unit: &str, title: &str) -> String {
+        let (w, bar_x, bar_w) = (480.0, 40.0, 380.0);
+        let n = self.stops.len() - 1;
+        let mut gradient = String::new();
+        for (k, rgb) in self.stops.iter().enumerate() {
+            let [r, g, b] = rgb.map(|c| (linear_to_srgb(c) * 255.0).round() as u8);
+            gradient.push_str(&format!(
+                "<stop offset=\"{:.3}\" stop-color=\"#{r:02x}{g:02x}{b:02x}\"/>",
+                k as f64 / n as f64
+            ));
+        }
+        // Three significant digits on the largest label, the same decimals on all.
+        let largest = self.stop_error(n, tolerance);
+        let decimals = if largest > 0.0 && largest.is_finite() {
+            (2.0 - largest.log10().floor()).clamp(0.0, 12.0) as usize
+        } else {
+            3
+        };
+        let mut ticks = String::new();
+        for k in 0..=n {
+            let x = bar_x + bar_w * k as f64 / n as f64;
+            let label = format!("{:.decimals$}", self.stop_error(k, tolerance));
+            let label = if k == n {
+                format!("\u{2265} {label}")
+            } else {
+                label
+            };
+            ticks.push_str(&format!(
+                "<line x1=\"{x}\" y1=\"62\" x2=\"{x}\" y2=\"68\" stroke=\"#222\"/><text x=\"{x}\" y=\"82\" text-anchor=\"middle\">{label}</text>"
+            ));
+        }
+        format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"110\" viewBox=\"0 0 {w} 110\" font-family=\"sans-serif\" font-size=\"12\"><rect width=\"{w}\" height=\"110\" fill=\"white\"/><defs><linearGradient id=\"ramp\">{gradient}</linearGradient></defs><text x=\"{bar_x}\" y=\"22\" font-size=\"13\">{}</text><rect x=\"{bar_x}\" y=\"32\" width=\"{bar_w}\" height=\"30\" fill=\"url(#ramp)\" stroke=\"#222\"/>{ticks}<text x=\"{bar_x}\" y=\"102\">{} (tolerance {:.decimals$} {})</text></svg>\n",
+            xml_escape(title),
+            xml_escape(unit),
+            tolerance,
+            xml_escape(unit),
+        )
+    }
+}
+
+fn linear_to_srgb(c: f32) -> f64 {
+    let c = f64::from(c.clamp(0.0, 1.0));
+    if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 pub(crate) fn write_glb(path: &Path, mesh: &TriMesh, attrs: &GlbAttributes) -> Result<(), IoError> {
@@ -188,5 +355,49 @@ mod tests {
         let idx: Vec<u32> = reader.read_indices().expect("indices").into_u32().collect();
         assert_eq!(idx, vec![0, 1, 2, 1, 3, 2]);
         assert!(reader.read_colors(0).is_some());
+        let material = prim.material();
+        let pbr = material.pbr_metallic_roughness();
+        assert_eq!(pbr.metallic_factor(), 0.0);
+        assert_eq!(pbr.base_color_factor(), [1.0; 4]);
+        assert!(material.double_sided());
+    }
+
+    #[test]
+    fn the_ramp_goes_into_the_mesh_extras_with_its_scale() {
+        let mesh = TriMesh::new(vec![DVec3::ZERO, DVec3::X, DVec3::Y], vec![[0, 1, 2]]);
+        let extras = ERROR_RAMP.extras(0.5e-3, "m", "geometric error");
+        let bytes = glb_bytes_with_extras(&mesh, &GlbAttributes::default(), Some(extras));
+        assert!(gltf::import_slice(&bytes).is_ok(), "valid glb");
+        // The gltf crate reads extras only with a feature this crate does not enable:
+        // read the JSON chunk directly.
+        let json_len = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        let doc: serde_json::Value =
+            serde_json::from_slice(&bytes[20..20 + json_len]).expect("json");
+        let v = &doc["meshes"][0]["extras"];
+        assert_eq!(
+            doc["materials"][0]["pbrMetallicRoughness"]["metallicFactor"],
+            json!(0.0)
+        );
+        let stops = v["error_ramp"]["stops"].as_array().expect("stops");
+        assert_eq!(stops.len(), 5);
+        assert_eq!(stops[2]["error"], json!(0.5e-3));
+        assert_eq!(stops[4]["error"], json!(1e-3));
+        assert_eq!(v["error_ramp"]["unit"], "m");
+    }
+
+    #[test]
+    fn ramp_colours_hit_the_stops_and_clamp() {
+        let t = 2.0;
+        let near = |e: f64, k: usize| {
+            let c = ERROR_RAMP.colour(e, t);
+            (0..3).all(|i| (c[i] - ERROR_RAMP.stops[k][i]).abs() < 1e-6)
+        };
+        assert!(near(0.0, 0) && near(t, 2) && near(2.0 * t, 4) && near(100.0, 4));
+        assert!(!near(0.5 * t, 2));
+        let svg = ERROR_RAMP.legend_svg(t, "mm", "error <b>");
+        assert!(
+            svg.contains("error &lt;b&gt;") && svg.contains(">\u{2265} 4.00<"),
+            "{svg}"
+        );
     }
 }

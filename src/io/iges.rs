@@ -44,6 +44,40 @@ impl IgesUnits {
     }
 }
 
+impl IgesUnits {
+    /// Metres per unit.
+    pub fn metres(self) -> f64 {
+        match self {
+            IgesUnits::Mm => 1e-3,
+            IgesUnits::M => 1.0,
+            IgesUnits::In => 0.0254,
+        }
+    }
+
+    /// A warning when data whose largest bounding-box side is `extent` (in this unit) would
+    /// be an implausible size for a scanned object: under 1 cm or over 100 m. A unit
+    /// mismatch is a factor of 1000 (or 25.4), so it lands far outside that range for
+    /// anything from a coin to a house, while a correct unit rarely does.
+    pub fn size_warning(self, extent: f64) -> Option<String> {
+        let metres = extent * self.metres();
+        if !metres.is_finite() || metres <= 0.0 || (1e-2..=100.0).contains(&metres) {
+            return None;
+        }
+        let likely = IgesUnits::ALL
+            .into_iter()
+            .filter(|u| *u != self)
+            .min_by(|a, b| {
+                let off = |u: &IgesUnits| (extent * u.metres()).log10().abs();
+                off(a).total_cmp(&off(b))
+            })
+            .unwrap_or(IgesUnits::M);
+        Some(format!(
+            "the data are {extent:.4} {self} across ({metres:.3e} m) if --units {self} is right; \
+             if the input is in {likely}, pass --units {likely} so CAD tools read true size"
+        ))
+    }
+}
+
 impl std::fmt::Display for IgesUnits {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
@@ -94,8 +128,8 @@ fn hollerith(s: &str) -> String {
 }
 
 /// A real with a decimal point and exponent, in the shortest form that reads back to the
-/// same f64.
-fn real(x: f64) -> String {
+/// same f64 (valid in IGES and in STEP, which both require the point).
+pub(super) fn real(x: f64) -> String {
     let s = format!("{x:E}");
     match s.find('E') {
         Some(e) if !s[..e].contains('.') => format!("{}.0{}", &s[..e], &s[e..]),
@@ -103,8 +137,15 @@ fn real(x: f64) -> String {
     }
 }
 
-/// `YYYYMMDD.HHNNSS` in UTC, from days since the epoch by the civil-calendar algorithm.
+/// `YYYYMMDD.HHNNSS` in UTC.
 fn timestamp(t: Option<SystemTime>) -> String {
+    let [y, m, d, hh, mm, ss] = civil_utc(t);
+    format!("{y:04}{m:02}{d:02}.{hh:02}{mm:02}{ss:02}")
+}
+
+/// [year, month, day, hour, minute, second] in UTC, from days since the epoch by the
+/// civil-calendar algorithm; `None` (and times before 1970) give the epoch.
+pub(super) fn civil_utc(t: Option<SystemTime>) -> [i64; 6] {
     let secs = t
         .and_then(|t| t.duration_since(SystemTime::UNIX_EPOCH).ok())
         .map(|d| d.as_secs() as i64)
@@ -119,12 +160,7 @@ fn timestamp(t: Option<SystemTime>) -> String {
     let d = doy - (153 * mp + 2) / 5 + 1;
     let m = if mp < 10 { mp + 3 } else { mp - 9 };
     let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}{m:02}{d:02}.{:02}{:02}{:02}",
-        rem / 3600,
-        rem / 60 % 60,
-        rem % 60
-    )
+    [y, m, d, rem / 3600, rem / 60 % 60, rem % 60]
 }
 
 /// Packs delimited tokens into lines of at most `width` columns without splitting tokens.

@@ -9,6 +9,7 @@ pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod polylines;
+pub mod step;
 pub mod stl;
 pub mod surface_json;
 pub mod writers;
@@ -179,6 +180,21 @@ pub fn write_mesh_file(path: &Path, mesh: &TriMesh) -> Result<(), IoError> {
     }
 }
 
+/// Temp files for outputs. `tempfile` creates 0600 by default (right for secrets, wrong for
+/// results another user's viewer or CAD station must open); asking for 0666 at creation
+/// lets the kernel apply the process umask exactly as for a plain `File::create`
+/// (0644 under 022, 0600 under 077) without reading or changing the umask.
+fn output_temp_builder() -> tempfile::Builder<'static, 'static> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".trispline-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder
+}
+
 /// Writes through a temp file in the same folder: write, fsync, rename, fsync the folder,
 /// so that readers see the old complete file or the new complete one, never a partial one.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
@@ -189,11 +205,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".trispline-")
-        .suffix(".tmp")
-        .tempfile_in(dir)
-        .map_err(err)?;
+    let mut tmp = output_temp_builder().tempfile_in(dir).map_err(err)?;
     tmp.write_all(bytes).map_err(err)?;
     tmp.as_file().sync_all().map_err(err)?;
     tmp.persist(path).map_err(|e| err(e.error))?;
@@ -222,9 +234,7 @@ pub(crate) fn write_atomic_group(dir: &Path, files: &[(&str, &[u8])]) -> Result<
             .iter()
             .map(|&(name, bytes)| {
                 scope.spawn(move || {
-                    let mut tmp = tempfile::Builder::new()
-                        .prefix(".trispline-")
-                        .suffix(".tmp")
+                    let mut tmp = output_temp_builder()
                         .tempfile_in(dir)
                         .map_err(|e| err(name, e))?;
                     tmp.write_all(bytes).map_err(|e| err(name, e))?;

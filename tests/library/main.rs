@@ -17,3 +17,4 @@ mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_fit;
 mod scan_pipeline;
+mod step_export;

@@ -4,6 +4,7 @@
 
 mod cli_bspline;
 mod cli_curvature;
+mod cli_export;
 mod cli_fit;
 mod cli_fit_scan;
 mod cli_mesh;
