@@ -44,7 +44,7 @@ fn main() {
         "models/bun_zipper_res4.ply",
     ];
     println!(
-        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | times ms: read clean simplify surface first rounds (rounds)",
+        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | times ms: read clean simplify surface first rounds (rounds) | fit cpu",
         "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b"
     );
     for name in models {
@@ -62,6 +62,7 @@ fn main() {
             target_controls_pct: pct,
             ..Default::default()
         };
+        let cpu_before = cpu_ms();
         let fit = match fit_object(&mesh, &opts) {
             Ok(f) => f,
             Err(e) => {
@@ -69,6 +70,7 @@ fn main() {
                 continue;
             }
         };
+        let fit_cpu_ms = cpu_ms() - cpu_before;
         let (tess_rms, tess_max) = rms_max(&fit.data, &tessellation(&fit));
         // The baseline: plain quadric decimation (no isotropy term) to the control count.
         let baseline = simplify(
@@ -92,7 +94,7 @@ fn main() {
         let m = fit.controls.len();
         let ts = &fit.times;
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({})",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) | cpu {:.0} ms",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -114,8 +116,27 @@ fn main() {
             ts.first_fit_ms,
             ts.rounds_ms,
             fit.rounds.len() - 1,
+            fit_cpu_ms,
         );
     }
+}
+
+/// CPU time of the process (all threads, user + system) in ms, from /proc (10 ms ticks;
+/// NaN elsewhere): on a shared machine the wall-clock stage times measure the neighbours.
+fn cpu_ms() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return f64::NAN;
+    };
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|s| s.parse::<f64>().ok())
+            .unwrap_or(f64::NAN)
+    };
+    (tick(11) + tick(12)) * 10.0
 }
 
 /// RMS and max distance of `points` to `mesh`.

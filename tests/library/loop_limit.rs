@@ -1040,3 +1040,89 @@ fn normals_from_two_sides_converge_at_boundary_vertices_with_many_faces() {
         println!("{line} rad");
     }
 }
+
+/// The per-control-set evaluator (ordinates of regular faces, memoised descent on the
+/// others) and the value-only basis row agree with the full basis rows, near and at
+/// irregular vertices too.
+#[test]
+fn cached_evaluator_and_value_rows_equal_the_basis_rows() {
+    let mut worst = 0.0f64;
+    for m in meshes_with_extraordinary_vertices() {
+        let s = surface(&m);
+        let sc = scale(&m);
+        let evaluate = s.evaluator(&m.pos);
+        let mut rng = Rng(77);
+        let mut row = Vec::new();
+        for face in 0..m.tris.len() {
+            let mut params: Vec<(f64, f64)> = vec![
+                (1.0, 0.0),
+                (0.0, 1.0),
+                (0.0, 0.0),
+                (0.5, 0.5),
+                (0.0, 0.3),
+                (1e-9, 1e-9),
+                (1.0 - 1e-9, 0.0),
+                (1e-13, 1.0 - 2e-13),
+            ];
+            for _ in 0..20 {
+                let (u, v) = (rng.f(), rng.f());
+                params.push(if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                });
+            }
+            for (u, v) in params {
+                let p = SurfaceParam {
+                    face: face as u32,
+                    u,
+                    v,
+                };
+                let want = s.evaluate(&m.pos, p);
+                let got = evaluate(p);
+                // Within 1e-9 of an irregular vertex the derivatives are 2^30 (second:
+                // 4^30) times the differences they come from: both routes round there,
+                // second derivatives to noise (eps 4^30 2^-30 ~ 1e-7 of the size).
+                let w = 1.0 - u - v;
+                let near = u.min(v).min(w) < 1e-6 && (u.max(v).max(w) > 1.0 - 1e-6);
+                let tol_of = |k: usize| match (k, near) {
+                    (0, _) => 1e-12,
+                    (1 | 2, false) => 1e-11,
+                    (_, false) => 1e-10,
+                    (1 | 2, true) => 1e-8,
+                    (_, true) => 1e-5,
+                };
+                for (k, (g, w)) in [
+                    (got.position, want.position),
+                    (got.du, want.du),
+                    (got.dv, want.dv),
+                    (got.duu, want.duu),
+                    (got.duv, want.duv),
+                    (got.dvv, want.dvv),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let err = (g - w).length() / w.length().max(sc);
+                    assert!(
+                        err < tol_of(k),
+                        "{} face {face} at ({u}, {v}) column {k}: {g} vs {w}",
+                        m.name
+                    );
+                    worst = worst.max(err);
+                }
+                s.basis_row(p, &mut row);
+                let from_row: DVec3 = row.iter().map(|&(i, w)| m.pos[i as usize] * w).sum();
+                let sum: f64 = row.iter().map(|e| e.1).sum();
+                assert!((sum - 1.0).abs() < 1e-14, "{}: row sums to {sum}", m.name);
+                let err = (from_row - want.position).length() / sc;
+                assert!(
+                    err < 1e-12,
+                    "{} face {face} at ({u}, {v}): value row off by {err:e}",
+                    m.name
+                );
+            }
+        }
+    }
+    println!("cached evaluator: max relative deviation {worst:e}");
+}

@@ -27,6 +27,7 @@ use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
 use glam::DVec3;
 use quadric::Quadric;
+use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 pub use summary::SurfaceTopology;
@@ -276,20 +277,25 @@ impl<'a> State<'a> {
     }
 
     fn run_pass(&mut self, target: usize) -> usize {
-        let mut heap: BinaryHeap<Entry> = BinaryHeap::new();
-        for f in 0..self.faces.len() {
-            if !self.face_alive[f] {
-                continue;
-            }
-            for k in 0..3 {
-                let (a, b) = (self.faces[f][k], self.faces[f][(k + 1) % 3]);
-                // Each interior edge once (from the face where it runs upwards); a
-                // boundary edge may run either way, so it is queued in both cases.
-                if a < b || !self.edge_is_interior(a, b) {
-                    self.push(&mut heap, a, b);
-                }
-            }
-        }
+        // Every edge's candidate at once, in parallel, heapified in O(n): the entries are
+        // totally ordered (cost, then the edge), so the pop order is that of pushing them
+        // one by one.
+        let this = &*self;
+        let entries: Vec<Entry> = (0..this.faces.len())
+            .into_par_iter()
+            .filter(|&f| this.face_alive[f])
+            .flat_map_iter(|f| {
+                (0..3).filter_map(move |k| {
+                    let (a, b) = (this.faces[f][k], this.faces[f][(k + 1) % 3]);
+                    // Each interior edge once (from the face where it runs upwards); a
+                    // boundary edge may run either way, so it is queued in both cases.
+                    (a < b || !this.edge_is_interior(a, b))
+                        .then(|| this.entry(a, b))
+                        .flatten()
+                })
+            })
+            .collect();
+        let mut heap: BinaryHeap<Entry> = BinaryHeap::from(entries);
         let before = self.collapses;
         while self.alive_vertices > target {
             let Some(Reverse((_, a, b, va, vb))) = heap.pop() else {
@@ -318,17 +324,22 @@ impl<'a> State<'a> {
     }
 
     fn push(&self, heap: &mut BinaryHeap<Entry>, a: u32, b: u32) {
-        let (a, b) = (a.min(b), a.max(b));
-        if let Some(c) = self.candidate(a, b) {
-            let cost = if c.cost.is_finite() { c.cost } else { f64::MAX };
-            heap.push(Reverse((
-                cost.to_bits(),
-                a,
-                b,
-                self.version[a as usize],
-                self.version[b as usize],
-            )));
+        if let Some(e) = self.entry(a, b) {
+            heap.push(e);
         }
+    }
+
+    fn entry(&self, a: u32, b: u32) -> Option<Entry> {
+        let (a, b) = (a.min(b), a.max(b));
+        let c = self.candidate(a, b)?;
+        let cost = if c.cost.is_finite() { c.cost } else { f64::MAX };
+        Some(Reverse((
+            cost.to_bits(),
+            a,
+            b,
+            self.version[a as usize],
+            self.version[b as usize],
+        )))
     }
 
     fn edge_is_interior(&self, a: u32, b: u32) -> bool {

@@ -25,11 +25,13 @@
 //! flipped). Node weights are kept as a base row plus differences, so derivatives near an
 //! irregular vertex keep their relative precision although the map scales by 2^depth.
 
+mod cached;
 mod net;
 mod patch;
 
-use super::{BasisDerivRows, SurfaceParam, TriSurface};
+use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use crate::mesh::topology::{Topology, TopologyError, NONE};
+use glam::DVec3;
 use net::{Net, Term, VertexKind};
 use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
 use std::sync::OnceLock;
@@ -356,6 +358,30 @@ impl IrregularPatch {
         add_column(&self.root.net, &kind.limit_mask(c), 0, acc);
     }
 
+    /// The memoised regular quadtree node holding face parameter (u, v), with the local
+    /// parameter and the Jacobian of its map; `None` where `rows` takes another route (an
+    /// irregular corner exactly, the depth cap, or below the memoised depth).
+    fn leaf(&self, u: f64, v: f64) -> Option<(&RegularPatch, f64, f64, Jac)> {
+        let at_corner = matches!((u, v), (1.0, 0.0) | (0.0, 1.0) | (0.0, 0.0));
+        let (mut a, mut b) = (u, v);
+        let mut jac = Jac::ID;
+        let mut node = &self.root;
+        let mut depth = 0;
+        loop {
+            if let Some(rp) = &node.regular {
+                return Some((rp, a, b, jac));
+            }
+            // Only the root can be regular at an irregular corner: it is not.
+            if at_corner || depth == self.cap || depth == MEMO_DEPTH {
+                return None;
+            }
+            let (c, na, nb, j) = pick_child(a, b);
+            (a, b, jac) = (na, nb, jac.then(j));
+            depth += 1;
+            node = node.child(c);
+        }
+    }
+
     fn descend(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
         let (mut a, mut b) = (u, v);
         let mut jac = Jac::ID;
@@ -423,6 +449,35 @@ fn restore_sums(acc: &mut [[f64; 6]]) {
     }
 }
 
+/// `restore_sums` for one column with target `target`.
+fn restore_sum(col: &mut [f64], target: f64) {
+    let (sum, size) = col
+        .iter()
+        .fold((0.0, 0.0), |(s, a), w| (s + w, a + w.abs()));
+    if size > 0.0 {
+        let r = (sum - target) / size;
+        for w in col.iter_mut() {
+            *w -= r * w.abs();
+        }
+    }
+}
+
+impl LoopLimitSurface {
+    /// The value column of the full rows (the route `basis_row` takes where no leaf
+    /// patch answers).
+    fn value_column(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        let mut rows = BasisDerivRows::default();
+        self.basis_rows_with_derivatives(p, &mut rows);
+        out.clear();
+        out.extend(
+            rows.indices
+                .iter()
+                .zip(&rows.weights)
+                .map(|(&i, w)| (i, w[0])),
+        );
+    }
+}
+
 /// Clamps a parameter into the face.
 fn clamp_param(u: f64, v: f64) -> (f64, f64) {
     let u = if u.is_finite() {
@@ -445,6 +500,48 @@ impl TriSurface for LoopLimitSurface {
 
     fn domain_face_count(&self) -> usize {
         self.patches.len()
+    }
+
+    /// The value column alone: a regular patch's stencil values, without derivatives.
+    fn basis_row(&self, p: SurfaceParam, out: &mut Vec<(u32, f64)>) {
+        out.clear();
+        let f = (p.face as usize).min(self.patches.len() - 1);
+        let (u, v) = clamp_param(p.u, p.v);
+        let mut acc = [0.0; 64];
+        match &self.patches[f] {
+            FacePatch::Regular(rp) if rp.cols.len() <= acc.len() => {
+                let n = rp.cols.len();
+                rp.add_values(u, v, &mut acc[..n]);
+                out.extend(rp.cols.iter().copied().zip(acc[..n].iter().copied()));
+            }
+            FacePatch::Irregular(ip) => match ip.leaf(u, v) {
+                Some((rp, a, b, _)) if rp.cols.len() <= acc.len() => {
+                    let n = rp.cols.len();
+                    rp.add_values(a, b, &mut acc[..n]);
+                    restore_sum(&mut acc[..n], 1.0);
+                    out.extend(
+                        rp.cols
+                            .iter()
+                            .zip(&acc[..n])
+                            .filter(|(_, &w)| w != 0.0)
+                            .map(|(&c, &w)| (ip.support[c as usize], w)),
+                    );
+                }
+                _ => self.value_column(p, out),
+            },
+            FacePatch::Regular(_) => self.value_column(p, out),
+        }
+    }
+
+    /// Regular faces as Bezier ordinates of their controls, computed once; irregular faces
+    /// by the memoised descent, the leaf's ordinates formed from the controls per call
+    /// (rows only where `leaf` has no answer). Equal to `evaluate` to rounding.
+    fn evaluator<'a>(
+        &'a self,
+        controls: &'a [DVec3],
+    ) -> Box<dyn Fn(SurfaceParam) -> Derivatives + Sync + 'a> {
+        let cached = cached::CachedEvaluator::new(self, controls);
+        Box::new(move |p| cached.evaluate(p))
     }
 
     /// Out-of-range faces are clamped to the last face, parameters into the face.

@@ -2,7 +2,11 @@
 //! net, the child maps of the quadtree with their Jacobians, and the depth-cap fallback.
 
 use super::net::{Net, Term};
-use crate::surface::box_spline::stencil_weights;
+use crate::surface::box_spline::{
+    bezier_ordinates, evaluate_ordinates, stencil_values, stencil_weights,
+};
+use crate::surface::Derivatives;
+use glam::DVec3;
 
 /// Stencil weights of a regular patch as a matrix over a list of columns.
 #[derive(Debug)]
@@ -94,6 +98,82 @@ impl RegularPatch {
     }
 }
 
+impl RegularPatch {
+    /// The patch's Bezier ordinates for positions of its columns, less the base point, and
+    /// the base point (zero at a root face): kept apart so that derivatives deep in the
+    /// quadtree come from differences only (see `Net`).
+    pub(crate) fn ordinates(&self, position: impl Fn(u32) -> DVec3) -> ([DVec3; 15], DVec3) {
+        let mut stencil = [DVec3::ZERO; 12];
+        match &self.mat {
+            None => {
+                for (s, &c) in stencil.iter_mut().zip(&self.cols) {
+                    *s = position(c);
+                }
+            }
+            Some(mat) => {
+                let n = self.cols.len();
+                for (c, &col) in self.cols.iter().enumerate() {
+                    let p = position(col);
+                    for (k, s) in stencil.iter_mut().enumerate() {
+                        let m = mat[k * n + c];
+                        if m != 0.0 {
+                            *s += p * m;
+                        }
+                    }
+                }
+            }
+        }
+        let base = match &self.base {
+            Some(b) => self
+                .cols
+                .iter()
+                .zip(b)
+                .map(|(&c, &w)| position(c) * w)
+                .sum(),
+            None => DVec3::ZERO,
+        };
+        (bezier_ordinates(&stencil), base)
+    }
+
+    /// Adds the value weights alone at local (a, b) to `acc` (indexed by column position).
+    pub(crate) fn add_values(&self, a: f64, b: f64, acc: &mut [f64]) {
+        let sv = stencil_values(a, b);
+        match &self.mat {
+            None => {
+                for (slot, w) in acc.iter_mut().zip(&sv) {
+                    *slot += w;
+                }
+            }
+            Some(mat) => {
+                let n = self.cols.len();
+                for (k, w) in sv.iter().enumerate() {
+                    for (c, slot) in acc.iter_mut().enumerate().take(n) {
+                        *slot += mat[k * n + c] * w;
+                    }
+                }
+            }
+        }
+        if let Some(base) = &self.base {
+            for (slot, b) in acc.iter_mut().zip(base) {
+                *slot += b;
+            }
+        }
+    }
+}
+
+/// Position and face derivatives from a patch's ordinates (less `base`) at local (a, b).
+pub(super) fn evaluate_patch(
+    ords: &[DVec3; 15],
+    base: DVec3,
+    a: f64,
+    b: f64,
+    jac: &Jac,
+) -> Derivatives {
+    let mut d = jac.apply_derivatives(&evaluate_ordinates(ords, a, b, false, 1.0));
+    d.position += base;
+    d
+}
+
 pub(super) fn add6(acc: &mut [f64; 6], w: &[f64; 6], s: f64) {
     for (a, x) in acc.iter_mut().zip(w) {
         *a += s * x;
@@ -116,6 +196,19 @@ impl Jac {
             }
         }
         Jac(r)
+    }
+
+    /// `apply` for evaluated derivatives.
+    pub fn apply_derivatives(&self, d: &Derivatives) -> Derivatives {
+        let [[j00, j01], [j10, j11]] = self.0;
+        Derivatives {
+            position: d.position,
+            du: d.du * j00 + d.dv * j10,
+            dv: d.du * j01 + d.dv * j11,
+            duu: d.duu * (j00 * j00) + d.duv * (2.0 * j00 * j10) + d.dvv * (j10 * j10),
+            duv: d.duu * (j00 * j01) + d.duv * (j00 * j11 + j10 * j01) + d.dvv * (j10 * j11),
+            dvv: d.duu * (j01 * j01) + d.duv * (2.0 * j01 * j11) + d.dvv * (j11 * j11),
+        }
     }
 
     /// Local [value, da, db, daa, dab, dbb] to face [value, du, dv, duu, duv, dvv]:
