@@ -16,4 +16,5 @@ mod mesh_clean;
 mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_fit;
+mod object_pipeline;
 mod scan_pipeline;

@@ -429,10 +429,10 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
 /// differs from the fitted one far less than the fitted one from the data.
 const CHORD_SHARE_OF_RMS: f64 = 0.1;
 /// Segments per control-face side at most ...
-const MAX_PER_FACE: usize = 16;
-/// ... and triangles in all at most (beyond that the GLB grows past what a viewer opens
-/// quickly for a gain nobody sees).
-const MAX_TRIANGLES: usize = 4_000_000;
+const MAX_PER_FACE: usize = 64;
+/// ... and triangles in all at most (about 30 MB of GLB; beyond that the file grows past
+/// what a viewer opens quickly for a gain nobody sees).
+const MAX_TRIANGLES: usize = 1_000_000;
 /// Control faces sampled for the chord error.
 const CHORD_SAMPLE_FACES: usize = 150;
 
