@@ -7,8 +7,8 @@ use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
 use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{
-    run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs,
-    WorkerConfig, DEFAULT_TESSELLATION,
+    run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
+    DEFAULT_TESSELLATION,
 };
 use crate::pipeline::{SurfaceKind, UnknownName};
 use anyhow::Context;

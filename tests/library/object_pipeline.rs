@@ -174,7 +174,10 @@ fn torus_goes_the_object_path_and_keeps_its_genus() {
         assert_eq!(r["topology"][side]["boundary_loops"], 0);
     }
     let s = &out.surface;
-    assert_eq!((s["kind"].as_str(), s["layout"].as_str()), (Some("loop"), Some("mesh")));
+    assert_eq!(
+        (s["kind"].as_str(), s["layout"].as_str()),
+        (Some("loop"), Some("mesh"))
+    );
     let faces = s["control_faces"].as_array().expect("control faces").len();
     let controls = s["control_points"].as_array().expect("controls").len();
     assert_eq!(r["control_points"], controls);
@@ -185,7 +188,10 @@ fn torus_goes_the_object_path_and_keeps_its_genus() {
     let bytes = serde_json::to_vec(s).expect("json");
     let read = parse_surface_json(&bytes, "torus").expect("reads back");
     match read {
-        SurfaceDescription::LoopMesh { surface, controls: c } => {
+        SurfaceDescription::LoopMesh {
+            surface,
+            controls: c,
+        } => {
             assert_eq!((surface.faces().len(), c.len()), (faces, controls));
         }
         _ => panic!("layout mesh reads back as another kind"),
@@ -227,7 +233,10 @@ fn holes_stay_holes() {
     };
     for (centre, rim) in [(DVec3::Z, 0.42), (-DVec3::Z, 0.42), (DVec3::X, 0.37)] {
         let gap = nearest(centre);
-        assert!(gap > 0.5 * rim, "surface {gap} from the centre of a hole of radius {rim}");
+        assert!(
+            gap > 0.5 * rim,
+            "surface {gap} from the centre of a hole of radius {rim}"
+        );
     }
 }
 
@@ -265,7 +274,8 @@ fn components_all_fits_each_object() {
     let offset = a.positions.len() as u32;
     let mut both = a.clone();
     both.positions.extend(&b.positions);
-    both.triangles.extend(b.triangles.iter().map(|t| t.map(|v| v + offset)));
+    both.triangles
+        .extend(b.triangles.iter().map(|t| t.map(|v| v + offset)));
     let mut cfg = config(Domain::Auto, 10.0);
     cfg.fit.components.mode = "all".parse().expect("a mode");
     let out = run_input(&both, None, &cfg).expect("fits");
@@ -341,7 +351,10 @@ fn bun_zipper_keeps_its_five_holes() {
     let mut cfg = config(Domain::Auto, 2.0);
     cfg.fit.correction.rounds = 2;
     let fitted = fit_patch(&mesh, None, &cfg).unwrap_or_else(|e: PipelineError| panic!("{e}"));
-    let info = fitted.object.as_ref().expect("object path, not the disk map");
+    let info = fitted
+        .object
+        .as_ref()
+        .expect("object path, not the disk map");
     assert_eq!(info.data_topology.boundary_loops, 5);
     assert_eq!(info.control_topology.boundary_loops, 5);
     // A cap bridging the bottom hole (about 4 cm across) would stand centimetres off the

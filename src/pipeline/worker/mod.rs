@@ -217,7 +217,10 @@ pub(crate) fn run_patch_with(
             if object_info.is_some() {
                 let check = object::object_tessellation(&fitted, object_start(&fitted, cfg));
                 let tess = tessellate_mesh_faces(&fitted, check.per_face);
-                return (tessellated_glb(&fitted, &tess, budget.tolerance), Some(check));
+                return (
+                    tessellated_glb(&fitted, &tess, budget.tolerance),
+                    Some(check),
+                );
             }
             let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)
@@ -434,5 +437,7 @@ fn object_start(fitted: &PatchFit, cfg: &WorkerConfig) -> usize {
         super::SurfaceModel::Mesh(m) => m.faces().len().max(1),
         _ => 1,
     };
-    (cfg.tessellation as f64 / (faces as f64).sqrt()).ceil().max(2.0) as usize
+    (cfg.tessellation as f64 / (faces as f64).sqrt())
+        .ceil()
+        .max(2.0) as usize
 }

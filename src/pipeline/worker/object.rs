@@ -49,7 +49,10 @@ pub(super) fn object_reason(mesh: &TriMesh) -> Option<String> {
     }
     let length = |l: &Vec<u32>| -> f64 {
         (0..l.len())
-            .map(|k| part.positions[l[k] as usize].distance(part.positions[l[(k + 1) % l.len()] as usize]))
+            .map(|k| {
+                part.positions[l[k] as usize]
+                    .distance(part.positions[l[(k + 1) % l.len()] as usize])
+            })
             .sum()
     };
     let rim = loops.iter().map(length).fold(0.0, f64::max);
@@ -200,7 +203,11 @@ fn warm_start(
             shift / diagonal.max(f64::MIN_POSITIVE)
         ));
     }
-    let faces_ok = warm.faces.iter().flatten().all(|&v| (v as usize) < controls.len());
+    let faces_ok = warm
+        .faces
+        .iter()
+        .flatten()
+        .all(|&v| (v as usize) < controls.len());
     if !faces_ok || warm.feet_faces.len() != before || warm.feet.params.len() != before {
         return Err("the stored control mesh is inconsistent".into());
     }
@@ -307,10 +314,7 @@ impl PointGrid {
             for z in range(c[2], self.dims[2]) {
                 for y in range(c[1], self.dims[1]) {
                     for x in range(c[0], self.dims[0]) {
-                        let on_shell = [x, y, z]
-                            .iter()
-                            .zip(c)
-                            .any(|(&a, b)| a.abs_diff(b) == r);
+                        let on_shell = [x, y, z].iter().zip(c).any(|(&a, b)| a.abs_diff(b) == r);
                         if !on_shell {
                             continue;
                         }
@@ -382,7 +386,11 @@ pub(super) fn object_warm(fit: &PatchFit, info: &ObjectInfo) -> Option<ObjectWar
         faces: surface.faces().to_vec(),
         feet: WarmFeet {
             points: fit.data.iter().map(|p| p.as_vec3().to_array()).collect(),
-            params: fit.params.iter().map(|p| [p.u as f32, p.v as f32]).collect(),
+            params: fit
+                .params
+                .iter()
+                .map(|p| [p.u as f32, p.v as f32])
+                .collect(),
             rms: fit.geometric_rms(),
         },
         feet_faces: fit.params.iter().map(|p| p.face).collect(),
