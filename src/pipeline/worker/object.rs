@@ -197,7 +197,9 @@ fn warm_start(
     let shift = (bounds[0] - warm.bounds[0])
         .length()
         .max((bounds[1] - warm.bounds[1]).length());
-    if !(shift <= WARM_MAX_BOX_SHIFT * diagonal) {
+    // Written so that a NaN box (no points) counts as moved.
+    let box_kept = shift <= WARM_MAX_BOX_SHIFT * diagonal;
+    if !box_kept {
         return Err(format!(
             "bounding box moved by {:.3} of its diagonal",
             shift / diagonal.max(f64::MIN_POSITIVE)
