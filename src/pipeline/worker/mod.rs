@@ -23,6 +23,7 @@ use super::subdivided::fit_subdivided;
 use super::{FitOptions, PatchFit, PipelineError};
 use crate::fit::{Budget, FitStatus, StepHook};
 use crate::mesh::clean::{clean, CleanOptions};
+use crate::remesh::RemeshError;
 use crate::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -125,7 +126,8 @@ pub(crate) fn fit_patch_with(
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
         Err(e) => return Err(e),
     };
-    if fit_cfg.domain == Domain::Auto {
+    let auto = fit_cfg.domain == Domain::Auto;
+    if auto && object::may_be_nearly_closed(mesh) {
         if let Some(reason) = object::object_reason(mesh) {
             return object_patch(mesh, any_previous, cfg, budget, reason);
         }
@@ -144,10 +146,21 @@ pub(crate) fn fit_patch_with(
         coords: &w.coords,
         feet: w.feet.as_ref(),
     });
-    let s = fit_scan(mesh, &opts, &scan, warm.as_ref()).map_err(|e| PipelineError::ScanFailed {
-        source: Box::new(e),
-        not_subdivided: Box::new(not_subdivided),
-    })?;
+    let s = match fit_scan(mesh, &opts, &scan, warm.as_ref()) {
+        Ok(s) => s,
+        // Closed after cleaning, or handles: the disk map cannot take it, a control mesh can.
+        Err(PipelineError::NotDiskLike {
+            source: source @ (RemeshError::Closed | RemeshError::NotDisk { .. }),
+        }) if auto => {
+            return object_patch(mesh, any_previous, cfg, budget, source.to_string());
+        }
+        Err(e) => {
+            return Err(PipelineError::ScanFailed {
+                source: Box::new(e),
+                not_subdivided: Box::new(not_subdivided),
+            })
+        }
+    };
     Ok(FittedPatch {
         fit: s.fit.clone(),
         scan: Some(s),

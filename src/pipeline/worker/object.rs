@@ -6,7 +6,7 @@
 
 use super::config::WorkerConfig;
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
-use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
@@ -26,6 +26,51 @@ use std::sync::Arc;
 /// area is nearly closed (a disk has 3.5, a range scan's ragged rim more; bun_zipper's
 /// largest hole 0.3): squeezed onto a disk it would be ruined, so it is fitted whole.
 const NEARLY_CLOSED_RIM: f64 = 1.0;
+
+/// Whether the raw input may be closed or nearly closed, judged without cleaning it: no
+/// boundary edge, or no boundary loop as long as twice `NEARLY_CLOSED_RIM` square roots of
+/// the area (cleaning can split a loop at a pinch vertex: the margin covers it). Every
+/// disk-like scan fails this in a few milliseconds, so only candidates pay for the
+/// cleaned check (`object_reason`); handles are found by the scan path's own refusal.
+pub(super) fn may_be_nearly_closed(mesh: &TriMesh) -> bool {
+    let n = mesh.positions.len();
+    if mesh.triangles.iter().flatten().any(|&v| v as usize >= n) {
+        return true;
+    }
+    let edges = EdgeTable::new(&mesh.triangles, n);
+    let mut next = vec![u32::MAX; n];
+    for e in 0..edges.len() {
+        if let [h] = edges.halves(e) {
+            let t = mesh.triangles[(*h / 3) as usize];
+            let k = (*h % 3) as usize;
+            next[t[k] as usize] = t[(k + 1) % 3];
+        }
+    }
+    let mut seen = vec![false; n];
+    let mut longest = 0.0f64;
+    for start in 0..n {
+        let mut length = 0.0;
+        let mut v = start;
+        while next[v] != u32::MAX && !seen[v] {
+            seen[v] = true;
+            let w = next[v] as usize;
+            length += mesh.positions[v].distance(mesh.positions[w]);
+            v = w;
+        }
+        longest = longest.max(length);
+    }
+    let area: f64 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    // Written so that a NaN (no area) counts as a candidate.
+    let long_rim = longest >= 2.0 * NEARLY_CLOSED_RIM * area.sqrt();
+    !long_rim
+}
 
 /// Why an input without subdivision connectivity goes the object path under
 /// `domain = "auto"`, or `None` when it is a disk-like scan (or so broken that the scan
