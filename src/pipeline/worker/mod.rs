@@ -148,9 +148,13 @@ pub(crate) fn fit_patch_with(
     });
     let s = match fit_scan(mesh, &opts, &scan, warm.as_ref()) {
         Ok(s) => s,
-        // Closed after cleaning, or handles: the disk map cannot take it, a control mesh can.
+        // Closed after cleaning, handles, or a component cleaning left non-orientable: the
+        // disk map cannot take it; the object path's component repair and control mesh can.
         Err(PipelineError::NotDiskLike {
-            source: source @ (RemeshError::Closed | RemeshError::NotDisk { .. }),
+            source:
+                source @ (RemeshError::Closed
+                | RemeshError::NotDisk { .. }
+                | RemeshError::NotManifold(_)),
         }) if auto => {
             return object_patch(mesh, any_previous, cfg, budget, source.to_string());
         }
