@@ -366,3 +366,22 @@ fn bun_zipper_keeps_its_five_holes() {
         mesh.bounds_diagonal()
     );
 }
+
+#[test]
+fn broken_bun_zipper_res4_is_repaired_and_fitted_whole() {
+    let Some(path) = shared_data("models/bun_zipper_res4.ply") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("reads")
+        .mesh;
+    // Non-manifold edges and duplicate faces: the scan path refuses what cleaning leaves,
+    // the object path repairs the component's orientation and fits it.
+    let fitted = fit_patch(&mesh, None, &config(Domain::Auto, 10.0))
+        .unwrap_or_else(|e: PipelineError| panic!("{e}"));
+    let info = fitted.object.as_ref().expect("the object path");
+    assert_eq!(info.control_topology.genus, info.data_topology.genus);
+    // 453 vertices of a bunny: a coarse shape, followed to about 1 % of its size.
+    let rms = fitted.fit.geometric_rms();
+    assert!(rms < 0.02 * mesh.bounds_diagonal(), "RMS {rms}");
+}
