@@ -7,7 +7,7 @@ use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
 use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{
-    run_input_with, BudgetConfig, ComponentsConfig, FitConfig, PatchOutputs, WorkerConfig,
+    run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
     DEFAULT_TESSELLATION,
 };
 use crate::pipeline::{SurfaceKind, UnknownName};
@@ -29,14 +29,22 @@ where
 
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
-    /// The input mesh: a disk-like scan patch (any connectivity) or a mesh with Loop
-    /// subdivision connectivity (fitted exactly).
+    /// The input mesh: a disk-like scan patch (any connectivity), a whole object (closed,
+    /// holed, any genus) or a mesh with Loop subdivision connectivity (fitted exactly).
     pub input: PathBuf,
     /// The surface fitted: `loop` (scans: a Loop surface over a grid; subdivided inputs: the
-    /// Loop limit surface of their coarse net) or `bezier` (scans: one quartic Bezier patch
-    /// per grid cell; subdivided inputs: one patch over a lattice-shaped coarse net).
-    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "bezier")]
+    /// Loop limit surface of their coarse net; whole objects: the Loop limit surface of a
+    /// control mesh simplified from the data) or `bezier` (scans: one quartic Bezier patch
+    /// per grid cell; subdivided inputs: one patch over a lattice-shaped coarse net; whole
+    /// objects are fitted with `loop` whatever is asked).
+    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "loop")]
     pub surface: SurfaceKind,
+    /// Inputs without subdivision connectivity: `auto` (disk-like scans on a grid over their
+    /// planar map; closed, higher-genus and nearly closed inputs on a control mesh), `grid`
+    /// (always the planar map) or `mesh` (always a control mesh simplified from the data,
+    /// subdivided inputs too).
+    #[arg(long, value_parser = named::<Domain>(Domain::NAMES), default_value = "auto")]
+    pub domain: Domain,
     /// Levels of inverse subdivision (subdivided inputs: the depth of their connectivity;
     /// scans: the resampling depth of the initial net).
     #[arg(long, default_value_t = 2)]
@@ -72,7 +80,7 @@ pub struct FitArgs {
     /// --target-controls-pct).
     #[arg(long)]
     pub lattice: Option<usize>,
-    /// Scans, `loop`: control points as a percentage of the data points.
+    /// Scans, `loop`, and whole objects: control points as a percentage of the data points.
     #[arg(long, default_value_t = ScanConfig::default().target_controls_pct)]
     pub target_controls_pct: f64,
     /// Scans: rounds of parameter correction (data parameters moved to foot points).
@@ -131,6 +139,7 @@ impl FitArgs {
         let scan_defaults = ScanConfig::default();
         let fit = FitConfig {
             surface: self.surface,
+            domain: self.domain,
             levels: self.levels,
             min_levels: self.min_levels,
             method: self.method,

@@ -159,6 +159,7 @@ mod tests {
                 coords: Vec::new(),
                 feet: None,
                 parts: Vec::new(),
+                object: None,
             },
         }
     }

@@ -10,6 +10,7 @@ use crate::fit::FitError;
 use crate::mesh::detect::DetectError;
 use crate::mesh::inverse::InverseError;
 use crate::mesh::topology::TopologyError;
+use crate::pipeline::object::ObjectError;
 use crate::remesh::RemeshError;
 use crate::surface::loop_limit::LoopLimitError;
 
@@ -109,6 +110,13 @@ pub enum PipelineError {
         /// Why the exact-connectivity path did not apply.
         not_subdivided: Box<PipelineError>,
     },
+    /// The whole-object path (a control mesh simplified from the data) failed.
+    #[error("whole-object fit: {source}")]
+    Object {
+        /// What the object fit reported.
+        #[source]
+        source: ObjectError,
+    },
     /// The solver failed.
     #[error(transparent)]
     Fit(#[from] FitError),
@@ -137,6 +145,14 @@ impl PipelineError {
             PipelineError::BezierTooLarge { .. } => "bezier_too_large",
             PipelineError::GridTooFine { .. } => "grid_too_fine",
             PipelineError::ScanFailed { source, .. } => source.kind(),
+            PipelineError::Object { source } => match source {
+                ObjectError::Empty => "empty_after_cleaning",
+                ObjectError::NotManifold(_) => "not_manifold",
+                ObjectError::Simplify(_) => "simplify_failed",
+                ObjectError::Surface(_) => "no_limit_surface",
+                ObjectError::Solve { .. } => "fit_failed",
+                _ => "object_failed",
+            },
             PipelineError::Fit(_) => "fit_failed",
         }
     }
@@ -144,7 +160,13 @@ impl PipelineError {
     /// True when the input (or the configuration) cannot be fitted, as opposed to a solver
     /// failure: the CLI exits with 2 on these.
     pub(crate) fn is_refusal(&self) -> bool {
-        !matches!(self, PipelineError::Fit(_))
+        !matches!(
+            self,
+            PipelineError::Fit(_)
+                | PipelineError::Object {
+                    source: ObjectError::Solve { .. }
+                }
+        )
     }
 }
 

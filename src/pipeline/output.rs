@@ -236,29 +236,86 @@ fn sample_surface(
             g.sample_lattice((per_cell.ceil() as usize).clamp(4, 32))
         }
         SurfaceModel::Mesh(m) => {
-            // Each face its own lattice (vertices on shared edges repeat: the surface is C1,
-            // so both copies carry the same point and normal).
             let per_face = segments as f64 / (m.faces().len().max(1) as f64).sqrt();
             let n = (per_face.ceil() as usize).clamp(4, 32);
-            let local = lattice_points(n);
-            let local_tris = lattice_triangles(n);
-            let mut params = Vec::with_capacity(m.faces().len() * local.len());
-            let mut triangles = Vec::with_capacity(m.faces().len() * local_tris.len());
-            for face in 0..m.faces().len() {
-                let base = params.len() as u32;
-                params.extend(local.iter().map(|&(i, j)| SurfaceParam {
-                    face: face as u32,
-                    u: i as f64 / n as f64,
-                    v: j as f64 / n as f64,
-                }));
-                triangles.extend(local_tris.iter().map(|t| t.map(|v| v + base)));
-            }
-            (params, triangles)
+            face_lattices(0..m.faces().len(), n)
         }
     };
     let evaluate = f.model.as_surface().evaluator(&f.controls);
     let evals = params.par_iter().map(|p| evaluate(*p)).collect();
     (params, triangles, evals)
+}
+
+/// Each of `faces` its own lattice of `n` segments per side (vertices on shared edges
+/// repeat: the surface is C1, so both copies carry the same point and normal).
+fn face_lattices(
+    faces: impl ExactSizeIterator<Item = usize>,
+    n: usize,
+) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+    let n = n.max(1);
+    let local = lattice_points(n);
+    let local_tris = lattice_triangles(n);
+    let mut params = Vec::with_capacity(faces.len() * local.len());
+    let mut triangles = Vec::with_capacity(faces.len() * local_tris.len());
+    for face in faces {
+        let base = params.len() as u32;
+        params.extend(local.iter().map(|&(i, j)| SurfaceParam {
+            face: face as u32,
+            u: i as f64 / n as f64,
+            v: j as f64 / n as f64,
+        }));
+        triangles.extend(local_tris.iter().map(|t| t.map(|v| v + base)));
+    }
+    (params, triangles)
+}
+
+/// A control-mesh surface tessellated with `per_face` segments per control-face side,
+/// untrimmed (a whole object's boundary loops are the control mesh's own). Other models
+/// get `tessellate` with that many segments in all.
+pub fn tessellate_mesh_faces(f: &PatchFit, per_face: usize) -> Tessellation {
+    let SurfaceModel::Mesh(m) = &f.model else {
+        return tessellate(f, per_face, None);
+    };
+    let (params, triangles) = face_lattices(0..m.faces().len(), per_face);
+    let evaluate = f.model.as_surface().evaluator(&f.controls);
+    let evals: Vec<Derivatives> = params.par_iter().map(|p| evaluate(*p)).collect();
+    Tessellation {
+        positions: evals.iter().map(|d| d.position).collect(),
+        normals: evals
+            .iter()
+            .map(|d| d.du.cross(d.dv).normalize_or_zero())
+            .collect(),
+        params,
+        triangles,
+    }
+}
+
+/// The flat triangles' own error: for every triangle of a `per_face` tessellation of (at
+/// most `max_faces`, spread evenly) control faces, the distance from the surface at the
+/// triangle's parameter centroid to the triangle's centroid. Zero-length for models
+/// without control faces.
+pub fn chord_errors(f: &PatchFit, per_face: usize, max_faces: usize) -> Vec<f64> {
+    let SurfaceModel::Mesh(m) = &f.model else {
+        return Vec::new();
+    };
+    let faces = m.faces().len();
+    let stride = faces.div_ceil(max_faces.max(1)).max(1);
+    let (params, triangles) = face_lattices((0..faces).step_by(stride), per_face);
+    let evaluate = f.model.as_surface().evaluator(&f.controls);
+    let corners: Vec<DVec3> = params.par_iter().map(|p| evaluate(*p).position).collect();
+    triangles
+        .par_iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| params[v as usize]);
+            let centre = SurfaceParam {
+                face: a.face,
+                u: (a.u + b.u + c.u) / 3.0,
+                v: (a.v + b.v + c.v) / 3.0,
+            };
+            let flat = t.iter().map(|&v| corners[v as usize]).sum::<DVec3>() / 3.0;
+            (evaluate(centre).position - flat).length()
+        })
+        .collect()
 }
 
 /// The GLB of a tessellation, each vertex coloured by the geometric error of the data point

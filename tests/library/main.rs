@@ -16,5 +16,6 @@ mod mesh_clean;
 mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_fit;
+mod object_pipeline;
 mod scan_pipeline;
 mod step_export;

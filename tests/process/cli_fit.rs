@@ -111,6 +111,8 @@ fn refuses_unsupported_inputs_with_status_2() {
     let o = trispline(&[
         "fit",
         closed.to_str().unwrap_or_default(),
+        "--domain",
+        "grid",
         "--out",
         out.to_str().unwrap_or_default(),
     ]);
@@ -157,6 +159,8 @@ fn refuses_unsupported_inputs_with_status_2() {
     let o = trispline(&[
         "fit",
         input.to_str().unwrap_or_default(),
+        "--surface",
+        "bezier",
         "--out",
         out.to_str().unwrap_or_default(),
     ]);

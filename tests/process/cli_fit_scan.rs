@@ -20,6 +20,8 @@ fn an_irregular_patch_is_remeshed_and_fitted_with_a_trim() {
     let o = trispline(&[
         "fit",
         input.to_str().unwrap_or_default(),
+        "--surface",
+        "bezier",
         "--lattice",
         "12",
         "--iterations",
@@ -66,7 +68,7 @@ fn an_irregular_patch_is_remeshed_and_fitted_with_a_trim() {
 }
 
 #[test]
-fn closed_and_higher_genus_meshes_are_refused() {
+fn closed_and_higher_genus_meshes_are_refused_by_the_grid_domain() {
     for rel in ["models/decimated-max.obj", "models/fertility.off"] {
         let Some(path) = shared_data(rel) else { return };
         let dir = tempfile::tempdir().expect("tmp");
@@ -74,6 +76,8 @@ fn closed_and_higher_genus_meshes_are_refused() {
         let o = trispline(&[
             "fit",
             path.to_str().unwrap_or_default(),
+            "--domain",
+            "grid",
             "--out",
             out.to_str().unwrap_or_default(),
         ]);

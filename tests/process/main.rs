@@ -8,6 +8,7 @@ mod cli_export;
 mod cli_fit;
 mod cli_fit_scan;
 mod cli_mesh;
+mod cli_object;
 mod components;
 mod daemon_crash;
 mod daemon_harden;

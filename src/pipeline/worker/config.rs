@@ -11,6 +11,26 @@ use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::SurfaceKind;
 use crate::TriMesh;
 
+/// `fit.domain`: which path fits an input without subdivision connectivity.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Domain {
+    /// Disk-like scans on a grid over their planar map; closed, higher-genus and nearly
+    /// closed inputs (the disk map cannot take them) on a control mesh.
+    #[default]
+    Auto,
+    /// Always the grid over the planar map (what every scan took before whole objects).
+    Grid,
+    /// Always a control mesh simplified from the data: any input, subdivided or not.
+    Mesh,
+}
+
+crate::pipeline::names::named!(Domain {
+    Auto => "auto",
+    Grid => "grid",
+    Mesh => "mesh",
+});
+
 /// Everything the worker needs: the fit, and the one output setting it applies itself.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct WorkerConfig {
@@ -39,6 +59,9 @@ impl Default for WorkerConfig {
 pub struct FitConfig {
     /// The kind of surface fitted.
     pub surface: SurfaceKind,
+    /// Which path fits inputs without subdivision connectivity (`mesh`: every input).
+    #[serde(default)]
+    pub domain: Domain,
     /// Levels of inverse subdivision.
     pub levels: usize,
     /// Inputs with subdivision connectivity: when the budget is not met, refit with one
@@ -71,6 +94,7 @@ impl Default for FitConfig {
     fn default() -> Self {
         Self {
             surface: SurfaceKind::Bezier,
+            domain: Domain::Auto,
             levels: 2,
             min_levels: default_min_levels(),
             method: Method::Cg,

@@ -1,15 +1,20 @@
 //! The worker as one pure function: (mesh, previous version's warm start, config) ->
 //! outputs as bytes and JSON values. The CLI and the daemon write them; nothing here touches
 //! files. It chooses the path (subdivision connectivity when the input has it, else the
-//! scan path) and applies the component policy.
+//! scan path for disk-like scans and the object path for the rest, see `Domain`) and
+//! applies the component policy.
 
 mod config;
+mod object;
 mod report;
 
-pub use config::{BudgetConfig, ComponentsConfig, FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
+pub use config::{
+    BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_TESSELLATION,
+};
+pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
 
-use super::output::{tessellate, tessellated_glb, Coverage};
+use super::output::{tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
@@ -18,6 +23,7 @@ use super::subdivided::fit_subdivided;
 use super::{FitOptions, PatchFit, PipelineError};
 use crate::fit::{Budget, FitStatus, StepHook};
 use crate::mesh::clean::{clean, CleanOptions};
+use crate::remesh::RemeshError;
 use crate::TriMesh;
 use glam::DVec3;
 use serde_json::json;
@@ -49,9 +55,13 @@ pub struct FittedPatch {
     pub levels: usize,
     /// Subdivided inputs: the fits that missed the budget before it, coarsest first.
     pub refinement: Vec<Refinement>,
+    /// Whole objects: the object fit and why that path was taken.
+    pub object: Option<ObjectInfo>,
 }
 
-/// The fit alone: subdivision connectivity when the input has it, else the scan path.
+/// The fit alone: with `domain = "mesh"` the object path; else subdivision connectivity
+/// when the input has it, else (`auto`) the object path for inputs the disk map cannot take
+/// and the scan path for the rest (`grid`: always the scan path).
 pub fn fit_patch(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
@@ -77,6 +87,10 @@ pub(crate) fn fit_patch_with(
         budget: budget.clone(),
         on_step,
     };
+    if fit_cfg.domain == Domain::Mesh {
+        return object_patch(mesh, previous, cfg, budget, "fit.domain = \"mesh\"".into());
+    }
+    let any_previous = previous;
     let previous = previous.filter(|w| w.surface == fit_cfg.surface);
     let mut levels = fit_cfg.levels;
     let mut refinement = Vec::new();
@@ -106,11 +120,18 @@ pub(crate) fn fit_patch_with(
                 budget,
                 levels,
                 refinement,
+                object: None,
             })
         }
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
         Err(e) => return Err(e),
     };
+    let auto = fit_cfg.domain == Domain::Auto;
+    if auto && object::may_be_nearly_closed(mesh) {
+        if let Some(reason) = object::object_reason(mesh) {
+            return object_patch(mesh, any_previous, cfg, budget, reason);
+        }
+    }
     // No subdivision connectivity: remesh the scan onto a lattice.
     let scan = ScanOptions {
         config: fit_cfg.scan,
@@ -125,16 +146,59 @@ pub(crate) fn fit_patch_with(
         coords: &w.coords,
         feet: w.feet.as_ref(),
     });
-    let s = fit_scan(mesh, &opts, &scan, warm.as_ref()).map_err(|e| PipelineError::ScanFailed {
-        source: Box::new(e),
-        not_subdivided: Box::new(not_subdivided),
-    })?;
+    let s = match fit_scan(mesh, &opts, &scan, warm.as_ref()) {
+        Ok(s) => s,
+        // Closed after cleaning, handles, or a component cleaning left non-orientable: the
+        // disk map cannot take it; the object path's component repair and control mesh can.
+        Err(PipelineError::NotDiskLike {
+            source:
+                source @ (RemeshError::Closed
+                | RemeshError::NotDisk { .. }
+                | RemeshError::NotManifold(_)),
+        }) if auto => {
+            return object_patch(mesh, any_previous, cfg, budget, source.to_string());
+        }
+        Err(e) => {
+            return Err(PipelineError::ScanFailed {
+                source: Box::new(e),
+                not_subdivided: Box::new(not_subdivided),
+            })
+        }
+    };
     Ok(FittedPatch {
         fit: s.fit.clone(),
         scan: Some(s),
         budget,
         levels: fit_cfg.levels,
         refinement,
+        object: None,
+    })
+}
+
+/// The object path of `fit_patch`: warm from the previous version's object fit if any.
+fn object_patch(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    budget: Budget,
+    reason: String,
+) -> Result<FittedPatch, PipelineError> {
+    let warm = previous.and_then(|w| w.object.as_ref().map(|o| (o, w.controls.as_slice())));
+    let (fit, info) = object::fit_as_object(
+        mesh,
+        warm.map(|w| w.0),
+        warm.map_or(&[][..], |w| w.1),
+        cfg,
+        &budget,
+        reason,
+    )?;
+    Ok(FittedPatch {
+        fit,
+        scan: None,
+        budget,
+        levels: 0,
+        refinement: Vec::new(),
+        object: Some(info),
     })
 }
 
@@ -161,13 +225,22 @@ pub(crate) fn run_patch_with(
         budget,
         levels,
         refinement,
+        object: object_info,
     } = fit_patch_with(mesh, previous, cfg, on_step)?;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
-    let (glb, (mut report, surface, warm)) = rayon::join(
+    let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
         || {
+            if object_info.is_some() {
+                let check = object::object_tessellation(&fitted, object_start(&fitted, cfg));
+                let tess = tessellate_mesh_faces(&fitted, check.per_face);
+                return (
+                    tessellated_glb(&fitted, &tess, budget.tolerance),
+                    Some(check),
+                );
+            }
             let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
-            tessellated_glb(&fitted, &tess, budget.tolerance)
+            (tessellated_glb(&fitted, &tess, budget.tolerance), None)
         },
         || {
             report::describe(
@@ -181,6 +254,15 @@ pub(crate) fn run_patch_with(
             )
         },
     );
+    let (glb, check) = glb_and_check;
+    if let Some(info) = &object_info {
+        let object_report = object::object_report(&fitted, info);
+        report["path"] = json!("object");
+        report["topology"] = object_report["topology"].clone();
+        report["object"] = object_report;
+        report["tessellation"] = json!(check);
+        warm.object = object::object_warm(&fitted, info);
+    }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
     Ok(PatchOutputs {
         surface,
@@ -324,6 +406,7 @@ pub(crate) fn run_input_with(
             coords: Vec::new(),
             feet: None,
             parts: warm_parts,
+            object: None,
         },
     })
 }
@@ -362,4 +445,16 @@ fn matching_part(
                 .total_cmp(&b.centroid.distance(centroid))
         })
         .map(|(i, _)| i)
+}
+
+/// Segments per control-face side the configured tessellation gives an object fit (as for
+/// subdivided inputs: the total spread over the faces), before the chord check refines it.
+fn object_start(fitted: &PatchFit, cfg: &WorkerConfig) -> usize {
+    let faces = match &fitted.model {
+        super::SurfaceModel::Mesh(m) => m.faces().len().max(1),
+        _ => 1,
+    };
+    (cfg.tessellation as f64 / (faces as f64).sqrt())
+        .ceil()
+        .max(2.0) as usize
 }

@@ -55,6 +55,10 @@ pub struct WarmStart {
     /// empty).
     #[serde(default)]
     pub parts: Vec<PartWarm>,
+    /// Whole objects: the control mesh's faces and the data's final parameters on it (the
+    /// control positions are `controls`).
+    #[serde(default)]
+    pub object: Option<super::object::ObjectWarm>,
 }
 
 /// A component's warm start and where the component was, so that the pieces of the next
@@ -104,6 +108,7 @@ pub(super) fn describe(
         },
         feet: scan_info.and_then(warm_feet),
         parts: Vec::new(),
+        object: None,
     };
     (report, surface, warm)
 }

@@ -1,0 +1,535 @@
+//! The worker's third path: whole objects (closed, higher-genus or nearly closed inputs the
+//! disk map cannot take, or any input with `fit.domain = "mesh"`) fitted with the exact Loop
+//! limit surface of a control mesh simplified from the data (`pipeline::object`). This
+//! module decides when an input goes there, warm-starts a new version from the previous
+//! control mesh, and turns an `ObjectFit` into the `PatchFit` every output reads.
+
+use super::config::WorkerConfig;
+use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
+use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
+use crate::mesh::simplify::SurfaceTopology;
+use crate::mesh::topology::Topology;
+use crate::pipeline::object::{
+    fit_object, fit_on_control_mesh, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
+};
+use crate::pipeline::scan::components::cleaned_components;
+use crate::pipeline::scan::WarmFeet;
+use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
+use crate::remesh::boundary_loops;
+use crate::surface::SurfaceParam;
+use crate::TriMesh;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// A surface whose longest boundary loop is shorter than this many square roots of its
+/// area is nearly closed (a disk has 3.5, a range scan's ragged rim more; bun_zipper's
+/// largest hole 0.3): squeezed onto a disk it would be ruined, so it is fitted whole.
+const NEARLY_CLOSED_RIM: f64 = 1.0;
+
+/// Whether the raw input may be closed or nearly closed, judged without cleaning it: no
+/// boundary edge, or no boundary loop as long as twice `NEARLY_CLOSED_RIM` square roots of
+/// the area (cleaning can split a loop at a pinch vertex: the margin covers it). Every
+/// disk-like scan fails this in a few milliseconds, so only candidates pay for the
+/// cleaned check (`object_reason`); handles are found by the scan path's own refusal.
+pub(super) fn may_be_nearly_closed(mesh: &TriMesh) -> bool {
+    let n = mesh.positions.len();
+    if mesh.triangles.iter().flatten().any(|&v| v as usize >= n) {
+        return true;
+    }
+    let edges = EdgeTable::new(&mesh.triangles, n);
+    let mut next = vec![u32::MAX; n];
+    for e in 0..edges.len() {
+        if let [h] = edges.halves(e) {
+            let t = mesh.triangles[(*h / 3) as usize];
+            let k = (*h % 3) as usize;
+            next[t[k] as usize] = t[(k + 1) % 3];
+        }
+    }
+    let mut seen = vec![false; n];
+    let mut longest = 0.0f64;
+    for start in 0..n {
+        let mut length = 0.0;
+        let mut v = start;
+        while next[v] != u32::MAX && !seen[v] {
+            seen[v] = true;
+            let w = next[v] as usize;
+            length += mesh.positions[v].distance(mesh.positions[w]);
+            v = w;
+        }
+        longest = longest.max(length);
+    }
+    let area: f64 = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    // Written so that a NaN (no area) counts as a candidate.
+    let long_rim = longest >= 2.0 * NEARLY_CLOSED_RIM * area.sqrt();
+    !long_rim
+}
+
+/// Why an input without subdivision connectivity goes the object path under
+/// `domain = "auto"`, or `None` when it is a disk-like scan (or so broken that the scan
+/// path's own refusal says more). Judged on the cleaned input's largest component.
+pub(super) fn object_reason(mesh: &TriMesh) -> Option<String> {
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let part = cleaned_components(&cleaned).into_iter().next()?;
+    let topo = Topology::from_mesh(&part).ok()?;
+    let loops = boundary_loops(&topo);
+    if loops.is_empty() {
+        return Some("closed surface".into());
+    }
+    let chi = part.positions.len() as i64 - topo.edge_count() as i64 + part.triangles.len() as i64;
+    // A disk with holes has chi = 2 - loops; less means handles.
+    let genus = (2 - loops.len() as i64 - chi) / 2;
+    if genus != 0 {
+        return Some(format!(
+            "genus {genus} with {} boundary loops (Euler characteristic {chi})",
+            loops.len()
+        ));
+    }
+    let length = |l: &Vec<u32>| -> f64 {
+        (0..l.len())
+            .map(|k| {
+                part.positions[l[k] as usize]
+                    .distance(part.positions[l[(k + 1) % l.len()] as usize])
+            })
+            .sum()
+    };
+    let rim = loops.iter().map(length).fold(0.0, f64::max);
+    let area: f64 = part
+        .triangles
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(|v| part.positions[v as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum();
+    let ratio = rim / area.sqrt().max(f64::MIN_POSITIVE);
+    (ratio < NEARLY_CLOSED_RIM).then(|| {
+        format!(
+            "nearly closed: {} boundary loops, the longest {ratio:.2} times the square root of the area",
+            loops.len()
+        )
+    })
+}
+
+/// What an object fit leaves for the next version of the same object.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct ObjectWarm {
+    /// The control faces (the positions are `WarmStart::controls`).
+    pub faces: Vec<[u32; 3]>,
+    /// The data points and their final (u, v) on their control faces ...
+    pub feet: WarmFeet,
+    /// ... and those faces.
+    pub feet_faces: Vec<u32>,
+    /// The data's topology the control mesh was simplified from.
+    pub euler: i64,
+    /// Its boundary loops.
+    pub boundary_loops: usize,
+    /// The data's bounding box (min, max).
+    pub bounds: [DVec3; 2],
+}
+
+/// A new version starts from the previous control mesh only when its vertex count is
+/// within this factor of the previous one ...
+const WARM_MAX_SIZE_RATIO: f64 = 1.5;
+/// ... and each corner of its bounding box within this fraction of the previous diagonal.
+const WARM_MAX_BOX_SHIFT: f64 = 0.05;
+
+/// The report's account of an object fit (the surface, controls, data and parameters are
+/// in the `PatchFit`).
+pub struct ObjectInfo {
+    /// Why the object path was taken.
+    pub reason: String,
+    /// Whether the previous version's control mesh was the start, and if not why.
+    pub warm: WarmDecision,
+    /// The data's topology.
+    pub data_topology: SurfaceTopology,
+    /// The control mesh's topology.
+    pub control_topology: SurfaceTopology,
+    /// RMS and max after the first fit and after each round.
+    pub rounds: Vec<RoundReport>,
+    /// Stage times.
+    pub times: ObjectTimes,
+}
+
+/// Whether a warm start was used.
+pub enum WarmDecision {
+    /// There was no previous object fit.
+    None,
+    /// Started from the previous control mesh and foot points.
+    Used,
+    /// Started cold: why the previous fit did not fit.
+    Refused(String),
+}
+
+fn options(cfg: &WorkerConfig) -> ObjectOptions {
+    ObjectOptions {
+        target_controls_pct: cfg.fit.scan.target_controls_pct,
+        smoothing: cfg.fit.scan.smoothing,
+        rounds: cfg.fit.correction.rounds,
+        ..ObjectOptions::default()
+    }
+}
+
+/// Fits `mesh` as a whole object, from `previous` when it still fits.
+pub(super) fn fit_as_object(
+    mesh: &TriMesh,
+    previous: Option<&ObjectWarm>,
+    previous_controls: &[DVec3],
+    cfg: &WorkerConfig,
+    budget: &Budget,
+    reason: String,
+) -> Result<(PatchFit, ObjectInfo), PipelineError> {
+    let opts = options(cfg);
+    let object = |source| PipelineError::Object { source };
+    let (fit, warm) = match previous.map(|w| warm_start(mesh, w, previous_controls)) {
+        Some(Ok((component, control_mesh, params))) => (
+            fit_on_control_mesh(component, control_mesh, params, &opts).map_err(object)?,
+            WarmDecision::Used,
+        ),
+        Some(Err(why)) => (
+            fit_object(mesh, &opts).map_err(object)?,
+            WarmDecision::Refused(why),
+        ),
+        None => (fit_object(mesh, &opts).map_err(object)?, WarmDecision::None),
+    };
+    let info = ObjectInfo {
+        reason,
+        warm,
+        data_topology: fit.data_topology,
+        control_topology: fit.control_topology,
+        rounds: fit.rounds.clone(),
+        times: fit.times.clone(),
+    };
+    let patch = patch_fit(fit, budget, matches!(info.warm, WarmDecision::Used));
+    Ok((patch, info))
+}
+
+/// The new version's component, the previous control mesh and each data point's start
+/// parameter (that of the nearest previous data point), or why the previous fit does not
+/// fit the new data.
+fn warm_start(
+    mesh: &TriMesh,
+    warm: &ObjectWarm,
+    controls: &[DVec3],
+) -> Result<(TriMesh, TriMesh, Vec<SurfaceParam>), String> {
+    let cleaned = clean(mesh, &CleanOptions::default());
+    let component = cleaned_components(&cleaned)
+        .into_iter()
+        .next()
+        .ok_or("nothing left after cleaning")?;
+    let topology =
+        SurfaceTopology::of(&component).map_err(|e| format!("not a manifold component: {e}"))?;
+    if (topology.euler, topology.boundary_loops) != (warm.euler, warm.boundary_loops) {
+        return Err(format!(
+            "topology changed: Euler characteristic {} -> {}, boundary loops {} -> {}",
+            warm.euler, topology.euler, warm.boundary_loops, topology.boundary_loops
+        ));
+    }
+    let (n, before) = (component.positions.len(), warm.feet.points.len());
+    let ratio = n.max(1) as f64 / before.max(1) as f64;
+    if !(1.0 / WARM_MAX_SIZE_RATIO..=WARM_MAX_SIZE_RATIO).contains(&ratio) {
+        return Err(format!("vertex count changed from {before} to {n}"));
+    }
+    let bounds = bounds_of(&component.positions);
+    let diagonal = (warm.bounds[1] - warm.bounds[0]).length();
+    let shift = (bounds[0] - warm.bounds[0])
+        .length()
+        .max((bounds[1] - warm.bounds[1]).length());
+    // Written so that a NaN box (no points) counts as moved.
+    let box_kept = shift <= WARM_MAX_BOX_SHIFT * diagonal;
+    if !box_kept {
+        return Err(format!(
+            "bounding box moved by {:.3} of its diagonal",
+            shift / diagonal.max(f64::MIN_POSITIVE)
+        ));
+    }
+    let faces_ok = warm
+        .faces
+        .iter()
+        .flatten()
+        .all(|&v| (v as usize) < controls.len());
+    if !faces_ok || warm.feet_faces.len() != before || warm.feet.params.len() != before {
+        return Err("the stored control mesh is inconsistent".into());
+    }
+    let params = nearest_params(warm, &component.positions);
+    let control_mesh = TriMesh::new(controls.to_vec(), warm.faces.clone());
+    Ok((component, control_mesh, params))
+}
+
+fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {
+    points.iter().fold(
+        [DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)],
+        |[lo, hi], p| [lo.min(*p), hi.max(*p)],
+    )
+}
+
+/// Each point's start parameter: the final parameter of the nearest previous data point
+/// (over a bucket grid with about two previous points per cell).
+fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> Vec<SurfaceParam> {
+    let old: Vec<DVec3> = warm
+        .feet
+        .points
+        .iter()
+        .map(|p| glam::Vec3::from_array(*p).as_dvec3())
+        .collect();
+    let grid = PointGrid::new(&old);
+    points
+        .par_iter()
+        .map(|p| {
+            let k = grid.nearest(&old, *p);
+            let [u, v] = warm.feet.params[k];
+            SurfaceParam {
+                face: warm.feet_faces[k],
+                u: f64::from(u),
+                v: f64::from(v),
+            }
+        })
+        .collect()
+}
+
+/// A uniform bucket grid over 3D points for nearest-point queries.
+struct PointGrid {
+    lo: DVec3,
+    cell: f64,
+    dims: [usize; 3],
+    /// Points of bucket b: `order[start[b]..start[b + 1]]`.
+    start: Vec<u32>,
+    order: Vec<u32>,
+}
+
+impl PointGrid {
+    fn new(points: &[DVec3]) -> Self {
+        let [lo, hi] = bounds_of(points);
+        let extent = (hi - lo).max(DVec3::splat(1e-12));
+        // About two points per occupied cell on a surface: cells of the surface's spacing.
+        let volume_cells = (points.len().max(1) as f64 / 2.0).powf(1.5);
+        let cell = (extent.x * extent.y * extent.z / volume_cells)
+            .cbrt()
+            .max(extent.max_element() / 512.0);
+        let dims = [extent.x, extent.y, extent.z].map(|e| ((e / cell) as usize + 1).min(512));
+        let mut grid = Self {
+            lo,
+            cell,
+            dims,
+            start: vec![0; dims[0] * dims[1] * dims[2] + 1],
+            order: vec![0; points.len()],
+        };
+        let slots: Vec<usize> = points.iter().map(|p| grid.slot(grid.coords(*p))).collect();
+        for &b in &slots {
+            grid.start[b + 1] += 1;
+        }
+        for b in 0..grid.start.len() - 1 {
+            grid.start[b + 1] += grid.start[b];
+        }
+        let mut fill = grid.start.clone();
+        for (k, &b) in slots.iter().enumerate() {
+            grid.order[fill[b] as usize] = k as u32;
+            fill[b] += 1;
+        }
+        grid
+    }
+
+    fn coords(&self, p: DVec3) -> [usize; 3] {
+        let q = ((p - self.lo) / self.cell).max(DVec3::ZERO);
+        let clamp = |x: f64, d: usize| (x as usize).min(d - 1);
+        [
+            clamp(q.x, self.dims[0]),
+            clamp(q.y, self.dims[1]),
+            clamp(q.z, self.dims[2]),
+        ]
+    }
+
+    fn slot(&self, [x, y, z]: [usize; 3]) -> usize {
+        (z * self.dims[1] + y) * self.dims[0] + x
+    }
+
+    /// Index of the nearest point (rings of cells until one more ring cannot hold a nearer
+    /// one); `points` must be those the grid was built on, and not empty.
+    fn nearest(&self, points: &[DVec3], q: DVec3) -> usize {
+        let c = self.coords(q);
+        let mut best = (f64::MAX, 0usize);
+        let reach = self.dims.into_iter().max().unwrap_or(1);
+        for r in 0..reach {
+            let range = |i: usize, d: usize| i.saturating_sub(r)..(i + r + 1).min(d);
+            for z in range(c[2], self.dims[2]) {
+                for y in range(c[1], self.dims[1]) {
+                    for x in range(c[0], self.dims[0]) {
+                        let on_shell = [x, y, z].iter().zip(c).any(|(&a, b)| a.abs_diff(b) == r);
+                        if !on_shell {
+                            continue;
+                        }
+                        let b = self.slot([x, y, z]);
+                        for &k in &self.order[self.start[b] as usize..self.start[b + 1] as usize] {
+                            let d = points[k as usize].distance_squared(q);
+                            if d < best.0 {
+                                best = (d, k as usize);
+                            }
+                        }
+                    }
+                }
+            }
+            if best.0 < f64::MAX && (r as f64 * self.cell).powi(2) >= best.0 {
+                break;
+            }
+        }
+        best.1
+    }
+}
+
+/// The object fit in the form every output reads: a Loop surface on its control mesh.
+fn patch_fit(fit: ObjectFit, budget: &Budget, warm_start: bool) -> PatchFit {
+    let n = fit.distances.len().max(1) as f64;
+    let within = fit
+        .distances
+        .iter()
+        .filter(|&&d| d <= budget.tolerance)
+        .count();
+    let last = StepStats {
+        k: fit.rounds.len().saturating_sub(1),
+        max_error: fit.max,
+        mean_error: fit.distances.iter().sum::<f64>() / n,
+        rms_error: fit.rms,
+        within_tolerance_pct: 100.0 * within as f64 / n,
+        elapsed_ms: fit.times.total_ms,
+    };
+    let status = if budget.met(&last) {
+        FitStatus::Met
+    } else {
+        FitStatus::Stalled
+    };
+    PatchFit {
+        surface: SurfaceKind::Loop,
+        degree: 0,
+        model: SurfaceModel::Mesh(Arc::new(fit.surface)),
+        outcome: FitOutcome {
+            controls: fit.controls.clone(),
+            iterations: last.k,
+            steps: vec![last],
+            status,
+        },
+        controls: fit.controls,
+        data: fit.data,
+        params: fit.params,
+        geometric_errors: fit.distances,
+        warm_start,
+        prepare_ms: fit.times.clean_ms + fit.times.simplify_ms + fit.times.surface_ms,
+        fit_ms: fit.times.first_fit_ms + fit.times.rounds_ms,
+    }
+}
+
+/// What the next version starts from (`None` for a fit of another model).
+pub(super) fn object_warm(fit: &PatchFit, info: &ObjectInfo) -> Option<ObjectWarm> {
+    let SurfaceModel::Mesh(surface) = &fit.model else {
+        return None;
+    };
+    Some(ObjectWarm {
+        faces: surface.faces().to_vec(),
+        feet: WarmFeet {
+            points: fit.data.iter().map(|p| p.as_vec3().to_array()).collect(),
+            params: fit
+                .params
+                .iter()
+                .map(|p| [p.u as f32, p.v as f32])
+                .collect(),
+            rms: fit.geometric_rms(),
+        },
+        feet_faces: fit.params.iter().map(|p| p.face).collect(),
+        euler: info.data_topology.euler,
+        boundary_loops: info.data_topology.boundary_loops,
+        bounds: bounds_of(&fit.data),
+    })
+}
+
+/// The report's keys about an object fit.
+pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Value {
+    let topology = |t: &SurfaceTopology| {
+        serde_json::json!({
+            "genus": t.genus,
+            "boundary_loops": t.boundary_loops,
+            "euler_characteristic": t.euler,
+            "components": t.components,
+        })
+    };
+    let faces = match &fit.model {
+        SurfaceModel::Mesh(m) => m.faces().len(),
+        _ => 0,
+    };
+    let warm = match &info.warm {
+        WarmDecision::None => serde_json::json!({"used": false}),
+        WarmDecision::Used => serde_json::json!({"used": true}),
+        WarmDecision::Refused(why) => serde_json::json!({"used": false, "cold_because": why}),
+    };
+    serde_json::json!({
+        "path_reason": info.reason,
+        "data_points": fit.data.len(),
+        "control_points": fit.controls.len(),
+        "control_faces": faces,
+        "initial_positions": "simplification",
+        "topology": {"data": topology(&info.data_topology), "control": topology(&info.control_topology)},
+        "rounds": info.rounds,
+        "stages": info.times,
+        "warm": warm,
+    })
+}
+
+/// The tessellation of an object fit is refined until its flat triangles' own error (RMS
+/// at their centroids) is at most this share of the fit's RMS: the shown surface then
+/// differs from the fitted one far less than the fitted one from the data.
+const CHORD_SHARE_OF_RMS: f64 = 0.1;
+/// Segments per control-face side at most ...
+const MAX_PER_FACE: usize = 64;
+/// ... and triangles in all at most (about 30 MB of GLB; beyond that the file grows past
+/// what a viewer opens quickly for a gain nobody sees).
+const MAX_TRIANGLES: usize = 1_000_000;
+/// Control faces sampled for the chord error.
+const CHORD_SAMPLE_FACES: usize = 150;
+
+/// How fine an object's tessellation is and what its triangles' own error measured.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct TessellationCheck {
+    /// Segments per control-face side.
+    pub per_face: usize,
+    /// RMS of the chord error at the triangles' centroids (sampled faces).
+    pub chord_rms: f64,
+    /// Its largest value.
+    pub chord_max: f64,
+    /// The fit's geometric RMS it is held against.
+    pub fit_rms: f64,
+}
+
+/// Segments per control-face side for an object fit: from `start` (what the configured
+/// tessellation gives), refined until the chord error is a small share of the fit's RMS.
+/// The chord error of a smooth surface falls with the square of the segments, so each
+/// measurement predicts the count the next one checks.
+pub(super) fn object_tessellation(fitted: &PatchFit, start: usize) -> TessellationCheck {
+    let faces = match &fitted.model {
+        SurfaceModel::Mesh(m) => m.faces().len().max(1),
+        _ => 1,
+    };
+    let cap = ((MAX_TRIANGLES as f64 / faces as f64).sqrt() as usize).clamp(2, MAX_PER_FACE);
+    let fit_rms = fitted.geometric_rms();
+    let target = CHORD_SHARE_OF_RMS * fit_rms;
+    let mut per_face = start.clamp(2, cap);
+    loop {
+        let errors = crate::pipeline::output::chord_errors(fitted, per_face, CHORD_SAMPLE_FACES);
+        let n = errors.len().max(1) as f64;
+        let check = TessellationCheck {
+            per_face,
+            chord_rms: (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+            chord_max: errors.iter().cloned().fold(0.0, f64::max),
+            fit_rms,
+        };
+        if check.chord_rms <= target || per_face >= cap {
+            return check;
+        }
+        let predicted = (per_face as f64 * (check.chord_rms / target).sqrt()).ceil() as usize;
+        per_face = predicted.clamp(per_face + 1, cap);
+    }
+}

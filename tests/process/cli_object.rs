@@ -1,0 +1,150 @@
+//! Whole objects as a user meets them: `trispline fit torus.off --out DIR` with no flags,
+//! `--domain`, `curvature` on the result, and the daemon fitting a torus dropped into its
+//! folder (then a changed version of it, warm).
+
+use crate::daemon_support::{config, read_json, setup};
+use std::f64::consts::TAU;
+use std::fmt::Write;
+use std::path::Path;
+use std::process::Command;
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_trispline"))
+}
+
+/// A torus (radii 1 and 0.35) on an `n x m` grid (`n`, `m` even) as OFF text; `wobble` moves every vertex
+/// by up to that much (a rescan of the same object).
+fn torus_off(n: usize, m: usize, wobble: f64) -> String {
+    let mut s = format!("OFF\n{} {} 0\n", n * m, 2 * n * m);
+    for i in 0..n {
+        for j in 0..m {
+            let (a, b) = (TAU * i as f64 / n as f64, TAU * j as f64 / m as f64);
+            let h = wobble * (((i * m + j) * 7919 % 101) as f64 / 101.0 - 0.5);
+            let r = 1.0 + (0.35 + h) * b.cos();
+            let _ = writeln!(
+                s,
+                "{} {} {}",
+                r * a.cos(),
+                r * a.sin(),
+                (0.35 + h) * b.sin()
+            );
+        }
+    }
+    let at = |i: usize, j: usize| (i % n) * m + j % m;
+    for i in 0..n {
+        for j in 0..m {
+            let (p, q, r, t) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+            // Alternating diagonals: valences 4 and 8, so no subdivision connectivity (a
+            // one-way split would be a regular lattice, fitted on the exact path).
+            if (i + j) % 2 == 0 {
+                let _ = writeln!(s, "3 {p} {q} {r}\n3 {p} {r} {t}");
+            } else {
+                let _ = writeln!(s, "3 {p} {q} {t}\n3 {q} {r} {t}");
+            }
+        }
+    }
+    s
+}
+
+fn run(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().expect("runs");
+    assert!(
+        out.status.success(),
+        "{:?}: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+#[test]
+fn fit_with_no_flags_fits_a_whole_object() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("torus.off");
+    std::fs::write(&input, torus_off(40, 16, 0.0)).expect("write");
+    let fit = tmp.path().join("fit");
+    run(bin().arg("fit").arg(&input).arg("--out").arg(&fit));
+    let report = read_json(&fit.join("report.json"));
+    assert_eq!(report["path"], "object", "{report}");
+    assert_eq!(report["surface"], "loop");
+    assert_eq!(report["topology"]["control"]["genus"], 1);
+    assert_eq!(report["topology"]["data"]["genus"], 1);
+    let surface = read_json(&fit.join("surface.json"));
+    assert_eq!(surface["layout"], "mesh");
+    assert!(std::fs::metadata(fit.join("surface.glb")).map_or(0, |m| m.len()) > 1000);
+
+    // `curvature` reads the control-mesh layout: a torus has a convex outside and a saddle
+    // inside.
+    let k = tmp.path().join("k");
+    run(bin()
+        .arg("curvature")
+        .arg(fit.join("surface.json"))
+        .args(["--grid", "41", "--out"])
+        .arg(&k));
+    let regions = read_json(&k.join("regions.json"));
+    assert!(regions["convex"].as_u64().unwrap_or(0) >= 1, "{regions}");
+    assert!(regions["saddle"].as_u64().unwrap_or(0) >= 1, "{regions}");
+
+    // The planar map cannot take a torus: `--domain grid` refuses it, exit 2.
+    let refused = bin()
+        .arg("fit")
+        .arg(&input)
+        .args(["--domain", "grid", "--out"])
+        .arg(tmp.path().join("grid"))
+        .output()
+        .expect("runs");
+    assert_eq!(refused.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(err.contains("not disk-like"), "{err}");
+}
+
+#[test]
+fn domain_mesh_fits_a_scan_patch_on_a_control_mesh() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("patch.ply");
+    std::fs::write(&input, crate::daemon_support::patch_ply(20, 3)).expect("write");
+    let fit = tmp.path().join("fit");
+    run(bin()
+        .arg("fit")
+        .arg(&input)
+        .args(["--domain", "mesh", "--out"])
+        .arg(&fit));
+    let report = read_json(&fit.join("report.json"));
+    assert_eq!(report["path"], "object", "{report}");
+    assert_eq!(report["topology"]["control"]["boundary_loops"], 1);
+}
+
+fn fitted_report(out: &Path, patch: &str) -> serde_json::Value {
+    read_json(&out.join(patch).join("report.json"))
+}
+
+#[test]
+fn daemon_fits_a_torus_dropped_into_its_folder_then_warm() {
+    let s = setup(&config(0, "poll", "").replace("surface = \"bezier\"", "surface = \"loop\""));
+    std::fs::write(s.inbox.join("ring.off"), torus_off(40, 16, 0.0)).expect("write");
+    let first = s.once();
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    let report = fitted_report(&s.out, "ring");
+    assert_eq!(report["path"], "object", "{report}");
+    assert_eq!(report["topology"]["control"]["genus"], 1);
+    assert_eq!(report["object"]["warm"]["used"], false);
+    assert_eq!(
+        read_json(&s.out.join("ring").join("surface.json"))["layout"],
+        "mesh"
+    );
+
+    // A rescan of the same ring: it starts from the stored control mesh.
+    std::fs::write(s.inbox.join("ring.off"), torus_off(40, 16, 4e-3)).expect("write");
+    let second = s.once();
+    assert!(
+        second.status.success(),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    let report = fitted_report(&s.out, "ring");
+    assert_eq!(report["object"]["warm"]["used"], true, "{report}");
+}
