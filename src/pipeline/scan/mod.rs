@@ -25,7 +25,7 @@ mod warm;
 
 pub use feet::WarmFeet;
 pub use types::{
-    BezierLayout, Correction, CorrectionConfig, Domain, Mapping, Preparation, ScanConfig, ScanFit,
+    BezierLayout, Correction, CorrectionConfig, Domain, Dropped, Mapping, Preparation, ScanConfig, ScanFit,
     ScanTimings, Trims,
 };
 pub(crate) use types::{ScanOptions, ScanWarm};
@@ -109,6 +109,7 @@ pub(crate) fn fit_scan(
     let prepare::Prepared {
         part,
         components,
+        dropped,
         patch,
         frame,
         map,
@@ -146,6 +147,7 @@ pub(crate) fn fit_scan(
             components,
             kept_vertices: real,
             holes: patch.holes,
+            dropped,
         },
         mapping: Mapping {
             frame,

@@ -2,7 +2,7 @@
 //! map it to the plane.
 
 use super::components::cleaned_components;
-use super::types::{ScanOptions, ScanWarm};
+use super::types::{Dropped, ScanOptions, ScanWarm};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::pipeline::PipelineError;
 use crate::remesh::planar::{evened_out, planar_map, projection_warp, PlanarMap, PlaneFrame};
@@ -15,6 +15,8 @@ pub(super) struct Prepared {
     pub(super) part: TriMesh,
     /// Components of the cleaned input.
     pub(super) components: usize,
+    /// The components left out.
+    pub(super) dropped: Dropped,
     /// `part` with its holes closed by virtual fans.
     pub(super) patch: FilledPatch,
     /// The plane of the map.
@@ -33,9 +35,30 @@ pub(super) fn prepare(
     let cleaned = clean(mesh, &CleanOptions::default());
     let parts = cleaned_components(&cleaned);
     let components = parts.len();
-    let part = parts.into_iter().next().unwrap_or_default();
+    let total: usize = parts.iter().map(|p| p.positions.len()).sum();
+    let mut parts = parts.into_iter();
+    let part = parts.next().unwrap_or_default();
     if part.triangles.is_empty() {
         return Err(PipelineError::EmptyAfterCleaning);
+    }
+    let sizes: Vec<usize> = parts.map(|p| p.positions.len()).collect();
+    let dropped = Dropped::of(&sizes, total);
+    if dropped.pieces > 0 {
+        // Said where it happens: a piece of a third of the scan left out without a word
+        // looks like a fit that ignored the data.
+        tracing::warn!(
+            pieces = dropped.pieces,
+            vertices = dropped.vertices,
+            share_pct = format!("{:.1}", 100.0 * dropped.share),
+            largest_piece = dropped.largest,
+            "{} of {} components not fitted: {} of {} vertices ({:.1} %), the largest piece left out has {}; `--components all` fits every sizeable piece",
+            dropped.pieces,
+            components,
+            dropped.vertices,
+            total,
+            100.0 * dropped.share,
+            dropped.largest,
+        );
     }
     let previous_warp = warm.and_then(|w| w.warp);
     // The plane's frame and warp read only the data triangles: found beside the filling of
@@ -70,6 +93,7 @@ pub(super) fn prepare(
     Ok(Prepared {
         part,
         components,
+        dropped,
         patch,
         frame,
         map,
