@@ -3,6 +3,7 @@
 
 use super::components::cleaned_components;
 use super::types::{Dropped, ScanOptions, ScanWarm};
+use super::warm_guard::{refuse_warm, ColdStart};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::pipeline::PipelineError;
 use crate::remesh::planar::{evened_out, planar_map, projection_warp, PlanarMap, PlaneFrame};
@@ -25,6 +26,8 @@ pub(super) struct Prepared {
     pub(super) map: PlanarMap,
     /// The data's sample spacing: the unit in which hole widths are judged.
     pub(super) edge_length: f64,
+    /// Why the previous version given was not used (the later stages then start cold).
+    pub(super) cold_start: Option<ColdStart>,
 }
 
 pub(super) fn prepare(
@@ -60,6 +63,12 @@ pub(super) fn prepare(
             dropped.largest,
         );
     }
+    let edge_length = median_edge_length(&part);
+    let cold_start = warm.and_then(|w| refuse_warm(&part, &dropped, edge_length, w));
+    if let Some(reason) = &cold_start {
+        tracing::warn!(%reason, "the previous version is too different: starting cold");
+    }
+    let warm = warm.filter(|_| cold_start.is_none());
     let previous_warp = warm.and_then(|w| w.warp);
     // The plane's frame and warp read only the data triangles: found beside the filling of
     // the holes (a warp from the previous version is reused instead, when it covers).
@@ -89,7 +98,6 @@ pub(super) fn prepare(
         &patch,
         previous_warp.or(early_warp.as_ref()),
     );
-    let edge_length = median_edge_length(&part);
     Ok(Prepared {
         part,
         components,
@@ -98,6 +106,7 @@ pub(super) fn prepare(
         frame,
         map,
         edge_length,
+        cold_start,
     })
 }
 

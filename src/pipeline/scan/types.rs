@@ -4,6 +4,7 @@
 use super::domain::{barycentric, GridFrame, InitialNet};
 use super::feet::WarmFeet;
 use super::holes::HolePlan;
+use super::warm_guard::ColdStart;
 use crate::pipeline::names::named;
 use crate::pipeline::PatchFit;
 use crate::remesh::planar::{MapMethod, PlaneFrame};
@@ -187,6 +188,8 @@ pub struct ScanFit {
     pub correction_rms: Vec<f64>,
     /// Control points reused from the previous version (warm start).
     pub reused_controls: usize,
+    /// Given a previous version, why it was not used (`None`: used, or none given).
+    pub cold_start: Option<ColdStart>,
     /// Stage times.
     pub timings: ScanTimings,
 }
