@@ -16,8 +16,8 @@ use std::time::Instant;
 use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::pipeline::scan::components::cleaned_components;
 use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Coverage};
+use trispline::pipeline::scan::components::cleaned_components;
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 
@@ -112,6 +112,12 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     cfg.fit.surface = surface;
     cfg.fit.correction.rounds = rounds;
     cfg.fit.scan.smoothing = smoothing;
+    if let Some(b) = std::env::var("SCAN_TABLE_BRIDGE")
+        .ok()
+        .and_then(|b| b.parse().ok())
+    {
+        cfg.fit.scan.hole_bridge_edges = b;
+    }
     let t1 = Instant::now();
     let fitted = match fit_patch(&loaded.mesh, None, &cfg) {
         Ok(f) => f,
@@ -234,7 +240,9 @@ fn shown_share(shown: &trispline::TriMesh, points: &[glam::DVec3], near: f64) ->
 /// Every scan's pieces after cleaning, largest first, and what fitting only the largest
 /// leaves out: the numbers the component default is chosen on.
 fn pieces_table(root: &Path, files: &[&str]) {
-    println!("| file | vertices | pieces | sizes (largest first, top 8) | `largest` drops | share |");
+    println!(
+        "| file | vertices | pieces | sizes (largest first, top 8) | `largest` drops | share |"
+    );
     println!("|---|---|---|---|---|---|");
     for rel in files.iter().filter(|r| r.starts_with("range_scans")) {
         let Ok(loaded) = read_mesh_file(&root.join(rel), &LoadOptions::default()) else {

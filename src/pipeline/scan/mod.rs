@@ -25,13 +25,13 @@ mod warm;
 mod warm_guard;
 
 pub use feet::WarmFeet;
-pub use warm_guard::ColdStart;
 pub use types::{
-    BezierLayout, Correction, CorrectionConfig, Domain, Dropped, Mapping, Preparation, ScanConfig, ScanFit,
-    ScanTimings, Trims,
+    BezierLayout, Correction, CorrectionConfig, Domain, Dropped, Mapping, Preparation, ScanConfig,
+    ScanFit, ScanTimings, Trims,
 };
 pub(crate) use types::{ScanOptions, ScanWarm};
 pub(crate) use warm::warm_feet;
+pub use warm_guard::ColdStart;
 
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::Collocation;

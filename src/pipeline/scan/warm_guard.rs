@@ -36,7 +36,7 @@ pub enum ColdStart {
         /// Degrees.
         normal_angle_deg: f64,
     },
-    /// The data moved: the shift of the bounding-box centre.
+    /// The data moved: how far the new bounding box sticks out of the previous one.
     Shift {
         /// As a share of the previous bounding-box diagonal.
         diagonal_share: f64,
@@ -74,7 +74,7 @@ impl std::fmt::Display for ColdStart {
             ),
             ColdStart::Shift { diagonal_share } => write!(
                 f,
-                "frame: the bounding box moved by {:.1} % of its diagonal (limit {:.0} %)",
+                "frame: the bounding box sticks out of the previous one by {:.1} % of its diagonal (limit {:.0} %)",
                 100.0 * diagonal_share,
                 100.0 * MAX_SHIFT_SHARE
             ),
@@ -104,7 +104,8 @@ const MAX_DROPPED_SHARE: f64 = 0.25;
 /// Mean-normal turn beyond which the previous plane is no longer the data's.
 const MAX_NORMAL_ANGLE_DEG: f64 = 15.0;
 
-/// Bounding-box centre shift (share of the diagonal) beyond which the data moved.
+/// How far (share of the previous diagonal) the new bounding box may stick out of the
+/// previous one before the data count as moved.
 const MAX_SHIFT_SHARE: f64 = 0.05;
 
 /// A warm grid may have at most this many times the controls the budget asks for: the old
@@ -151,7 +152,12 @@ pub(super) fn refuse_warm(
     let (old_lo, old_hi) = bounds(&old);
     let (new_lo, new_hi) = bounds(&part.positions);
     let diagonal = (old_hi - old_lo).length();
-    let shift = ((new_lo + new_hi) - (old_lo + old_hi)).length() * 0.5;
+    // How far the new box sticks out of the previous one: a moved version sticks out by its
+    // move, a cut one (part of the same data) not at all.
+    let shift = (new_hi - old_hi)
+        .max(old_lo - new_lo)
+        .max_element()
+        .max(0.0);
     if diagonal > 0.0 && shift > MAX_SHIFT_SHARE * diagonal {
         return Some(ColdStart::Shift {
             diagonal_share: shift / diagonal,
@@ -172,7 +178,10 @@ fn normal_angle_deg(mesh: &TriMesh, frame: &PlaneFrame) -> f64 {
             (p[1] - p[0]).cross(p[2] - p[0])
         })
         .sum();
-    let (a, b) = (normal.normalize_or_zero(), frame.normal().normalize_or_zero());
+    let (a, b) = (
+        normal.normalize_or_zero(),
+        frame.normal().normalize_or_zero(),
+    );
     if a == DVec3::ZERO || b == DVec3::ZERO {
         return 0.0;
     }
