@@ -146,11 +146,11 @@ fn versions_too_different_start_cold_and_stay_within_the_budget() {
     assert!(reason.to_string().starts_with("frame:"), "{reason}");
     assert!(within_budget(&f), "{} controls", f.fit.controls.len());
 
-    // Turned by 30 degrees about the x axis.
-    let (s30, c30) = 30f64.to_radians().sin_cos();
+    // Turned by 45 degrees about the x axis.
+    let (sin, cos) = 45f64.to_radians().sin_cos();
     let mut turned = mesh.clone();
     for p in &mut turned.positions {
-        *p = DVec3::new(p.x, c30 * p.y - s30 * p.z, s30 * p.y + c30 * p.z);
+        *p = DVec3::new(p.x, cos * p.y - sin * p.z, sin * p.y + cos * p.z);
     }
     let f = fit_patch(&turned, Some(&first.warm), &cfg).expect("turned");
     assert!(
