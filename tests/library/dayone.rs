@@ -104,7 +104,7 @@ fn versions_too_different_start_cold_and_stay_within_the_budget() {
 
     // A fifth of the vertices gone at random (deterministic hash): a piece full of holes
     // with fragments around it.
-    let gone = |v: usize| (v.wrapping_mul(2_654_435_761) >> 7) % 5 == 0;
+    let gone = |v: usize| (v.wrapping_mul(2_654_435_761) >> 7).is_multiple_of(5);
     let fragmented = without(&mesh, |v| !gone(v));
     let f = fit_patch(&fragmented, Some(&first.warm), &cfg).expect("fragmented");
     let s = scan_of(&f);
