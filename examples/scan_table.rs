@@ -14,8 +14,10 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use trispline::io::{read_mesh_file, write_atomic, LoadOptions};
+use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellate, tessellated_glb, Coverage};
+use trispline::pipeline::scan::components::cleaned_components;
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 
@@ -40,14 +42,20 @@ fn main() {
         "range_scans/chin_tri.ply",
         "range_scans/bun000_meshlab_triangulated.ply",
         "range_scans/bun000_range_grid.ply",
+        "range_scans/registered/bun000.ply",
+        "range_scans/registered/bun045.ply",
+        "range_scans/registered/bun180.ply",
+        "range_scans/registered/bun270.ply",
+        "range_scans/registered/chin.ply",
         "models/camelhead.off",
         "models/bun_zipper.ply",
     ];
     let out = std::env::temp_dir().join(format!("trispline-scan-table-{}", std::process::id()));
+    pieces_table(&root, &files);
     println!(
-        "| file | surface | data pts | ctrl (% data) | geo max | geo rms | status | read ms | prepare ms | fit ms | outputs ms | total ms | tess->data max | p99.9 | tess->filled max | p99.9 | map |"
+        "| file | surface | data pts | ctrl (% data) | geo max | geo rms | status | read ms | prepare ms | fit ms | outputs ms | total ms | tess->data max | p99.9 | tess->filled max | p99.9 | fitted within 1 mm of tess | dropped (pieces, share) | map |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for rel in files {
         let path = root.join(rel);
         if !path.exists() {
@@ -104,6 +112,12 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
     cfg.fit.surface = surface;
     cfg.fit.correction.rounds = rounds;
     cfg.fit.scan.smoothing = smoothing;
+    if let Some(b) = std::env::var("SCAN_TABLE_BRIDGE")
+        .ok()
+        .and_then(|b| b.parse().ok())
+    {
+        cfg.fit.scan.hole_bridge_edges = b;
+    }
     let t1 = Instant::now();
     let fitted = match fit_patch(&loaded.mesh, None, &cfg) {
         Ok(f) => f,
@@ -162,6 +176,28 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
         || dist.clone(),
         |s| distances(&MeshDistance::new(&s.mapping.filled)),
     );
+    // The other side: the fitted points to what is shown (the trimmed tessellation), the
+    // share within 1 mm (Stanford scale; 1/1000 of the diagonal elsewhere).
+    let shown = trispline::TriMesh {
+        positions: tess.positions.clone(),
+        triangles: tess.triangles.clone(),
+    };
+    let near = if unit.1 == "um" {
+        1e-3
+    } else {
+        1e-3 * loaded.mesh.bounds_diagonal()
+    };
+    let within = shown_share(&shown, &f.data, near);
+    let dropped = fitted.scan.as_ref().map_or_else(String::new, |s| {
+        let d = s.preparation.dropped;
+        format!(
+            "{} of {}, {:.2}% (largest {})",
+            d.pieces,
+            s.preparation.components,
+            100.0 * d.share,
+            d.largest
+        )
+    });
     let (prepare_ms, fit_ms) = (f.prepare_ms, f.fit_ms);
     let map = fitted.scan.as_ref().map_or("subdivision".to_string(), |s| {
         format!(
@@ -170,7 +206,7 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
         )
     });
     println!(
-        "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.4} {u} | {:.4} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.4} {u} | {:.4} {u} | {:.4} {u} | {:.4} {u} | {map}; diagonal {:.4} |",
+        "| {rel} | {surface:?} | {} | {} ({:.1}%) | {:.4} {u} | {:.4} {u} | {:?} | {read_ms:.0} | {prepare_ms:.0} | {fit_ms:.0} | {outputs_ms:.0}{} | {total_ms:.0} (fit_patch {fit_total:.0}) | {:.4} {u} | {:.4} {u} | {:.4} {u} | {:.4} {u} | {:.3}% | {dropped} | {map}; diagonal {:.4} |",
         f.data.len(),
         f.controls.len(),
         100.0 * f.controls.len() as f64 / f.data.len().max(1) as f64,
@@ -182,9 +218,52 @@ fn row(path: &Path, rel: &str, surface: SurfaceKind, out: &Path) {
         pct(&dist, 0.999) * unit.0,
         pct(&filled, 1.0) * unit.0,
         pct(&filled, 0.999) * unit.0,
+        100.0 * within,
         loaded.mesh.bounds_diagonal() * unit.0,
         u = unit.1,
     );
+}
+
+/// Share of `points` within `near` of `shown` (none when nothing is shown).
+fn shown_share(shown: &trispline::TriMesh, points: &[glam::DVec3], near: f64) -> f64 {
+    if shown.triangles.is_empty() || points.is_empty() {
+        return 0.0;
+    }
+    let md = MeshDistance::new(shown);
+    let inside = points
+        .par_iter()
+        .filter(|p| md.distance(**p).is_some_and(|d| d <= near))
+        .count();
+    inside as f64 / points.len() as f64
+}
+
+/// Every scan's pieces after cleaning, largest first, and what fitting only the largest
+/// leaves out: the numbers the component default is chosen on.
+fn pieces_table(root: &Path, files: &[&str]) {
+    println!(
+        "| file | vertices | pieces | sizes (largest first, top 8) | `largest` drops | share |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for rel in files.iter().filter(|r| r.starts_with("range_scans")) {
+        let Ok(loaded) = read_mesh_file(&root.join(rel), &LoadOptions::default()) else {
+            println!("| {rel} | unreadable |");
+            continue;
+        };
+        let cleaned = clean(&loaded.mesh, &CleanOptions::default());
+        let sizes: Vec<usize> = cleaned_components(&cleaned)
+            .iter()
+            .map(|p| p.positions.len())
+            .collect();
+        let total: usize = sizes.iter().sum();
+        let dropped: usize = sizes.iter().skip(1).sum();
+        println!(
+            "| {rel} | {total} | {} | {:?} | {dropped} | {:.2}% |",
+            sizes.len(),
+            &sizes[..sizes.len().min(8)],
+            100.0 * dropped as f64 / total.max(1) as f64
+        );
+    }
+    println!();
 }
 
 fn ms(t: Instant) -> f64 {

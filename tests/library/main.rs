@@ -4,6 +4,7 @@
 mod bpatch_dms;
 mod bspline;
 mod curvature;
+mod dayone;
 mod fit_engine;
 mod fit_operator;
 mod iges;

@@ -22,14 +22,16 @@ mod solve;
 mod trims;
 mod types;
 mod warm;
+mod warm_guard;
 
 pub use feet::WarmFeet;
 pub use types::{
-    BezierLayout, Correction, CorrectionConfig, Domain, Mapping, Preparation, ScanConfig, ScanFit,
-    ScanTimings, Trims,
+    BezierLayout, Correction, CorrectionConfig, Domain, Dropped, Mapping, Preparation, ScanConfig,
+    ScanFit, ScanTimings, Trims,
 };
 pub(crate) use types::{ScanOptions, ScanWarm};
 pub(crate) use warm::warm_feet;
+pub use warm_guard::ColdStart;
 
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::Collocation;
@@ -48,10 +50,15 @@ pub(crate) fn fit_scan(
 ) -> Result<ScanFit, PipelineError> {
     let t0 = Instant::now();
     let prepared = prepare::prepare(mesh, scan, warm)?;
+    // A previous version too different from this one is not used at all (its plane, grid,
+    // controls and feet would each mislead).
+    let warm = warm.filter(|_| prepared.cold_start.is_none());
     let parameterization_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t1 = Instant::now();
     let (hole_plan, resampled) = resample::resample(&prepared, opts, scan, warm)?;
+    let warm = warm.filter(|_| resampled.cold_start.is_none());
+    let cold_start = prepared.cold_start.or(resampled.cold_start);
     let resample_ms = t1.elapsed().as_secs_f64() * 1e3;
 
     let seed::Seed {
@@ -109,6 +116,7 @@ pub(crate) fn fit_scan(
     let prepare::Prepared {
         part,
         components,
+        dropped,
         patch,
         frame,
         map,
@@ -146,6 +154,7 @@ pub(crate) fn fit_scan(
             components,
             kept_vertices: real,
             holes: patch.holes,
+            dropped,
         },
         mapping: Mapping {
             frame,
@@ -162,6 +171,7 @@ pub(crate) fn fit_scan(
         trims,
         correction_rms: corrected.correction_rms,
         reused_controls: reused,
+        cold_start,
         timings: ScanTimings {
             parameterization_ms,
             resample_ms,

@@ -2,7 +2,8 @@
 //! map it to the plane.
 
 use super::components::cleaned_components;
-use super::types::{ScanOptions, ScanWarm};
+use super::types::{Dropped, ScanOptions, ScanWarm};
+use super::warm_guard::{refuse_warm, ColdStart};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::pipeline::PipelineError;
 use crate::remesh::planar::{evened_out, planar_map, projection_warp, PlanarMap, PlaneFrame};
@@ -15,6 +16,8 @@ pub(super) struct Prepared {
     pub(super) part: TriMesh,
     /// Components of the cleaned input.
     pub(super) components: usize,
+    /// The components left out.
+    pub(super) dropped: Dropped,
     /// `part` with its holes closed by virtual fans.
     pub(super) patch: FilledPatch,
     /// The plane of the map.
@@ -23,6 +26,8 @@ pub(super) struct Prepared {
     pub(super) map: PlanarMap,
     /// The data's sample spacing: the unit in which hole widths are judged.
     pub(super) edge_length: f64,
+    /// Why the previous version given was not used (the later stages then start cold).
+    pub(super) cold_start: Option<ColdStart>,
 }
 
 pub(super) fn prepare(
@@ -33,10 +38,37 @@ pub(super) fn prepare(
     let cleaned = clean(mesh, &CleanOptions::default());
     let parts = cleaned_components(&cleaned);
     let components = parts.len();
-    let part = parts.into_iter().next().unwrap_or_default();
+    let total: usize = parts.iter().map(|p| p.positions.len()).sum();
+    let mut parts = parts.into_iter();
+    let part = parts.next().unwrap_or_default();
     if part.triangles.is_empty() {
         return Err(PipelineError::EmptyAfterCleaning);
     }
+    let sizes: Vec<usize> = parts.map(|p| p.positions.len()).collect();
+    let dropped = Dropped::of(&sizes, total);
+    if dropped.pieces > 0 {
+        // Said where it happens: a piece of a third of the scan left out without a word
+        // looks like a fit that ignored the data.
+        tracing::warn!(
+            pieces = dropped.pieces,
+            vertices = dropped.vertices,
+            share_pct = format!("{:.1}", 100.0 * dropped.share),
+            largest_piece = dropped.largest,
+            "{} of {} components not fitted: {} of {} vertices ({:.1} %), the largest piece left out has {}; `--components all` fits every sizeable piece",
+            dropped.pieces,
+            components,
+            dropped.vertices,
+            total,
+            100.0 * dropped.share,
+            dropped.largest,
+        );
+    }
+    let edge_length = median_edge_length(&part);
+    let cold_start = warm.and_then(|w| refuse_warm(&part, &dropped, edge_length, w));
+    if let Some(reason) = &cold_start {
+        tracing::warn!(%reason, "the previous version is too different: starting cold");
+    }
+    let warm = warm.filter(|_| cold_start.is_none());
     let previous_warp = warm.and_then(|w| w.warp);
     // The plane's frame and warp read only the data triangles: found beside the filling of
     // the holes (a warp from the previous version is reused instead, when it covers).
@@ -66,14 +98,15 @@ pub(super) fn prepare(
         &patch,
         previous_warp.or(early_warp.as_ref()),
     );
-    let edge_length = median_edge_length(&part);
     Ok(Prepared {
         part,
         components,
+        dropped,
         patch,
         frame,
         map,
         edge_length,
+        cold_start,
     })
 }
 

@@ -11,10 +11,12 @@ use super::holes::{plan_holes, HolePlan};
 use super::prepare::Prepared;
 use super::types::{BezierLayout, Domain, ScanOptions, ScanWarm};
 use super::warm::net_from_warm;
+use super::warm_guard::{ColdStart, WARM_BUDGET_SLACK};
 use crate::pipeline::{FitOptions, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::planar::PlanarMap;
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};
 use crate::surface::grid_spline::GridSpline;
+use crate::surface::TriSurface;
 use glam::DVec2;
 
 /// The surface model over its domain and the net a fit starts from.
@@ -24,6 +26,8 @@ pub(super) struct Resampled {
     pub(super) initial: InitialNet,
     /// The control net's triangles: what the fairness term smooths over.
     pub(super) fairness_triangles: Vec<[u32; 3]>,
+    /// Set when the previous version's grid spacing was refused for the budget.
+    pub(super) cold_start: Option<ColdStart>,
 }
 
 pub(super) fn resample(
@@ -106,6 +110,7 @@ fn single_patch(
         domain: Domain::Triangle { corners },
         initial,
         fairness_triangles: lattice_triangles(n0),
+        cold_start: None,
     })
 }
 
@@ -119,6 +124,8 @@ fn grid(
     warm: Option<&ScanWarm>,
 ) -> Result<Resampled, PipelineError> {
     let plane = &map.plane;
+    let target = (scan.config.target_controls_pct / 100.0 * real as f64).round() as usize;
+    let for_target = || grid_for_target(plane, &map.mesh.triangles, target);
     let (spacing, cells) = match (warm.and_then(|w| w.domain), scan.config.grid_segments) {
         (_, Some(n)) => (
             plane_extent(plane).max_element().max(1e-300) / n.max(1) as f64,
@@ -126,15 +133,31 @@ fn grid(
         ),
         (Some(Domain::Grid { spacing }), None) => (*spacing, None),
         _ => {
-            let target = (scan.config.target_controls_pct / 100.0 * real as f64).round();
-            let (h, cells) = grid_for_target(plane, &map.mesh.triangles, target as usize);
+            let (h, cells) = for_target();
             (h, Some(cells))
         }
     };
+    let warm_spacing = cells.is_none() && scan.config.grid_segments.is_none();
     let gf = GridFrame { spacing };
     check_grid_size(plane, spacing, opts.levels)?;
     let cells = cells.unwrap_or_else(|| covered_cells(&gf, plane, &map.mesh.triangles));
-    let grid = GridSpline::new(cells);
+    let mut grid = GridSpline::new(cells);
+    let mut spacing = spacing;
+    let mut cold_start = None;
+    // The previous spacing over data that changed shape can cost any number of controls:
+    // past the budget's slack the grid is laid out for the target instead.
+    let limit = (WARM_BUDGET_SLACK * target as f64).ceil() as usize;
+    if warm_spacing && target > 0 && grid.control_count() > limit {
+        cold_start = Some(ColdStart::Budget {
+            controls: grid.control_count(),
+            limit,
+        });
+        let (h, cells) = for_target();
+        check_grid_size(plane, h, opts.levels)?;
+        spacing = h;
+        grid = GridSpline::new(cells);
+    }
+    let gf = GridFrame { spacing };
     let same_domain = warm.filter(|w| w.domain == Some(&Domain::Grid { spacing }));
     let initial = match same_domain.and_then(|w| net_from_warm(&grid, w)) {
         Some(net) => net,
@@ -146,6 +169,7 @@ fn grid(
         domain: Domain::Grid { spacing },
         initial,
         fairness_triangles,
+        cold_start,
     })
 }
 

@@ -4,6 +4,7 @@
 use super::domain::{barycentric, GridFrame, InitialNet};
 use super::feet::WarmFeet;
 use super::holes::HolePlan;
+use super::warm_guard::ColdStart;
 use crate::pipeline::names::named;
 use crate::pipeline::PatchFit;
 use crate::remesh::planar::{MapMethod, PlaneFrame};
@@ -187,6 +188,8 @@ pub struct ScanFit {
     pub correction_rms: Vec<f64>,
     /// Control points reused from the previous version (warm start).
     pub reused_controls: usize,
+    /// Given a previous version, why it was not used (`None`: used, or none given).
+    pub cold_start: Option<ColdStart>,
     /// Stage times.
     pub timings: ScanTimings,
 }
@@ -200,6 +203,34 @@ pub struct Preparation {
     pub kept_vertices: usize,
     /// Holes filled.
     pub holes: usize,
+    /// The components not fitted: what a user loses unless told.
+    pub dropped: Dropped,
+}
+
+/// The pieces of an input left out of its surface (every component but the one fitted).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Dropped {
+    /// Components left out.
+    pub pieces: usize,
+    /// Their vertices.
+    pub vertices: usize,
+    /// `vertices` as a share of all the cleaned input's vertices (0..=1).
+    pub share: f64,
+    /// Vertices of the largest piece left out.
+    pub largest: usize,
+}
+
+impl Dropped {
+    /// The summary of `sizes` (vertex counts of the pieces left out) out of `total` vertices.
+    pub fn of(sizes: &[usize], total: usize) -> Self {
+        let vertices: usize = sizes.iter().sum();
+        Self {
+            pieces: sizes.len(),
+            vertices,
+            share: vertices as f64 / total.max(1) as f64,
+            largest: sizes.iter().copied().max().unwrap_or(0),
+        }
+    }
 }
 
 /// The patch's map to the plane.
