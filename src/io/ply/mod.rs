@@ -269,7 +269,7 @@ impl IndexSink<'_> {
                 let [a, b] = self.last;
                 // Strips alternate winding; degenerate joins are dropped.
                 if self.run >= 2 && a != b && b != c && a != c {
-                    let t = if self.run % 2 == 0 {
+                    let t = if self.run.is_multiple_of(2) {
                         [a, b, c]
                     } else {
                         [b, a, c]
