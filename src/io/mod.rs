@@ -237,7 +237,7 @@ fn read_with_base(
     let plain = |mesh: TriMesh| Loaded { mesh, grid: None };
     let loaded = match format {
         Format::Ply => ply::read_ply(bytes, name, opts)?,
-        Format::Obj => plain(obj::read_obj(bytes, name)?),
+        Format::Obj => plain(obj::read_obj(bytes, name, opts)?),
         Format::Off => plain(off::read_off(bytes, name, opts)?),
         Format::Stl => plain(stl::read_stl(bytes, name)?),
         Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base, opts)?),

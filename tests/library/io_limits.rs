@@ -342,6 +342,16 @@ fn io_declared_counts_beyond_the_vertex_budget_are_refused_before_reading() {
     let ply = xyz_header("ascii", 200) + "end_header\n" + &"0 0 0\n".repeat(200);
     let e = read_mesh_bytes(ply.as_bytes(), Format::Ply, "big.ply", &small).expect_err("200 > 100");
     assert_eq!(e.kind(), "too_large", "{e}");
+    // One polygon of 30,000 corners over three vertices: refused before its fan is built.
+    let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf".to_string() + &" 1 2 3".repeat(10_000) + "\n";
+    let e = read_mesh_bytes(
+        obj.as_bytes(),
+        Format::Obj,
+        "fan.obj",
+        &LoadOptions::default(),
+    )
+    .expect_err("29,998 triangles over 3 vertices");
+    assert_eq!(e.kind(), "too_large", "{e}");
     let tiny_files = LoadOptions::with_limits(10, 100);
     let e = read_mesh_bytes(off.as_bytes(), Format::Off, "big.off", &tiny_files)
         .expect_err("over max_file_bytes");
