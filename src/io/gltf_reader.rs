@@ -1,8 +1,9 @@
 //! glTF 2.0 / GLB: every triangle primitive of every mesh node, with world transforms.
 
-use super::{IoError, IoErrorKind};
+use super::{IoError, IoErrorKind, LoadOptions};
 use crate::mesh::TriMesh;
 use glam::{DMat4, DVec3};
+use std::panic::AssertUnwindSafe;
 use std::path::Path;
 
 const COMPRESSED: [&str; 3] = [
@@ -12,61 +13,159 @@ const COMPRESSED: [&str; 3] = [
 ];
 
 /// `base` is the folder for external buffers of a .gltf file (None for in-memory input).
-pub(crate) fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result<TriMesh, IoError> {
+///
+/// The `gltf` crate's readers panic on some inconsistent files (an index accessor of a
+/// float type, strides shorter than an element); every accessor read is validated first,
+/// and a panic that still escapes the crate is caught and reported as a malformed file.
+pub(crate) fn read_gltf(
+    bytes: &[u8],
+    file: &str,
+    base: Option<&Path>,
+    opts: &LoadOptions,
+) -> Result<TriMesh, IoError> {
     let e = |kind: IoErrorKind| IoError::new(file, None, kind);
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|x| e(IoErrorKind::Gltf(x)))?;
-    for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
-        if COMPRESSED.contains(&ext) {
-            return Err(e(IoErrorKind::unsupported(format!(
-                "compressed meshes ({ext}) are not supported; export without compression"
-            ))));
+    let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        let gltf = gltf::Gltf::from_slice(bytes).map_err(IoErrorKind::Gltf)?;
+        for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
+            if COMPRESSED.contains(&ext) {
+                return Err(IoErrorKind::unsupported(format!(
+                    "compressed meshes ({ext}) are not supported; export without compression"
+                )));
+            }
+        }
+        let buffers = load_buffers(&gltf, base, opts, bytes.len() as u64)?;
+        collect_mesh(&gltf, &buffers, opts)
+    }));
+    match read {
+        Ok(result) => result.map_err(e),
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_default();
+            Err(e(IoErrorKind::malformed(format!(
+                "inconsistent glTF (the glTF reader failed: {what})"
+            ))))
         }
     }
+}
+
+/// The data of every buffer, external ones read from beside the file. The input and its
+/// external buffers share one `max_file_bytes` budget; sizes are checked before reading,
+/// and no more than the declared length is ever read.
+fn load_buffers(
+    gltf: &gltf::Gltf,
+    base: Option<&Path>,
+    opts: &LoadOptions,
+    input_bytes: u64,
+) -> Result<Vec<Vec<u8>>, IoErrorKind> {
+    let mut budget = opts.max_file_bytes.saturating_sub(input_bytes);
     let mut buffers = Vec::new();
     for b in gltf.buffers() {
+        let declared = b.length() as u64;
         let data = match b.source() {
             gltf::buffer::Source::Bin => gltf
                 .blob
                 .clone()
-                .ok_or_else(|| e(IoErrorKind::malformed("GLB has no binary chunk")))?,
+                .ok_or_else(|| IoErrorKind::malformed("GLB has no binary chunk"))?,
             gltf::buffer::Source::Uri(uri) => {
                 if let Some(rest) = uri.strip_prefix("data:") {
                     let b64 = rest
                         .split_once(";base64,")
                         .map(|x| x.1)
-                        .ok_or_else(|| e(IoErrorKind::unsupported("unsupported data URI")))?;
+                        .ok_or_else(|| IoErrorKind::unsupported("unsupported data URI"))?;
                     decode_base64(b64)
-                        .ok_or_else(|| e(IoErrorKind::malformed("bad base64 in data URI")))?
+                        .ok_or_else(|| IoErrorKind::malformed("bad base64 in data URI"))?
                 } else {
-                    let dir = base.ok_or_else(|| {
-                        e(IoErrorKind::unsupported(format!(
-                            "external buffer '{uri}' cannot be resolved for streamed input"
-                        )))
-                    })?;
-                    if uri.contains("..") || uri.starts_with('/') {
-                        return Err(e(IoErrorKind::unsupported(format!(
-                            "buffer URI '{uri}' leaves the file's folder"
-                        ))));
+                    if declared > budget {
+                        return Err(IoErrorKind::too_large(format!(
+                            "buffer {} declares {declared} bytes; {budget} remain of the {}-byte input limit",
+                            b.index(),
+                            opts.max_file_bytes
+                        )));
                     }
-                    std::fs::read(dir.join(uri)).map_err(|x| {
-                        e(IoErrorKind::ExternalBuffer {
-                            uri: uri.to_string(),
-                            source: x,
-                        })
-                    })?
+                    let data = read_external(base, uri, declared)?;
+                    budget -= data.len() as u64;
+                    data
                 }
             }
         };
-        if data.len() < b.length() {
-            return Err(e(IoErrorKind::count_mismatch(format!(
-                "buffer {} is {} bytes, declared {}",
+        if (data.len() as u64) < declared {
+            return Err(IoErrorKind::count_mismatch(format!(
+                "buffer {} is {} bytes, declared {declared}",
                 b.index(),
                 data.len(),
-                b.length()
-            ))));
+            )));
         }
         buffers.push(data);
     }
+    Ok(buffers)
+}
+
+/// An external buffer: a relative path inside the .gltf's folder (no `..`, no absolute
+/// path, no symlink leading out), of which the first `declared` bytes are read.
+fn read_external(base: Option<&Path>, uri: &str, declared: u64) -> Result<Vec<u8>, IoErrorKind> {
+    use std::io::Read;
+    use std::path::Component;
+    let dir = base.ok_or_else(|| {
+        IoErrorKind::unsupported(format!(
+            "external buffer '{uri}' cannot be resolved for streamed input; embed it (.glb or a data URI)"
+        ))
+    })?;
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let relative = Path::new(uri);
+    let confined = !uri.contains('\\')
+        && !uri.contains(':')
+        && relative
+            .components()
+            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir));
+    let outside = || {
+        IoErrorKind::unsupported(format!(
+            "buffer URI '{uri}' leaves the .gltf file's folder; external buffers must sit beside it"
+        ))
+    };
+    if !confined {
+        return Err(outside());
+    }
+    let external = |source: std::io::Error| IoErrorKind::ExternalBuffer {
+        uri: uri.to_string(),
+        source,
+    };
+    let path = dir.join(relative);
+    let (real_dir, real_path) = (
+        dir.canonicalize().map_err(external)?,
+        path.canonicalize().map_err(external)?,
+    );
+    if !real_path.starts_with(&real_dir) {
+        return Err(outside());
+    }
+    let f = std::fs::File::open(&real_path).map_err(external)?;
+    let len = f.metadata().map_err(external)?.len();
+    if !f.metadata().map_err(external)?.is_file() {
+        return Err(external(std::io::Error::other("not a regular file")));
+    }
+    if len < declared {
+        return Err(IoErrorKind::count_mismatch(format!(
+            "buffer '{uri}' is {len} bytes, declared {declared}"
+        )));
+    }
+    let mut data = Vec::with_capacity(declared as usize);
+    f.take(declared).read_to_end(&mut data).map_err(external)?;
+    Ok(data)
+}
+
+/// Every triangle primitive of every mesh node, with world transforms, within the
+/// vertex and triangle budgets (a mesh instanced by many nodes is copied per node).
+fn collect_mesh(
+    gltf: &gltf::Gltf,
+    buffers: &[Vec<u8>],
+    opts: &LoadOptions,
+) -> Result<TriMesh, IoErrorKind> {
     let mut mesh = TriMesh::default();
     let scenes: Vec<gltf::Scene> = gltf.scenes().collect();
     let mut stack: Vec<(gltf::Node, DMat4)> = Vec::new();
@@ -82,77 +181,172 @@ pub(crate) fn read_gltf(bytes: &[u8], file: &str, base: Option<&Path>) -> Result
     while let Some((node, parent)) = stack.pop() {
         visited += 1;
         if visited > 1_000_000 {
-            return Err(e(IoErrorKind::malformed(
-                "node hierarchy too deep or cyclic",
-            )));
+            return Err(IoErrorKind::malformed("node hierarchy too deep or cyclic"));
         }
         let m = node.transform().matrix();
         let local = DMat4::from_cols_array_2d(&m.map(|c| c.map(|x| x as f64)));
         let world = parent * local;
         if let Some(gm) = node.mesh() {
             for prim in gm.primitives() {
-                use gltf::mesh::Mode;
-                let mode = prim.mode();
-                if !matches!(
-                    mode,
-                    Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-                ) {
-                    continue;
-                }
-                let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
-                let pos: Vec<DVec3> = reader
-                    .read_positions()
-                    .ok_or_else(|| {
-                        e(IoErrorKind::malformed(format!(
-                            "mesh '{}' primitive without positions",
-                            gm.name().unwrap_or("")
-                        )))
-                    })?
-                    .map(|p| {
-                        world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-                    })
-                    .collect();
-                if pos.iter().any(|p| !p.is_finite()) {
-                    return Err(e(IoErrorKind::non_finite("non-finite vertex coordinate")));
-                }
-                let idx: Vec<u32> = match reader.read_indices() {
-                    Some(i) => i.into_u32().collect(),
-                    None => (0..pos.len() as u32).collect(),
-                };
-                if idx.iter().any(|&i| i as usize >= pos.len()) {
-                    return Err(e(IoErrorKind::index_out_of_range(
-                        "index out of range in a primitive",
-                    )));
-                }
-                let off = mesh.positions.len() as u32;
-                let flip = world.determinant() < 0.0;
-                let mut push = |a: u32, b: u32, c: u32| {
-                    let t = if flip { [a, c, b] } else { [a, b, c] };
-                    mesh.triangles.push([t[0] + off, t[1] + off, t[2] + off]);
-                };
-                match mode {
-                    Mode::Triangles => idx.chunks_exact(3).for_each(|t| push(t[0], t[1], t[2])),
-                    Mode::TriangleStrip => {
-                        for k in 0..idx.len().saturating_sub(2) {
-                            if k % 2 == 0 {
-                                push(idx[k], idx[k + 1], idx[k + 2]);
-                            } else {
-                                push(idx[k + 1], idx[k], idx[k + 2]);
-                            }
-                        }
-                    }
-                    _ => {
-                        for k in 1..idx.len().saturating_sub(1) {
-                            push(idx[0], idx[k], idx[k + 1]);
-                        }
-                    }
-                }
-                mesh.positions.extend(pos);
+                add_primitive(
+                    &mut mesh,
+                    &prim,
+                    gm.name().unwrap_or(""),
+                    world,
+                    buffers,
+                    opts,
+                )?;
             }
         }
         stack.extend(node.children().map(|c| (c, world)));
     }
     Ok(mesh)
+}
+
+fn add_primitive(
+    mesh: &mut TriMesh,
+    prim: &gltf::Primitive,
+    mesh_name: &str,
+    world: DMat4,
+    buffers: &[Vec<u8>],
+    opts: &LoadOptions,
+) -> Result<(), IoErrorKind> {
+    use gltf::accessor::{DataType, Dimensions};
+    use gltf::mesh::Mode;
+    let mode = prim.mode();
+    if !matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
+        return Ok(());
+    }
+    let positions = prim.get(&gltf::Semantic::Positions).ok_or_else(|| {
+        IoErrorKind::malformed(format!("mesh '{mesh_name}' primitive without positions"))
+    })?;
+    check_accessor(
+        &positions,
+        buffers,
+        &[DataType::F32],
+        Dimensions::Vec3,
+        "POSITION",
+    )?;
+    let vertex_total = mesh.positions.len().saturating_add(positions.count());
+    opts.check_vertices(vertex_total, "the glTF scene")?;
+    let index_count = match prim.indices() {
+        Some(a) => {
+            let types = [DataType::U8, DataType::U16, DataType::U32];
+            check_accessor(&a, buffers, &types, Dimensions::Scalar, "indices")?;
+            a.count()
+        }
+        None => positions.count(),
+    };
+    let new_triangles = match mode {
+        Mode::Triangles => index_count / 3,
+        _ => index_count.saturating_sub(2),
+    };
+    opts.check_triangles(
+        mesh.triangles.len().saturating_add(new_triangles),
+        vertex_total,
+        "the glTF scene",
+    )?;
+    let reader = prim.reader(|b| buffers.get(b.index()).map(|d| d.as_slice()));
+    let pos: Vec<DVec3> = reader
+        .read_positions()
+        .ok_or_else(|| {
+            IoErrorKind::malformed(format!("mesh '{mesh_name}' primitive without positions"))
+        })?
+        .map(|p| world.transform_point3(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)))
+        .collect();
+    if pos.iter().any(|p| !p.is_finite()) {
+        return Err(IoErrorKind::non_finite("non-finite vertex coordinate"));
+    }
+    let idx: Vec<u32> = match reader.read_indices() {
+        Some(i) => i.into_u32().collect(),
+        None => (0..pos.len() as u32).collect(),
+    };
+    if idx.iter().any(|&i| i as usize >= pos.len()) {
+        return Err(IoErrorKind::index_out_of_range(
+            "index out of range in a primitive",
+        ));
+    }
+    let off = mesh.positions.len() as u32;
+    let flip = world.determinant() < 0.0;
+    let mut push = |a: u32, b: u32, c: u32| {
+        let t = if flip { [a, c, b] } else { [a, b, c] };
+        mesh.triangles.push([t[0] + off, t[1] + off, t[2] + off]);
+    };
+    match mode {
+        Mode::Triangles => idx.chunks_exact(3).for_each(|t| push(t[0], t[1], t[2])),
+        Mode::TriangleStrip => {
+            for k in 0..idx.len().saturating_sub(2) {
+                if k % 2 == 0 {
+                    push(idx[k], idx[k + 1], idx[k + 2]);
+                } else {
+                    push(idx[k + 1], idx[k], idx[k + 2]);
+                }
+            }
+        }
+        _ => {
+            for k in 1..idx.len().saturating_sub(1) {
+                push(idx[0], idx[k], idx[k + 1]);
+            }
+        }
+    }
+    mesh.positions.extend(pos);
+    Ok(())
+}
+
+/// What the `gltf` crate's accessor iterator assumes without checking: a buffer view, an
+/// element type it can decode, a stride no shorter than an element, and every element
+/// inside the view and the view inside its buffer.
+fn check_accessor(
+    a: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+    types: &[gltf::accessor::DataType],
+    dimensions: gltf::accessor::Dimensions,
+    what: &str,
+) -> Result<(), IoErrorKind> {
+    let bad = |why: String| IoErrorKind::malformed(format!("{what} accessor {}: {why}", a.index()));
+    if a.sparse().is_some() {
+        return Err(IoErrorKind::unsupported(format!(
+            "{what} accessor {}: sparse accessors are not supported",
+            a.index()
+        )));
+    }
+    if !types.contains(&a.data_type()) || a.dimensions() != dimensions {
+        return Err(bad(format!(
+            "type {:?} {:?} is not allowed here",
+            a.data_type(),
+            a.dimensions()
+        )));
+    }
+    let view = a.view().ok_or_else(|| bad("no buffer view".into()))?;
+    let size = a.size();
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(bad(format!(
+            "stride {stride} is shorter than an element ({size} bytes)"
+        )));
+    }
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+    let view_end = view.offset().checked_add(view.length());
+    if view_end.is_none_or(|end| end > buffer_len) {
+        return Err(bad("buffer view runs past its buffer".into()));
+    }
+    if a.count() == 0 {
+        return Ok(());
+    }
+    let end = (a.count() - 1)
+        .checked_mul(stride)
+        .and_then(|x| x.checked_add(size))
+        .and_then(|x| x.checked_add(a.offset()));
+    if end.is_none_or(|end| end > view.length()) {
+        return Err(bad(format!(
+            "{} elements run past the buffer view",
+            a.count()
+        )));
+    }
+    Ok(())
 }
 
 fn decode_base64(s: &str) -> Option<Vec<u8>> {

@@ -54,18 +54,100 @@ impl Format {
 }
 
 #[derive(Clone, Debug)]
-/// Options of the mesh readers.
+/// Options of the mesh readers, with the budgets every declared count is checked against
+/// before anything is allocated for it.
 pub struct LoadOptions {
     /// Range grids: triangles with an edge longer than this multiple of the median grid
     /// spacing bridge depth jumps and are dropped.
     pub range_grid_max_edge_factor: f64,
+    /// Most vertices a mesh may have (the daemon's `daemon.max_vertices`).
+    pub max_vertices: usize,
+    /// Largest input in bytes, external glTF buffers included (`daemon.max_file_bytes`).
+    pub max_file_bytes: u64,
 }
 
 impl Default for LoadOptions {
     fn default() -> Self {
         Self {
             range_grid_max_edge_factor: 6.0,
+            // The daemon's shipped defaults (config/default.toml).
+            max_vertices: 5_000_000,
+            max_file_bytes: 512 << 20,
         }
+    }
+}
+
+/// Triangles per vertex a mesh may have. Closed manifold meshes have about two; eight
+/// leaves room for soups of duplicated faces while a strip or polygon of 10^8 indices
+/// over three vertices (10^8 triangles, 1.2 GB) is refused at the 25th.
+const TRIANGLES_PER_VERTEX: usize = 8;
+/// Range-grid cells per vertex: Stanford scans fill one cell in two to five; sixteen
+/// allows sparse scans while 10^8 empty cells over a few vertices (40 bytes per cell once
+/// gridded) are refused from the header.
+const GRID_CELLS_PER_VERTEX: usize = 16;
+/// Small meshes and grids are never refused by the per-vertex ratios.
+const SMALL_ALLOWANCE: usize = 1 << 12;
+
+impl LoadOptions {
+    /// Options with the daemon's limits (and the default range-grid edge factor).
+    pub fn with_limits(max_file_bytes: u64, max_vertices: usize) -> Self {
+        Self {
+            max_file_bytes,
+            max_vertices,
+            ..Self::default()
+        }
+    }
+
+    /// Most triangles a mesh of `vertices` vertices may have.
+    pub(crate) fn max_triangles(&self, vertices: usize) -> usize {
+        TRIANGLES_PER_VERTEX
+            .saturating_mul(vertices.min(self.max_vertices))
+            .saturating_add(SMALL_ALLOWANCE)
+    }
+
+    /// Most range-grid cells an image over `vertices` vertices may have.
+    pub(crate) fn max_grid_cells(&self, vertices: usize) -> usize {
+        GRID_CELLS_PER_VERTEX
+            .saturating_mul(vertices.min(self.max_vertices))
+            .saturating_add(SMALL_ALLOWANCE)
+    }
+
+    /// Refuses `vertices` above `max_vertices`.
+    pub(crate) fn check_vertices(&self, vertices: usize, what: &str) -> Result<(), IoErrorKind> {
+        if vertices > self.max_vertices {
+            return Err(IoErrorKind::too_large(format!(
+                "{what}: {vertices} vertices exceed the limit of {}",
+                self.max_vertices
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuses `triangles` above the budget of a mesh of `vertices` vertices.
+    pub(crate) fn check_triangles(
+        &self,
+        triangles: usize,
+        vertices: usize,
+        what: &str,
+    ) -> Result<(), IoErrorKind> {
+        let max = self.max_triangles(vertices);
+        if triangles > max {
+            return Err(IoErrorKind::too_large(format!(
+                "{what}: {triangles} triangles over {vertices} vertices exceed the budget of {max}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// Refuses an input of `bytes` bytes above `max_file_bytes`.
+    pub(crate) fn check_file_bytes(&self, bytes: u64, what: &str) -> Result<(), IoErrorKind> {
+        if bytes > self.max_file_bytes {
+            return Err(IoErrorKind::too_large(format!(
+                "{what} is {bytes} bytes, more than the limit of {}",
+                self.max_file_bytes
+            )));
+        }
+        Ok(())
     }
 }
 
@@ -99,8 +181,36 @@ pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError
             IoErrorKind::UnknownExtension("unknown extension (obj, gltf, glb, ply, stl, off)"),
         )
     })?;
-    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, IoErrorKind::Open(e)))?;
+    let bytes = read_limited(path, opts.max_file_bytes, "the file")
+        .map_err(|kind| IoError::new(&name, None, kind))?;
     read_with_base(&bytes, format, &name, opts, path.parent())
+}
+
+/// Reads a whole file after checking its size against `max_bytes`, and never more than
+/// `max_bytes` even if it grows meanwhile (a file being written, `/dev/zero`).
+pub(crate) fn read_limited(
+    path: &Path,
+    max_bytes: u64,
+    what: &str,
+) -> Result<Vec<u8>, IoErrorKind> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(IoErrorKind::Open)?;
+    let len = file.metadata().map_err(IoErrorKind::Open)?.len();
+    if len > max_bytes {
+        return Err(IoErrorKind::too_large(format!(
+            "{what} is {len} bytes, more than the limit of {max_bytes}"
+        )));
+    }
+    let mut bytes = Vec::with_capacity(len as usize);
+    file.take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(IoErrorKind::Open)?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(IoErrorKind::too_large(format!(
+            "{what} grew past the limit of {max_bytes} bytes while being read"
+        )));
+    }
+    Ok(bytes)
 }
 
 /// Reads a mesh held in memory (the pipe source); `name` is used in errors.
@@ -123,17 +233,25 @@ fn read_with_base(
     if bytes.is_empty() {
         return Err(IoError::new(name, None, IoErrorKind::Empty));
     }
+    opts.check_file_bytes(bytes.len() as u64, "the input")
+        .map_err(|kind| IoError::new(name, None, kind))?;
     let plain = |mesh: TriMesh| Loaded { mesh, grid: None };
     let loaded = match format {
         Format::Ply => ply::read_ply(bytes, name, opts)?,
-        Format::Obj => plain(obj::read_obj(bytes, name)?),
-        Format::Off => plain(off::read_off(bytes, name)?),
+        Format::Obj => plain(obj::read_obj(bytes, name, opts)?),
+        Format::Off => plain(off::read_off(bytes, name, opts)?),
         Format::Stl => plain(stl::read_stl(bytes, name)?),
-        Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base)?),
+        Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base, opts)?),
     };
     if loaded.mesh.positions.is_empty() {
         return Err(IoError::new(name, None, IoErrorKind::NoVertices));
     }
+    // Readers whose counts are not declared up front (OBJ, STL) are bounded by the input
+    // size while reading; the budgets still hold for what they return.
+    let (v, t) = (loaded.mesh.positions.len(), loaded.mesh.triangles.len());
+    opts.check_vertices(v, "the mesh")
+        .and_then(|()| opts.check_triangles(t, v, "the mesh"))
+        .map_err(|kind| IoError::new(name, None, kind))?;
     Ok(loaded)
 }
 

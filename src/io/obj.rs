@@ -4,11 +4,11 @@
 //! and objects share the file's one position list, polygons are fan-triangulated, and only
 //! position indices are used, so UV or normal seams never split a vertex.
 
-use super::{IoError, IoErrorKind};
+use super::{IoError, IoErrorKind, LoadOptions};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub(crate) fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_obj(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<TriMesh, IoError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
         IoError::at(
             file,
@@ -18,7 +18,10 @@ pub(crate) fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
     })?;
     let err = |n: usize, kind: IoErrorKind| IoError::at(file, format!("line {n}"), kind);
     let mut positions: Vec<DVec3> = Vec::new();
-    let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
+    // Each face keeps its line (for errors) and the vertices read before it (negative
+    // indices count back from there).
+    let mut faces: Vec<(usize, i64, Vec<i64>)> = Vec::new();
+    let mut fan_triangles = 0usize;
     for (n, raw) in text.lines().enumerate() {
         let n = n + 1;
         let line = raw.split('#').next().unwrap_or("");
@@ -61,32 +64,25 @@ pub(crate) fn read_obj(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
                         IoErrorKind::malformed(format!("face with {} vertices", idx.len())),
                     ));
                 }
-                faces.push((n, idx));
+                fan_triangles += idx.len() - 2;
+                faces.push((n, positions.len() as i64, idx));
             }
             _ => {}
         }
     }
-    // Indices are resolved at the end: negative (relative) indices refer to the vertices
-    // read so far, which the line number lets us recompute.
-    let mut triangles = Vec::with_capacity(faces.len());
+    // Indices are resolved at the end, once the vertex count is known: the triangle
+    // budget is checked before the triangles are allocated.
     let nv = positions.len() as i64;
-    let mut seen_vertices_at_line: Vec<(usize, i64)> = Vec::new();
-    if faces.iter().any(|(_, f)| f.iter().any(|&i| i < 0)) {
-        let mut count = 0i64;
-        for (n, raw) in text.lines().enumerate() {
-            if raw.trim_start().starts_with("v ") {
-                count += 1;
-            }
-            seen_vertices_at_line.push((n + 1, count));
-        }
-    }
-    for (n, f) in &faces {
+    opts.check_vertices(positions.len(), "the OBJ file")
+        .and_then(|()| opts.check_triangles(fan_triangles, positions.len(), "the OBJ file"))
+        .map_err(|kind| IoError::new(file, None, kind))?;
+    let mut triangles = Vec::with_capacity(fan_triangles);
+    for (n, so_far, f) in &faces {
         let mut resolved = Vec::with_capacity(f.len());
         for &i in f {
             let k = if i > 0 {
                 i - 1
             } else if i < 0 {
-                let so_far = seen_vertices_at_line.get(n - 1).map_or(nv, |x| x.1);
                 so_far + i
             } else {
                 -1

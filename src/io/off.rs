@@ -2,11 +2,11 @@
 //! Line-based: a vertex line's first three numbers are its position and a face line's
 //! first number its size, so colour and normal columns are skipped whatever their count.
 
-use super::{IoError, IoErrorKind};
+use super::{IoError, IoErrorKind, LoadOptions};
 use crate::mesh::TriMesh;
 use glam::DVec3;
 
-pub(crate) fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
+pub(crate) fn read_off(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<TriMesh, IoError> {
     let text = std::str::from_utf8(bytes).map_err(|e| {
         IoError::at(
             file,
@@ -66,6 +66,10 @@ pub(crate) fn read_off(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
         Ok(v)
     };
     let (nv, nf) = (count(0, "vertex")?, count(1, "face")?);
+    // Both counts size allocations below: check them against the budgets first.
+    opts.check_vertices(nv, "the OFF header")
+        .and_then(|()| opts.check_triangles(nf, nv, "the OFF header"))
+        .map_err(|kind| err(count_line, kind))?;
     let num = |n: usize, t: &str| -> Result<f64, IoError> {
         t.parse::<f64>()
             .map_err(|_| err(n, IoErrorKind::malformed(format!("'{t}' is not a number"))))

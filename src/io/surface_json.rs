@@ -12,6 +12,10 @@ use serde_json::{json, Value};
 
 pub(crate) const SCHEMA: &str = "trispline.surface/1";
 
+/// Largest `surface.json` read: the daemon's default input limit (a parsed JSON value
+/// takes several times its text).
+const MAX_SURFACE_JSON_BYTES: u64 = 512 << 20;
+
 /// A surface as described by a `surface.json`.
 #[derive(Clone, Debug)]
 pub enum SurfaceDescription {
@@ -247,6 +251,7 @@ fn bezier_patch(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
 /// over the listed grid cells (Bezier patches carry it beside the patches).
 fn grid_surface(v: &Value, kind: &str, name: &str) -> Result<SurfaceDescription, IoError> {
     let cells = int_rows::<3>(v, "cells", name)?;
+    check_cell_span(&cells, name)?;
     let coords = int_rows::<2>(v, "control_coords", name)?;
     let surface = GridSpline::new(cells.iter().map(|c| (c[0], c[1], c[2] != 0)));
     let same = surface.control_coords().len() == coords.len()
@@ -274,6 +279,42 @@ fn grid_surface(v: &Value, kind: &str, name: &str) -> Result<SurfaceDescription,
     } else {
         SurfaceDescription::LoopGrid { surface, controls }
     })
+}
+
+/// Grid surfaces index their controls and cells through dense tables over the bounding
+/// box of the cells (about 20 bytes per grid point): two cells far apart would make a
+/// few-byte file take gigabytes. The box may hold at most `SPAN_PER_CELL` grid points per
+/// listed cell (fitted grids cover a compact region: about two per cell) and never more
+/// than `MAX_SPAN` (~350 MB of tables).
+fn check_cell_span(cells: &[[i64; 3]], name: &str) -> Result<(), IoError> {
+    const SPAN_PER_CELL: u64 = 32;
+    const MAX_SPAN: u64 = 1 << 24;
+    // The stencil of a cell reaches two grid points beyond it on every side.
+    const MARGIN: i64 = 4;
+    let (Some(lo_i), Some(hi_i), Some(lo_j), Some(hi_j)) = (
+        cells.iter().map(|c| c[0]).min(),
+        cells.iter().map(|c| c[0]).max(),
+        cells.iter().map(|c| c[1]).min(),
+        cells.iter().map(|c| c[1]).max(),
+    ) else {
+        return Ok(());
+    };
+    // Coordinates are below 2^40 (int_rows): these cannot overflow.
+    let width = (hi_i - lo_i + 1 + 2 * MARGIN) as u64;
+    let height = (hi_j - lo_j + 1 + 2 * MARGIN) as u64;
+    let span = width.saturating_mul(height);
+    let budget = (cells.len() as u64 * SPAN_PER_CELL + 4096).min(MAX_SPAN);
+    if span > budget {
+        return Err(IoError::at(
+            name,
+            "key cells",
+            IoErrorKind::too_large(format!(
+                "{} cells span a {width} x {height} grid; at most {budget} grid points are allowed",
+                cells.len()
+            )),
+        ));
+    }
+    Ok(())
 }
 
 /// `kind: loop, layout: mesh`: the Loop limit surface of an arbitrary manifold control mesh.
@@ -367,7 +408,8 @@ fn bspline_surface(v: &Value, name: &str) -> Result<SurfaceDescription, IoError>
 /// Reads a `surface.json` file.
 pub fn read_surface_json(path: &std::path::Path) -> Result<SurfaceDescription, IoError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| IoError::new(&name, None, IoErrorKind::Open(e)))?;
+    let bytes = super::read_limited(path, MAX_SURFACE_JSON_BYTES, "the surface file")
+        .map_err(|kind| IoError::new(&name, None, kind))?;
     parse_surface_json(&bytes, &name)
 }
 

@@ -9,6 +9,7 @@ mod fit_engine;
 mod fit_operator;
 mod iges;
 mod io_formats;
+mod io_limits;
 mod io_malformed;
 mod io_shared_data;
 mod loop_fit;

@@ -29,10 +29,14 @@ pub(crate) fn read_ply(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<L
     for e in &header.elements {
         check_room(&body, e)?;
         match e.name.as_str() {
-            "vertex" => read_vertices(&mut body, e, &mut positions)?,
+            "vertex" => {
+                opts.check_vertices(positions.len().saturating_add(e.count), "element 'vertex'")
+                    .map_err(|kind| body.error(kind))?;
+                read_vertices(&mut body, e, &mut positions)?
+            }
             "face" | "tristrips" | "range_grid" => {
                 let cells = (e.name == "range_grid").then(|| grid_cells.insert(Vec::new()));
-                read_index_lists(&mut body, e, positions.len(), &mut triangles, cells)?
+                read_index_lists(&mut body, e, positions.len(), opts, &mut triangles, cells)?
             }
             _ => skip_element(&mut body, e)?,
         }
@@ -111,13 +115,15 @@ fn read_vertices(body: &mut Body, e: &Element, positions: &mut Vec<DVec3>) -> Re
 
 /// An element whose `vertex_indices` list gives connectivity: `face` (polygons, fanned),
 /// `tristrips` (strips split at negative indices) or `range_grid` (one vertex or none per
-/// cell, pushed to `grid_cells`).
+/// cell, pushed to `grid_cells`). Lists are consumed value by value, never collected: a
+/// list can be as long as the file.
 fn read_index_lists(
     body: &mut Body,
     e: &Element,
     vertex_count: usize,
+    opts: &LoadOptions,
     triangles: &mut Vec<[u32; 3]>,
-    mut grid_cells: Option<&mut Vec<Option<u32>>>,
+    grid_cells: Option<&mut Vec<Option<u32>>>,
 ) -> Result<(), IoError> {
     let target = e
         .props
@@ -129,77 +135,182 @@ fn read_index_lists(
                 e.name
             )))
         })?;
-    if let Some(g) = grid_cells.as_mut() {
-        g.reserve(e.count);
-    }
+    // Declared counts that size allocations are checked before anything is reserved: a
+    // face gives at least one triangle, a grid entry is one cell.
+    let declared = match (e.name.as_str(), &grid_cells) {
+        ("face", _) => opts.check_triangles(e.count, vertex_count, "element 'face'"),
+        (_, Some(_)) => {
+            let max = opts.max_grid_cells(vertex_count);
+            if e.count > max {
+                Err(IoErrorKind::too_large(format!(
+                    "range_grid declares {} cells over {vertex_count} vertices, more than the budget of {max}",
+                    e.count
+                )))
+            } else {
+                Ok(())
+            }
+        }
+        _ => Ok(()),
+    };
+    declared.map_err(|kind| body.error(kind))?;
     if e.name == "face"
         && body.encoding == Encoding::Little
         && body.fast_triangles(e, vertex_count, triangles)
     {
         return Ok(());
     }
-    let mut list = Vec::new();
+    let connectivity = match e.name.as_str() {
+        "face" => Connectivity::Face,
+        "tristrips" => Connectivity::Strip,
+        _ => Connectivity::Grid,
+    };
+    let mut sink = IndexSink {
+        element: &e.name,
+        connectivity,
+        vertex_count,
+        max_triangles: opts.max_triangles(vertex_count),
+        triangles,
+        grid_cells,
+        item: 0,
+        seen: 0,
+        run: 0,
+        first: 0,
+        last: [0; 2],
+        cell: None,
+    };
+    if let Some(g) = sink.grid_cells.as_mut() {
+        g.reserve(e.count);
+    }
     for item in 0..e.count {
-        read_target_list(body, e, target, &mut list)?;
-        let check = |x: f64, body: &Body| -> Result<u32, IoError> {
-            if x >= 0.0 && x.fract() == 0.0 && (x as usize) < vertex_count {
-                Ok(x as u32)
-            } else {
-                Err(body.error(IoErrorKind::index_out_of_range(format!(
-                    "{} {item}: vertex index {x} out of range (0..{vertex_count})",
-                    e.name,
-                ))))
-            }
-        };
-        match e.name.as_str() {
-            "face" => {
-                if list.len() < 3 {
-                    return Err(body.error(IoErrorKind::malformed(format!(
-                        "face {item} has {} vertices",
-                        list.len()
-                    ))));
-                }
-                let first = check(list[0], body)?;
-                for w in 1..list.len() - 1 {
-                    triangles.push([first, check(list[w], body)?, check(list[w + 1], body)?]);
-                }
-            }
-            "tristrips" => {
-                for run in list.split(|&x| x < 0.0) {
-                    for w in 0..run.len().saturating_sub(2) {
-                        let (a, b, c) = (
-                            check(run[w], body)?,
-                            check(run[w + 1], body)?,
-                            check(run[w + 2], body)?,
-                        );
-                        // Strips alternate winding; degenerate joins are dropped.
-                        if a != b && b != c && a != c {
-                            triangles.push(if w % 2 == 0 { [a, b, c] } else { [b, a, c] });
-                        }
-                    }
-                }
-            }
-            _ => {
-                let cell = match list.first() {
-                    Some(&x) => Some(check(x, body)?),
-                    None => None,
-                };
-                if let Some(g) = grid_cells.as_mut() {
-                    g.push(cell);
-                }
-            }
-        }
+        sink.start(item);
+        read_target_list(body, e, target, &mut sink)?;
+        sink.finish(body)?;
     }
     Ok(())
 }
 
-/// One entry of an index-list element: the values of property `target` go to `list`,
+#[derive(Clone, Copy, PartialEq)]
+enum Connectivity {
+    Face,
+    Strip,
+    Grid,
+}
+
+/// Turns the indices of one list at a time into triangles or a grid cell as they are
+/// read, holding only the indices a fan or strip still needs.
+struct IndexSink<'a> {
+    element: &'a str,
+    connectivity: Connectivity,
+    vertex_count: usize,
+    max_triangles: usize,
+    triangles: &'a mut Vec<[u32; 3]>,
+    grid_cells: Option<&'a mut Vec<Option<u32>>>,
+    /// The entry being read, and how many of its indices were seen.
+    item: usize,
+    seen: usize,
+    /// Strips: indices since the last restart (negative index).
+    run: usize,
+    /// Faces: the fan's apex.
+    first: u32,
+    /// The two indices before the current one.
+    last: [u32; 2],
+    cell: Option<u32>,
+}
+
+impl IndexSink<'_> {
+    fn start(&mut self, item: usize) {
+        self.item = item;
+        self.seen = 0;
+        self.run = 0;
+        self.cell = None;
+    }
+
+    fn index(&self, x: f64, body: &Body) -> Result<u32, IoError> {
+        if x >= 0.0 && x.fract() == 0.0 && (x as usize) < self.vertex_count {
+            Ok(x as u32)
+        } else {
+            Err(body.error(IoErrorKind::index_out_of_range(format!(
+                "{} {}: vertex index {x} out of range (0..{})",
+                self.element, self.item, self.vertex_count
+            ))))
+        }
+    }
+
+    fn push(&mut self, t: [u32; 3], body: &Body) -> Result<(), IoError> {
+        if self.triangles.len() >= self.max_triangles {
+            return Err(body.error(IoErrorKind::too_large(format!(
+                "{} {}: more than {} triangles over {} vertices",
+                self.element, self.item, self.max_triangles, self.vertex_count
+            ))));
+        }
+        self.triangles.push(t);
+        Ok(())
+    }
+
+    fn value(&mut self, x: f64, body: &Body) -> Result<(), IoError> {
+        let seen = self.seen;
+        self.seen += 1;
+        match self.connectivity {
+            Connectivity::Face => {
+                let i = self.index(x, body)?;
+                match seen {
+                    0 => self.first = i,
+                    1 => {}
+                    _ => self.push([self.first, self.last[1], i], body)?,
+                }
+                self.last = [self.last[1], i];
+            }
+            Connectivity::Strip => {
+                if x < 0.0 {
+                    self.run = 0;
+                    return Ok(());
+                }
+                let c = self.index(x, body)?;
+                let [a, b] = self.last;
+                // Strips alternate winding; degenerate joins are dropped.
+                if self.run >= 2 && a != b && b != c && a != c {
+                    let t = if self.run.is_multiple_of(2) {
+                        [a, b, c]
+                    } else {
+                        [b, a, c]
+                    };
+                    self.push(t, body)?;
+                }
+                self.run += 1;
+                self.last = [b, c];
+            }
+            Connectivity::Grid => {
+                if seen == 0 {
+                    self.cell = Some(self.index(x, body)?);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, body: &Body) -> Result<(), IoError> {
+        match self.connectivity {
+            Connectivity::Face if self.seen < 3 => Err(body.error(IoErrorKind::malformed(
+                format!("face {} has {} vertices", self.item, self.seen),
+            ))),
+            Connectivity::Grid => {
+                if let Some(g) = self.grid_cells.as_mut() {
+                    g.push(self.cell);
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// One entry of an index-list element: the values of property `target` go to `sink`,
 /// every other property is read past.
 fn read_target_list(
     body: &mut Body,
     e: &Element,
     target: usize,
-    list: &mut Vec<f64>,
+    sink: &mut IndexSink,
 ) -> Result<(), IoError> {
     for (k, p) in e.props.iter().enumerate() {
         match p {
@@ -208,11 +319,10 @@ fn read_target_list(
             }
             Property::List(_, c, t) => {
                 let n = read_count(body, *c)?;
-                list.clear();
                 for _ in 0..n {
                     let x = body.read(*t)?;
                     if k == target {
-                        list.push(x);
+                        sink.value(x, body)?;
                     }
                 }
             }

@@ -10,6 +10,10 @@ pub(crate) fn triangulate_range_grid(
     cells: &[Option<u32>],
     max_edge_factor: f64,
 ) -> Vec<[u32; 3]> {
+    // Rows or columns of zero (with the other up to 2^32) hold no cell: nothing to walk.
+    if grid.points.is_empty() {
+        return Vec::new();
+    }
     let at = |r: usize, c: usize| cells[r * grid.cols + c];
     let pos = |r: usize, c: usize| grid.points[r * grid.cols + c];
     let mut spacing = Vec::new();
