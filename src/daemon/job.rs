@@ -143,7 +143,12 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         return Outcome::Unchanged { hash };
     }
     let start = Instant::now();
-    let mesh = match read_mesh_bytes(&bytes, format, &a.label, &LoadOptions::default()) {
+    let mesh = match read_mesh_bytes(
+        &bytes,
+        format,
+        &a.label,
+        &LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices),
+    ) {
         Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
             return reject(
                 Cause::TooManyVertices,

@@ -119,6 +119,9 @@ fn add_scan_report(report: &mut serde_json::Value, fitted: &PatchFit, s: &ScanFi
     report["remeshed"] = json!(true);
     report["components"] = json!(s.preparation.components);
     report["kept_vertices"] = json!(s.preparation.kept_vertices);
+    // Pieces left out are said, never dropped silently: how many, their vertices and share.
+    report["dropped"] = json!(s.preparation.dropped);
+    report["cold_start"] = json!(s.cold_start.as_ref().map(|c| c.to_string()));
     report["holes_filled"] = json!(s.preparation.holes);
     report["holes"] = json!({
         "count": s.preparation.holes,
