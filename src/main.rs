@@ -25,12 +25,12 @@ enum Command {
     Subdivide(cli::mesh_tools::SubdivideArgs),
     /// Inverse Loop subdivision (exit 2 without subdivision connectivity).
     Coarsen(cli::mesh_tools::CoarsenArgs),
-    /// Fit a triangular surface to a disk-like scan patch or a mesh with subdivision
-    /// connectivity.
+    /// Fit a smooth triangular surface to a mesh: a scan patch, a whole object (closed,
+    /// holed, any genus) or a mesh with subdivision connectivity.
     Fit(cli::fit::FitArgs),
     /// The daemon: watch a folder, fit every patch that arrives.
     Watch(cli::watch::WatchArgs),
-    /// Fit a tensor-product B-spline surface to grid or scattered points (JSON, IGES, GLB).
+    /// Fit a tensor-product B-spline surface to grid or scattered points (JSON, IGES, STEP, GLB).
     BsplineFit(cli::bspline_fit::BsplineFitArgs),
     /// Curvature, convex/concave/saddle regions and their boundaries of a surface.json.
     Curvature(cli::curvature::CurvatureArgs),
