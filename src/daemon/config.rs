@@ -4,25 +4,37 @@ use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
 
+/// The embedded default configuration (`config/default.toml`): what runs without `--config`.
 pub const DEFAULT_CONFIG: &str = include_str!("../../config/default.toml");
 
+/// The whole daemon configuration, one field per TOML table.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DaemonConfig {
+    /// `[fit]` and its sub-tables: what the worker does with every input.
     pub fit: FitConfig,
+    /// `[daemon]`: intake, limits, threads.
     pub daemon: DaemonSection,
+    /// `[output]`: which files are written and what happens to fitted inputs.
     #[serde(default)]
     pub output: OutputSection,
+    /// `[log]`: filter and format of the log lines.
     #[serde(default)]
     pub log: LogSection,
 }
 
+/// The `[daemon]` table.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DaemonSection {
+    /// A file counts as arrived when its size and mtime stayed the same this long (files a
+    /// writer keeps open, polling mode, files present at start-up).
     pub settle_ms: u64,
+    /// Directory scan interval of the polling watcher.
     pub poll_interval_ms: u64,
+    /// Larger inputs (and larger sums of pipe payloads held at once) are refused.
     pub max_file_bytes: u64,
+    /// Inputs with more vertices are refused; the readers' allocation budgets derive from it.
     pub max_vertices: usize,
     /// Fitting threads; 0 means one per available core. Needs a restart to change.
     #[serde(default)]
@@ -52,8 +64,10 @@ fn default_stop_timeout_ms() -> u64 {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum WatcherKind {
+    /// inotify through `notify`.
     #[default]
     Native,
+    /// Directory scans with the settle time only.
     Poll,
 }
 
@@ -62,26 +76,32 @@ pub enum WatcherKind {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ProcessedPolicy {
+    /// Left where it is.
     #[default]
     Leave,
     /// Moved to OUT/processed.
     Move,
+    /// Removed (only inputs under the watch folder or the pipe roots).
     Delete,
 }
 
+/// The `[output]` table.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct OutputSection {
     /// Tessellation segments per side of the shown surface in surface.glb.
     #[serde(default = "default_tessellation")]
     pub tessellation: usize,
+    /// Where broken inputs go with their `.error.json`; absent: `OUT/quarantine`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quarantine_dir: Option<PathBuf>,
-    /// `surface.json` is always written (last, as the commit marker); these are optional.
+    /// Write `surface.glb` (`surface.json` is always written).
     #[serde(default = "yes")]
     pub glb: bool,
+    /// Write `report.json`.
     #[serde(default = "yes")]
     pub report: bool,
+    /// What happens to an input once its content was fitted.
     #[serde(default)]
     pub processed: ProcessedPolicy,
 }
@@ -106,14 +126,18 @@ fn yes() -> bool {
     true
 }
 
+/// How log lines are written (`log.format`, or `--log-json`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LogFormat {
+    /// One readable line per event.
     #[default]
     Human,
+    /// One JSON object per line.
     Json,
 }
 
+/// The `[log]` table.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LogSection {
@@ -312,6 +336,7 @@ impl DaemonConfig {
         keys
     }
 
+    /// The configuration as TOML (`--print-config`).
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
     }

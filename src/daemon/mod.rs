@@ -3,9 +3,6 @@
 //! for the threads and their invariants.
 #![warn(missing_docs)]
 
-// The config's fields are documented where the TOML keys are (config/default.toml); their
-// Rust docs come with the config's regrouping into sections.
-#[allow(missing_docs)]
 pub mod config;
 mod confine;
 mod coordinator;
