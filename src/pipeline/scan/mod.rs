@@ -8,6 +8,7 @@
 //! `domain` and `grid_inverse` (domains and initial nets), `solve` (the solves and foot
 //! points), `warm` and `feet` (what a previous version leaves). Shared types live in `types`.
 
+mod cold_start;
 pub mod components;
 pub mod domain;
 mod edge_band;
@@ -24,6 +25,7 @@ mod types;
 mod warm;
 mod warm_guard;
 
+pub use cold_start::ColdStart;
 pub use feet::WarmFeet;
 pub use types::{
     BezierLayout, Correction, CorrectionConfig, Domain, Dropped, Mapping, Preparation, ScanConfig,
@@ -31,7 +33,6 @@ pub use types::{
 };
 pub(crate) use types::{ScanOptions, ScanWarm};
 pub(crate) use warm::warm_feet;
-pub use warm_guard::ColdStart;
 
 use crate::fit::engine::umbrella_laplacian;
 use crate::fit::Collocation;

@@ -1,9 +1,10 @@
 //! Stage 1 of a scan fit: clean the input, keep its largest component, close its holes and
 //! map it to the plane.
 
+use super::cold_start::ColdStart;
 use super::components::cleaned_components;
 use super::types::{Dropped, ScanOptions, ScanWarm};
-use super::warm_guard::{refuse_warm, ColdStart};
+use super::warm_guard::refuse_warm;
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::pipeline::PipelineError;
 use crate::remesh::planar::{evened_out, planar_map, projection_warp, PlanarMap, PlaneFrame};

@@ -3,6 +3,7 @@
 //! previous version. The hole plan, which decides only what is trimmed afterwards, is made
 //! beside it.
 
+use super::cold_start::ColdStart;
 use super::domain::{
     barycentric, bezier_initial_net, covered_cells, enclosing_triangle, grid_for_target,
     grid_initial_net, plane_extent, GridFrame, InitialNet,
@@ -11,7 +12,7 @@ use super::holes::{plan_holes, HolePlan};
 use super::prepare::Prepared;
 use super::types::{BezierLayout, Domain, ScanOptions, ScanWarm};
 use super::warm::net_from_warm;
-use super::warm_guard::{ColdStart, WARM_BUDGET_SLACK};
+use super::warm_guard::WARM_BUDGET_SLACK;
 use crate::pipeline::{FitOptions, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::planar::PlanarMap;
 use crate::surface::bezier::{lattice_triangles, BezierTriangle};

@@ -1,10 +1,10 @@
 //! The scan path's options and results: shared by its stages and by the warm start, so
 //! that none of them imports another for a type.
 
+use super::cold_start::ColdStart;
 use super::domain::{barycentric, GridFrame, InitialNet};
 use super::feet::WarmFeet;
 use super::holes::HolePlan;
-use super::warm_guard::ColdStart;
 use crate::pipeline::names::named;
 use crate::pipeline::PatchFit;
 use crate::remesh::planar::{MapMethod, PlaneFrame};
