@@ -3,6 +3,8 @@
 //! Layering (see ARCHITECTURE.md): `io` is the only module that knows file formats;
 //! `mesh`, `surface` and `fit` are pure geometry on `f64`.
 
+#![warn(missing_docs)]
+
 pub mod allocator;
 pub mod bspline;
 pub mod cli;

@@ -33,12 +33,16 @@ pub enum InitialNet {
     Affine,
     /// Each control at the data point whose domain point is nearest its Greville site.
     NearestData,
+    /// These controls, in the surface's control order (their count must match).
     Given(Vec<DVec3>),
 }
 
+/// How `fit_scattered` fits.
 #[derive(Clone, Debug)]
 pub struct ScatteredOptions {
+    /// The engine's solver, used in every round.
     pub method: Method,
+    /// When each round's fit stops (applied per round, not over all rounds).
     pub budget: Budget,
     /// Weight of the umbrella fairness term over the control net (0: none).
     pub smoothing: f64,
@@ -46,6 +50,7 @@ pub struct ScatteredOptions {
     pub correction_rounds: usize,
     /// Newton steps per foot point and round.
     pub newton_steps: usize,
+    /// Where the controls of the first round start.
     pub initial: InitialNet,
 }
 
@@ -62,8 +67,10 @@ impl Default for ScatteredOptions {
     }
 }
 
+/// The result of `fit_scattered`.
 #[derive(Clone, Debug)]
 pub struct ScatteredFit {
+    /// The controls after the last round.
     pub controls: Vec<DVec3>,
     /// The parameters after the last correction round.
     pub params: Vec<SurfaceParam>,
@@ -71,22 +78,41 @@ pub struct ScatteredFit {
     pub rounds: Vec<FitOutcome>,
     /// Collocation and fairness assembly, summed over rounds.
     pub assembly_ms: f64,
+    /// Time in the fitting engine, summed over rounds.
     pub solve_ms: f64,
+    /// Time moving parameters to foot points, summed over rounds.
     pub correction_ms: f64,
 }
 
+/// Why `fit_scattered` failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ScatteredFitError {
+    /// The parameter and data slices differ in length.
     #[error("{params} parameters for {points} data points")]
-    Count { params: usize, points: usize },
+    Count {
+        /// Number of parameters given.
+        params: usize,
+        /// Number of data points given.
+        points: usize,
+    },
+    /// No data points were given.
     #[error("no data points")]
     Empty,
+    /// The initial net's size does not match the surface's control count.
     #[error("initial net has {found} points, the surface {expected} controls")]
-    InitialShape { found: usize, expected: usize },
+    InitialShape {
+        /// Points in the initial net.
+        found: usize,
+        /// Controls the surface has.
+        expected: usize,
+    },
+    /// The fitting engine failed in one round.
     #[error("fit round {round}")]
     Fit {
+        /// The round that failed (0: the fit at the given parameters).
         round: usize,
+        /// The engine's error.
         #[source]
         source: FitError,
     },

@@ -41,21 +41,29 @@ pub fn units_parser() -> impl clap::builder::TypedValueParser<Value = IgesUnits>
     named_parser(IgesUnits::ALL.map(IgesUnits::name))
 }
 
+/// How grid points get their parameters (`--param`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Param {
+    /// Parameter steps proportional to the distance between neighbouring points.
     Chord,
+    /// Parameter steps proportional to the square root of that distance (steadier at sharp turns).
     Centripetal,
 }
 
+/// How a scattered fit's least-squares system is solved (`--solver`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Solver {
+    /// Exact least squares by a banded QR of the whole system.
     Direct,
+    /// Progressive iterative approximation (LSPIA) from the plane through the data.
     Lspia,
 }
 
+/// Arguments of `trispline bspline-fit`.
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("layout").required(true).args(["grid", "scattered"])))]
 pub struct BsplineFitArgs {
+    /// The point file (any mesh format trispline reads); only its vertices are used.
     pub input: PathBuf,
     /// The input's vertices are R rows of C points, row-major (a PLY range grid is read as
     /// its grid, or an R x C window of it with --window).
@@ -70,6 +78,7 @@ pub struct BsplineFitArgs {
     /// Control points U x V (with --tolerance: the most the adaptive loop may use).
     #[arg(long, value_name = "UxV", value_parser = parse_pair_x)]
     pub control: (usize, usize),
+    /// Polynomial degree in U and V (3,3 is bicubic).
     #[arg(long, value_name = "p,q", value_parser = parse_pair_comma, default_value = "3,3")]
     pub degree: (usize, usize),
     /// Grow the control net from the minimum until every point is within this distance.
@@ -79,14 +88,17 @@ pub struct BsplineFitArgs {
     /// columns-then-rows approximation with interpolated ends.
     #[arg(long, value_parser = grid_method_parser(), default_value = "lsq")]
     pub method: GridMethod,
+    /// Grid fits: how parameters are spaced along rows and columns.
     #[arg(long, value_enum, default_value = "chord")]
     pub param: Param,
     /// Scattered fits: weight of the control-net smoothing energy relative to the data
     /// (direct solver only).
     #[arg(long, default_value_t = 1e-6)]
     pub smoothing: f64,
+    /// Scattered fits: how the least-squares system is solved.
     #[arg(long, value_enum, default_value = "direct")]
     pub solver: Solver,
+    /// Scattered fits with --solver lspia: number of LSPIA steps.
     #[arg(long, default_value_t = 500)]
     pub lspia_iterations: usize,
     /// Scattered fits: rounds of foot-point parameter correction.
@@ -100,6 +112,8 @@ pub struct BsplineFitArgs {
     /// Segments per side of the tessellation in surface.glb.
     #[arg(long, default_value_t = 64)]
     pub tessellation: usize,
+    /// Output folder (created if missing): surface.json, surface.igs, surface.stp,
+    /// surface.glb and report.json.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -182,6 +196,7 @@ pub(crate) fn largest_side(points: &[DVec3]) -> f64 {
     (hi - lo).max_element().max(0.0)
 }
 
+/// Runs `bspline-fit`: reads the points, fits, writes the outputs.
 pub fn run(args: &BsplineFitArgs) -> anyhow::Result<ExitCode> {
     let t0 = Instant::now();
     let param = match args.param {

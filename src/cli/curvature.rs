@@ -20,15 +20,22 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// What the vertex colours of curvature.glb show (`--colour`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Colouring {
+    /// The region kind: convex blue, concave red, saddle green.
     Region,
+    /// Gaussian curvature K.
     Gaussian,
+    /// Mean curvature H.
     Mean,
+    /// The larger principal curvature.
     KMax,
+    /// The smaller principal curvature.
     KMin,
 }
 
+/// Arguments of `trispline curvature`.
 #[derive(clap::Args, Debug)]
 pub struct CurvatureArgs {
     /// A surface.json written by `fit` (bezier, loop) or `bspline-fit` (bspline).
@@ -44,11 +51,15 @@ pub struct CurvatureArgs {
     /// Regions with fewer samples are merged into their main neighbour.
     #[arg(long, default_value_t = 8)]
     pub min_region: usize,
+    /// What curvature.glb's colours show; the signed quantities run blue (negative) through
+    /// white to red (positive), saturating at the 98th percentile of their magnitude.
     #[arg(long, value_enum, default_value = "region")]
     pub colour: Colouring,
     /// Units declared in boundaries.igs.
     #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "mm")]
     pub units: IgesUnits,
+    /// Output folder (created if missing): curvature.glb, boundaries.json, boundaries.obj,
+    /// boundaries.igs and regions.json.
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -128,6 +139,7 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<Loaded> {
     Ok((surface, kind, packing))
 }
 
+/// Runs `curvature`: samples the surface, classifies regions, writes the outputs.
 pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
     let t0 = Instant::now();
     if !(2..=4001).contains(&args.grid) {

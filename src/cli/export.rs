@@ -28,6 +28,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
+/// Arguments of `trispline export`.
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
     /// A surface.json of any kind (bspline, bezier, loop).
@@ -225,6 +226,7 @@ fn beside(path: &Path, suffix: &str) -> PathBuf {
     path.with_file_name(format!("{stem}{suffix}"))
 }
 
+/// Runs `export`: converts the surface to a B-spline if needed, writes STEP (and IGES).
 pub fn run(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     let t0 = Instant::now();
     let (cu, cv) = args.control;

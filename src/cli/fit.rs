@@ -27,6 +27,7 @@ where
     PossibleValuesParser::new(names).try_map(|s| s.parse::<T>())
 }
 
+/// Arguments of `trispline fit`.
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// The input mesh: a disk-like scan patch (any connectivity), a whole object (closed,
@@ -53,8 +54,13 @@ pub struct FitArgs {
     /// less (4x control points) down to this floor.
     #[arg(long, default_value_t = 1)]
     pub min_levels: usize,
+    /// How the control points are solved for: `pia` (progressive iterative approximation),
+    /// `lspia` (least-squares PIA), `cg` (conjugate gradients on the normal equations) or
+    /// `direct` (sparse Cholesky, one step).
     #[arg(long, default_value = "cg")]
     pub method: Method,
+    /// Subdivided inputs: how the coarse net is recovered, `exact` (the inverse of the
+    /// subdivision rules) or `lsq` (the net whose subdivision is closest in least squares).
     #[arg(long, default_value = "exact")]
     pub inverse: InverseMethod,
     /// Maximum number of fitting steps.
@@ -69,10 +75,14 @@ pub struct FitArgs {
     /// Targets; with none given the fit aims at max error <= tolerance.
     #[arg(long)]
     pub max_error: Option<f64>,
+    /// Target for the mean error (same unit as the input); the fit stops once every target
+    /// given holds.
     #[arg(long)]
     pub mean_error: Option<f64>,
+    /// Target share of data points within the tolerance, in percent (0-100).
     #[arg(long)]
     pub within_tolerance_pct: Option<f64>,
+    /// Stop fitting after this many milliseconds (checked between steps); no limit by default.
     #[arg(long)]
     pub max_time_ms: Option<u64>,
     /// Scans without subdivision connectivity, `bezier`: control-net segments per side (the
@@ -129,6 +139,8 @@ pub struct FitArgs {
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
+    /// Output folder (created if missing): surface.json, surface.glb and report.json (with
+    /// --components all, in one subfolder per component).
     #[arg(long)]
     pub out: PathBuf,
 }
@@ -185,6 +197,7 @@ impl FitArgs {
     }
 }
 
+/// Runs `fit`: reads the mesh, fits it, writes the outputs.
 pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let started = std::time::Instant::now();
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;

@@ -8,34 +8,47 @@ use anyhow::Context;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// Arguments of `trispline inspect`.
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
+    /// The mesh file to inspect.
     pub input: PathBuf,
     /// Deepest level of subdivision connectivity to look for.
     #[arg(long, default_value_t = 8)]
     pub max_depth: usize,
 }
 
+/// Arguments of `trispline subdivide`.
 #[derive(clap::Args, Debug)]
 pub struct SubdivideArgs {
+    /// The mesh file to subdivide.
     pub input: PathBuf,
+    /// Loop subdivision steps; each one multiplies the face count by 4.
     #[arg(long, default_value_t = 1)]
     pub levels: usize,
+    /// The mesh file to write: .obj, .ply or .glb.
     #[arg(short = 'o', long)]
     pub output: PathBuf,
 }
 
+/// Arguments of `trispline coarsen`.
 #[derive(clap::Args, Debug)]
 pub struct CoarsenArgs {
+    /// A mesh with Loop subdivision connectivity.
     pub input: PathBuf,
+    /// Inverse subdivision steps; each one divides the face count by 4.
     #[arg(long, default_value_t = 1)]
     pub levels: usize,
+    /// How coarse positions are recovered: `exact` (the inverse of the subdivision rules)
+    /// or `lsq` (the coarse net whose subdivision is closest in least squares).
     #[arg(long, default_value = "exact")]
     pub method: InverseMethod,
+    /// The mesh file to write: .obj, .ply or .glb.
     #[arg(short = 'o', long)]
     pub output: PathBuf,
 }
 
+/// Runs `inspect`: prints the mesh's counts and subdivision depth as JSON.
 pub fn inspect(args: &InspectArgs) -> anyhow::Result<ExitCode> {
     let loaded = read_mesh_file(&args.input, &LoadOptions::default())?;
     let stats = mesh_stats(&loaded.mesh, args.max_depth);
@@ -43,6 +56,7 @@ pub fn inspect(args: &InspectArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Runs `subdivide`.
 pub fn subdivide_cmd(args: &SubdivideArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     let fine = subdivide(&mesh, args.levels)
@@ -51,6 +65,7 @@ pub fn subdivide_cmd(args: &SubdivideArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Runs `coarsen`; exit code 2 when the input lacks subdivision connectivity.
 pub fn coarsen_cmd(args: &CoarsenArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     match coarsen(&mesh, args.levels, args.method) {

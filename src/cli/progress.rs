@@ -12,6 +12,7 @@ const QUIET_FOR: Duration = Duration::from_millis(500);
 const REDRAW_EVERY: Duration = Duration::from_millis(100);
 const BAR_WIDTH: usize = 24;
 
+/// The progress line of one fit; `on_step` may be called from any thread.
 pub struct Progress {
     enabled: bool,
     start: Instant,
@@ -26,6 +27,7 @@ impl Progress {
         Self::with_output(max_iterations, std::io::stderr().is_terminal())
     }
 
+    /// Enabled or not as told (tests use this to avoid depending on the terminal).
     pub fn with_output(max_iterations: usize, enabled: bool) -> Self {
         Self {
             enabled,
@@ -35,6 +37,7 @@ impl Progress {
         }
     }
 
+    /// Redraws the line for this step, unless it is too early or too soon after the last draw.
     pub fn on_step(&self, s: &StepStats) {
         let elapsed = self.start.elapsed();
         if !self.enabled || elapsed < QUIET_FOR {
@@ -63,6 +66,7 @@ impl Progress {
         }
     }
 
+    /// Whether a line is on screen now.
     pub fn has_drawn(&self) -> bool {
         self.drawn.lock().map(|d| d.is_some()).unwrap_or(false)
     }

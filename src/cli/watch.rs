@@ -8,10 +8,13 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 
+/// Arguments of `trispline watch`.
 #[derive(clap::Args, Debug)]
 pub struct WatchArgs {
     /// Folder to watch for mesh files.
     pub dir: PathBuf,
+    /// Output folder (created if missing): OUT/<id> holds each patch's latest outputs,
+    /// beside the event log (events.ndjson) and, unless the config moves it, quarantine/.
     #[arg(long)]
     pub out: PathBuf,
     /// Also read records from this FIFO, or `-` for stdin (stdin EOF ends the daemon once
@@ -39,6 +42,8 @@ pub struct WatchArgs {
     pub log_json: bool,
 }
 
+/// Runs `watch`: loads the configuration, then the daemon until it is stopped (or, with
+/// --once, until the folder's files are processed).
 pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
     let (text, name) = match &args.config {
         Some(p) => (
