@@ -5,7 +5,7 @@ use super::config::DaemonConfig;
 use super::kinds::{rejection_kind, Cause};
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
-use crate::io::{read_mesh_bytes, Format, LoadOptions};
+use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
 use crate::pipeline::worker::{run_input, InputOutputs, WarmStart};
 use std::sync::Arc;
 use std::time::Instant;
@@ -143,12 +143,17 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         return Outcome::Unchanged { hash };
     }
     let start = Instant::now();
-    let mesh = match read_mesh_bytes(
-        &bytes,
-        format,
-        &a.label,
-        &LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices),
-    ) {
+    let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
+    // A file's external glTF buffers lie beside it (the reader confines them to that
+    // folder); pipe payloads have no folder and must embed theirs.
+    let read = match &a.input {
+        Input::File(path) => match path.parent() {
+            Some(folder) => read_mesh_bytes_in(&bytes, format, &a.label, &load, folder),
+            None => read_mesh_bytes(&bytes, format, &a.label, &load),
+        },
+        Input::Inline { .. } => read_mesh_bytes(&bytes, format, &a.label, &load),
+    };
+    let mesh = match read {
         Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
             return reject(
                 Cause::TooManyVertices,

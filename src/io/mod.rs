@@ -223,6 +223,18 @@ pub fn read_mesh_bytes(
     read_with_base(bytes, format, name, opts, None)
 }
 
+/// Reads the bytes of a file that lies in `folder` (read by the caller, e.g. to hash them
+/// first): a `.gltf`'s external buffers are resolved there, and only there.
+pub fn read_mesh_bytes_in(
+    bytes: &[u8],
+    format: Format,
+    name: &str,
+    opts: &LoadOptions,
+    folder: &Path,
+) -> Result<Loaded, IoError> {
+    read_with_base(bytes, format, name, opts, Some(folder))
+}
+
 fn read_with_base(
     bytes: &[u8],
     format: Format,

@@ -1,7 +1,8 @@
 //! The hardening points of the daemon as a process: a relative watch folder sees renamed-in
 //! files; pipe path records cannot reach outside their roots; odd entries are reported once
 //! and odd names get distinct, safe folders; superseded versions are recorded once across
-//! starts; a record half-received at a stop is reported.
+//! starts; a record half-received at a stop is reported; a `.gltf` takes its external
+//! buffer from beside it.
 
 use crate::daemon_support::*;
 use std::io::Write;
@@ -51,10 +52,11 @@ fn a_relative_watch_folder_sees_renamed_in_files() {
 /// processed policy is `delete`; a file inside the folder is fitted and deleted.
 #[test]
 fn pipe_path_records_cannot_reach_outside_the_roots() {
-    let s = setup(&format!(
-        "{}\n[output]\nprocessed = \"delete\"\n",
-        config(3_000_000, "native", "")
-    ));
+    // The fixture already has an [output] table: the policy goes into it.
+    let s = setup(
+        &config(3_000_000, "native", "")
+            .replace("[output]\n", "[output]\nprocessed = \"delete\"\n"),
+    );
     let root = s.out.parent().expect("tmp").to_path_buf();
     let victim = root.join("victim.obj");
     std::fs::write(&victim, patch_obj(12, 2)).expect("victim");
@@ -247,4 +249,34 @@ fn a_record_half_received_at_stop_is_reported() {
             .is_some_and(|r| r.contains("of 100000 bytes")),
         "{cut}"
     );
+}
+
+/// A `.gltf` dropped into the folder with its buffer beside it is fitted (the buffer is
+/// resolved in the watch folder); one naming a buffer outside the folder is rejected with
+/// the reader's kind, and the file outside is left alone.
+#[test]
+fn a_gltf_with_an_external_buffer_beside_it_is_fitted() {
+    let s = setup(&config(200, "native", ""));
+    let child = s.spawn(&[]);
+    assert!(wait_until(|| s.log().contains("watching")), "{}", s.log());
+    let (gltf, bin) = patch_gltf_external(12, 3, "scan.bin");
+    std::fs::write(s.inbox.join("scan.bin"), &bin).expect("bin");
+    drop_file(&s.inbox, "scan.gltf", gltf.as_bytes());
+    let outside = s.out.parent().expect("tmp").join("outside.bin");
+    std::fs::write(&outside, &bin).expect("outside bin");
+    let (escaping, _) = patch_gltf_external(12, 4, "../outside.bin");
+    drop_file(&s.inbox, "escape.gltf", escaping.as_bytes());
+    assert!(
+        wait_until(|| s.out.join("scan/surface.json").exists()
+            && count(&s.out, |e| e["status"] == "rejected") >= 1),
+        "{}",
+        s.log()
+    );
+    let rejected = events(&s.out)
+        .into_iter()
+        .find(|e| e["status"] == "rejected")
+        .expect("the escaping gltf is rejected");
+    assert_eq!(rejected["kind"], "unsupported", "{rejected}");
+    assert!(outside.exists(), "the file outside the folder stays");
+    assert!(stop(child).is_some_and(|st| st.success()));
 }

@@ -13,8 +13,8 @@ pub enum ColdStart {
         /// from every previous point.
         outside_share: f64,
     },
-    /// The piece fitted is not the previous piece: far fewer or far more points, or most of
-    /// the input fell apart into pieces.
+    /// The piece fitted is not the previous piece: far fewer points, or most of the input
+    /// fell apart into pieces.
     Pieces {
         /// Vertices of the piece fitted now...
         vertices: usize,
@@ -86,7 +86,9 @@ pub(super) const NEW_GROUND_REACH_EDGES: f64 = 3.0;
 /// controls there were never fitted to anything.
 pub(super) const MAX_OUTSIDE_SHARE: f64 = 0.1;
 
-/// Vertex-count ratio (either way) beyond which the piece fitted is taken for another piece.
+/// Shrink of the vertex count beyond which the piece fitted is taken for a fragment of the
+/// previous one. Only a shrink counts: a denser rescan of the same ground has more points and
+/// is the best case for a warm start, and growth onto new ground is judged by coverage.
 pub(super) const MAX_SIZE_RATIO: f64 = 1.5;
 
 /// Share of the input in pieces left out beyond which the input is taken to have fallen

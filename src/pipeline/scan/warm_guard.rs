@@ -41,9 +41,7 @@ pub(super) fn refuse_warm(
     let previous = feet.points.len();
     let vertices = part.positions.len();
     let ratio = vertices.max(1) as f64 / previous as f64;
-    if !(1.0 / MAX_SIZE_RATIO..=MAX_SIZE_RATIO).contains(&ratio)
-        || dropped.share > MAX_DROPPED_SHARE
-    {
+    if ratio < 1.0 / MAX_SIZE_RATIO || dropped.share > MAX_DROPPED_SHARE {
         return Some(ColdStart::Pieces {
             vertices,
             previous,

@@ -68,6 +68,42 @@ pub fn patch_ply(n: usize, seed: u32) -> Vec<u8> {
     s.into_bytes()
 }
 
+/// The same height field as a `.gltf` whose positions and indices live in the external
+/// buffer `bin_name` (returned second: the bytes to write beside it).
+pub fn patch_gltf_external(n: usize, seed: u32, bin_name: &str) -> (String, Vec<u8>) {
+    let (v, f) = height_field(n, seed);
+    let mut bin = Vec::new();
+    let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+    for p in &v {
+        for k in 0..3 {
+            let c = p[k] as f32;
+            lo[k] = lo[k].min(c);
+            hi[k] = hi[k].max(c);
+            bin.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    let positions_len = bin.len();
+    for t in &f {
+        for &i in t {
+            bin.extend_from_slice(&(i as u32).to_le_bytes());
+        }
+    }
+    let gltf = format!(
+        r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1}}]}}],"accessors":[{{"bufferView":0,"componentType":5126,"count":{nv},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}},{{"bufferView":1,"componentType":5125,"count":{ni},"type":"SCALAR"}}],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{positions_len}}},{{"buffer":0,"byteOffset":{positions_len},"byteLength":{il}}}],"buffers":[{{"byteLength":{bl},"uri":"{bin_name}"}}]}}"#,
+        lo[0],
+        lo[1],
+        lo[2],
+        hi[0],
+        hi[1],
+        hi[2],
+        nv = v.len(),
+        ni = 3 * f.len(),
+        il = bin.len() - positions_len,
+        bl = bin.len(),
+    );
+    (gltf, bin)
+}
+
 pub fn patch_obj(n: usize, seed: u32) -> Vec<u8> {
     let (v, f) = height_field(n, seed);
     let mut s = String::from("# generated height field\n");
