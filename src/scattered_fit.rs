@@ -16,7 +16,7 @@
 //! This module sits beside `fit` and `surface` (it uses both); the pipeline calls
 //! `fit_scattered` with a surface built from the config.
 
-use crate::fit::engine::PiaOperator;
+use crate::fit::engine::{umbrella_laplacian_of_edges, PiaOperator};
 use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
 use crate::surface::dms::PlanarSurface;
 use crate::surface::{SurfaceParam, TriSurface};
@@ -136,26 +136,7 @@ pub fn collocation_matrix(surface: &dyn TriSurface, params: &[SurfaceParam]) -> 
 
 /// Umbrella Laplacian over the control net: row i is `P_i - mean(neighbours)`.
 pub fn fairness_operator(surface: &dyn PlanarSurface) -> Csr {
-    let n = surface.control_count();
-    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for [a, b] in surface.control_net_edges() {
-        nbrs[a as usize].push(b);
-        nbrs[b as usize].push(a);
-    }
-    let rows: Vec<Vec<(u32, f64)>> = nbrs
-        .iter()
-        .enumerate()
-        .map(|(i, nb)| {
-            if nb.is_empty() {
-                return Vec::new();
-            }
-            let w = 1.0 / nb.len() as f64;
-            std::iter::once((i as u32, 1.0))
-                .chain(nb.iter().map(|&j| (j, -w)))
-                .collect()
-        })
-        .collect();
-    Csr::from_rows(n, rows.iter().map(|r| r.as_slice()))
+    umbrella_laplacian_of_edges(surface.control_count(), surface.control_net_edges())
 }
 
 /// The column-average PIA update `D^-1 N^T r` (module docs); controls without data stay.

@@ -468,13 +468,21 @@ fn direct_solve(problem: &FitProblem) -> Result<Vec<DVec3>, FitError> {
 
 /// Umbrella Laplacian of a control net: row i is `P_i - mean(neighbours)`.
 pub fn umbrella_laplacian(control_count: usize, faces: &[[u32; 3]]) -> Csr {
+    let edges = faces
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| [t[k], t[(k + 1) % 3]]));
+    umbrella_laplacian_of_edges(control_count, edges)
+}
+
+/// The umbrella Laplacian of a net given by its edges (either direction, repeats allowed).
+pub fn umbrella_laplacian_of_edges(
+    control_count: usize,
+    edges: impl IntoIterator<Item = [u32; 2]>,
+) -> Csr {
     let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); control_count];
-    for t in faces {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            nbrs[a as usize].push(b);
-            nbrs[b as usize].push(a);
-        }
+    for [a, b] in edges {
+        nbrs[a as usize].push(b);
+        nbrs[b as usize].push(a);
     }
     let rows: Vec<Vec<(u32, f64)>> = nbrs
         .iter_mut()
