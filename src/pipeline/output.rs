@@ -121,6 +121,25 @@ pub struct Tessellation {
     pub triangles: Vec<[u32; 3]>,
 }
 
+impl Tessellation {
+    /// Vertices from the surface's evaluations at `params` (normal: S_u x S_v, unit).
+    fn from_evaluations(
+        evals: &[Derivatives],
+        params: Vec<SurfaceParam>,
+        triangles: Vec<[u32; 3]>,
+    ) -> Self {
+        Tessellation {
+            positions: evals.iter().map(|d| d.position).collect(),
+            normals: evals
+                .iter()
+                .map(|d| d.du.cross(d.dv).normalize_or_zero())
+                .collect(),
+            params,
+            triangles,
+        }
+    }
+}
+
 /// The scanned region in parameter space: the triangles of the mapped patch (data and
 /// hole fills) with the data vertices at their corrected parameters. A triangle that the
 /// correction stretched to more than `MAX_STRETCH` times its mapped size (a foot point that
@@ -202,15 +221,7 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         .into_iter()
         .filter(|t| t.iter().all(|&v| inside[v as usize]))
         .collect();
-    Tessellation {
-        positions: evals.iter().map(|d| d.position).collect(),
-        normals: evals
-            .iter()
-            .map(|d| d.du.cross(d.dv).normalize_or_zero())
-            .collect(),
-        params,
-        triangles,
-    }
+    Tessellation::from_evaluations(&evals, params, triangles)
 }
 
 /// The tessellation's parameters, its untrimmed triangles and the surface there.
@@ -279,15 +290,7 @@ pub fn tessellate_mesh_faces(f: &PatchFit, per_face: usize) -> Tessellation {
     let (params, triangles) = face_lattices(0..m.faces().len(), per_face);
     let evaluate = f.model.as_surface().evaluator(&f.controls);
     let evals: Vec<Derivatives> = params.par_iter().map(|p| evaluate(*p)).collect();
-    Tessellation {
-        positions: evals.iter().map(|d| d.position).collect(),
-        normals: evals
-            .iter()
-            .map(|d| d.du.cross(d.dv).normalize_or_zero())
-            .collect(),
-        params,
-        triangles,
-    }
+    Tessellation::from_evaluations(&evals, params, triangles)
 }
 
 /// The flat triangles' own error: for every triangle of a `per_face` tessellation of (at
