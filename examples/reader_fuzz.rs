@@ -7,7 +7,10 @@
 //! ```text
 //! cargo run --release --example reader_fuzz -- [--runs N] [--seed S] [--target NAME]...
 //!     [--artifacts DIR] [SEED_FILE...]
+//! cargo run --release --example reader_fuzz -- --write-seeds DIR
 //! ```
+//! `--write-seeds` writes the seed inputs to `DIR/<target>/` and exits: the starting corpus
+//! for the cargo-fuzz targets, so libFuzzer and this fuzzer start from the same inputs.
 //! Deterministic for a given seed. Prints executions, crashes and distinct outcomes per
 //! target; exits 1 if anything panicked.
 
@@ -206,6 +209,20 @@ fn target_of(path: &Path) -> Option<&'static str> {
     })
 }
 
+/// Writes every target's seeds as `dir/<target>/seed-<i>`; returns how many.
+fn write_seeds(dir: &Path) -> std::io::Result<usize> {
+    let mut count = 0;
+    for target in targets::TARGETS {
+        let folder = dir.join(target);
+        std::fs::create_dir_all(&folder)?;
+        for (i, seed) in targets::seeds(target).iter().enumerate() {
+            std::fs::write(folder.join(format!("seed-{i}")), seed)?;
+            count += 1;
+        }
+    }
+    Ok(count)
+}
+
 fn main() {
     let mut runs = 1_000_000u64;
     let mut seed = 0x5eed_u64;
@@ -219,6 +236,17 @@ fn main() {
             "--runs" => runs = value().parse().unwrap_or(runs),
             "--seed" => seed = value().parse().unwrap_or(seed),
             "--artifacts" => artifacts = PathBuf::from(value()),
+            "--write-seeds" => {
+                let dir = PathBuf::from(value());
+                match write_seeds(&dir) {
+                    Ok(count) => println!("{count} seeds written under {}", dir.display()),
+                    Err(e) => {
+                        eprintln!("cannot write seeds under {}: {e}", dir.display());
+                        std::process::exit(1);
+                    }
+                }
+                return;
+            }
             "--target" => {
                 let t = value();
                 match targets::TARGETS.into_iter().find(|x| *x == t) {
