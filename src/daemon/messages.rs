@@ -57,9 +57,11 @@ const RESERVED_IDS: [&str; 3] = ["quarantine", "processed", "events.ndjson"];
 
 /// A patch id from a pipe record or a file stem, safe as a folder name in OUT: letters and
 /// digits of any script, `_`, `-` and `.` are kept; anything else (and a leading or trailing
-/// dot, a reserved name, an overlong id) is replaced and marked with `~` and a hash of the
-/// raw id. `~` never survives sanitising, so a marked id cannot equal a clean one and two
-/// raw ids differ after sanitising unless their hashes collide. `None` for an empty id.
+/// dot, a reserved name, an id that looks like a component's, an overlong id) is replaced
+/// and marked with `~` and a hash of the raw id. `~` never survives sanitising, so a marked
+/// id cannot equal a clean one and two raw ids differ after sanitising unless their hashes
+/// collide. No sanitised id ends in `.c<digits>`, so component outputs (`<id>.c<k>`) live in
+/// a namespace of their own. `None` for an empty id.
 pub(crate) fn sanitize_id(raw: &str) -> Option<String> {
     const MAX_CHARS: usize = 120;
     if raw.is_empty() {
@@ -89,11 +91,27 @@ pub(crate) fn sanitize_id(raw: &str) -> Option<String> {
     let reserved = RESERVED_IDS
         .iter()
         .any(|r| id == *r || id.starts_with(&format!("{r}.")));
-    if changed || reserved {
+    if changed || reserved || looks_like_component(&id) {
         let hash = state::content_hash(raw.as_bytes());
         id = format!("{id}~{:08x}", hash as u32 ^ (hash >> 32) as u32);
     }
     Some(id)
+}
+
+/// `<anything>.c<digits>`: the shape of a component's id (`pipeline::worker::run_input`
+/// suffixes `.c<k>`), which a patch of its own must not take, or patch `x.c0` and
+/// component 0 of patch `x` would share a folder and a state.
+fn looks_like_component(id: &str) -> bool {
+    id.rsplit_once(".c")
+        .is_some_and(|(_, k)| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// The id of component `suffix` (`.c<k>`, or empty for the whole input) of patch `id`.
+/// Disjoint from every `sanitize_id` result (none ends in `.c<digits>`), and from every
+/// other component's id: `k` is all digits, so the last `.c` of the result splits it back
+/// into `id` and `k`.
+pub(crate) fn part_id(id: &str, suffix: &str) -> String {
+    format!("{id}{suffix}")
 }
 
 /// Patch id of a file: the stem up to the first '@', sanitised.
@@ -157,6 +175,37 @@ mod tests {
         assert_eq!(
             patch_id(Path::new("/in/测试@0003.obj")).as_deref(),
             Some("测试")
+        );
+    }
+
+    /// Patch `x.c0` used to be written to the folder (and state) of component 0 of `x`.
+    #[test]
+    fn patch_ids_never_take_a_components_id() {
+        let raws = [
+            "x", "x.c0", "x.c1", "x.c12", "x.c0.c1", "y.c", "y.cz", "y.c0a",
+        ];
+        let ids: Vec<String> = raws
+            .iter()
+            .map(|r| sanitize_id(r).expect("an id"))
+            .collect();
+        assert_eq!(ids[0], "x");
+        for (raw, id) in raws[1..5].iter().zip(&ids[1..5]) {
+            assert!(looks_like_component(raw), "{raw}");
+            assert!(id.starts_with(raw) && id.contains('~'), "{raw} -> {id}");
+        }
+        // Only `.c` followed by digits is a component's shape.
+        assert_eq!(&ids[5..], &["y.c", "y.cz", "y.c0a"]);
+        let mut all: Vec<String> = ids.clone();
+        for id in &ids {
+            for k in 0..12 {
+                all.push(part_id(id, &format!(".c{k}")));
+            }
+        }
+        let unique: std::collections::HashSet<&String> = all.iter().collect();
+        assert_eq!(unique.len(), all.len(), "{all:?}");
+        assert!(
+            all.contains(&"x.c0".to_string()),
+            "component 0 of x keeps its name"
         );
     }
 }

@@ -8,6 +8,7 @@ mod confine;
 mod coordinator;
 mod job;
 mod kinds;
+mod layout;
 mod messages;
 pub(crate) mod ops;
 pub(crate) mod pipe;
@@ -61,6 +62,15 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    /// `output.quarantine_dir` could coincide with a patch's folder (inside OUT, outside
+    /// `OUT/quarantine`) or is the watch folder.
+    #[error("output.quarantine_dir {}: {reason}", path.display())]
+    QuarantineDir {
+        /// The configured folder.
+        path: PathBuf,
+        /// Why it is refused.
+        reason: String,
+    },
     /// A thread could not be started (a process or memory limit).
     #[error("cannot start the {name} thread: {source}")]
     Spawn {
@@ -78,6 +88,7 @@ impl DaemonError {
         match self {
             DaemonError::Folder { .. } => "folder",
             DaemonError::Metrics { .. } => "metrics_bind",
+            DaemonError::QuarantineDir { .. } => "quarantine_dir",
             DaemonError::Spawn { .. } => "thread_spawn",
         }
     }
@@ -127,12 +138,12 @@ fn remove_stale_temps(dir: &Path) {
 /// Runs the daemon until a stop (or, with `once`, until the work is done).
 pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     let opts = prepare_folders(opts)?;
-    let quarantine = opts
-        .config
-        .output
-        .quarantine_dir
-        .clone()
-        .unwrap_or_else(|| opts.out_dir.join("quarantine"));
+    let configured = opts.config.output.quarantine_dir.as_deref();
+    let quarantine = layout::quarantine_folder(configured, &opts.out_dir, &opts.watch_dir)
+        .map_err(|e| DaemonError::QuarantineDir {
+            path: configured.map(Path::to_path_buf).unwrap_or_default(),
+            reason: e.to_string(),
+        })?;
     let workers = opts.config.worker_threads();
     let metrics = Arc::new(Metrics::default());
     if let Some(addr) = &opts.config.daemon.metrics_addr {

@@ -6,7 +6,7 @@ use super::config::DaemonConfig;
 use super::config::ProcessedPolicy;
 use super::confine::Roots;
 use super::job::{JobDone, Outcome, Timings};
-use super::messages::{Msg, Summary};
+use super::messages::{part_id, Msg, Summary};
 use super::ops::metrics::Metrics;
 use super::publish::publish;
 use super::reload::ConfigCell;
@@ -268,7 +268,7 @@ impl Writer {
                 } = *outputs;
                 let mut written_all = true;
                 for part in parts {
-                    let id = format!("{}{}", a.id, part.suffix);
+                    let id = part_id(&a.id, &part.suffix);
                     written_all &= self.write_part(
                         a,
                         &done.cfg,
@@ -282,7 +282,7 @@ impl Writer {
                 for (suffix, reason) in failed {
                     // The input as a whole is fitted (some component is); this piece is
                     // reported, not quarantined, since the input stays in use.
-                    let id = format!("{}{suffix}", a.id);
+                    let id = part_id(&a.id, &suffix);
                     tracing::warn!(patch = %id, reason, "component not fitted");
                     self.metrics.error("component_failed");
                     self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "component_failed", "reason": reason}));

@@ -184,6 +184,70 @@ fn the_daemon_writes_suffixed_patches_and_keeps_one_state_per_input() {
     assert_eq!(events(&s.out).into_iter().filter(is_fitted).count(), 2);
 }
 
+/// A patch named like a component (`scan.c0`) beside a split input `scan`: each gets its own
+/// folder (the patch's id is marked `~<hash>`), and component 0 of `scan` keeps `scan.c0`.
+#[test]
+fn a_patch_named_like_a_component_gets_a_folder_of_its_own() {
+    let cfg =
+        config(0, "native", "").replace("mode = \"largest\"", "mode = \"all\"\nmin_vertices = 100");
+    let s = setup(&cfg);
+    let tmp = tempfile::tempdir().expect("tmp");
+    let pieces = tmp.path().join("pieces.obj");
+    trispline::io::write_mesh_file(&pieces, &three_pieces(0.0)).expect("write");
+    let mut lone = TriMesh::default();
+    add_sheet(&mut lone, 20, DVec3::new(0.0, 0.0, 5.0), 1.0);
+    let single = tmp.path().join("single.obj");
+    trispline::io::write_mesh_file(&single, &lone).expect("write");
+    drop_file(&s.inbox, "scan.obj", &std::fs::read(&pieces).expect("read"));
+    drop_file(
+        &s.inbox,
+        "scan.c0.obj",
+        &std::fs::read(&single).expect("read"),
+    );
+    let run = s.once();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let fitted: Vec<(String, String)> = events(&s.out)
+        .into_iter()
+        .filter(is_fitted)
+        .map(|e| {
+            let input = e["input"].as_str().unwrap_or("");
+            let name = input.rsplit('/').next().unwrap_or("").to_string();
+            (e["patch"].as_str().unwrap_or("").to_string(), name)
+        })
+        .collect();
+    assert_eq!(fitted.len(), 3, "{fitted:?}");
+    let folders: std::collections::HashSet<&String> = fitted.iter().map(|(p, _)| p).collect();
+    assert_eq!(folders.len(), 3, "{fitted:?}");
+    let input_of = |patch: &str| {
+        fitted
+            .iter()
+            .find(|(p, _)| p == patch)
+            .map(|(_, i)| i.as_str())
+    };
+    assert_eq!(input_of("scan.c0"), Some("scan.obj"), "{fitted:?}");
+    assert_eq!(input_of("scan.c1"), Some("scan.obj"), "{fitted:?}");
+    let (own, _) = fitted
+        .iter()
+        .find(|(_, i)| i == "scan.c0.obj")
+        .expect("the lone patch is fitted");
+    assert!(own.starts_with("scan.c0~") && own.ends_with(".c0"), "{own}");
+    for (patch, _) in &fitted {
+        assert_eq!(
+            read_json(&s.out.join(patch).join("report.json"))["patch"],
+            patch.as_str()
+        );
+    }
+    assert_eq!(
+        read_json(&s.out.join("scan.c0/report.json"))["component"]["vertices"],
+        900,
+        "component 0 of scan is its 30^2 sheet"
+    );
+}
+
 /// bun045 has 12 pieces: the policy keeps those over the thresholds and fits each.
 #[test]
 fn stanford_scan_all_components() {
