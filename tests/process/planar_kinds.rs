@@ -142,7 +142,7 @@ fn degrees_and_spreads_out_of_range_are_refused() {
         assert!(!out.join("surface.json").exists());
     }
     let cfg = dir.path().join("bad.toml");
-    std::fs::write(&cfg, "[fit]\nsurface = \"dms\"\nlevels = 2\nmethod = \"cg\"\ninverse = \"exact\"\n[fit.dms]\ndegree = 5\n").expect("write");
+    std::fs::write(&cfg, DMS_CONFIG.replace("degree = 2", "degree = 5")).expect("write");
     let o = trispline(&[
         "watch",
         ".",
