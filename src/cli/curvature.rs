@@ -4,7 +4,7 @@
 use crate::bspline::{BSplineCurve, BSplineSurface};
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
 use crate::curvature::{
-    BezierPatch, DerivativeSurface, GridPatch, LoopMeshPatch, RegionKind, Triangular,
+    BezierPatch, DerivativeSurface, DmsPatch, GridPatch, LoopMeshPatch, RegionKind, Triangular,
 };
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
@@ -38,7 +38,9 @@ pub enum Colouring {
 /// Arguments of `trispline curvature`.
 #[derive(clap::Args, Debug)]
 pub struct CurvatureArgs {
-    /// A surface.json written by `fit` (bezier, loop) or `bspline-fit` (bspline).
+    /// A surface.json written by `fit` (bezier, loop, bpatch, dms) or `bspline-fit`
+    /// (bspline). B-patches are sampled on their domain triangle (barycentric parameters),
+    /// DMS splines triangle by triangle over their domain (parameters: domain points).
     pub surface: PathBuf,
     /// Samples per side of the parameter lattice (N x N on a rectangle, a triangular
     /// lattice of N a side on the reference triangle).
@@ -135,6 +137,16 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<Loaded> {
             }),
             "loop",
         ),
+        SurfaceDescription::BPatch { patch, controls } => (
+            Box::new(Triangular {
+                surface: patch,
+                controls,
+            }),
+            "bpatch",
+        ),
+        SurfaceDescription::Dms { spline, controls } => {
+            (Box::new(DmsPatch { spline, controls }), "dms")
+        }
     };
     Ok((surface, kind, packing))
 }

@@ -14,7 +14,7 @@ use crate::bspline::scattered::ScatteredSolver;
 use crate::bspline::scattered::{fit_scattered, planar_parameters, ScatteredOptions};
 use crate::bspline::BSplineSurface;
 use crate::curvature::{
-    BezierPatch, DerivativeSurface, Domain, GridPatch, LoopMeshPatch, Triangular,
+    BezierPatch, DerivativeSurface, DmsPatch, Domain, GridPatch, LoopMeshPatch, Triangular,
 };
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::step::{step_bytes, StepOptions};
@@ -90,6 +90,11 @@ fn triangular(d: SurfaceDescription) -> Result<Box<dyn DerivativeSurface>, BSpli
             surface: LatticeSpline::new(domain_segments),
             controls,
         }),
+        SurfaceDescription::BPatch { patch, controls } => Box::new(Triangular {
+            surface: patch,
+            controls,
+        }),
+        SurfaceDescription::Dms { spline, controls } => Box::new(DmsPatch { spline, controls }),
     })
 }
 

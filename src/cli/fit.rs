@@ -6,6 +6,7 @@ use crate::io::{read_mesh_file, write_atomic, write_atomic_group, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
 use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConfig};
+use crate::pipeline::scattered::{BPatchConfig, DmsConfig};
 use crate::pipeline::worker::{
     run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
     DEFAULT_TESSELLATION,
@@ -37,7 +38,10 @@ pub struct FitArgs {
     /// Loop limit surface of their coarse net; whole objects: the Loop limit surface of a
     /// control mesh simplified from the data) or `bezier` (scans: one quartic Bezier patch
     /// per grid cell; subdivided inputs: one patch over a lattice-shaped coarse net; whole
-    /// objects are fitted with `loop` whatever is asked).
+    /// objects are fitted with `loop` whatever is asked), `bpatch` (one B-patch of degree
+    /// --bpatch-degree over a triangle around the planar map) or `dms` (a DMS triangular
+    /// B-spline of degree --dms-degree over grid triangles of the planar map); the last two
+    /// map every input to the plane, subdivided ones too.
     #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "loop")]
     pub surface: SurfaceKind,
     /// Inputs without subdivision connectivity: `auto` (disk-like scans on a grid over their
@@ -136,6 +140,18 @@ pub struct FitArgs {
     /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
     #[arg(long, default_value_t = ScanConfig::default().hole_bridge_edges)]
     pub hole_bridge_edges: f64,
+    /// `--surface dms`: the degree, 2 or 3 (C1 or C2 surfaces; 6 or 10 controls per domain
+    /// triangle, their number set by --target-controls-pct).
+    #[arg(long, default_value_t = DmsConfig::default().degree, value_parser = clap::value_parser!(u8).range(2..=3).map(usize::from))]
+    pub dms_degree: usize,
+    /// `--surface bpatch`: the degree (1-20).
+    #[arg(long, default_value_t = BPatchConfig::default().degree, value_parser = clap::value_parser!(u8).range(1..=20).map(usize::from))]
+    pub bpatch_degree: usize,
+    /// `--surface dms`: knot cloud radius as a fraction of each domain vertex's shortest
+    /// edge, in (0, 1); `bpatch`: knots pushed out along the medians by this fraction, in
+    /// [0, 2] (0: the Bezier patch). Default: 0.3 for dms, 0.5 for bpatch.
+    #[arg(long)]
+    pub knot_spread: Option<f64>,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
@@ -189,6 +205,16 @@ impl FitArgs {
                 min_vertices: self.min_component_vertices,
                 min_fraction: self.min_component_fraction,
             },
+            dms: DmsConfig {
+                degree: self.dms_degree,
+                knot_spread: self.knot_spread.unwrap_or(DmsConfig::default().knot_spread),
+            },
+            bpatch: BPatchConfig {
+                degree: self.bpatch_degree,
+                knot_spread: self
+                    .knot_spread
+                    .unwrap_or(BPatchConfig::default().knot_spread),
+            },
         };
         WorkerConfig {
             fit,
@@ -203,6 +229,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let cfg = args.worker_config();
+    check_knot_spread(args)?;
     let progress = Progress::new(cfg.fit.budget.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
     let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));
@@ -252,6 +279,23 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         &serde_json::to_vec_pretty(&json!({"input": label, "fitted": listing, "failed": failed}))?,
     )?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// `--knot-spread` within the range of the kind asked for (the degrees are range-checked
+/// by their parsers).
+fn check_knot_spread(args: &FitArgs) -> anyhow::Result<()> {
+    let Some(k) = args.knot_spread else {
+        return Ok(());
+    };
+    match args.surface {
+        SurfaceKind::Dms if !(k > 0.0 && k < 1.0) => {
+            anyhow::bail!("--knot-spread {k}: dms needs a value in (0, 1)")
+        }
+        SurfaceKind::Bpatch if !(0.0..=2.0).contains(&k) => {
+            anyhow::bail!("--knot-spread {k}: bpatch needs a value in [0, 2]")
+        }
+        _ => Ok(()),
+    }
 }
 
 /// Where a fit's mesh came from, for its report.

@@ -383,6 +383,7 @@ fn validate_fit(f: &FitConfig) -> Check {
     }
     validate_scan(&f.scan)?;
     validate_correction(&f.correction)?;
+    validate_planar(f)?;
     let c = &f.components;
     check(
         c.min_vertices >= 3,
@@ -431,6 +432,35 @@ fn validate_scan(s: &ScanConfig) -> Check {
         "fit.scan.hole_bridge_edges",
         s.hole_bridge_edges,
         "must be a positive number",
+    )
+}
+
+/// Ranges of `[fit.dms]` and `[fit.bpatch]`.
+fn validate_planar(f: &FitConfig) -> Check {
+    use crate::pipeline::scattered::{BPATCH_DEGREES, DMS_DEGREES};
+    check(
+        DMS_DEGREES.contains(&f.dms.degree),
+        "fit.dms.degree",
+        f.dms.degree,
+        "must be 2 or 3",
+    )?;
+    check(
+        f.dms.knot_spread > 0.0 && f.dms.knot_spread < 1.0,
+        "fit.dms.knot_spread",
+        f.dms.knot_spread,
+        "must be in (0, 1)",
+    )?;
+    check(
+        BPATCH_DEGREES.contains(&f.bpatch.degree),
+        "fit.bpatch.degree",
+        f.bpatch.degree,
+        "must be 1..=20",
+    )?;
+    check(
+        (0.0..=2.0).contains(&f.bpatch.knot_spread),
+        "fit.bpatch.knot_spread",
+        f.bpatch.knot_spread,
+        "must be in [0, 2]",
     )
 }
 

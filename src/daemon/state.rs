@@ -160,6 +160,7 @@ mod tests {
                 feet: None,
                 parts: Vec::new(),
                 object: None,
+                scattered: None,
             },
         }
     }

@@ -11,6 +11,7 @@ use crate::mesh::detect::DetectError;
 use crate::mesh::inverse::InverseError;
 use crate::mesh::topology::TopologyError;
 use crate::pipeline::object::ObjectError;
+use crate::pipeline::scattered::ScatteredError;
 use crate::remesh::RemeshError;
 use crate::surface::loop_limit::LoopLimitError;
 
@@ -120,6 +121,9 @@ pub enum PipelineError {
     /// The solver failed.
     #[error(transparent)]
     Fit(#[from] FitError),
+    /// A B-patch or DMS fit (`pipeline::scattered`) failed.
+    #[error(transparent)]
+    Scattered(#[from] ScatteredError),
 }
 
 fn describe_failures(failures: &[(String, PipelineError)]) -> String {
@@ -154,6 +158,7 @@ impl PipelineError {
                 _ => "object_failed",
             },
             PipelineError::Fit(_) => "fit_failed",
+            PipelineError::Scattered(e) => e.kind(),
         }
     }
 
@@ -163,6 +168,7 @@ impl PipelineError {
         !matches!(
             self,
             PipelineError::Fit(_)
+                | PipelineError::Scattered(ScatteredError::Fit(_))
                 | PipelineError::Object {
                     source: ObjectError::Solve { .. }
                 }

@@ -79,6 +79,9 @@ pub fn surface_json(
             "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; faces whose corners are all regular are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
             "control_faces": m.faces(),
         }),
+        SurfaceModel::BPatch(_) | SurfaceModel::Dms(_) => {
+            super::scattered::model_json(&f.model, &f.controls).unwrap_or_else(|| json!({}))
+        }
     };
     v["schema"] = json!("trispline.surface/1");
     v["control_points"] = json!(controls);
@@ -195,7 +198,7 @@ impl Coverage {
     }
 
     /// Returns a test for parameters: inside a kept triangle.
-    fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
+    pub(crate) fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
         let locator = Locator::new(&self.triangles, &self.params);
         move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
     }
@@ -230,7 +233,7 @@ fn sample_surface(
     segments: usize,
 ) -> (Vec<SurfaceParam>, Vec<[u32; 3]>, Vec<Derivatives>) {
     let (params, triangles) = match &f.model {
-        SurfaceModel::Bezier(_) => {
+        SurfaceModel::Bezier(_) | SurfaceModel::BPatch(_) => {
             let n = segments.max(1);
             let params = lattice_points(n)
                 .into_iter()
@@ -246,10 +249,11 @@ fn sample_surface(
             let per_cell = segments as f64 / (g.cells().len().max(1) as f64).sqrt();
             g.sample_lattice((per_cell.ceil() as usize).clamp(4, 32))
         }
-        SurfaceModel::Mesh(m) => {
-            let per_face = segments as f64 / (m.faces().len().max(1) as f64).sqrt();
+        SurfaceModel::Mesh(_) | SurfaceModel::Dms(_) => {
+            let faces = f.model.as_surface().domain_face_count();
+            let per_face = segments as f64 / (faces.max(1) as f64).sqrt();
             let n = (per_face.ceil() as usize).clamp(4, 32);
-            face_lattices(0..m.faces().len(), n)
+            face_lattices(0..faces, n)
         }
     };
     let evaluate = f.model.as_surface().evaluator(&f.controls);

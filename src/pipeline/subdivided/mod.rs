@@ -170,6 +170,13 @@ fn model_on_net(
                 degree: 0,
             }
         }
+        // The worker fits these over the planar map (`pipeline::scattered`) before it looks
+        // for subdivision connectivity.
+        kind @ (SurfaceKind::Bpatch | SurfaceKind::Dms) => {
+            return Err(
+                crate::pipeline::scattered::ScatteredError::NotPlanarKind(kind.name()).into(),
+            )
+        }
         SurfaceKind::Bezier => {
             let (n, index) =
                 lattice::lattice_coordinates(coarse.positions.len(), &coarse.triangles)?;

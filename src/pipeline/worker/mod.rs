@@ -19,8 +19,9 @@ use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
 use super::scan::{fit_scan, ScanFit, ScanOptions, ScanWarm};
+use super::scattered::{add_outputs, fit_planar, tessellate_planar, ScatteredInfo};
 use super::subdivided::fit_subdivided;
-use super::{FitOptions, PatchFit, PipelineError};
+use super::{FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, StepHook};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::RemeshError;
@@ -57,6 +58,8 @@ pub struct FittedPatch {
     pub refinement: Vec<Refinement>,
     /// Whole objects: the object fit and why that path was taken.
     pub object: Option<ObjectInfo>,
+    /// B-patch and DMS fits: the planar map, coverage and trims.
+    pub scattered: Option<ScatteredInfo>,
 }
 
 /// The fit alone: with `domain = "mesh"` the object path; else subdivision connectivity
@@ -87,6 +90,18 @@ pub(crate) fn fit_patch_with(
         budget: budget.clone(),
         on_step,
     };
+    if matches!(fit_cfg.surface, SurfaceKind::Bpatch | SurfaceKind::Dms) {
+        let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
+        return Ok(FittedPatch {
+            fit,
+            scan: None,
+            budget,
+            levels: 0,
+            refinement: Vec::new(),
+            object: None,
+            scattered: Some(info),
+        });
+    }
     if fit_cfg.domain == Domain::Mesh {
         return object_patch(mesh, previous, cfg, budget, "fit.domain = \"mesh\"".into());
     }
@@ -121,6 +136,7 @@ pub(crate) fn fit_patch_with(
                 levels,
                 refinement,
                 object: None,
+                scattered: None,
             })
         }
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
@@ -172,6 +188,7 @@ pub(crate) fn fit_patch_with(
         levels: fit_cfg.levels,
         refinement,
         object: None,
+        scattered: None,
     })
 }
 
@@ -199,6 +216,7 @@ fn object_patch(
         levels: 0,
         refinement: Vec::new(),
         object: Some(info),
+        scattered: None,
     })
 }
 
@@ -226,6 +244,7 @@ pub(crate) fn run_patch_with(
         levels,
         refinement,
         object: object_info,
+        scattered: planar_info,
     } = fit_patch_with(mesh, previous, cfg, on_step)?;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
@@ -239,7 +258,10 @@ pub(crate) fn run_patch_with(
                     Some(check),
                 );
             }
-            let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
+            let tess = match &planar_info {
+                Some(info) => tessellate_planar(&fitted, info, cfg.tessellation.max(1)),
+                None => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
+            };
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)
         },
         || {
@@ -255,6 +277,10 @@ pub(crate) fn run_patch_with(
         },
     );
     let (glb, check) = glb_and_check;
+    let mut surface = surface;
+    if let Some(info) = &planar_info {
+        add_outputs(&fitted, info, &mut report, &mut surface, &mut warm);
+    }
     if let Some(info) = &object_info {
         let object_report = object::object_report(&fitted, info);
         report["path"] = json!("object");
@@ -407,6 +433,7 @@ pub(crate) fn run_input_with(
             feet: None,
             parts: warm_parts,
             object: None,
+            scattered: None,
         },
     })
 }

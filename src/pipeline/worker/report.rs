@@ -59,6 +59,10 @@ pub struct WarmStart {
     /// control positions are `controls`).
     #[serde(default)]
     pub object: Option<super::object::ObjectWarm>,
+    /// B-patch and DMS fits: the domain, knots and controls (the plane frame, warp and data
+    /// feet are in the fields above).
+    #[serde(default)]
+    pub scattered: Option<crate::pipeline::scattered::ScatteredWarm>,
 }
 
 /// A component's warm start and where the component was, so that the pieces of the next
@@ -104,11 +108,12 @@ pub(super) fn describe(
         domain: scan_info.map(|s| s.domain.clone()),
         coords: match &fitted.model {
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
-            SurfaceModel::Bezier(_) | SurfaceModel::Mesh(_) => Vec::new(),
+            _ => Vec::new(),
         },
         feet: scan_info.and_then(warm_feet),
         parts: Vec::new(),
         object: None,
+        scattered: None,
     };
     (report, surface, warm)
 }

@@ -1,0 +1,344 @@
+//! The planar-domain kinds in the product: `surface = "bpatch"` (Seidel's B-patch over one
+//! triangle around the scan's planar map) and `surface = "dms"` (a DMS triangular B-spline
+//! over a triangulation of the map: the grid path's cells at a coarser spacing).
+//!
+//! Any input these kinds are asked for goes through the scan's preparation (clean, largest
+//! component, holes, planar map: `scan::prepare`), so subdivided inputs are fitted over their
+//! planar map too, not over their coarse net. Then: the domain (`domain`), every data point
+//! located in it, `scattered_fit::fit_scattered` per round with foot-point correction between
+//! rounds (stopping like the scan path, once a round gains less than
+//! `fit.correction.min_gain`), and the covered region in the plane for the trimmed
+//! tessellation (`output`). A previous version of the same kind (`warm`) gives its frame and
+//! warp, and its domain and controls where they still cover the new data.
+
+mod config;
+mod domain;
+mod error;
+mod output;
+mod warm;
+
+pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
+pub use error::ScatteredError;
+pub(crate) use output::add_outputs;
+pub use output::{model_json, tessellate_planar};
+pub use warm::ScatteredWarm;
+
+use super::output::Coverage;
+use super::scan::holes::plan_holes;
+use super::scan::prepare::{prepare, Prepared};
+use super::scan::{Preparation, ScanOptions, ScanWarm};
+use super::worker::{WarmStart, WorkerConfig};
+use super::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
+use crate::fit::{Budget, FitOutcome};
+use crate::remesh::planar::{MapMethod, PlaneFrame};
+use crate::remesh::warp::PlaneWarp;
+use crate::scattered_fit::{fit_scattered, foot_points, initial_net, InitialNet, ScatteredOptions};
+use crate::surface::dms::PlanarSurface;
+use crate::surface::SurfaceParam;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Newton steps per foot point and round.
+const NEWTON_STEPS: usize = 6;
+
+/// What a planar-domain fit leaves for its outputs, report and next version beside the fit.
+pub struct ScatteredInfo {
+    /// What cleaning and hole filling found.
+    pub preparation: Preparation,
+    /// The plane of the map.
+    pub frame: PlaneFrame,
+    /// Its warp, if the map is a warped projection.
+    pub warp: Option<PlaneWarp>,
+    /// How the map was made.
+    pub method: MapMethod,
+    /// The scanned region in domain coordinates (data at their final domain points).
+    pub coverage: Coverage,
+    /// The outer rim of the data in domain coordinates...
+    pub outer: Vec<DVec2>,
+    /// ... and the rims of trimmed holes and wide data triangles.
+    pub holes: Vec<Vec<DVec2>>,
+    /// Geometric RMS after each round.
+    pub correction_rms: Vec<f64>,
+    /// DMS: the grid spacing of the domain.
+    pub spacing: Option<f64>,
+    /// Controls taken from the previous version.
+    pub reused_controls: usize,
+    /// Given a previous version, why it (or its domain) was not used.
+    pub cold_start: Option<String>,
+}
+
+/// Fits `mesh` with the planar-domain kind `cfg.fit.surface`, warm from `previous` when it
+/// is a fit of the same kind.
+pub(crate) fn fit_planar(
+    mesh: &crate::TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    budget: &Budget,
+) -> Result<(PatchFit, ScatteredInfo), PipelineError> {
+    let t0 = Instant::now();
+    let fit_cfg = &cfg.fit;
+    let kind = fit_cfg.surface;
+    if !matches!(kind, SurfaceKind::Bpatch | SurfaceKind::Dms) {
+        return Err(ScatteredError::NotPlanarKind(kind.name()).into());
+    }
+    let scan = ScanOptions {
+        config: fit_cfg.scan,
+        correction: fit_cfg.correction,
+        min_component_vertices: fit_cfg.components.min_vertices,
+    };
+    let previous = previous.filter(|w| w.surface == kind && w.scattered.is_some());
+    let scan_warm = previous.map(|w| ScanWarm {
+        frame: w.frame,
+        warp: w.warp.as_ref(),
+        feet: w.feet.as_ref(),
+        ..ScanWarm::default()
+    });
+    let prepared = prepare(mesh, &scan, scan_warm.as_ref())?;
+    let mut cold_start = prepared.cold_start.map(|c| c.to_string());
+    let previous = previous.filter(|_| cold_start.is_none());
+    let real = prepared.patch.real_vertices;
+    let plane = &prepared.map.plane[..real];
+    let data = &prepared.part.positions;
+    let map = warm::MapView {
+        data: plane,
+        plane: &prepared.map.plane,
+        triangles: &prepared.map.mesh.triangles,
+    };
+    let built = warm::build_surface(
+        kind,
+        fit_cfg,
+        &map,
+        previous.and_then(|w| w.scattered.as_ref()),
+    )?;
+    if built.cold_because.is_some() {
+        cold_start = built.cold_because.clone();
+    }
+    let surface = planar_surface(&built.model).ok_or(ScatteredError::NotPlanarKind(kind.name()))?;
+    let params = locate_all(surface, plane)?;
+    let smoothing =
+        fit_cfg.scan.smoothing * data.len() as f64 / surface.control_count().max(1) as f64;
+    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+    let t1 = Instant::now();
+    let options = ScatteredOptions {
+        method: fit_cfg.method,
+        budget: budget.clone(),
+        smoothing,
+        correction_rounds: 0,
+        newton_steps: NEWTON_STEPS,
+        initial: start_net(surface, &params, data, built.controls.clone()),
+    };
+    let rounds = fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
+    let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
+
+    let domain_points: Vec<DVec2> = rounds
+        .params
+        .iter()
+        .map(|p| surface.domain_point(*p))
+        .collect();
+    let info = planar_info(
+        &prepared,
+        &fit_cfg.scan,
+        &domain_points,
+        rounds.rms.clone(),
+        built.spacing,
+        built.reused,
+        cold_start,
+    );
+    let degree = match &built.model {
+        SurfaceModel::BPatch(b) => b.degree(),
+        SurfaceModel::Dms(d) => d.degree(),
+        _ => 0,
+    };
+    let fit = PatchFit {
+        surface: kind,
+        degree,
+        model: built.model.clone(),
+        controls: rounds.outcome.controls.clone(),
+        data: data.clone(),
+        params: rounds.params,
+        outcome: rounds.outcome,
+        geometric_errors: rounds.errors,
+        warm_start: built.reused > 0,
+        prepare_ms,
+        fit_ms,
+    };
+    Ok((fit, info))
+}
+
+/// Every data point's parameter from its plane point; the domains are built to cover the
+/// map, so a point outside is refused rather than fitted somewhere else.
+fn locate_all(
+    surface: &dyn PlanarSurface,
+    plane: &[DVec2],
+) -> Result<Vec<SurfaceParam>, PipelineError> {
+    let located: Vec<Option<SurfaceParam>> = plane.par_iter().map(|x| surface.locate(*x)).collect();
+    let outside = located.iter().filter(|p| p.is_none()).count();
+    if outside > 0 {
+        return Err(ScatteredError::OutsideDomain { points: outside }.into());
+    }
+    Ok(located.into_iter().flatten().collect())
+}
+
+/// The first round's start: the previous version's controls where it gave them, the plane
+/// of the data (`InitialNet::Affine`) elsewhere.
+fn start_net(
+    surface: &dyn PlanarSurface,
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    previous: Option<Vec<Option<DVec3>>>,
+) -> InitialNet {
+    let Some(start) = previous else {
+        return InitialNet::Affine;
+    };
+    let plane_fill = if start.iter().any(Option::is_none) {
+        initial_net(surface, params, data, &InitialNet::Affine)
+    } else {
+        Vec::new()
+    };
+    InitialNet::Given(
+        start
+            .into_iter()
+            .enumerate()
+            .map(|(k, c)| {
+                c.or_else(|| plane_fill.get(k).copied())
+                    .unwrap_or(DVec3::ZERO)
+            })
+            .collect(),
+    )
+}
+
+/// The rounds of a planar-domain fit.
+struct Rounds {
+    outcome: FitOutcome,
+    params: Vec<SurfaceParam>,
+    errors: Vec<f64>,
+    /// Geometric RMS after each round.
+    rms: Vec<f64>,
+}
+
+/// A fit at the given parameters, then rounds of (foot points, refit from the last
+/// controls) while a round lowers the geometric RMS by at least `min_gain`; the errors
+/// are the distances to the foot points on the final surface.
+fn fit_rounds(
+    surface: &dyn PlanarSurface,
+    mut params: Vec<SurfaceParam>,
+    data: &[DVec3],
+    mut options: ScatteredOptions,
+    correction: &crate::pipeline::scan::CorrectionConfig,
+) -> Result<Rounds, PipelineError> {
+    let mut rms_history = Vec::new();
+    let mut round = 0;
+    loop {
+        let fitted =
+            fit_scattered(surface, &params, data, &options, None).map_err(ScatteredError::Fit)?;
+        let outcome = fitted
+            .rounds
+            .into_iter()
+            .last()
+            .ok_or(ScatteredError::EmptyDomain)?;
+        let feet = foot_points(surface, &outcome.controls, &params, data, NEWTON_STEPS);
+        let eval = surface.evaluator(&outcome.controls);
+        let errors: Vec<f64> = feet
+            .par_iter()
+            .zip(data.par_iter())
+            .map(|(p, x)| (eval(*p).position - *x).length())
+            .collect();
+        drop(eval);
+        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
+        let gain = rms_history.last().map_or(1.0, |&last: &f64| {
+            (last - rms) / last.max(f64::MIN_POSITIVE)
+        });
+        rms_history.push(rms);
+        params = feet;
+        round += 1;
+        if round > correction.rounds || gain < correction.min_gain {
+            return Ok(Rounds {
+                outcome,
+                params,
+                errors,
+                rms: rms_history,
+            });
+        }
+        options.initial = InitialNet::Given(outcome.controls);
+    }
+}
+
+/// The covered region and trims in domain coordinates.
+fn planar_info(
+    prepared: &Prepared,
+    scan: &crate::pipeline::scan::ScanConfig,
+    domain_points: &[DVec2],
+    correction_rms: Vec<f64>,
+    spacing: Option<f64>,
+    reused_controls: usize,
+    cold_start: Option<String>,
+) -> ScatteredInfo {
+    let real = prepared.patch.real_vertices;
+    let map = &prepared.map;
+    let plan = plan_holes(
+        &map.mesh,
+        real,
+        &prepared.patch.hole_loops,
+        &prepared.part.triangles,
+        scan.hole_bridge_edges * prepared.edge_length,
+    );
+    // Data vertices at their final domain points, hole centres where the map put them.
+    let at = |v: u32| {
+        domain_points
+            .get(v as usize)
+            .copied()
+            .unwrap_or(map.plane[v as usize])
+    };
+    let outer = prepared.patch.outer.iter().map(|&v| at(v)).collect();
+    let holes = prepared
+        .patch
+        .hole_loops
+        .iter()
+        .zip(&plan.bridged)
+        .filter(|(_, bridged)| !**bridged)
+        .map(|(rim, _)| rim.iter().map(|&v| at(v)).collect())
+        .chain(
+            plan.wide_triangles
+                .iter()
+                .map(|&k| map.mesh.triangles[k].iter().map(|&v| at(v)).collect()),
+        )
+        .collect();
+    let corrected: Vec<SurfaceParam> = domain_points
+        .iter()
+        .map(|x| SurfaceParam {
+            face: 0,
+            u: x.x,
+            v: x.y,
+        })
+        .collect();
+    let coverage = Coverage::new(&plan.covered, &corrected, &map.plane, &map.near_fold);
+    ScatteredInfo {
+        preparation: Preparation {
+            components: prepared.components,
+            kept_vertices: real,
+            holes: prepared.patch.holes,
+            dropped: prepared.dropped,
+        },
+        frame: prepared.frame,
+        warp: map.warp.clone(),
+        method: map.method,
+        coverage,
+        outer,
+        holes,
+        correction_rms,
+        spacing,
+        reused_controls,
+        cold_start,
+    }
+}
+
+/// The model of a fit as a planar surface (B-patch and DMS models only).
+pub(crate) fn planar_surface(model: &SurfaceModel) -> Option<&dyn PlanarSurface> {
+    match model {
+        SurfaceModel::BPatch(b) => Some(b.as_ref() as &dyn PlanarSurface),
+        SurfaceModel::Dms(d) => Some(d.as_ref() as &dyn PlanarSurface),
+        _ => None,
+    }
+}
