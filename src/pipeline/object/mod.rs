@@ -11,6 +11,8 @@
 //! with a small tangential share) until a round gains less than `min_gain` of the RMS.
 
 mod component;
+mod layout;
+mod refine;
 mod solve;
 
 use crate::fit::engine::umbrella_laplacian;
@@ -25,12 +27,20 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
 use glam::DVec3;
+use layout::improve_layout;
+pub use layout::{LayoutOptions, LayoutReport};
+use refine::refined_mesh;
+pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet};
 use std::time::Instant;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
 /// stop.
 const MAX_REFUSALS: usize = 3;
+
+/// Controls a hole's rim keeps at least (fewer pull the rim's limit curve inward: it is the
+/// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
+const MIN_BOUNDARY_LOOP: usize = 6;
 
 /// Budget, cleaning, simplification and fitting settings of [`fit_object`].
 #[derive(Clone, Debug)]
@@ -62,6 +72,10 @@ pub struct ObjectOptions {
     /// Start the first fit from the data's foot points on the limit surface of the initial
     /// control mesh instead of their projections onto the control faces.
     pub limit_start: bool,
+    /// Flips and relaxation of the simplified control mesh before fitting.
+    pub layout: LayoutOptions,
+    /// Adaptive refinement after the first fit.
+    pub refine: RefineOptions,
 }
 
 impl Default for ObjectOptions {
@@ -72,6 +86,7 @@ impl Default for ObjectOptions {
             clean: CleanOptions::default(),
             simplify: SimplifyOptions {
                 isotropy: 1e-3,
+                min_boundary_loop: MIN_BOUNDARY_LOOP,
                 ..Default::default()
             },
             smoothing: 1e-5,
@@ -82,6 +97,8 @@ impl Default for ObjectOptions {
             edge_rings: 3,
             max_iterations: 400,
             limit_start: true,
+            layout: LayoutOptions::default(),
+            refine: RefineOptions::default(),
         }
     }
 }
@@ -125,6 +142,11 @@ pub struct ObjectTimes {
     pub clean_ms: f64,
     /// Simplifying the component to the control mesh.
     pub simplify_ms: f64,
+    /// Flips and relaxation of the control mesh.
+    pub layout_ms: f64,
+    /// Adaptive refinement: every refined control mesh and its whole fit (the surface,
+    /// first fit and rounds times are those of the fit before refinement).
+    pub refine_ms: f64,
     /// Topology counts, the limit surface and the fairness operator.
     pub surface_ms: f64,
     /// Initial parameters, the first point fit and its foot points.
@@ -150,8 +172,9 @@ pub struct ObjectFit {
     pub data: Vec<DVec3>,
     /// The component itself (data points and their triangles).
     pub component: TriMesh,
-    /// The simplification before fitting: the control faces at their initial positions
-    /// (also the quadric-decimated mesh with as many vertices as there are controls).
+    /// The control mesh before fitting: the simplification after the layout stage, at its
+    /// initial positions (a quadric-decimated mesh of as many vertices as there are
+    /// controls, with flipped edges and relaxed vertices when the layout stage ran).
     pub simplified: TriMesh,
     /// The limit surface's structure (faces and evaluation), independent of positions.
     pub surface: LoopLimitSurface,
@@ -173,6 +196,11 @@ pub struct ObjectFit {
     pub control_topology: SurfaceTopology,
     /// Stage times.
     pub times: ObjectTimes,
+    /// What the layout stage changed (all zero when it did not run).
+    pub layout: LayoutReport,
+    /// The fit before refinement, then after each refinement round (empty when refinement
+    /// is off).
+    pub refinement: Vec<RefineRound>,
 }
 
 impl ObjectFit {
@@ -197,8 +225,15 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         .unwrap_or((opts.target_controls_pct / 100.0 * n as f64).round() as usize)
         .max(4)
         .min(n);
+    // With refinement on, the simplification keeps a share of the budget and the rounds
+    // spend the rest where the first fit leaves the error.
+    let first_target = if opts.refine.rounds > 0 {
+        ((target as f64 * opts.refine.start_share).round() as usize).clamp(4.min(target), target)
+    } else {
+        target
+    };
     let simplify_opts = SimplifyOptions {
-        target_vertices: target,
+        target_vertices: first_target,
         ..opts.simplify.clone()
     };
     let simplified = simplify(&component, &simplify_opts).map_err(ObjectError::Simplify)?;
@@ -217,9 +252,18 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
             v: l.v,
         })
         .collect();
+    let t = Instant::now();
+    let (control_mesh, params, layout) =
+        improve_layout(&component, control_mesh, params, &opts.layout);
+    times.layout_ms = ms_since(t);
     let mut fit = fit_on_control_mesh(component, control_mesh, params, opts)?;
+    if opts.refine.rounds > 0 {
+        fit = refine_fit(fit, target, opts);
+    }
+    fit.layout = layout;
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
+    fit.times.layout_ms = times.layout_ms;
     fit.times.total_ms = ms_since(start);
     Ok(fit)
 }
@@ -340,7 +384,42 @@ pub fn fit_on_control_mesh(
         data_topology,
         control_topology,
         times,
+        layout: LayoutReport::default(),
+        refinement: Vec::new(),
     })
+}
+
+/// Refinement rounds after the first fit (see `refine`): each refines the control mesh
+/// where the error is and fits again; a round that fails or does not lower the RMS ends
+/// them, its fit dropped.
+fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
+    let t = Instant::now();
+    let tolerance = opts.refine.tolerance;
+    let first_times = first.times.clone();
+    let mut stages = vec![RefineRound::of(&first, tolerance)];
+    let mut fit = first;
+    for round in 0..opts.refine.rounds {
+        let room = cap.saturating_sub(fit.controls.len());
+        if room == 0 {
+            break;
+        }
+        let add = room.div_ceil(opts.refine.rounds - round);
+        let Some((mesh, params)) = refined_mesh(&fit, add, tolerance, &opts.layout) else {
+            break;
+        };
+        let Ok(next) = fit_on_control_mesh(fit.component.clone(), mesh, params, opts) else {
+            break;
+        };
+        stages.push(RefineRound::of(&next, tolerance));
+        if next.rms >= fit.rms {
+            break;
+        }
+        fit = next;
+    }
+    fit.times = first_times;
+    fit.times.refine_ms = ms_since(t);
+    fit.refinement = stages;
+    fit
 }
 
 fn ms_since(t: Instant) -> f64 {
