@@ -16,4 +16,5 @@ mod daemon_ops;
 mod daemon_pipe;
 mod daemon_process;
 mod daemon_support;
+mod daemon_trust;
 mod daemon_watch;

@@ -90,11 +90,7 @@ fn answer(mut stream: TcpStream, metrics: &Metrics) -> std::io::Result<()> {
     let (method, target) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
     let path = target.split('?').next().unwrap_or("");
     let (status, ctype, body) = match (method, path) {
-        ("GET" | "HEAD", "/metrics") => (
-            "200 OK",
-            "text/plain; version=0.0.4; charset=utf-8",
-            metrics.render(),
-        ),
+        ("GET" | "HEAD", "/metrics") => ("200 OK", super::metrics::CONTENT_TYPE, metrics.render()),
         ("GET" | "HEAD", "/healthz") if metrics.stopping.load(Ordering::Relaxed) => {
             ("503 Service Unavailable", "text/plain", "stopping\n".into())
         }
@@ -129,7 +125,7 @@ mod tests {
     #[test]
     fn answers_metrics_health_and_unknown_paths() {
         let m = Arc::new(Metrics::default());
-        m.fitted.fetch_add(3, Ordering::Relaxed);
+        m.fitted.inc_by(3);
         let addr = serve("127.0.0.1:0", Arc::clone(&m)).expect("binds");
         let r = get(addr, "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 200 OK"), "{r}");
