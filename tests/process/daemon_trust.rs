@@ -311,3 +311,47 @@ fn the_systemd_watchdog_gets_keep_alives() {
     assert!(stopping);
     assert!(wait_exit(&mut child).is_some_and(|st| st.success()));
 }
+
+/// A pipe path record's relative path is taken in the watch folder; `bad/../x.ply` with no
+/// folder `bad` is refused naming `bad` (the kernel resolves `..` after it), not the file,
+/// and an id like `bad/../x` is made safe, never a path.
+#[test]
+fn pipe_paths_are_relative_to_the_watch_folder_and_refusals_name_the_cause() {
+    let s = setup(&config(0, "native", ""));
+    std::fs::write(s.inbox.join("x.ply"), patch_ply(12, 8)).expect("write");
+    let mut child = bin()
+        .args(s.args())
+        .args(["--pipe", "-"])
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawns");
+    let mut w = child.stdin.take().expect("stdin");
+    write_all(
+        &mut w,
+        b"{\"patch\": \"rel\", \"path\": \"x.ply\"}\n{\"patch\": \"bad/../x\", \"path\": \"bad/../x.ply\"}\n",
+    );
+    drop(w);
+    assert!(wait_exit(&mut child).is_some_and(|st| st.success()));
+    let ev = events(&s.out);
+    assert!(
+        ev.iter().any(|e| e["patch"] == "rel" && is_fitted(e)),
+        "{ev:?}"
+    );
+    let bad = ev
+        .iter()
+        .find(|e| e["status"] == "rejected")
+        .expect("the record naming bad/ is refused");
+    assert_eq!(bad["kind"], "path_unreadable", "{bad}");
+    let reason = bad["reason"].as_str().unwrap_or("");
+    assert!(
+        reason.starts_with("bad/../x.ply: ") && reason.contains("/bad does not exist"),
+        "{reason}"
+    );
+    let id = bad["patch"].as_str().unwrap_or("");
+    assert!(
+        !id.contains('/') && id.starts_with("bad_.._x~"),
+        "a safe id: {id}"
+    );
+    assert!(s.inbox.join("x.ply").exists(), "nothing moved");
+}

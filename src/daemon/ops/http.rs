@@ -2,6 +2,12 @@
 //! answered and closed, each connection on a thread of its own (at most `MAX_CONNECTIONS`
 //! at once) so that a slow client cannot hold `/healthz` from a supervisor. Loopback only
 //! (checked in config validation), no authentication.
+//!
+//! Kept rather than `tiny_http`: what this endpoint must guarantee is a bound on a slow or
+//! silent client (issue 22), and tiny_http's is a per-read timeout that every trickled byte
+//! resets (tiny-http PR #20), with no deadline for the whole request and no cap on
+//! connections or the threads serving them; two GET routes need nothing else it offers.
+//! The exposition format itself comes from `prometheus-client` (`metrics.rs`).
 
 use super::metrics::Metrics;
 use std::io::{Read, Write};
