@@ -40,6 +40,10 @@ pub struct WatchArgs {
     /// Log lines as JSON (overrides log.format).
     #[arg(long)]
     pub log_json: bool,
+    /// Files in subfolders are patches too: DIR/scans/ear.ply is patch `scans/ear`, with
+    /// outputs in OUT/scans/ear/ (sets daemon.recursive).
+    #[arg(long)]
+    pub recursive: bool,
 }
 
 /// Runs `watch`: loads the configuration, then the daemon until it is stopped (or, with
@@ -56,7 +60,10 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         ),
     };
     let config = match DaemonConfig::parse(&text, &name) {
-        Ok(c) => c,
+        Ok(mut c) => {
+            c.daemon.recursive |= args.recursive;
+            c
+        }
         Err(e) => {
             eprintln!("{e}");
             return Ok(ExitCode::from(2));

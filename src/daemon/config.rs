@@ -52,6 +52,25 @@ pub struct DaemonSection {
     /// the watch folder only.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pipe_roots: Vec<PathBuf>,
+    /// What happens to a valid input the pipeline cannot fit (a topology it does not
+    /// support, too few points, over `max_vertices`). Broken files always go to quarantine.
+    #[serde(default)]
+    pub unsupported: UnsupportedPolicy,
+    /// Files in subfolders of the watch folder are patches too (`sub/name`); `--recursive`
+    /// sets it. Needs a restart to change.
+    #[serde(default)]
+    pub recursive: bool,
+}
+
+/// Where a valid but unsupported input goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UnsupportedPolicy {
+    /// Left in the watch folder, rejected with an event that gives the reason.
+    #[default]
+    Keep,
+    /// Moved to quarantine like a broken file.
+    Quarantine,
 }
 
 fn default_stop_timeout_ms() -> u64 {
@@ -83,6 +102,17 @@ pub enum ProcessedPolicy {
     Move,
     /// Removed (only inputs under the watch folder or the pipe roots).
     Delete,
+}
+
+impl ProcessedPolicy {
+    /// The config spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            ProcessedPolicy::Leave => "leave",
+            ProcessedPolicy::Move => "move",
+            ProcessedPolicy::Delete => "delete",
+        }
+    }
 }
 
 /// The `[output]` table.
@@ -226,11 +256,26 @@ fn check(ok: bool, key: &'static str, value: impl ToString, rule: &'static str) 
 impl DaemonConfig {
     /// Parses and validates; `source_name` names the file in errors (toml reports the key,
     /// line and column of a bad entry).
+    ///
+    /// A file may give only the keys it changes: what it leaves out comes from the embedded
+    /// default (tables merged key by key). It is first read on its own, so that a bad key or
+    /// type is reported with its line and column; only a missing key sends it through the
+    /// merge (where an unknown key is still refused by name).
     pub fn parse(text: &str, source_name: &str) -> Result<DaemonConfig, ConfigError> {
-        let cfg: DaemonConfig = toml::from_str(text).map_err(|source| ConfigError::Parse {
+        let parse_err = |source| ConfigError::Parse {
             source_name: source_name.to_string(),
             source,
-        })?;
+        };
+        let cfg = match toml::from_str::<DaemonConfig>(text) {
+            Ok(cfg) => cfg,
+            Err(e) if e.message().starts_with("missing field") => {
+                let mine: toml::Table = toml::from_str(text).map_err(parse_err)?;
+                let mut merged: toml::Table = toml::from_str(DEFAULT_CONFIG).map_err(parse_err)?;
+                merge_tables(&mut merged, mine);
+                toml::Value::Table(merged).try_into().map_err(parse_err)?
+            }
+            Err(e) => return Err(parse_err(e)),
+        };
         cfg.validate(source_name)?;
         Ok(cfg)
     }
@@ -302,16 +347,26 @@ impl DaemonConfig {
         }
     }
 
-    /// Hash of everything that shapes the outputs of a fit: an unchanged input is refitted
-    /// when this changes.
-    pub fn output_hash(&self) -> u64 {
-        let shaping = serde_json::json!({
-            "fit": self.fit,
-            "tessellation": self.output.tessellation,
-            "glb": self.output.glb,
-            "report": self.output.report,
-        });
+    /// Hash of what changes a fit (the `[fit]` tables): an unchanged input is refitted when
+    /// this changes. `[output]` and `[log]` are left out on purpose: a new tessellation
+    /// applies to the next version of each patch rather than refitting every patch at the
+    /// next start; outputs newly asked for (`glb`, `report` turned on) are produced by a
+    /// refit of the patches that lack them (`wanted_outputs`).
+    pub fn fit_hash(&self) -> u64 {
+        let shaping = serde_json::json!({ "fit": self.fit });
         super::state::content_hash(shaping.to_string().as_bytes())
+    }
+
+    /// The output files a fit writes under this config.
+    pub fn wanted_outputs(&self) -> Vec<String> {
+        let mut files = vec!["surface.json".to_string()];
+        if self.output.glb {
+            files.push("surface.glb".into());
+        }
+        if self.output.report {
+            files.push("report.json".into());
+        }
+        files
     }
 
     /// Keys whose change a reload cannot apply (threads, sockets and the watcher are set up
@@ -323,6 +378,9 @@ impl DaemonConfig {
         }
         if self.daemon.watcher != new.daemon.watcher {
             keys.push("daemon.watcher");
+        }
+        if self.daemon.recursive != new.daemon.recursive {
+            keys.push("daemon.recursive");
         }
         if self.daemon.metrics_addr != new.daemon.metrics_addr {
             keys.push("daemon.metrics_addr");
@@ -339,6 +397,19 @@ impl DaemonConfig {
     /// The configuration as TOML (`--print-config`).
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
+    }
+}
+
+/// `over`'s keys replace `base`'s, table by table (a sub-table given in part keeps the rest
+/// of the default's).
+fn merge_tables(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
     }
 }
 
@@ -531,7 +602,7 @@ mod tests {
         let cfg = DaemonConfig::embedded_default().expect("valid default");
         let again = DaemonConfig::parse(&cfg.to_toml(), "printed").expect("printed config parses");
         assert_eq!(again.to_toml(), cfg.to_toml());
-        assert_eq!(again.output_hash(), cfg.output_hash());
+        assert_eq!(again.fit_hash(), cfg.fit_hash());
     }
 
     #[test]
@@ -596,16 +667,42 @@ mod tests {
     }
 
     #[test]
-    fn output_hash_follows_the_fit_section_only() {
+    fn fit_hash_follows_the_fit_section_only() {
         let a = DaemonConfig::embedded_default().expect("default");
         let mut b = a.clone();
         b.daemon.settle_ms += 1;
-        assert_eq!(a.output_hash(), b.output_hash());
+        b.output.tessellation += 1;
+        b.output.glb = false;
+        b.log.level = "debug".into();
+        assert_eq!(a.fit_hash(), b.fit_hash());
+        assert_eq!(b.wanted_outputs(), ["surface.json", "report.json"]);
         b.fit.budget.max_iterations += 1;
-        assert_ne!(a.output_hash(), b.output_hash());
-        let mut c = a.clone();
-        c.output.tessellation += 1;
-        assert_ne!(a.output_hash(), c.output_hash());
+        assert_ne!(a.fit_hash(), b.fit_hash());
+    }
+
+    #[test]
+    fn a_partial_file_is_merged_over_the_defaults() {
+        let text = "[fit.budget]\nmax_iterations = 7\n";
+        let cfg = DaemonConfig::parse(text, "partial.toml").expect("partial config");
+        let default = DaemonConfig::embedded_default().expect("default");
+        assert_eq!(cfg.fit.budget.max_iterations, 7);
+        assert_eq!(cfg.daemon.settle_ms, default.daemon.settle_ms);
+        assert_eq!(cfg.fit.scan.lattice, default.fit.scan.lattice);
+        // Unknown keys are still refused, named, in partial files too.
+        for (bad, key) in [
+            ("[fit.budget]\nmax_iteration = 7\n", "max_iteration"),
+            (
+                "[fit.budget]\nmax_iterations = 7\n[daemon]\nsetle_ms = 1\n",
+                "setle_ms",
+            ),
+            ("[daemon]\nsettle_ms = 1\n[fit]\nlevel = 1\n", "level"),
+        ] {
+            let e = DaemonConfig::parse(bad, "partial.toml").expect_err("refused");
+            assert!(e.to_string().contains(key), "{bad}: {e}");
+        }
+        // Ranges hold after the merge.
+        let e = DaemonConfig::parse("[fit]\nlevels = 9\n", "p.toml").expect_err("range");
+        assert!(e.to_string().contains("fit.levels"), "{e}");
     }
 
     #[test]

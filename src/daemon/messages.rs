@@ -120,6 +120,26 @@ pub(crate) fn patch_id(path: &Path) -> Option<String> {
     sanitize_id(stem.split('@').next().unwrap_or(stem))
 }
 
+/// Patch id of a file under the watch folder `root`: its folder names (each sanitised like
+/// an id) and its own patch id, joined by `/` (`scans/ear@3.ply` -> `scans/ear`), so that
+/// its outputs go to `OUT/scans/ear/`. A file directly in `root` gets `patch_id`. The one
+/// place that turns a relative path into an id, for whatever groups files by folder.
+/// `None` when the path is not under `root` or a part leaves no id.
+pub(crate) fn relative_patch_id(root: &Path, path: &Path) -> Option<String> {
+    let rel = path.strip_prefix(root).ok()?;
+    let mut parts = Vec::new();
+    if let Some(folders) = rel.parent() {
+        for c in folders.components() {
+            let std::path::Component::Normal(name) = c else {
+                return None;
+            };
+            parts.push(sanitize_id(name.to_str()?)?);
+        }
+    }
+    parts.push(patch_id(rel)?);
+    Some(parts.join("/"))
+}
+
 /// Names that are still being written or are not meshes.
 pub(crate) fn ignored(path: &Path) -> bool {
     let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
@@ -207,5 +227,24 @@ mod tests {
             all.contains(&"x.c0".to_string()),
             "component 0 of x keeps its name"
         );
+    }
+
+    #[test]
+    fn relative_ids_keep_folders_apart_and_safe() {
+        let root = Path::new("/in");
+        let id = |p: &str| relative_patch_id(root, Path::new(p));
+        assert_eq!(id("/in/ear@2.ply").as_deref(), Some("ear"));
+        assert_eq!(id("/in/scans/ear@2.ply").as_deref(), Some("scans/ear"));
+        assert_eq!(id("/in/a/b/c.obj").as_deref(), Some("a/b/c"));
+        assert_eq!(id("/elsewhere/x.ply"), None);
+        // Folder names are sanitised like ids: no `..`, no reserved name, distinct.
+        let odd = id("/in/quarantine/x.ply").expect("id");
+        assert!(
+            odd.starts_with("quarantine~") && odd.ends_with("/x"),
+            "{odd}"
+        );
+        let (a, b) = (id("/in/a b/x.ply"), id("/in/a_b/x.ply"));
+        assert_ne!(a, b);
+        assert!(id("/in/.hidden/x.ply").is_some_and(|i| !i.starts_with('.')));
     }
 }

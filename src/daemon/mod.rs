@@ -10,6 +10,7 @@ mod job;
 mod kinds;
 mod layout;
 mod messages;
+mod open_files;
 pub(crate) mod ops;
 pub(crate) mod pipe;
 mod publish;
@@ -189,6 +190,11 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         writer: wtx.clone(),
         stop: Arc::clone(&intake_stop),
         ready: ready_tx,
+        recursive: opts.config.daemon.recursive,
+        exclude: [&opts.out_dir, &opts.state_dir, &quarantine]
+            .into_iter()
+            .filter_map(|d| std::fs::canonicalize(d).ok())
+            .collect(),
     };
     spawn("watcher", move || folder.run())?;
     if let Some(spec) = opts.pipe.clone() {
@@ -222,6 +228,8 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         wtx,
         job_tx,
         workers,
+        retries: Vec::new(),
+        watchdog: sdnotify::Watchdog::from_env(),
     };
     let mut reloader = Reloader::new(opts.config_path.clone());
     lp.drive(
@@ -294,7 +302,7 @@ fn announce_ready(ready: &Receiver<()>) {
     if ready.recv_timeout(Duration::from_secs(30)).is_err() {
         tracing::warn!("the folder watcher is slow to start");
     }
-    sdnotify::notify("READY=1");
+    sdnotify::notify(sdnotify::State::Ready);
 }
 
 /// A pipe record whose payload was still arriving when the daemon stopped: its bytes go

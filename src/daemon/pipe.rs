@@ -299,15 +299,16 @@ impl PipeSource {
             return;
         }
         let cfg = self.cell.get();
-        let path =
-            match Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots).confine(Path::new(path)) {
-                Ok(p) => p,
-                Err(refusal) => {
-                    let kind = rejection_kind(&Cause::Path(&refusal));
-                    self.reject(&h.id, label, Keep::Nothing, kind, refusal.to_string());
-                    return;
-                }
-            };
+        let path = match Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots)
+            .confine(Path::new(path), &self.watch_dir)
+        {
+            Ok(p) => p,
+            Err(refusal) => {
+                let kind = rejection_kind(&Cause::Path(&refusal));
+                self.reject(&h.id, label, Keep::Nothing, kind, refusal.to_string());
+                return;
+            }
+        };
         let version = path
             .file_name()
             .map(|n| n.to_string_lossy().to_string())

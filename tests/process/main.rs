@@ -16,5 +16,6 @@ mod daemon_ops;
 mod daemon_pipe;
 mod daemon_process;
 mod daemon_support;
+mod daemon_trust;
 mod daemon_watch;
 mod planar_kinds;
