@@ -19,5 +19,6 @@ mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_fit;
 mod object_pipeline;
+mod point_clouds;
 mod scan_pipeline;
 mod step_export;
