@@ -32,7 +32,9 @@ where
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// The input mesh: a disk-like scan patch (any connectivity), a whole object (closed,
-    /// holed, any genus) or a mesh with Loop subdivision connectivity (fitted exactly).
+    /// holed, any genus) or a mesh with Loop subdivision connectivity (fitted exactly); or a
+    /// point cloud (.xyz, .pts, .pcd, vertices-only .ply) of a scan that is a height field
+    /// over some plane, triangulated and fitted as a scan.
     pub input: PathBuf,
     /// The surface fitted: `loop` (scans: a Loop surface over a grid; subdivided inputs: the
     /// Loop limit surface of their coarse net; whole objects: the Loop limit surface of a

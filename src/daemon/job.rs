@@ -114,7 +114,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             let Some(format) = Format::from_path(path) else {
                 return reject(
                     Cause::UnknownFormat,
-                    "unknown extension (obj, gltf, glb, ply, stl, off)".into(),
+                    format!("unknown extension ({})", Format::READABLE),
                 );
             };
             // Refuse before reading: the limit exists so that one file cannot exhaust memory.

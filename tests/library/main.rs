@@ -20,5 +20,6 @@ mod mesh_roundtrip;
 mod object_fit;
 mod object_pipeline;
 mod planar_product;
+mod point_clouds;
 mod scan_pipeline;
 mod step_export;

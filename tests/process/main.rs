@@ -19,3 +19,4 @@ mod daemon_support;
 mod daemon_trust;
 mod daemon_watch;
 mod planar_kinds;
+mod point_clouds;

@@ -4,6 +4,7 @@
 //! scan path for disk-like scans and the object path for the rest, see `Domain`) and
 //! applies the component policy.
 
+mod cloud;
 mod config;
 mod object;
 mod report;
@@ -80,6 +81,8 @@ pub(crate) fn fit_patch_with(
     cfg: &WorkerConfig,
     on_step: Option<StepHook>,
 ) -> Result<FittedPatch, PipelineError> {
+    let input = cloud::with_faces(mesh, cfg)?;
+    let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
     let fit_cfg = &cfg.fit;
     let budget = fit_cfg.budget.resolve(mesh);
     let opts = FitOptions {
@@ -237,6 +240,8 @@ pub(crate) fn run_patch_with(
     on_step: Option<StepHook>,
 ) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
+    let input = cloud::with_faces(mesh, cfg)?;
+    let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
     let FittedPatch {
         fit: fitted,
         scan: scan_info,
@@ -288,6 +293,9 @@ pub(crate) fn run_patch_with(
         report["object"] = object_report;
         report["tessellation"] = json!(check);
         warm.object = object::object_warm(&fitted, info);
+    }
+    if let Some(cloud) = input.report() {
+        report["point_cloud"] = cloud;
     }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
     Ok(PatchOutputs {
@@ -347,6 +355,23 @@ pub fn run_input(
 
 /// `run_input` reporting every fitting step (of every component) to `on_step`.
 pub(crate) fn run_input_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<InputOutputs, PipelineError> {
+    let input = cloud::with_faces(mesh, cfg)?;
+    let mut fitted = run_components(&input.mesh, previous, &input.cfg, on_step)?;
+    if let Some(cloud) = input.report() {
+        for part in &mut fitted.parts {
+            part.outputs.report["point_cloud"] = cloud.clone();
+        }
+    }
+    Ok(fitted)
+}
+
+/// `run_input_with` on a mesh with triangles.
+fn run_components(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
