@@ -21,6 +21,15 @@
 //! (derivatives there: see `IrregularPatch::vertex_rows`), and a descent that is still
 //! irregular at the depth cap interpolates the exact limit positions of the node corners.
 //!
+//! Crease edges (Hoppe et al. 1994) are sharp like boundary edges: their odd points take
+//! 1/2 (a + b), a vertex with two sharp edges 3/4 v + 1/8 (a + b) along them, one with
+//! three or more is fixed, and a dart (one crease edge) keeps the smooth rule. Face by
+//! face this is the boundary surface of the mesh cut open along its creases, so a face
+//! whose corners are regular on its side of a crease is again a ghost-point box spline;
+//! the local subdivision carries crease flags like boundary flags. A dart's limit mask is
+//! not Loop's (its crease spoke takes the crease rule): it is found by iterating its
+//! 1-ring's subdivision matrix.
+//!
 //! Derivatives follow the chain rule through each child's affine map (the middle child is
 //! flipped). Node weights are kept as a base row plus differences, so derivatives near an
 //! irregular vertex keep their relative precision although the map scales by 2^depth.
@@ -32,7 +41,7 @@ mod patch;
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use crate::mesh::topology::{Topology, TopologyError, NONE};
 use glam::DVec3;
-use net::{Net, Term, VertexKind};
+use net::{Net, Term, VertexRule};
 use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
 use std::sync::OnceLock;
 
@@ -84,6 +93,14 @@ pub enum LoopLimitError {
     /// The faces do not form a manifold mesh.
     #[error("the control mesh is not a manifold: {0}")]
     NonManifold(#[source] TopologyError),
+    /// A crease edge that is no edge of the control mesh.
+    #[error("crease edge ({a}, {b}) is not an edge of the control mesh")]
+    UnknownCreaseEdge {
+        /// One end.
+        a: u32,
+        /// The other end.
+        b: u32,
+    },
 }
 
 impl LoopLimitError {
@@ -96,6 +113,7 @@ impl LoopLimitError {
             Self::DegenerateFace { .. } => "degenerate_face",
             Self::IsolatedVertex { .. } => "isolated_vertex",
             Self::NonManifold(_) => "non_manifold",
+            Self::UnknownCreaseEdge { .. } => "unknown_crease_edge",
         }
     }
 }
@@ -145,6 +163,8 @@ enum FacePatch {
 pub struct LoopLimitSurface {
     control_count: usize,
     topo: Topology,
+    /// Crease edges as (low, high) control indices, sorted, each once.
+    creases: Vec<[u32; 2]>,
     patches: Vec<FacePatch>,
 }
 
@@ -154,6 +174,7 @@ impl std::fmt::Debug for LoopLimitSurface {
             .field("control_count", &self.control_count)
             .field("faces", &self.patches.len())
             .field("irregular_faces", &self.irregular_face_count())
+            .field("crease_edges", &self.creases.len())
             .finish()
     }
 }
@@ -161,6 +182,20 @@ impl std::fmt::Debug for LoopLimitSurface {
 impl LoopLimitSurface {
     /// Builds the surface of a manifold control mesh of `control_count` points.
     pub fn new(control_count: usize, faces: &[[u32; 3]]) -> Result<Self, LoopLimitError> {
+        Self::with_creases(control_count, faces, &[])
+    }
+
+    /// Builds the surface with sharp edges: each crease edge (a pair of control indices, in
+    /// either order; repeats and boundary edges, sharp anyway, are harmless) is subdivided
+    /// with the boundary rules on both sides (Hoppe et al. 1994). A vertex with two sharp
+    /// (crease or boundary) edges follows the cubic B-spline along them, one with more (or
+    /// a boundary vertex with a crease) is a fixed corner, and one crease edge ending at a
+    /// vertex (a dart) leaves it smooth.
+    pub fn with_creases(
+        control_count: usize,
+        faces: &[[u32; 3]],
+        crease_edges: &[[u32; 2]],
+    ) -> Result<Self, LoopLimitError> {
         if faces.is_empty() {
             return Err(LoopLimitError::NoFaces);
         }
@@ -185,14 +220,57 @@ impl LoopLimitSurface {
         if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
             return Err(LoopLimitError::IsolatedVertex { vertex });
         }
+        let (creases, crease_half) = Self::crease_halfedges(&topo, crease_edges)?;
         let patches = (0..faces.len())
-            .map(|f| Self::face_patch(&topo, f))
+            .map(|f| Self::face_patch(&topo, &crease_half, f))
             .collect();
         Ok(Self {
             control_count,
             topo,
+            creases,
             patches,
         })
+    }
+
+    /// The interior crease edges (sorted, low index first) and a flag per half-edge.
+    fn crease_halfedges(
+        topo: &Topology,
+        crease_edges: &[[u32; 2]],
+    ) -> Result<(Vec<[u32; 2]>, Vec<bool>), LoopLimitError> {
+        let mut half = vec![false; topo.twin.len()];
+        let mut kept = Vec::with_capacity(crease_edges.len());
+        for &[a, b] in crease_edges {
+            let unknown = LoopLimitError::UnknownCreaseEdge { a, b };
+            if a as usize >= topo.vertex_count || b as usize >= topo.vertex_count {
+                return Err(unknown);
+            }
+            let h = topo
+                .ring_halfedges(a)
+                .iter()
+                .copied()
+                .find(|&h| h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == b)
+                .or_else(|| {
+                    topo.ring_halfedges(b).iter().copied().find(|&h| {
+                        h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == a
+                    })
+                })
+                .ok_or(unknown)?;
+            let t = topo.twin[h as usize];
+            if t == NONE {
+                continue;
+            }
+            half[h as usize] = true;
+            half[t as usize] = true;
+            kept.push([a.min(b), a.max(b)]);
+        }
+        kept.sort_unstable();
+        kept.dedup();
+        Ok((kept, half))
+    }
+
+    /// The crease edges of the surface: interior edges, low control index first, sorted.
+    pub fn crease_edges(&self) -> &[[u32; 2]] {
+        &self.creases
     }
 
     /// The control faces (the domain faces), as given.
@@ -214,7 +292,7 @@ impl LoopLimitSurface {
             .count()
     }
 
-    fn face_patch(topo: &Topology, f: usize) -> FacePatch {
+    fn face_patch(topo: &Topology, crease_half: &[bool], f: usize) -> FacePatch {
         let corners = topo.triangles[f];
         let mut support: Vec<u32> = corners.to_vec();
         let mut faces = vec![f];
@@ -227,6 +305,7 @@ impl LoopLimitSurface {
         }
         let mut tris = Vec::with_capacity(faces.len());
         let mut bnd = Vec::with_capacity(faces.len());
+        let mut crease = Vec::with_capacity(faces.len());
         for &g in &faces {
             let mut t = [0u32; 3];
             for (k, &v) in topo.triangles[g].iter().enumerate() {
@@ -240,6 +319,7 @@ impl LoopLimitSurface {
             }
             tris.push(t);
             bnd.push([0, 1, 2].map(|k| topo.twin[3 * g + k] == NONE));
+            crease.push([0, 1, 2].map(|k| crease_half[3 * g + k]));
         }
         let n = support.len();
         let mut base = vec![0.0; n];
@@ -255,6 +335,7 @@ impl LoopLimitSurface {
             nsup: n,
             tris,
             bnd,
+            crease,
             faces_total: support
                 .iter()
                 .map(|&v| topo.face_valence[v as usize])
@@ -270,13 +351,14 @@ impl LoopLimitSurface {
         // cross-boundary rate is not derived here, so those take the full 80 as margin
         // (the cap costs nothing unless a parameter is within 2^-cap of the vertex).
         let cap = (0..3u32)
-            .filter_map(|v| net.vertex_kind(v))
+            .filter_map(|v| net.vertex_rule(v))
             .map(|k| match k {
-                VertexKind::Interior(r) => {
-                    let lambda = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / r.len() as f64).cos();
+                VertexRule::Smooth { ring, dart: false } => {
+                    let lambda =
+                        0.375 + 0.25 * (2.0 * std::f64::consts::PI / ring.len() as f64).cos();
                     (-38.0 / lambda.ln()).ceil() as usize
                 }
-                VertexKind::Boundary(_) => 80,
+                _ => 80,
             })
             .max()
             .unwrap_or(80)
@@ -298,10 +380,13 @@ impl IrregularPatch {
             (0.0, 0.0) => Some(2),
             _ => None,
         };
-        let kind = corner.and_then(|c| self.root.net.vertex_kind(c).map(|k| (c, k)));
-        match kind {
-            Some((c, k)) if !k.is_regular() => self.vertex_rows(c, &k, u, v, acc),
-            _ => self.descend(u, v, acc),
+        let net = &self.root.net;
+        let irregular = corner
+            .filter(|&c| !net.corner_is_regular(c))
+            .and_then(|c| net.vertex_rule(c).map(|k| (c, k)));
+        match irregular {
+            Some((c, k)) => self.vertex_rows(c, &k, u, v, acc),
+            None => self.descend(u, v, acc),
         }
     }
 
@@ -309,11 +394,12 @@ impl IrregularPatch {
     /// vertex of valence n the parametric derivatives tend to 0 (n < 6) or grow without
     /// bound (n > 6); what is returned instead is the derivative along each face edge as
     /// Loop's tangent mask `2/n sum_m cos(2 pi (m - j) / n) r_m` (exact tangent plane, the
-    /// box spline's values at n = 6), and zero second derivatives. At a boundary vertex or
-    /// corner the derivatives are those at a parameter 2^-40 towards the face centre.
-    fn vertex_rows(&self, c: u32, kind: &VertexKind, u: f64, v: f64, acc: &mut [[f64; 6]]) {
+    /// box spline's values at n = 6), and zero second derivatives. At a boundary, crease or
+    /// corner vertex, or a dart, the derivatives are those at a parameter 2^-40 towards the
+    /// face centre.
+    fn vertex_rows(&self, c: u32, kind: &VertexRule, u: f64, v: f64, acc: &mut [[f64; 6]]) {
         match kind {
-            VertexKind::Interior(ring) => {
+            VertexRule::Smooth { ring, dart: false } => {
                 let n = ring.len();
                 // Derivative along the edge from c to its ring neighbour x.
                 let along = |x: u32| -> Vec<Term> {
@@ -344,7 +430,7 @@ impl IrregularPatch {
                     add_column(&self.root.net, terms, col, acc);
                 }
             }
-            VertexKind::Boundary(_) => {
+            _ => {
                 let d = VERTEX_NUDGE;
                 self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, acc);
                 for a in acc.iter_mut() {
@@ -355,7 +441,7 @@ impl IrregularPatch {
                 }
             }
         }
-        add_column(&self.root.net, &kind.limit_mask(c), 0, acc);
+        add_column(&self.root.net, &kind.limit_mask(c, &self.root.net), 0, acc);
     }
 
     /// The memoised regular quadtree node holding face parameter (u, v), with the local
