@@ -354,13 +354,14 @@ fn loop_mesh(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
     } else {
         Vec::new()
     };
-    let surface = LoopLimitSurface::with_creases(controls.len(), &faces, &creases).map_err(|e| {
-        let key = match &e {
-            LoopLimitError::UnknownCreaseEdge { .. } => "key crease_edges",
-            _ => "key control_faces",
-        };
-        IoError::at(name, key, IoErrorKind::LoopSurface(e))
-    })?;
+    let surface =
+        LoopLimitSurface::with_creases(controls.len(), &faces, &creases).map_err(|e| {
+            let key = match &e {
+                LoopLimitError::UnknownCreaseEdge { .. } => "key crease_edges",
+                _ => "key control_faces",
+            };
+            IoError::at(name, key, IoErrorKind::LoopSurface(e))
+        })?;
     Ok(SurfaceDescription::LoopMesh {
         surface: std::sync::Arc::new(surface),
         controls,

@@ -1,8 +1,14 @@
 //! Sharp edges of a mesh (Hoppe et al. 1994): interior edges whose two faces meet at a
 //! dihedral angle (the angle between their normals) above a threshold, kept where they
-//! form connected sets of at least a few edges. A lone sharp edge is scan noise or a
+//! form connected sets of at least a few edges. A short sharp run is scan noise or a
 //! sliver triangle far more often than a machined edge, and a control mesh could not
 //! carry it anyway.
+//!
+//! The defaults (60 degrees, 12 edges) are measured: at 40 degrees and 4 edges the smooth
+//! models get spurious creases (fertility.off 49 edges, bun_zipper.ply 338, from scan
+//! noise on sub-millimetre faces); at 50 degrees fertility has none but bun_zipper still
+//! 116 (46 in sets of 12 or more); at 60 degrees and 12 edges both have none, while machined
+//! edges (90 degrees) keep a wide margin. Chamfers of 45-degree steps need a lower angle.
 
 use super::topology::{Topology, NONE};
 use super::TriMesh;
@@ -21,8 +27,8 @@ pub struct CreaseOptions {
 impl Default for CreaseOptions {
     fn default() -> Self {
         Self {
-            angle_deg: 40.0,
-            min_edges: 4,
+            angle_deg: 60.0,
+            min_edges: 12,
         }
     }
 }

@@ -105,10 +105,8 @@ fn even_rule(topo: &Topology, v: u32, is_crease: &impl Fn(u32, u32) -> bool) -> 
 /// halves of each interior crease edge).
 pub fn loop_step_with_creases(topo: &Topology, creases: &[[u32; 2]]) -> (LoopStep, Vec<[u32; 2]>) {
     let nv = topo.vertex_count;
-    let crease_set: std::collections::HashSet<(u32, u32)> = creases
-        .iter()
-        .map(|&[a, b]| (a.min(b), a.max(b)))
-        .collect();
+    let crease_set: std::collections::HashSet<(u32, u32)> =
+        creases.iter().map(|&[a, b]| (a.min(b), a.max(b))).collect();
     let is_crease = |a: u32, b: u32| crease_set.contains(&(a.min(b), a.max(b)));
     let edges = topo.edges();
     let mut edge_of_halfedge = vec![NONE; topo.twin.len()];

@@ -136,7 +136,16 @@ fn icosahedron() -> Creased {
         name: "icosahedron",
         pos,
         tris,
-        creases: vec![[0, 5], [5, 4], [1, 7], [7, 8], [8, 1], [3, 9], [2, 3], [3, 6]],
+        creases: vec![
+            [0, 5],
+            [5, 4],
+            [1, 7],
+            [7, 8],
+            [8, 1],
+            [3, 9],
+            [2, 3],
+            [3, 6],
+        ],
     }
 }
 
@@ -163,8 +172,8 @@ fn cube(n: usize, jitter: f64, seed: u64) -> Creased {
                     key[b] = j as i64;
                     *slot = *ids.entry(key).or_insert_with(|| {
                         let ext = key.iter().filter(|&&k| k == 0 || k == n as i64).count();
-                        let mut p = DVec3::new(key[0] as f64, key[1] as f64, key[2] as f64)
-                            / n as f64;
+                        let mut p =
+                            DVec3::new(key[0] as f64, key[1] as f64, key[2] as f64) / n as f64;
                         // Interior grid vertices move within the face plane.
                         if ext == 1 {
                             p[a] += r.range(-jitter, jitter) / n as f64;
@@ -178,7 +187,12 @@ fn cube(n: usize, jitter: f64, seed: u64) -> Creased {
             }
             for i in 0..n {
                 for j in 0..n {
-                    let (p, q, s, t) = (grid[i][j], grid[i + 1][j], grid[i + 1][j + 1], grid[i][j + 1]);
+                    let (p, q, s, t) = (
+                        grid[i][j],
+                        grid[i + 1][j],
+                        grid[i + 1][j + 1],
+                        grid[i][j + 1],
+                    );
                     tris.push([p, q, s]);
                     tris.push([p, s, t]);
                 }
@@ -195,9 +209,7 @@ fn cube(n: usize, jitter: f64, seed: u64) -> Creased {
             on_edge[a as usize] >= 2
                 && on_edge[b as usize] >= 2
                 && (0..3)
-                    .filter(|&k| {
-                        pa[k] == pb[k] && (pa[k] == 0.0 || pa[k] == 1.0)
-                    })
+                    .filter(|&k| pa[k] == pb[k] && (pa[k] == 0.0 || pa[k] == 1.0))
                     .count()
                     >= 2
         })
@@ -247,7 +259,8 @@ fn limit_positions(topo: &Topology, pos: &[DVec3], creases: &HashSet<(u32, u32)>
                                 if sharp[j] {
                                     (c + rr[j]) * 0.5
                                 } else {
-                                    (c + rr[j]) * 0.375 + (rr[(j + 1) % n] + rr[(j + n - 1) % n]) * 0.125
+                                    (c + rr[j]) * 0.375
+                                        + (rr[(j + 1) % n] + rr[(j + n - 1) % n]) * 0.125
                                 }
                             })
                             .collect();
@@ -284,11 +297,18 @@ fn creased_surface_equals_limit_masks_of_crease_subdivision_at_dyadic_parameters
             let mut next = Vec::with_capacity(4 * origin.len());
             for &(c, [b0, b1, b2]) in &origin {
                 let (m0, m1, m2) = (mid(b0, b1), mid(b1, b2), mid(b2, b0));
-                next.extend([(c, [b0, m0, m2]), (c, [b1, m1, m0]), (c, [b2, m2, m1]), (c, [m0, m1, m2])]);
+                next.extend([
+                    (c, [b0, m0, m2]),
+                    (c, [b1, m1, m0]),
+                    (c, [b2, m2, m1]),
+                    (c, [m0, m1, m2]),
+                ]);
             }
-            (pos, tris, creases, origin) = (st.operator.apply(&pos), st.triangles, fine_creases, next);
+            (pos, tris, creases, origin) =
+                (st.operator.apply(&pos), st.triangles, fine_creases, next);
             let topo = Topology::build(pos.len(), &tris).expect("manifold");
-            let set: HashSet<(u32, u32)> = creases.iter().map(|&[a, b]| (a.min(b), a.max(b))).collect();
+            let set: HashSet<(u32, u32)> =
+                creases.iter().map(|&[a, b]| (a.min(b), a.max(b))).collect();
             let lim = limit_positions(&topo, &pos, &set);
             let mut err = 0.0f64;
             for (t, &(c, bary)) in tris.iter().zip(&origin) {
@@ -297,7 +317,11 @@ fn creased_surface_equals_limit_masks_of_crease_subdivision_at_dyadic_parameters
                     err = err.max((e.position - lim[t[k] as usize]).length() / sc);
                 }
             }
-            assert!(err < 1e-12, "{} level {level}: relative error {err:e}", m.name);
+            assert!(
+                err < 1e-12,
+                "{} level {level}: relative error {err:e}",
+                m.name
+            );
             worst = worst.max(err);
         }
     }
@@ -310,7 +334,11 @@ fn a_regular_crease_is_the_uniform_cubic_bspline_of_its_polygon() {
     let m = lattice(n, 9);
     let s = m.surface();
     let pts = lattice_points(n);
-    let index: HashMap<(usize, usize), u32> = pts.iter().enumerate().map(|(k, &ij)| (ij, k as u32)).collect();
+    let index: HashMap<(usize, usize), u32> = pts
+        .iter()
+        .enumerate()
+        .map(|(k, &ij)| (ij, k as u32))
+        .collect();
     let poly: Vec<u32> = (0..=n - 3).map(|i| index[&(i, 3)]).collect();
     let mut worst = 0.0f64;
     let mut checked = 0;
@@ -366,7 +394,10 @@ fn crease_angles(m: &Creased, s: &LoopLimitSurface) -> Vec<f64> {
                 (e.position, e.du.cross(e.dv))
             };
             let ((p0, n0), (p1, n1)) = (normal(faces[0]), normal(faces[1]));
-            assert!((p0 - p1).length() < 1e-12, "the surface is continuous across a crease");
+            assert!(
+                (p0 - p1).length() < 1e-12,
+                "the surface is continuous across a crease"
+            );
             out.push(angle_deg(n0, n1));
         }
     }
@@ -380,8 +411,14 @@ fn a_creased_cube_keeps_its_right_angles_and_an_uncreased_one_is_rounded() {
     let s = m.surface();
     assert_eq!(s.crease_edges().len(), 48);
     let angles = crease_angles(&m, &s);
-    let off = angles.iter().map(|a| (a - 90.0).abs()).fold(0.0f64, f64::max);
-    assert!(off < 1e-6, "normals across a cube edge {off} degrees off 90");
+    let off = angles
+        .iter()
+        .map(|a| (a - 90.0).abs())
+        .fold(0.0f64, f64::max);
+    assert!(
+        off < 1e-6,
+        "normals across a cube edge {off} degrees off 90"
+    );
     // Every face stays in its cube face's plane: the limit is the cube itself.
     let mut r = Rng(3);
     let mut plane_off = 0.0f64;
@@ -414,7 +451,10 @@ fn a_creased_cube_keeps_its_right_angles_and_an_uncreased_one_is_rounded() {
         rounded.push(angle_deg(n(faces[0]), n(faces[1])));
     }
     let most = rounded.iter().fold(0.0f64, |a, &b| a.max(b));
-    assert!(most < 1.0, "without creases the limit is C1 (normal jump {most})");
+    assert!(
+        most < 1.0,
+        "without creases the limit is C1 (normal jump {most})"
+    );
     println!("creased cube: |angle - 90| <= {off:e} deg, plane deviation {plane_off:e}");
 }
 
@@ -446,7 +486,11 @@ fn creased_derivatives_match_central_differences_and_rows_sum_right() {
                     .max((c(pv.dv, nv.dv) - e.dvv).length())
                     .max((c(pu.dv, nu.dv) - e.duv).length())
                     / sz2;
-                assert!(d1 < 1e-7 && d2 < 1e-5, "{} face {f}: first {d1:e} second {d2:e}", m.name);
+                assert!(
+                    d1 < 1e-7 && d2 < 1e-5,
+                    "{} face {f}: first {d1:e} second {d2:e}",
+                    m.name
+                );
                 (w1, w2) = (w1.max(d1), w2.max(d2));
             }
             for (u, v) in [(1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (0.5, 0.5), (0.3, 0.2)] {
@@ -466,7 +510,9 @@ fn creased_derivatives_match_central_differences_and_rows_sum_right() {
                     }
                 }
                 worst_sum.0 = worst_sum.0.max((sum[0] - 1.0).abs());
-                worst_sum.1 = worst_sum.1.max(sum[1..].iter().fold(0.0f64, |a, x| a.max(x.abs())));
+                worst_sum.1 = worst_sum
+                    .1
+                    .max(sum[1..].iter().fold(0.0f64, |a, x| a.max(x.abs())));
                 // The rows are the evaluation.
                 let e = eval(&s, &m.pos, f, u, v);
                 let p: DVec3 = rows
@@ -479,7 +525,10 @@ fn creased_derivatives_match_central_differences_and_rows_sum_right() {
             }
         }
     }
-    assert!(worst_sum.0 < 1e-13 && worst_sum.1 < 1e-9, "row sums {worst_sum:?}");
+    assert!(
+        worst_sum.0 < 1e-13 && worst_sum.1 < 1e-9,
+        "row sums {worst_sum:?}"
+    );
     println!("creased finite differences: first {w1:e}, second {w2:e}; row sums {worst_sum:?}");
 }
 
@@ -489,7 +538,10 @@ fn a_crease_that_is_no_edge_is_refused() {
     let err = LoopLimitSurface::with_creases(m.pos.len(), &m.tris, &[[0, 3]])
         .expect_err("0-3 is no edge");
     assert_eq!(err.kind(), "unknown_crease_edge");
-    assert!(matches!(err, LoopLimitError::UnknownCreaseEdge { a: 0, b: 3 }));
+    assert!(matches!(
+        err,
+        LoopLimitError::UnknownCreaseEdge { a: 0, b: 3 }
+    ));
     let err = LoopLimitSurface::with_creases(m.pos.len(), &m.tris, &[[0, 99]])
         .expect_err("99 is no vertex");
     assert_eq!(err.kind(), "unknown_crease_edge");

@@ -22,10 +22,8 @@ impl Creases {
         if edges.is_empty() {
             return Self { nbrs };
         }
-        let wanted: std::collections::HashSet<(u32, u32)> = edges
-            .iter()
-            .map(|&[a, b]| (a.min(b), a.max(b)))
-            .collect();
+        let wanted: std::collections::HashSet<(u32, u32)> =
+            edges.iter().map(|&[a, b]| (a.min(b), a.max(b))).collect();
         for (a, b, h) in topo.edges() {
             if topo.twin[h as usize] != NONE && wanted.contains(&(a.min(b), a.max(b))) {
                 nbrs[a as usize].push(b);

@@ -15,7 +15,7 @@
 mod component;
 mod solve;
 
-use crate::fit::engine::umbrella_laplacian;
+use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{detect_creases, CreaseOptions};
@@ -229,7 +229,8 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
             v: l.v,
         })
         .collect();
-    let mut fit = fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, opts)?;
+    let mut fit =
+        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, opts)?;
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
     fit.times.total_ms = ms_since(start);
@@ -277,7 +278,11 @@ pub fn fit_on_creased_control_mesh(
     )
     .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
-    let fairness = Collocation::new(umbrella_laplacian(m, &control_mesh.triangles));
+    let fairness = Collocation::new(umbrella_laplacian_with_creases(
+        m,
+        &control_mesh.triangles,
+        surface.crease_edges(),
+    ));
     let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
     times.surface_ms = ms_since(t);
 

@@ -94,10 +94,9 @@ fn default_min_levels() -> usize {
     1
 }
 
-/// Machined edges are 90 degrees or more, bevels and chamfers split them into 45-degree
-/// steps; smooth scans at their sampling turn by well under 30 degrees between faces (the
-/// scan noise of 35-50 um over sub-millimetre edges tilts faces by a few degrees).
-pub const DEFAULT_CREASE_ANGLE_DEG: f64 = 40.0;
+/// Machined edges are 90 degrees or more; on smooth scans noise tilts neighbouring faces by
+/// up to about 50 degrees in places (see `mesh::crease` for the measurements), so 60.
+pub const DEFAULT_CREASE_ANGLE_DEG: f64 = 60.0;
 
 fn default_crease_angle_deg() -> f64 {
     DEFAULT_CREASE_ANGLE_DEG

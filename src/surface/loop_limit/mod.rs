@@ -248,7 +248,9 @@ impl LoopLimitSurface {
                 .ring_halfedges(a)
                 .iter()
                 .copied()
-                .find(|&h| h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == b)
+                .find(|&h| {
+                    h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == b
+                })
                 .or_else(|| {
                     topo.ring_halfedges(b).iter().copied().find(|&h| {
                         h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == a
