@@ -4,6 +4,7 @@
 
 use glam::DVec3;
 use std::collections::HashMap;
+use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::crease::{detect_creases, CreaseOptions};
@@ -11,6 +12,7 @@ use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::{simplify, SimplifyOptions};
 use trispline::mesh::topology::Topology;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
+use trispline::pipeline::worker::{run_patch, Domain, WorkerConfig};
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::shared_data;
 use trispline::TriMesh;
@@ -377,4 +379,36 @@ fn smooth_models_get_no_spurious_creases_at_the_default_angle() {
         println!("{name}: {creases} crease edges of {edges} at the default angle");
         assert_eq!(creases, 0, "{name}: {creases} of {edges} edges tagged");
     }
+}
+
+#[test]
+fn surface_json_and_the_report_carry_the_creases_and_warm_starts_keep_them() {
+    let mesh = box_mesh(DVec3::new(0.06, 0.05, 0.04), 0.004);
+    let mut cfg = WorkerConfig::default();
+    cfg.fit.domain = Domain::Auto;
+    cfg.fit.correction.rounds = 3;
+    cfg.tessellation = 8;
+    let first = run_patch(&mesh, None, &cfg).expect("a box fits");
+    let s = &first.surface;
+    assert_eq!(s["layout"], "mesh");
+    let written: Vec<[u32; 2]> =
+        serde_json::from_value(s["crease_edges"].clone()).expect("crease_edges is a list of pairs");
+    assert!(written.len() >= 12, "{} crease edges", written.len());
+    assert_eq!(first.report["object"]["crease_edges"], written.len());
+    let bytes = serde_json::to_vec(s).expect("json");
+    match parse_surface_json(&bytes, "box").expect("reads back") {
+        SurfaceDescription::LoopMesh { surface, .. } => {
+            assert_eq!(surface.crease_edges(), &written[..]);
+        }
+        _ => panic!("layout mesh reads back as another kind"),
+    }
+    // The next version starts from the creased control mesh.
+    let second = run_patch(&mesh, Some(&first.warm), &cfg).expect("fits warm");
+    assert_eq!(second.report["object"]["warm"]["used"], true);
+    assert_eq!(second.surface["crease_edges"], s["crease_edges"]);
+    // Creases off: none written.
+    cfg.fit.crease_angle_deg = 0.0;
+    let off = run_patch(&mesh, None, &cfg).expect("fits");
+    assert_eq!(off.surface["crease_edges"], serde_json::json!([]));
+    assert_eq!(off.report["object"]["crease_edges"], 0);
 }
