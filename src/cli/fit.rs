@@ -9,7 +9,7 @@ use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConf
 use crate::pipeline::scattered::{BPatchConfig, DmsConfig};
 use crate::pipeline::worker::{
     run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
-    DEFAULT_TESSELLATION,
+    DEFAULT_CREASE_ANGLE_DEG, DEFAULT_TESSELLATION,
 };
 use crate::pipeline::{SurfaceKind, UnknownName};
 use anyhow::Context;
@@ -154,6 +154,10 @@ pub struct FitArgs {
     /// [0, 2] (0: the Bezier patch). Default: 0.3 for dms, 0.5 for bpatch.
     #[arg(long)]
     pub knot_spread: Option<f64>,
+    /// Whole objects: data edges whose faces turn by more than this many degrees become
+    /// sharp crease edges of the surface (0: none).
+    #[arg(long, default_value_t = DEFAULT_CREASE_ANGLE_DEG)]
+    pub crease_angle_deg: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
@@ -202,6 +206,7 @@ impl FitArgs {
                 tangential: self.correction_tangential,
                 tangential_edge: self.correction_tangential_edge,
             },
+            crease_angle_deg: self.crease_angle_deg,
             components: ComponentsConfig {
                 mode: self.components,
                 min_vertices: self.min_component_vertices,

@@ -452,6 +452,12 @@ fn validate_fit(f: &FitConfig) -> Check {
         let key = "fit.budget.within_tolerance_pct";
         check((0.0..=100.0).contains(&p), key, p, "must be 0..=100")?;
     }
+    check(
+        (0.0..180.0).contains(&f.crease_angle_deg),
+        "fit.crease_angle_deg",
+        f.crease_angle_deg,
+        "must be in [0, 180) (0: no creases)",
+    )?;
     validate_scan(&f.scan)?;
     validate_correction(&f.correction)?;
     validate_planar(f)?;

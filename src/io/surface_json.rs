@@ -9,7 +9,7 @@ use crate::surface::bpatch::{BPatch, BPatchRecord};
 use crate::surface::dms::record::DmsRecord;
 use crate::surface::dms::DmsSpline;
 use crate::surface::grid_spline::GridSpline;
-use crate::surface::loop_limit::LoopLimitSurface;
+use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use glam::DVec3;
 use serde::Deserialize;
 use serde_json::{json, Value};
@@ -366,8 +366,23 @@ fn loop_mesh(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
             Ok(out)
         })
         .collect::<Result<Vec<_>, IoError>>()?;
-    let surface = LoopLimitSurface::new(controls.len(), &faces)
-        .map_err(|e| IoError::at(name, "key control_faces", IoErrorKind::LoopSurface(e)))?;
+    // Optional: files written before creases existed have none.
+    let creases = if v.get("crease_edges").is_some() {
+        int_rows::<2>(v, "crease_edges", name)?
+            .into_iter()
+            .map(|[a, b]| [a, b].map(|i| u32::try_from(i).unwrap_or(u32::MAX)))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let surface =
+        LoopLimitSurface::with_creases(controls.len(), &faces, &creases).map_err(|e| {
+            let key = match &e {
+                LoopLimitError::UnknownCreaseEdge { .. } => "key crease_edges",
+                _ => "key control_faces",
+            };
+            IoError::at(name, key, IoErrorKind::LoopSurface(e))
+        })?;
     Ok(SurfaceDescription::LoopMesh {
         surface: std::sync::Arc::new(surface),
         controls,
@@ -516,6 +531,7 @@ mod tests {
             "kind": "loop",
             "layout": "mesh",
             "control_faces": faces,
+            "crease_edges": [[2, 0]],
             "control_points": controls.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
         });
         let bytes = serde_json::to_vec(&text).expect("json");
@@ -526,6 +542,7 @@ mod tests {
             } => {
                 assert_eq!(c, controls);
                 assert_eq!(surface.faces(), &faces[..]);
+                assert_eq!(surface.crease_edges(), &[[0, 2]]);
             }
             other => panic!("wrong kind {other:?}"),
         }
@@ -564,6 +581,14 @@ mod tests {
             (
                 r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]]}"#,
                 "key control_faces",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],"control_faces":[[0,1,2],[1,3,2]],"crease_edges":[[0,3]]}"#,
+                "crease_edges",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],"control_faces":[[0,1,2],[1,3,2]],"crease_edges":[[1]]}"#,
+                "crease_edges",
             ),
             // Four faces on one edge: the LoopLimitError names the non-manifold net.
             (

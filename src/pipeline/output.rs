@@ -76,8 +76,9 @@ pub fn surface_json(
             "kind": "loop",
             "layout": "mesh",
             "domain": "every control face is a domain triangle; a parameter is (face, u, v) with u and v the barycentric weights of the face's corners 0 and 1 (w = 1 - u - v of corner 2)",
-            "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; faces whose corners are all regular are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
+            "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; crease edges (Hoppe et al. 1994) are subdivided like boundary edges on both sides: a vertex with two sharp (crease or boundary) edges takes 3/4 1/8 1/8 along them, one with three or more (or a boundary vertex with a crease) is fixed, one with a single crease edge (a dart) keeps the smooth rule; faces whose corners are all regular on their side of every crease are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
             "control_faces": m.faces(),
+            "crease_edges": m.crease_edges(),
         }),
         SurfaceModel::BPatch(_) | SurfaceModel::Dms(_) => {
             super::scattered::model_json(&f.model, &f.controls).unwrap_or_else(|| json!({}))

@@ -10,6 +10,10 @@
 //! controls fits six times closer. Every data point stays on a control face (its landing)
 //! through the changes: the points of changed faces are re-projected onto the nearby faces,
 //! as during simplification, so a point never jumps to the far side of a thin part.
+//!
+//! Crease edges are kept as they are: never flipped (a flip would cut across the sharp
+//! edge), their vertices never relaxed (a tangential slide on the data would pull the
+//! vertex off the edge), and a split crease edge leaves two crease edges.
 
 use crate::mesh::distance::closest_on_triangle;
 use crate::mesh::topology::Topology;
@@ -17,6 +21,7 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
+use std::collections::HashSet;
 
 /// How much of the layout work is done.
 #[derive(Clone, Debug)]
@@ -75,14 +80,20 @@ pub(super) fn improve_layout(
     data: &TriMesh,
     control: TriMesh,
     landing: Vec<SurfaceParam>,
+    creases: &[[u32; 2]],
     opts: &LayoutOptions,
-) -> (TriMesh, Vec<SurfaceParam>, LayoutReport) {
-    let Some(mut net) = Net::new(data, control.clone(), &landing) else {
-        return (control, landing, LayoutReport::default());
+) -> (TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>, LayoutReport) {
+    let Some(mut net) = Net::new(data, control.clone(), &landing, creases) else {
+        return (control, landing, creases.to_vec(), LayoutReport::default());
     };
     let report = net.tidy(opts);
-    let (mesh, landing) = net.finish();
-    (mesh, landing, report)
+    let (mesh, landing, creases) = net.finish();
+    (mesh, landing, creases, report)
+}
+
+/// An undirected edge as a key.
+fn edge_key(a: u32, b: u32) -> [u32; 2] {
+    [a.min(b), a.max(b)]
 }
 
 /// The control mesh being changed, with face lists per vertex and the landings.
@@ -97,6 +108,9 @@ pub(super) struct Net<'a> {
     /// Per data point: its face and barycentric weights of the face's corners.
     land: Vec<(u32, [f64; 3])>,
     face_points: Vec<Vec<u32>>,
+    /// Crease edges (sorted pairs) and the vertices on them.
+    creases: HashSet<[u32; 2]>,
+    on_crease: Vec<bool>,
 }
 
 impl<'a> Net<'a> {
@@ -106,8 +120,16 @@ impl<'a> Net<'a> {
         data: &'a TriMesh,
         control: TriMesh,
         landing: &[SurfaceParam],
+        crease_edges: &[[u32; 2]],
     ) -> Option<Self> {
         let topo = Topology::from_mesh(&control).ok()?;
+        let mut on_crease = vec![false; control.positions.len()];
+        let mut creases = HashSet::with_capacity(crease_edges.len());
+        for &[a, b] in crease_edges {
+            *on_crease.get_mut(a as usize)? = true;
+            *on_crease.get_mut(b as usize)? = true;
+            creases.insert(edge_key(a, b));
+        }
         let nf = control.triangles.len();
         if landing.len() != data.positions.len() || landing.iter().any(|l| l.face as usize >= nf) {
             return None;
@@ -142,6 +164,8 @@ impl<'a> Net<'a> {
             boundary: topo.boundary,
             land,
             face_points,
+            creases,
+            on_crease,
         })
     }
 
@@ -185,6 +209,12 @@ impl<'a> Net<'a> {
         self.pos.push(at);
         self.vfaces.push(Vec::with_capacity(6));
         self.boundary.push(on_edge.len() == 1);
+        let crease = self.creases.remove(&edge_key(a, b));
+        self.on_crease.push(crease);
+        if crease {
+            self.creases.insert(edge_key(a, m));
+            self.creases.insert(edge_key(m, b));
+        }
         for f in on_edge {
             let t = self.faces[f as usize];
             let Some(k) = (0..3).find(|&k| {
@@ -270,6 +300,7 @@ impl<'a> Net<'a> {
 
     fn flip_wanted(&self, a: u32, b: u32, c: u32, d: u32, cos_fold: f64) -> bool {
         if c == d
+            || self.creases.contains(&edge_key(a, b))
             || self.vfaces[c as usize]
                 .iter()
                 .any(|&h| self.faces[h as usize].contains(&d))
@@ -353,7 +384,7 @@ impl<'a> Net<'a> {
     }
 
     fn relaxed(&self, v: u32, step: f64, cos_turn: f64) -> Option<DVec3> {
-        if self.boundary[v as usize] {
+        if self.boundary[v as usize] || self.on_crease[v as usize] {
             return None;
         }
         let fan = &self.vfaces[v as usize];
@@ -434,7 +465,7 @@ impl<'a> Net<'a> {
     }
 
     /// The control mesh and each data point's landing on it.
-    pub(super) fn finish(self) -> (TriMesh, Vec<SurfaceParam>) {
+    pub(super) fn finish(self) -> (TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>) {
         let landing = self
             .land
             .iter()
@@ -444,7 +475,9 @@ impl<'a> Net<'a> {
                 v: b[1],
             })
             .collect();
-        (TriMesh::new(self.pos, self.faces), landing)
+        let mut creases: Vec<[u32; 2]> = self.creases.into_iter().collect();
+        creases.sort_unstable();
+        (TriMesh::new(self.pos, self.faces), landing, creases)
     }
 }
 
@@ -485,10 +518,10 @@ fn project(q: DVec3, tri: [DVec3; 3]) -> (f64, [f64; 3]) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn flips_lower_irregular_valences_and_keep_every_point_landed() {
-        // A hexagonal disc of 7 vertices (centre of valence 6) with one spoke flipped
-        // into the other diagonal: the centre lost a neighbour, the flip restores it.
+    /// A hexagonal disc of 7 vertices (centre of valence 6) with spoke 0-2 flipped into
+    /// the other diagonal 1-3 (the centre lost a neighbour), and each vertex landed on a
+    /// face it is a corner of: (flat data, bad control mesh, landings).
+    fn disc_with_a_flipped_spoke() -> (TriMesh, TriMesh, Vec<SurfaceParam>) {
         let mut positions = vec![DVec3::ZERO];
         for k in 0..6 {
             let a = std::f64::consts::TAU * k as f64 / 6.0;
@@ -496,12 +529,9 @@ mod tests {
         }
         let ring = |k: u32| 1 + k % 6;
         let fan: Vec<[u32; 3]> = (0..6).map(|k| [0, ring(k), ring(k + 1)]).collect();
-        // Faces (0,1,2), (0,2,3) become (0,1,3), (1,2,3): spoke 0-2 flipped away.
         let mut bad = fan.clone();
         bad[0] = [0, 1, 3];
         bad[1] = [1, 2, 3];
-        let data = TriMesh::new(positions.clone(), fan);
-        // Each point lands on a face it is a corner of.
         let landing: Vec<SurfaceParam> = (0..7u32)
             .map(|p| {
                 let face = bad.iter().position(|t| t.contains(&p)).unwrap_or(0);
@@ -513,11 +543,27 @@ mod tests {
                 }
             })
             .collect();
-        let bad_mesh = TriMesh::new(positions.clone(), bad);
-        let (mesh, landing, report) = improve_layout(
+        (
+            TriMesh::new(positions.clone(), fan),
+            TriMesh::new(positions, bad),
+            landing,
+        )
+    }
+
+    fn has_edge(mesh: &TriMesh, a: u32, b: u32) -> bool {
+        mesh.triangles
+            .iter()
+            .any(|t| t.contains(&a) && t.contains(&b))
+    }
+
+    #[test]
+    fn flips_lower_irregular_valences_and_keep_every_point_landed() {
+        let (data, bad_mesh, landing) = disc_with_a_flipped_spoke();
+        let (mesh, landing, creases, report) = improve_layout(
             &data,
             bad_mesh,
             landing,
+            &[],
             &LayoutOptions {
                 rounds: 1,
                 relax_steps: 0,
@@ -526,15 +572,49 @@ mod tests {
         );
         assert!(report.flips >= 1);
         assert!(report.irregular_after < report.irregular_before);
-        assert!(mesh
-            .triangles
-            .iter()
-            .any(|t| t.contains(&0) && t.contains(&2)));
+        assert!(has_edge(&mesh, 0, 2));
+        assert!(creases.is_empty());
         // All is flat, so every point's landing reproduces it exactly.
         for (p, l) in landing.iter().enumerate() {
             let t = mesh.triangles[l.face as usize].map(|v| mesh.positions[v as usize]);
             let x = t[0] * l.u + t[1] * l.v + t[2] * (1.0 - l.u - l.v);
-            assert!(x.distance(positions[p]) < 1e-12, "point {p} landed at {x}");
+            assert!(x.distance(data.positions[p]) < 1e-12, "point {p} landed at {x}");
         }
+    }
+
+    /// The flip that the test above makes is refused when the edge is a crease, and its
+    /// vertices stay where they are under relaxation.
+    #[test]
+    fn crease_edges_are_never_flipped_nor_their_vertices_moved() {
+        let (data, bad_mesh, landing) = disc_with_a_flipped_spoke();
+        let before = bad_mesh.positions.clone();
+        let (mesh, _, creases, _) = improve_layout(
+            &data,
+            bad_mesh,
+            landing,
+            &[[3, 1]],
+            &LayoutOptions {
+                rounds: 2,
+                ..Default::default()
+            },
+        );
+        assert!(has_edge(&mesh, 1, 3), "the crease edge was flipped");
+        assert!(!has_edge(&mesh, 0, 2));
+        assert_eq!(creases, vec![[1, 3]]);
+        assert_eq!(mesh.positions[1], before[1]);
+        assert_eq!(mesh.positions[3], before[3]);
+    }
+
+    #[test]
+    fn a_split_crease_edge_leaves_two_crease_edges() {
+        let (data, bad_mesh, landing) = disc_with_a_flipped_spoke();
+        let mid = (bad_mesh.positions[1] + bad_mesh.positions[3]) / 2.0;
+        let Some(mut net) = Net::new(&data, bad_mesh, &landing, &[[1, 3]]) else {
+            panic!("the disc is a manifold");
+        };
+        assert!(net.split_edge(1, 3, mid));
+        let (mesh, _, creases) = net.finish();
+        assert_eq!(mesh.positions.len(), 8);
+        assert_eq!(creases, vec![[1, 7], [3, 7]]);
     }
 }

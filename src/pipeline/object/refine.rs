@@ -72,7 +72,7 @@ pub(super) fn refined_mesh(
     add: usize,
     tolerance: Option<f64>,
     layout: &LayoutOptions,
-) -> Option<(TriMesh, Vec<SurfaceParam>)> {
+) -> Option<(TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>)> {
     let faces = fit.surface.faces();
     let evaluate = fit.surface.evaluator(&fit.controls);
     let corner = |f: usize, k: usize| {
@@ -147,7 +147,12 @@ pub(super) fn refined_mesh(
     }
 
     let control = TriMesh::new(limit, faces.to_vec());
-    let mut net = Net::new(&fit.component, control, &fit.params)?;
+    let mut net = Net::new(
+        &fit.component,
+        control,
+        &fit.params,
+        fit.surface.crease_edges(),
+    )?;
     for (a, b, at) in splits {
         net.split_edge(a, b, at);
     }

@@ -92,10 +92,22 @@ pub struct FitConfig {
     /// `[fit.bpatch]`: `surface = "bpatch"`: degree and knots.
     #[serde(default)]
     pub bpatch: BPatchConfig,
+    /// Whole objects: data edges whose faces meet at more than this angle (degrees between
+    /// their normals) become crease edges of the surface; 0 turns creases off.
+    #[serde(default = "default_crease_angle_deg")]
+    pub crease_angle_deg: f64,
 }
 
 fn default_min_levels() -> usize {
     1
+}
+
+/// Machined edges are 90 degrees or more; on smooth scans noise tilts neighbouring faces by
+/// up to about 50 degrees in places (see `mesh::crease` for the measurements), so 60.
+pub const DEFAULT_CREASE_ANGLE_DEG: f64 = 60.0;
+
+fn default_crease_angle_deg() -> f64 {
+    DEFAULT_CREASE_ANGLE_DEG
 }
 
 impl Default for FitConfig {
@@ -113,6 +125,7 @@ impl Default for FitConfig {
             components: ComponentsConfig::default(),
             dms: DmsConfig::default(),
             bpatch: BPatchConfig::default(),
+            crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
         }
     }
 }

@@ -10,7 +10,8 @@ mod object;
 mod report;
 
 pub use config::{
-    BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_TESSELLATION,
+    BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_CREASE_ANGLE_DEG,
+    DEFAULT_TESSELLATION,
 };
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
