@@ -17,7 +17,8 @@ runs=${1:-1000000}
 shift || true
 fuzz=$(cd "$(dirname "$0")" && pwd)
 cd "$fuzz/.."
-cargo run --release --example reader_fuzz -- --write-seeds "$fuzz/seeds"
+# SEEDS_PROFILE=test reuses the test build of the crate, when that one is warm.
+cargo run --profile "${SEEDS_PROFILE:-release}" --example reader_fuzz -- --write-seeds "$fuzz/seeds"
 cd "$fuzz"
 toolchain=${FUZZ_TOOLCHAIN:-+nightly}
 cargo "$toolchain" fuzz build
