@@ -20,4 +20,5 @@ mod mesh_roundtrip;
 mod object_fit;
 mod object_pipeline;
 mod scan_pipeline;
+mod shown_surface;
 mod step_export;

@@ -17,3 +17,4 @@ mod daemon_pipe;
 mod daemon_process;
 mod daemon_support;
 mod daemon_watch;
+mod schemas;
