@@ -57,8 +57,10 @@ pub struct CurvatureArgs {
     /// white to red (positive), saturating at the 98th percentile of their magnitude.
     #[arg(long, value_enum, default_value = "region")]
     pub colour: Colouring,
-    /// Units declared in boundaries.igs.
-    #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "mm")]
+    /// The length unit of the surface's coordinates (those of the input it was fitted to),
+    /// declared in boundaries.igs so that CAD tools read the loops at true size: `m`
+    /// (the scans' unit), `mm` or `in`. A size implausible in that unit is warned about.
+    #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "m")]
     pub units: IgesUnits,
     /// Output folder (created if missing): curvature.glb, boundaries.json, boundaries.obj,
     /// boundaries.igs and regions.json.
@@ -185,6 +187,13 @@ pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
         &args.out.join("boundaries.obj"),
         &obj_polylines_bytes(&loops),
     )?;
+    let points: Vec<DVec3> = loops.iter().flatten().copied().collect();
+    if let Some(w) = args
+        .units
+        .size_warning(super::bspline_fit::largest_side(&points))
+    {
+        eprintln!("warning: {w}");
+    }
     // Degree-1 B-spline curves with chord-length knots are the polylines exactly.
     let curves: Vec<BSplineCurve> = loops.iter().filter_map(|l| polyline_curve(l)).collect();
     let iges = iges_bytes(

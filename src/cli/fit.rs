@@ -1,7 +1,7 @@
 //! `trispline fit`: one patch in, `surface.json`, `surface.glb` and `report.json` out.
 
 use super::progress::Progress;
-use crate::fit::Method;
+use crate::fit::{FitStatus, Method};
 use crate::io::{read_mesh_file, write_atomic, write_atomic_group, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
@@ -11,7 +11,7 @@ use crate::pipeline::worker::{
     run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
     DEFAULT_CREASE_ANGLE_DEG, DEFAULT_TESSELLATION,
 };
-use crate::pipeline::{SurfaceKind, UnknownName};
+use crate::pipeline::SurfaceKind;
 use anyhow::Context;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use serde_json::json;
@@ -21,9 +21,10 @@ use std::str::FromStr;
 
 /// A parser for a core enum spelled by fixed names: `--help` lists them, and the core needs
 /// no command-line library.
-fn named<T>(names: &'static [&'static str]) -> impl TypedValueParser<Value = T>
+fn named<T>(names: impl IntoIterator<Item = &'static str>) -> impl TypedValueParser<Value = T>
 where
-    T: FromStr<Err = UnknownName> + Clone + Send + Sync + 'static,
+    T: FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::error::Error + Send + Sync + 'static,
 {
     PossibleValuesParser::new(names).try_map(|s| s.parse::<T>())
 }
@@ -44,13 +45,13 @@ pub struct FitArgs {
     /// --bpatch-degree over a triangle around the planar map) or `dms` (a DMS triangular
     /// B-spline of degree --dms-degree over grid triangles of the planar map); the last two
     /// map every input to the plane, subdivided ones too.
-    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "loop")]
+    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES.iter().copied()), default_value = "loop")]
     pub surface: SurfaceKind,
     /// Inputs without subdivision connectivity: `auto` (disk-like scans on a grid over their
     /// planar map; closed, higher-genus and nearly closed inputs on a control mesh), `grid`
     /// (always the planar map) or `mesh` (always a control mesh simplified from the data,
     /// subdivided inputs too).
-    #[arg(long, value_parser = named::<Domain>(Domain::NAMES), default_value = "auto")]
+    #[arg(long, value_parser = named::<Domain>(Domain::NAMES.iter().copied()), default_value = "auto")]
     pub domain: Domain,
     /// Levels of inverse subdivision (subdivided inputs: the depth of their connectivity;
     /// scans: the resampling depth of the initial net).
@@ -63,11 +64,11 @@ pub struct FitArgs {
     /// How the control points are solved for: `pia` (progressive iterative approximation),
     /// `lspia` (least-squares PIA), `cg` (conjugate gradients on the normal equations) or
     /// `direct` (sparse Cholesky, one step).
-    #[arg(long, default_value = "cg")]
+    #[arg(long, value_parser = named::<Method>(Method::ALL.map(Method::name)), default_value = "cg")]
     pub method: Method,
     /// Subdivided inputs: how the coarse net is recovered, `exact` (the inverse of the
     /// subdivision rules) or `lsq` (the net whose subdivision is closest in least squares).
-    #[arg(long, default_value = "exact")]
+    #[arg(long, value_parser = named::<InverseMethod>(InverseMethod::ALL.map(InverseMethod::name)), default_value = "exact")]
     pub inverse: InverseMethod,
     /// Maximum number of fitting steps.
     #[arg(long, default_value_t = BudgetConfig::default().max_iterations)]
@@ -104,7 +105,7 @@ pub struct FitArgs {
     pub corrections: usize,
     /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
     /// or `parameters` (point-to-point again).
-    #[arg(long, value_parser = named::<Correction>(Correction::NAMES), default_value = "distance")]
+    #[arg(long, value_parser = named::<Correction>(Correction::NAMES.iter().copied()), default_value = "distance")]
     pub correction: Correction,
     /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
     /// fraction.
@@ -123,7 +124,7 @@ pub struct FitArgs {
     pub smoothing: f64,
     /// Scans: fit the largest component (`largest`) or every component big enough (`all`,
     /// written to OUT/c0, OUT/c1, ... largest first, with OUT/components.json).
-    #[arg(long, value_parser = named::<ComponentMode>(ComponentMode::NAMES), default_value = "largest")]
+    #[arg(long, value_parser = named::<ComponentMode>(ComponentMode::NAMES.iter().copied()), default_value = "largest")]
     pub components: ComponentMode,
     /// Scans: components with fewer vertices are not fitted.
     #[arg(long, default_value_t = ComponentsConfig::default().min_vertices)]
@@ -135,7 +136,7 @@ pub struct FitArgs {
     /// Scans with `--surface bezier`: `patches` (one quartic Bezier patch per grid cell,
     /// the Bezier form of the grid fit) or `single` (one patch of degree `--lattice`, 16 by
     /// default; implied by `--lattice`).
-    #[arg(long, value_parser = named::<BezierLayout>(BezierLayout::NAMES), default_value = "patches")]
+    #[arg(long, value_parser = named::<BezierLayout>(BezierLayout::NAMES.iter().copied()), default_value = "patches")]
     pub bezier_layout: BezierLayout,
     /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
     /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
@@ -258,6 +259,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     if args.components == ComponentMode::Largest {
         for part in input.parts {
+            println!("{}", summary(&label, &part.outputs, &args.out));
             write_outputs(&args.out, part.outputs, &source)?;
         }
         return Ok(ExitCode::SUCCESS);
@@ -271,7 +273,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
             "data_points": part.outputs.report["data_points"],
             "final": part.outputs.report["final"],
         }));
-        write_outputs(&args.out.join(&name), part.outputs, &source)?;
+        let dir = args.out.join(&name);
+        println!(
+            "{}",
+            summary(&format!("{label} [{name}]"), &part.outputs, &dir)
+        );
+        write_outputs(&dir, part.outputs, &source)?;
     }
     for (suffix, reason) in &input.failed {
         eprintln!("{label}: component {suffix} not fitted: {reason}");
@@ -305,6 +312,45 @@ fn check_knot_spread(args: &FitArgs) -> anyhow::Result<()> {
     }
 }
 
+/// The line `fit` prints per fitted surface: how it ended (and what that means), its
+/// errors, size and time, and what was left out. Errors are in the input's unit.
+fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
+    let r = &out.report;
+    let number = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let status = match out.status {
+        FitStatus::Met => "met: every target holds".to_string(),
+        FitStatus::Stalled => {
+            "stalled: further steps stopped improving the fit before every target held \
+            (usual for scans, whose noise and rims keep the max error above the tolerance; \
+            judge it by the RMS, see the README)"
+                .to_string()
+        }
+        FitStatus::Capped => "capped: the step or time limit came first (raise --iterations or \
+            --max-time-ms)"
+            .to_string(),
+    };
+    let mut line = format!(
+        "{label}: {status}; RMS {:.3e}, max {:.3e} (tolerance {:.3e}); {} control points for {} data points; fitted in {:.2} s; -> {}",
+        number(&r["final"]["geometric_rms_error"]),
+        number(&r["final"]["geometric_max_error"]),
+        number(&r["tolerance"]),
+        r["control_points"],
+        r["data_points"],
+        number(&r["wall_ms"]) / 1e3,
+        dir.display(),
+    );
+    let dropped = &r["dropped"];
+    if dropped["pieces"].as_u64().is_some_and(|p| p > 0) {
+        line.push_str(&format!(
+            "; {} pieces not fitted ({} vertices, {:.1} %; --components all fits every sizeable piece)",
+            dropped["pieces"],
+            dropped["vertices"],
+            100.0 * number(&dropped["share"]),
+        ));
+    }
+    line
+}
+
 /// Where a fit's mesh came from, for its report.
 struct Source<'a> {
     label: &'a str,
@@ -319,11 +365,12 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let report = serde_json::to_vec_pretty(&out.report)?;
     let surface = serde_json::to_vec_pretty(&out.surface)?;
-    // As the daemon writes them: the three synced at once, surface.json renamed last.
+    // As the daemon writes them: all synced at once, surface.json renamed last.
     write_atomic_group(
         dir,
         &[
             ("surface.glb", &out.glb),
+            ("legend.svg", out.legend.as_bytes()),
             ("report.json", &report),
             ("surface.json", &surface),
         ],

@@ -375,12 +375,15 @@ impl Writer {
         let mut hashes = json!({"surface.json": format!("{:016x}", content_hash(&surface_bytes))});
         if out.glb {
             hashes["surface.glb"] = json!(format!("{:016x}", content_hash(&outputs.glb)));
+            hashes["legend.svg"] =
+                json!(format!("{:016x}", content_hash(outputs.legend.as_bytes())));
         }
         outputs.report["output_hashes"] = hashes;
         let report_bytes = out.report.then(|| to_json(&outputs.report));
-        let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
+        let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(4);
         if out.glb {
             group.push(("surface.glb", &outputs.glb));
+            group.push(("legend.svg", outputs.legend.as_bytes()));
         }
         if let Some(r) = &report_bytes {
             group.push(("report.json", r));
@@ -422,6 +425,7 @@ impl Writer {
         let mut paths = json!({"surface": surface});
         if out.glb {
             paths["glb"] = json!(glb);
+            paths["legend"] = json!(dir.join("legend.svg"));
         }
         if out.report {
             paths["report"] = json!(report);

@@ -3,7 +3,7 @@
 
 use super::scan::ScanFit;
 use super::{PatchFit, SurfaceKind, SurfaceModel};
-use crate::io::glb::{glb_bytes, GlbAttributes};
+use crate::io::glb::{glb_bytes_with_extras, GlbAttributes, ERROR_RAMP};
 use crate::remesh::param::{ring_cells, Locator};
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::{Derivatives, SurfaceParam};
@@ -144,15 +144,29 @@ impl Tessellation {
     }
 }
 
-/// The scanned region in parameter space: the triangles of the mapped patch (data and
-/// hole fills) with the data vertices at their corrected parameters. A triangle that the
-/// correction stretched to more than `MAX_STRETCH` times its mapped size (a foot point that
-/// slid far, typically on a grazing wall) is left out rather than let it cover ground the
-/// data never saw. The tessellation shows where the surface was fitted, never where it
-/// only extrapolates.
+/// The scanned region in parameter space, and what of the tessellation is shown of it.
+///
+/// Two sources, united per tessellation vertex:
+/// - the triangles of the mapped patch (data and bridged hole fills) with the data vertices
+///   at their corrected parameters. A triangle that the correction stretched to more than
+///   `MAX_STRETCH` times its mapped size (a foot point that slid far, typically on a
+///   grazing wall) or that touches a fold of the map is left out of this source: there the
+///   mapped triangles say little about where the data lie.
+/// - the fitted data's footprint: every data point that the surface passes within `reach`
+///   of marks the corners of the tessellation triangle its parameter lies in. Triangles
+///   of the mapped patch are too coarse a guide at the rims (a tessellation triangle only
+///   partly inside the last data triangle would be lost, and with it the rim's points) and
+///   say nothing where they were left out above; the data's own parameters are exact there.
+///
+/// A tessellation triangle is shown when its three corners are: inside the mapped region,
+/// or corners of a triangle holding data. It is so never more than one tessellation
+/// triangle away from a fitted point or from the mapped patch, and the surface is shown
+/// where it was fitted, never where it only extrapolates.
 pub struct Coverage {
     triangles: Vec<[u32; 3]>,
     params: Vec<DVec2>,
+    /// Parameters of the data points the surface passes within the reach of.
+    footprint: Vec<DVec2>,
 }
 
 const MAX_STRETCH: f64 = 3.0;
@@ -161,7 +175,8 @@ impl Coverage {
     /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
     /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map;
     /// `untrusted[v]`: a vertex of a folded triangle of the map, whose triangles are left out
-    /// (at a folded silhouette the map overlaps itself and the surface there is a guess).
+    /// (at a folded silhouette the map overlaps itself and the mapped triangles are a guess).
+    /// No footprint: see [`Coverage::with_footprint`].
     pub fn new(
         triangles: &[[u32; 3]],
         corrected: &[SurfaceParam],
@@ -185,10 +200,29 @@ impl Coverage {
                 })
             })
             .collect();
-        Self { triangles, params }
+        Self {
+            triangles,
+            params,
+            footprint: Vec::new(),
+        }
     }
 
-    /// The scanned region of a scan fit.
+    /// Adds the fitted data's footprint: the parameters of the data points whose geometric
+    /// error is at most `reach` (a point the surface misses by more does not vouch for the
+    /// surface at its parameter).
+    pub fn with_footprint(mut self, params: &[SurfaceParam], errors: &[f64], reach: f64) -> Self {
+        self.footprint = params
+            .iter()
+            .zip(errors)
+            .filter(|(_, e)| **e <= reach)
+            .map(|(p, _)| DVec2::new(p.u, p.v))
+            .collect();
+        self
+    }
+
+    /// The scanned region of a scan fit: its mapped patch and the footprint of the data
+    /// the surface passes within the hole-bridging distance of (the furthest the shown
+    /// surface may stand from a measured point).
     pub fn of(fit: &PatchFit, scan: &ScanFit) -> Self {
         Self::new(
             &scan.trims.plan.covered,
@@ -196,20 +230,69 @@ impl Coverage {
             &scan.mapping.mapped_params,
             &scan.mapping.near_fold,
         )
+        .with_footprint(
+            &fit.params,
+            &fit.geometric_errors,
+            scan.trims.plan.max_bridge,
+        )
     }
 
-    /// Returns a test for parameters: inside a kept triangle.
+    /// Returns a test for parameters: inside a kept triangle of the mapped patch.
     pub(crate) fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
         let locator = Locator::new(&self.triangles, &self.params);
         move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
     }
+
+    /// The triangles of a tessellation (vertices at `params`) that are shown; `mapped`
+    /// tells a parameter inside the mapped region.
+    fn shown(
+        &self,
+        mapped: impl Fn(f64, f64) -> bool + Sync,
+        params: &[SurfaceParam],
+        triangles: Vec<[u32; 3]>,
+    ) -> Vec<[u32; 3]> {
+        let mut inside: Vec<bool> = params.par_iter().map(|p| mapped(p.u, p.v)).collect();
+        if !self.footprint.is_empty() && !triangles.is_empty() {
+            let plane: Vec<DVec2> = params.iter().map(|p| DVec2::new(p.u, p.v)).collect();
+            let locator = Locator::new(&triangles, &plane);
+            let holding: Vec<usize> = self
+                .footprint
+                .par_iter()
+                .filter_map(|&q| {
+                    let (t, _) = locator.locate(q);
+                    let corners = triangles[t].map(|v| plane[v as usize]);
+                    holds(corners, q).then_some(t)
+                })
+                .collect();
+            for t in holding {
+                for v in triangles[t] {
+                    inside[v as usize] = true;
+                }
+            }
+        }
+        triangles
+            .into_iter()
+            .filter(|t| t.iter().all(|&v| inside[v as usize]))
+            .collect()
+    }
+}
+
+/// Whether `q` lies in the triangle `c` or within a quarter of its size outside it (a data
+/// parameter on the surface's last edge, beside rounding).
+fn holds(c: [DVec2; 3], q: DVec2) -> bool {
+    let det = (c[1] - c[0]).perp_dot(c[2] - c[0]);
+    if det == 0.0 {
+        return false;
+    }
+    let l1 = (q - c[0]).perp_dot(c[2] - c[0]) / det;
+    let l2 = (c[1] - c[0]).perp_dot(q - c[0]) / det;
+    (1.0 - l1 - l2).min(l1).min(l2) >= -0.25
 }
 
 /// `segments`: per side of the Bezier triangle; for a grid, the total budget spread over
 /// the cells, at least 4 per cell side (a quartic cell flattened into 4 x 4 keeps the
 /// chordal error far below scan noise at scan-like curvatures). With a coverage, only
-/// triangles whose three corners lie on the scanned region are kept: the surface is shown
-/// where it was fitted and never where it only extrapolates.
+/// the triangles it shows are kept (see [`Coverage`]).
 pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) -> Tessellation {
     // The coverage's point locator and the surface's samples need nothing of each other:
     // built side by side (each about a third of a 40k-point scan's tessellation).
@@ -217,14 +300,10 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         || coverage.map(Coverage::tester),
         || sample_surface(f, segments),
     );
-    let inside: Vec<bool> = match &covers {
-        Some(c) => params.par_iter().map(|p| c(p.u, p.v)).collect(),
-        None => vec![true; params.len()],
+    let triangles = match (coverage, covers) {
+        (Some(c), Some(mapped)) => c.shown(mapped, &params, triangles),
+        _ => triangles,
     };
-    let triangles: Vec<[u32; 3]> = triangles
-        .into_iter()
-        .filter(|t| t.iter().all(|&v| inside[v as usize]))
-        .collect();
     Tessellation::from_evaluations(&evals, params, triangles)
 }
 
@@ -327,7 +406,8 @@ pub fn chord_errors(f: &PatchFit, per_face: usize, max_faces: usize) -> Vec<f64>
 }
 
 /// The GLB of a tessellation, each vertex coloured by the geometric error of the data point
-/// whose parameter is nearest (blue exact .. red twice the tolerance).
+/// whose parameter is nearest (`ERROR_RAMP`: blue exact .. red twice the tolerance), the
+/// ramp and its scale in the mesh's `extras`.
 pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec<u8> {
     // Parameters are (u, v) within a face: the nearest data point is searched among those
     // of the same face (one face for Bezier and grid surfaces).
@@ -375,47 +455,42 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
                 .get(&p.face)
                 .and_then(|(n, ids)| n.nearest(p.u, p.v).map(|k| ids[k]))
                 .map_or(0.0, |k| f.geometric_errors[k]);
-            error_colour(e, tolerance)
+            ERROR_RAMP.colour(e, tolerance)
         })
         .collect();
     let mesh = TriMesh::new(positions, triangles);
-    glb_bytes(
+    glb_bytes_with_extras(
         &mesh,
         &GlbAttributes {
             normals: Some(&normals),
             colors: Some(&cols),
             polylines: &[],
         },
+        Some(error_ramp(tolerance)),
     )
 }
 
-/// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
-/// half the tolerance, yellow the tolerance, red twice it or more.
-fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
-    let t = if tolerance > 0.0 {
-        (error / tolerance).clamp(0.0, 2.0) / 2.0
-    } else {
-        0.0
-    } as f32;
-    let stops: [[f32; 3]; 5] = [
-        [0.10, 0.25, 0.90],
-        [0.10, 0.75, 0.30],
-        [0.95, 0.90, 0.10],
-        [0.95, 0.50, 0.10],
-        [0.85, 0.10, 0.10],
-    ];
-    let x = t * 4.0;
-    let i = (x.floor() as usize).min(3);
-    let f = x - i as f32;
-    let a = stops[i];
-    let b = stops[i + 1];
-    [
-        a[0] + (b[0] - a[0]) * f,
-        a[1] + (b[1] - a[1]) * f,
-        a[2] + (b[2] - a[2]) * f,
-        1.0,
-    ]
+/// What the heatmap's colours mean, for the GLB's `extras` and report.json: the ramp's
+/// stops at this tolerance, in the input's length unit (the unit of every error the
+/// reports give).
+pub fn error_ramp(tolerance: f64) -> serde_json::Value {
+    ERROR_RAMP.extras(tolerance, ERROR_UNIT, ERROR_QUANTITY)
 }
+
+/// The heatmap's legend as an SVG image (written as legend.svg beside the GLB).
+pub fn error_legend(tolerance: f64) -> String {
+    ERROR_RAMP.legend_svg(
+        tolerance,
+        ERROR_UNIT,
+        "surface.glb colours: distance from each data point to the fitted surface",
+    )
+}
+
+/// The errors' unit: the input's own (no unit is declared by the formats read).
+const ERROR_UNIT: &str = "input length unit";
+
+const ERROR_QUANTITY: &str =
+    "geometric error: distance from the data point whose parameter is nearest to the vertex";
 
 /// Nearest data parameter through a uniform bucket grid over the parameters' bounding box.
 struct NearestParam<'a> {

@@ -24,4 +24,5 @@ mod object_pipeline;
 mod planar_product;
 mod point_clouds;
 mod scan_pipeline;
+mod shown_surface;
 mod step_export;

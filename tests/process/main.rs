@@ -20,3 +20,4 @@ mod daemon_trust;
 mod daemon_watch;
 mod planar_kinds;
 mod point_clouds;
+mod schemas;

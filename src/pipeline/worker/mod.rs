@@ -16,7 +16,7 @@ pub use config::{
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
 
-use super::output::{tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
+use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
@@ -40,6 +40,8 @@ pub struct PatchOutputs {
     pub report: serde_json::Value,
     /// surface.glb.
     pub glb: Vec<u8>,
+    /// legend.svg: what surface.glb's colours mean.
+    pub legend: String,
     /// What the next version of the patch starts from; callers store it opaquely.
     pub warm: WarmStart,
     /// How the fit ended.
@@ -303,6 +305,7 @@ pub(crate) fn run_patch_with(
         surface,
         report,
         glb,
+        legend: error_legend(budget.tolerance),
         warm,
         status: fitted.outcome.status,
     })

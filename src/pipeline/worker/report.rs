@@ -3,7 +3,7 @@
 
 use super::config::WorkerConfig;
 use crate::fit::{Budget, FitStatus, StepStats};
-use crate::pipeline::output::surface_json;
+use crate::pipeline::output::{error_ramp, surface_json};
 use crate::pipeline::scan::{warm_feet, ScanFit};
 use crate::pipeline::{PatchFit, SurfaceKind, SurfaceModel};
 use crate::remesh::planar::PlaneFrame;
@@ -179,5 +179,7 @@ fn report_json(
         "wall_ms": wall_ms,
         "iterations": f.outcome.steps,
         "final": fin,
+        // What surface.glb's colours mean (legend.svg draws the same).
+        "error_ramp": error_ramp(budget.tolerance)["error_ramp"],
     })
 }
