@@ -15,14 +15,18 @@
 mod config;
 mod domain;
 mod error;
+mod info;
+pub mod kinds;
 mod output;
 mod rounds;
 mod warm;
 
 pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
 pub use error::ScatteredError;
+use info::planar_surface;
+pub use info::ScatteredInfo;
 pub(crate) use output::add_outputs;
-pub use output::{model_json, tessellate_planar};
+pub use output::tessellate_planar;
 pub use warm::ScatteredWarm;
 
 use super::output::Coverage;
@@ -32,40 +36,12 @@ use super::scan::{Preparation, ScanOptions, ScanWarm};
 use super::worker::{WarmStart, WorkerConfig};
 use super::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::fit::Budget;
-use crate::remesh::planar::{MapMethod, PlaneFrame};
-use crate::remesh::warp::PlaneWarp;
 use crate::scattered_fit::{initial_net, InitialNet, ScatteredOptions};
 use crate::surface::dms::PlanarSurface;
 use crate::surface::SurfaceParam;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// What a planar-domain fit leaves for its outputs, report and next version beside the fit.
-pub struct ScatteredInfo {
-    /// What cleaning and hole filling found.
-    pub preparation: Preparation,
-    /// The plane of the map.
-    pub frame: PlaneFrame,
-    /// Its warp, if the map is a warped projection.
-    pub warp: Option<PlaneWarp>,
-    /// How the map was made.
-    pub method: MapMethod,
-    /// The scanned region in domain coordinates (data at their final domain points).
-    pub coverage: Coverage,
-    /// The outer rim of the data in domain coordinates...
-    pub outer: Vec<DVec2>,
-    /// ... and the rims of trimmed holes and wide data triangles.
-    pub holes: Vec<Vec<DVec2>>,
-    /// Geometric RMS after each round.
-    pub correction_rms: Vec<f64>,
-    /// DMS: the grid spacing of the domain.
-    pub spacing: Option<f64>,
-    /// Controls taken from the previous version.
-    pub reused_controls: usize,
-    /// Given a previous version, why it (or its domain) was not used.
-    pub cold_start: Option<String>,
-}
 
 /// Fits `mesh` with the planar-domain kind `cfg.fit.surface`, warm from `previous` when it
 /// is a fit of the same kind.
@@ -274,14 +250,5 @@ fn planar_info(
         spacing,
         reused_controls,
         cold_start,
-    }
-}
-
-/// The model of a fit as a planar surface (B-patch and DMS models only).
-pub(crate) fn planar_surface(model: &SurfaceModel) -> Option<&dyn PlanarSurface> {
-    match model {
-        SurfaceModel::BPatch(b) => Some(b.as_ref() as &dyn PlanarSurface),
-        SurfaceModel::Dms(d) => Some(d.as_ref() as &dyn PlanarSurface),
-        _ => None,
     }
 }
