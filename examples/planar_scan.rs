@@ -50,6 +50,56 @@ fn row(label: &str, mesh: &trispline::TriMesh, cfg: &WorkerConfig, loop_rms: Opt
     rms
 }
 
+/// `PLANAR_SWEEP=1`: DMS degree 2 (direct) on the first file over knot spreads, smoothing
+/// weights and control shares, with the RMS after each round: what limits DMS on scans.
+fn sweep(mesh: &trispline::TriMesh) {
+    println!("| degree | spread | smoothing | controls % | controls | triangles | rms um per round | fit ms |");
+    println!("|---|---|---|---|---|---|---|---|");
+    let cases: [(usize, f64, f64, f64); 9] = [
+        (2, 0.3, 1e-5, 5.0),
+        (2, 0.1, 1e-5, 5.0),
+        (2, 0.6, 1e-5, 5.0),
+        (2, 0.9, 1e-5, 5.0),
+        (2, 0.3, 0.0, 5.0),
+        (2, 0.3, 1e-3, 5.0),
+        (2, 0.3, 1e-5, 10.0),
+        (2, 0.3, 1e-5, 20.0),
+        (3, 0.3, 1e-5, 10.0),
+    ];
+    for (degree, spread, smoothing, pct) in cases {
+        let mut cfg = WorkerConfig::default();
+        cfg.fit.surface = SurfaceKind::Dms;
+        cfg.fit.method = trispline::fit::Method::Direct;
+        cfg.fit.dms.degree = degree;
+        cfg.fit.dms.knot_spread = spread;
+        cfg.fit.scan.smoothing = smoothing;
+        cfg.fit.scan.target_controls_pct = pct;
+        let t = Instant::now();
+        match fit_patch(mesh, None, &cfg) {
+            Ok(f) => {
+                let rounds: Vec<String> = f
+                    .scattered
+                    .as_ref()
+                    .map(|i| {
+                        i.correction_rms
+                            .iter()
+                            .map(|r| format!("{:.1}", r * 1e6))
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                println!(
+                    "| {degree} | {spread} | {smoothing:e} | {pct} | {} | {} | {} | {:.0} |",
+                    f.fit.controls.len(),
+                    f.fit.model.as_surface().domain_face_count(),
+                    rounds.join(" "),
+                    t.elapsed().as_secs_f64() * 1e3
+                );
+            }
+            Err(e) => println!("| {degree} | {spread} | {smoothing:e} | {pct} | failed: {e} |"),
+        }
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let files: Vec<std::path::PathBuf> = if args.is_empty() {
@@ -72,6 +122,10 @@ fn main() {
             }
         };
         println!("\n{} ({} vertices)", file.display(), mesh.positions.len());
+        if std::env::var("PLANAR_SWEEP").is_ok_and(|v| v == "1") {
+            sweep(&mesh);
+            return;
+        }
         println!("| surface | points | controls | domain faces | rms um | max mm | rms / loop | status | steps (last round) | fit ms | eval us/point (1 thread, with derivatives) |");
         println!("|---|---|---|---|---|---|---|---|---|---|---|");
         let mut cfg = WorkerConfig::default();

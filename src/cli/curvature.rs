@@ -2,9 +2,10 @@
 //! `boundaries.json`, `boundaries.obj`, `boundaries.igs` and `regions.json` out.
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
+use crate::curvature::planar::DmsPatch;
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
 use crate::curvature::{
-    BezierPatch, DerivativeSurface, DmsPatch, GridPatch, LoopMeshPatch, RegionKind, Triangular,
+    BezierPatch, DerivativeSurface, GridPatch, LoopMeshPatch, RegionKind, Triangular,
 };
 use crate::io::glb::{glb_bytes, GlbAttributes};
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};

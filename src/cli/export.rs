@@ -13,8 +13,9 @@ use super::bspline_fit::{largest_side, units_parser};
 use crate::bspline::scattered::ScatteredSolver;
 use crate::bspline::scattered::{fit_scattered, planar_parameters, ScatteredOptions};
 use crate::bspline::BSplineSurface;
+use crate::curvature::planar::DmsPatch;
 use crate::curvature::{
-    BezierPatch, DerivativeSurface, DmsPatch, Domain, GridPatch, LoopMeshPatch, Triangular,
+    BezierPatch, DerivativeSurface, Domain, GridPatch, LoopMeshPatch, Triangular,
 };
 use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::step::{step_bytes, StepOptions};

@@ -152,7 +152,7 @@ pub struct FitArgs {
     pub bpatch_degree: usize,
     /// `--surface dms`: knot cloud radius as a fraction of each domain vertex's shortest
     /// edge, in (0, 1); `bpatch`: knots pushed out along the medians by this fraction, in
-    /// [0, 2] (0: the Bezier patch). Default: 0.3 for dms, 0.5 for bpatch.
+    /// [0, 2] (0: the Bezier patch). Default: 0.6 for dms, 0.5 for bpatch.
     #[arg(long)]
     pub knot_spread: Option<f64>,
     /// Whole objects: data edges whose faces turn by more than this many degrees become

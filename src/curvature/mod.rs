@@ -10,10 +10,8 @@
 //! n has H < 0 and counts as convex.
 #![warn(missing_docs)]
 
-mod planar;
+pub mod planar;
 pub mod regions;
-
-pub use planar::DmsPatch;
 
 use crate::bspline::BSplineSurface;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};

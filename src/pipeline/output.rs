@@ -81,7 +81,7 @@ pub fn surface_json(
             "crease_edges": m.crease_edges(),
         }),
         SurfaceModel::BPatch(_) | SurfaceModel::Dms(_) => {
-            super::scattered::model_json(&f.model, &f.controls).unwrap_or_else(|| json!({}))
+            super::scattered::kinds::model_json(&f.model, &f.controls).unwrap_or_else(|| json!({}))
         }
     };
     v["schema"] = json!("trispline.surface/1");

@@ -4,8 +4,9 @@
 //! Micchelli's recurrence for DMS), and curvature of both read-back surfaces.
 
 use glam::{DVec2, DVec3};
+use trispline::curvature::planar::DmsPatch;
 use trispline::curvature::regions::{analyze, AnalysisOptions};
-use trispline::curvature::{DerivativeSurface, DmsPatch, Triangular};
+use trispline::curvature::{DerivativeSurface, Triangular};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::io::{read_mesh_bytes, Format, LoadOptions};
 use trispline::pipeline::output::{surface_json, tessellated_glb};

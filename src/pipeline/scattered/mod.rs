@@ -5,22 +5,28 @@
 //! Any input these kinds are asked for goes through the scan's preparation (clean, largest
 //! component, holes, planar map: `scan::prepare`), so subdivided inputs are fitted over their
 //! planar map too, not over their coarse net. Then: the domain (`domain`), every data point
-//! located in it, `scattered_fit::fit_scattered` per round with foot-point correction between
-//! rounds (stopping like the scan path, once a round gains less than
-//! `fit.correction.min_gain`), and the covered region in the plane for the trimmed
+//! located in it, a first fit by `scattered_fit::fit_scattered`, then rounds at the foot
+//! points (`rounds`: squared-distance minimisation like the scan path's, or point-to-point
+//! again with `fit.correction.kind = "parameters"`) while a round gains
+//! `fit.correction.min_gain`, and the covered region in the plane for the trimmed
 //! tessellation (`output`). A previous version of the same kind (`warm`) gives its frame and
 //! warp, and its domain and controls where they still cover the new data.
 
 mod config;
 mod domain;
 mod error;
+mod info;
+pub mod kinds;
 mod output;
+mod rounds;
 mod warm;
 
 pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
 pub use error::ScatteredError;
+use info::planar_surface;
+pub use info::ScatteredInfo;
 pub(crate) use output::add_outputs;
-pub use output::{model_json, tessellate_planar};
+pub use output::tessellate_planar;
 pub use warm::ScatteredWarm;
 
 use super::output::Coverage;
@@ -29,44 +35,13 @@ use super::scan::prepare::{prepare, Prepared};
 use super::scan::{Preparation, ScanOptions, ScanWarm};
 use super::worker::{WarmStart, WorkerConfig};
 use super::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
-use crate::fit::{Budget, FitOutcome};
-use crate::remesh::planar::{MapMethod, PlaneFrame};
-use crate::remesh::warp::PlaneWarp;
-use crate::scattered_fit::{fit_scattered, foot_points, initial_net, InitialNet, ScatteredOptions};
+use crate::fit::Budget;
+use crate::scattered_fit::{initial_net, InitialNet, ScatteredOptions};
 use crate::surface::dms::PlanarSurface;
 use crate::surface::SurfaceParam;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// Newton steps per foot point and round.
-const NEWTON_STEPS: usize = 6;
-
-/// What a planar-domain fit leaves for its outputs, report and next version beside the fit.
-pub struct ScatteredInfo {
-    /// What cleaning and hole filling found.
-    pub preparation: Preparation,
-    /// The plane of the map.
-    pub frame: PlaneFrame,
-    /// Its warp, if the map is a warped projection.
-    pub warp: Option<PlaneWarp>,
-    /// How the map was made.
-    pub method: MapMethod,
-    /// The scanned region in domain coordinates (data at their final domain points).
-    pub coverage: Coverage,
-    /// The outer rim of the data in domain coordinates...
-    pub outer: Vec<DVec2>,
-    /// ... and the rims of trimmed holes and wide data triangles.
-    pub holes: Vec<Vec<DVec2>>,
-    /// Geometric RMS after each round.
-    pub correction_rms: Vec<f64>,
-    /// DMS: the grid spacing of the domain.
-    pub spacing: Option<f64>,
-    /// Controls taken from the previous version.
-    pub reused_controls: usize,
-    /// Given a previous version, why it (or its domain) was not used.
-    pub cold_start: Option<String>,
-}
 
 /// Fits `mesh` with the planar-domain kind `cfg.fit.surface`, warm from `previous` when it
 /// is a fit of the same kind.
@@ -126,10 +101,10 @@ pub(crate) fn fit_planar(
         budget: budget.clone(),
         smoothing,
         correction_rounds: 0,
-        newton_steps: NEWTON_STEPS,
+        newton_steps: rounds::NEWTON_STEPS,
         initial: start_net(surface, &params, data, built.controls.clone()),
     };
-    let rounds = fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
+    let rounds = rounds::fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
 
     let domain_points: Vec<DVec2> = rounds
@@ -209,62 +184,6 @@ fn start_net(
     )
 }
 
-/// The rounds of a planar-domain fit.
-struct Rounds {
-    outcome: FitOutcome,
-    params: Vec<SurfaceParam>,
-    errors: Vec<f64>,
-    /// Geometric RMS after each round.
-    rms: Vec<f64>,
-}
-
-/// A fit at the given parameters, then rounds of (foot points, refit from the last
-/// controls) while a round lowers the geometric RMS by at least `min_gain`; the errors
-/// are the distances to the foot points on the final surface.
-fn fit_rounds(
-    surface: &dyn PlanarSurface,
-    mut params: Vec<SurfaceParam>,
-    data: &[DVec3],
-    mut options: ScatteredOptions,
-    correction: &crate::pipeline::scan::CorrectionConfig,
-) -> Result<Rounds, PipelineError> {
-    let mut rms_history = Vec::new();
-    let mut round = 0;
-    loop {
-        let fitted =
-            fit_scattered(surface, &params, data, &options, None).map_err(ScatteredError::Fit)?;
-        let outcome = fitted
-            .rounds
-            .into_iter()
-            .last()
-            .ok_or(ScatteredError::EmptyDomain)?;
-        let feet = foot_points(surface, &outcome.controls, &params, data, NEWTON_STEPS);
-        let eval = surface.evaluator(&outcome.controls);
-        let errors: Vec<f64> = feet
-            .par_iter()
-            .zip(data.par_iter())
-            .map(|(p, x)| (eval(*p).position - *x).length())
-            .collect();
-        drop(eval);
-        let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
-        let gain = rms_history.last().map_or(1.0, |&last: &f64| {
-            (last - rms) / last.max(f64::MIN_POSITIVE)
-        });
-        rms_history.push(rms);
-        params = feet;
-        round += 1;
-        if round > correction.rounds || gain < correction.min_gain {
-            return Ok(Rounds {
-                outcome,
-                params,
-                errors,
-                rms: rms_history,
-            });
-        }
-        options.initial = InitialNet::Given(outcome.controls);
-    }
-}
-
 /// The covered region and trims in domain coordinates.
 fn planar_info(
     prepared: &Prepared,
@@ -331,14 +250,5 @@ fn planar_info(
         spacing,
         reused_controls,
         cold_start,
-    }
-}
-
-/// The model of a fit as a planar surface (B-patch and DMS models only).
-pub(crate) fn planar_surface(model: &SurfaceModel) -> Option<&dyn PlanarSurface> {
-    match model {
-        SurfaceModel::BPatch(b) => Some(b.as_ref() as &dyn PlanarSurface),
-        SurfaceModel::Dms(d) => Some(d.as_ref() as &dyn PlanarSurface),
-        _ => None,
     }
 }

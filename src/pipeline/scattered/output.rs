@@ -1,46 +1,16 @@
-//! What a B-patch or DMS fit adds to the outputs: its `surface.json` kind (the records of
-//! `surface::bpatch` and `surface::dms::record`, with the text another program needs to
-//! evaluate them), the plane frame and trims, the report's keys, the warm state, and the
+//! What a B-patch or DMS fit adds to the outputs beside its `surface.json` kind (`kinds`):
+//! the plane frame and trims, the report's keys, the warm state, and the
 //! tessellation trimmed to the scanned region in domain coordinates.
 
-use super::{planar_surface, ScatteredInfo, ScatteredWarm};
+use super::info::{planar_surface, ScatteredInfo};
+use super::warm::ScatteredWarm;
 use crate::pipeline::output::{tessellate, Tessellation};
 use crate::pipeline::scan::WarmFeet;
 use crate::pipeline::worker::WarmStart;
 use crate::pipeline::{PatchFit, SurfaceModel};
-use crate::surface::bpatch::BPatchRecord;
-use crate::surface::dms::record::DmsRecord;
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use rayon::prelude::*;
 use serde_json::{json, Value};
-
-const LATTICE_ORDERING: &str = "control point b = (i, j, k), i + j + k = degree, sits at index j*(degree+1) - j*(j-1)/2 + i (the bezier kind's lattice order)";
-
-/// The `surface.json` object of a B-patch or DMS model with `controls` (`None` for other
-/// models).
-pub fn model_json(model: &SurfaceModel, controls: &[DVec3]) -> Option<Value> {
-    let mut v = match model {
-        SurfaceModel::BPatch(b) => {
-            let mut v = serde_json::to_value(BPatchRecord::new(b, controls)).ok()?;
-            v["kind"] = json!("bpatch");
-            v["domain"] = json!("domain points x in the plane of parameter_frame, inside domain_triangle [A, B, C] (counter-clockwise)");
-            v["evaluation"] = json!("Seidel's B-patch: level 0 are the control points P_b; for l = 1..degree and every b with |b| = degree - l, P_b^l = l0 P_(b+(1,0,0))^(l-1) + l1 P_(b+(0,1,0))^(l-1) + l2 P_(b+(0,0,1))^(l-1), (l0, l1, l2) the barycentric coordinates of x in the knot triangle [r_b0, s_b1, t_b2]; the point is P_(0,0,0)^degree. r_0, s_0, t_0 are A, B, C; with every knot on its corner this is the Bezier patch over [A, B, C]");
-            v
-        }
-        SurfaceModel::Dms(d) => {
-            let mut v = serde_json::to_value(DmsRecord::new(d, controls)).ok()?;
-            v["kind"] = json!("dms");
-            v["domain"] = json!(
-                "domain points x in the plane of parameter_frame, in the union of domain_triangles"
-            );
-            v["evaluation"] = json!("DMS triangular B-spline: S(x) = sum over domain triangles I = (a, b, c) and b = (i, j, k), i + j + k = degree, of P_(I,b) N_b^I(x) with N_b^I(x) = |det(t_(a,i), t_(b,j), t_(c,k))| M(x | t_(a,0..i), t_(b,0..j), t_(c,0..k)), t_(v,0..degree) the knot cloud of domain vertex v and M the bivariate simplex spline of those degree + 3 knots (degree 0: 1 / |det| inside the knot triangle, det twice its signed area; higher degrees by Micchelli's recurrence). Points on knot lines belong to the side towards the centroid of the domain triangle holding x");
-            v
-        }
-        _ => return None,
-    };
-    v["lattice_ordering"] = json!(LATTICE_ORDERING);
-    Some(v)
-}
 
 /// The tessellation of a planar fit (the B-patch's triangle as one lattice, DMS triangle by
 /// triangle), keeping the triangles whose corners all lie on the scanned region.
