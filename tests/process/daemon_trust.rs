@@ -240,7 +240,7 @@ fn log_lines_say_what_is_fitted_and_how_well() {
     }
     let event = events(&s.out)
         .into_iter()
-        .find(|e| is_fitted(e))
+        .find(is_fitted)
         .expect("fitted event");
     let status = event["status"].as_str().expect("status");
     assert!(
