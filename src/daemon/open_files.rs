@@ -126,7 +126,9 @@ mod tests {
         std::fs::write(&path, b"ply\n").expect("write");
         let mut child = std::process::Command::new("sh")
             .arg("-c")
-            .arg(format!("exec 3>>'{}'; sleep 30", path.display()))
+            // `exec` so that the process killed below is the one holding the descriptor (a
+            // forked `sleep` would inherit it and stay a writer).
+            .arg(format!("exec 3>>'{}'; exec sleep 30", path.display()))
             .spawn()
             .expect("sh runs");
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);

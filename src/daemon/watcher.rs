@@ -127,10 +127,15 @@ pub(crate) fn skip_reason(path: &Path) -> Option<Skip> {
     if name.starts_with('.') || name.ends_with(".tmp") || name.ends_with(".part") {
         return None;
     }
+    let link = std::fs::symlink_metadata(path).ok()?;
+    // A subfolder is reported whatever its name (without --recursive its files are not
+    // taken, and that should not pass in silence).
+    if link.is_dir() {
+        return Some(Skip::Directory);
+    }
     if ignored(path) {
         return Some(Skip::NotAMesh);
     }
-    let link = std::fs::symlink_metadata(path).ok()?;
     let meta = if link.file_type().is_symlink() {
         match std::fs::metadata(path) {
             Ok(m) => m,

@@ -240,7 +240,7 @@ fn log_lines_say_what_is_fitted_and_how_well() {
     }
     let event = events(&s.out)
         .into_iter()
-        .find(|e| is_fitted(e))
+        .find(is_fitted)
         .expect("fitted event");
     let status = event["status"].as_str().expect("status");
     assert!(
@@ -283,8 +283,18 @@ fn the_systemd_watchdog_gets_keep_alives() {
     let sock_path = s.out.parent().expect("tmp").join("notify.sock");
     let sock = UnixDatagram::bind(&sock_path).expect("bind");
     sock.set_read_timeout(Some(DEADLINE)).expect("timeout");
-    let mut child = bin()
-        .args(s.args())
+    // systemd names the watched process in WATCHDOG_PID: the shell's pid, kept by exec.
+    let command = format!(
+        "WATCHDOG_PID=$$ exec '{}' {}",
+        env!("CARGO_BIN_EXE_trispline"),
+        s.args()
+            .iter()
+            .map(|a| format!("'{a}'"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
+    let mut child = std::process::Command::new("sh")
+        .args(["-c", &command])
         .env("NOTIFY_SOCKET", &sock_path)
         .env("WATCHDOG_USEC", "200000")
         .stderr(std::process::Stdio::null())
