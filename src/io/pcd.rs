@@ -70,7 +70,7 @@ pub(crate) fn read_pcd(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
     match header.data {
         Data::Binary => {
             let stride: usize = header.fields.iter().map(|(_, f)| f.size * f.count).sum();
-            let need = stride.checked_mul(header.points).unwrap_or(usize::MAX);
+            let need = stride.saturating_mul(header.points);
             if need > body.len() {
                 return Err(IoError::at(
                     file,
@@ -298,7 +298,7 @@ fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> {
                         ))))
                     }
                     (Some(p), _, _) => p,
-                    (None, Some(w), h) => w.checked_mul(h).unwrap_or(usize::MAX),
+                    (None, Some(w), h) => w.saturating_mul(h),
                     (None, None, _) => return Err(bad("no POINTS or WIDTH before DATA".into())),
                 };
                 return Ok(Header {

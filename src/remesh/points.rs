@@ -62,6 +62,10 @@ pub struct PointCloudStats {
     pub triangulated_points: usize,
     /// Points in no triangle (strays beyond every gap), left out of the fit.
     pub left_out_points: usize,
+    /// Points in edge-connected pieces of at least 1 % of the triangles: what tells a
+    /// surface from scattered triangles (the scan path then fits the largest component by
+    /// default, `--components all` every sizeable one).
+    pub sizeable_piece_points: usize,
     /// Triangles of the Delaunay triangulation.
     pub delaunay_triangles: usize,
     /// Triangles removed for an edge bridging a gap.
