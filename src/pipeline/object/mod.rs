@@ -3,12 +3,15 @@
 //! every data point.
 //!
 //! Stages: clean and keep the largest component; simplify it by quadric edge collapse to
-//! the control budget (`mesh::simplify`: the topology is kept, so the control mesh has the
-//! component's Euler characteristic and boundary loops, and every data vertex is carried
-//! to a control face: its initial parameter); a point-to-point least-squares fit at those
-//! parameters with a small umbrella fairness term; then rounds of foot points (Newton on
-//! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
-//! with a small tangential share) until a round gains less than `min_gain` of the RMS.
+//! a share of the control budget (`mesh::simplify`: the topology is kept, so the control
+//! mesh has the component's Euler characteristic and boundary loops, and every data vertex
+//! is carried to a control face: its initial parameter); even the valences by edge flips
+//! (`layout`); a point-to-point least-squares fit at those parameters with a small umbrella
+//! fairness term; then rounds of foot points (Newton on the limit surface, crossing faces,
+//! the data's rim held on the surface's boundary curve) and squared-distance minimisation
+//! (point-to-plane with a small tangential share) until a round gains less than `min_gain`
+//! of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
+//! error is, each followed by a fit on the refined mesh.
 
 mod component;
 mod layout;
@@ -31,7 +34,7 @@ use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 use refine::refined_mesh;
 pub use refine::{RefineOptions, RefineRound};
-use solve::{point_fit, rows_at, DistanceRound, Feet};
+use solve::{point_fit, rows_at, DistanceRound, Feet, Rim};
 use std::time::Instant;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
@@ -172,9 +175,9 @@ pub struct ObjectFit {
     pub data: Vec<DVec3>,
     /// The component itself (data points and their triangles).
     pub component: TriMesh,
-    /// The control mesh before fitting: the simplification after the layout stage, at its
-    /// initial positions (a quadric-decimated mesh of as many vertices as there are
-    /// controls, with flipped edges and relaxed vertices when the layout stage ran).
+    /// The control mesh before the final fit: the simplification after the layout stage
+    /// at its initial positions or, after refinement, the refined mesh at the previous
+    /// fit's limit positions.
     pub simplified: TriMesh,
     /// The limit surface's structure (faces and evaluation), independent of positions.
     pub surface: LoopLimitSurface,
@@ -232,8 +235,19 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         target
     };
+    // The holes' minimum never takes more than a quarter of the budget (a broken scan can
+    // have dozens of tiny holes).
+    let loops = SurfaceTopology::of(&component)
+        .map(|t| t.boundary_loops)
+        .unwrap_or(0);
+    let min_boundary_loop = opts
+        .simplify
+        .min_boundary_loop
+        .min(first_target / (4 * loops.max(1)))
+        .max(3);
     let simplify_opts = SimplifyOptions {
         target_vertices: first_target,
+        min_boundary_loop,
         ..opts.simplify.clone()
     };
     let simplified = simplify(&component, &simplify_opts).map_err(ObjectError::Simplify)?;
@@ -256,8 +270,14 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     let (control_mesh, params, layout) =
         improve_layout(&component, control_mesh, params, &opts.layout);
     times.layout_ms = ms_since(t);
-    let mut fit = fit_on_control_mesh(component, control_mesh, params, opts)?;
-    if opts.refine.rounds > 0 {
+    let refining = opts.refine.rounds > 0 && first_target < target;
+    let first_opts = if refining {
+        intermediate(opts)
+    } else {
+        opts.clone()
+    };
+    let mut fit = fit_on_control_mesh(component, control_mesh, params, &first_opts)?;
+    if refining {
         fit = refine_fit(fit, target, opts);
     }
     fit.layout = layout;
@@ -293,6 +313,8 @@ pub fn fit_on_control_mesh(
     let surface = LoopLimitSurface::new(control_mesh.positions.len(), &control_mesh.triangles)
         .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
+    let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
+    let rim = Rim::new(&control_topo.twin, &near_boundary(&component, 0));
     let fairness = Collocation::new(umbrella_laplacian(m, &control_mesh.triangles));
     let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
     times.surface_ms = ms_since(t);
@@ -300,7 +322,9 @@ pub fn fit_on_control_mesh(
     let t = Instant::now();
     let data = component.positions.clone();
     let params = if opts.limit_start {
-        Feet::find(&surface, &control_mesh.positions, &data, &params).params
+        let mut start = Feet::find(&surface, &control_mesh.positions, &data, &params);
+        rim.hold(&mut start, &surface, &control_mesh.positions, &data);
+        start.params
     } else {
         params
     };
@@ -316,6 +340,7 @@ pub fn fit_on_control_mesh(
     .ok_or(ObjectError::Solve { stage: "first" })?;
     drop(rows);
     let mut feet = Feet::find(&surface, &controls, &data, &params);
+    rim.hold(&mut feet, &surface, &controls, &data);
     times.first_fit_ms = ms_since(t);
 
     let t = Instant::now();
@@ -330,13 +355,20 @@ pub fn fit_on_control_mesh(
     // fixed large share makes slow.
     let mut share = opts.tangential;
     let near_edge = near_boundary(&component, opts.edge_rings);
+    let on_rim = rim.marks(n);
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
     let mut refusals = 0;
     let mut taken = 0;
     while taken < opts.rounds && refusals < MAX_REFUSALS {
+        // Rim points pull point to point: the boundary curve has to reach them.
         let tangential: Vec<f64> = near_edge
             .iter()
-            .map(|&e| share * if e { edge_factor } else { 1.0 })
+            .zip(&on_rim)
+            .map(|(&e, &r)| match (r, e) {
+                (true, _) => 1.0,
+                (false, true) => share * edge_factor,
+                (false, false) => share,
+            })
             .collect();
         let round = DistanceRound {
             surface: &surface,
@@ -346,9 +378,11 @@ pub fn fit_on_control_mesh(
             tangential: &tangential,
             max_iterations: opts.max_iterations,
         };
-        let next_feet = round
-            .solve(&feet, controls.clone())
-            .map(|next| (Feet::find(&surface, &next, &data, &feet.params), next));
+        let next_feet = round.solve(&feet, controls.clone()).map(|next| {
+            let mut f = Feet::find(&surface, &next, &data, &feet.params);
+            rim.hold(&mut f, &surface, &next, &data);
+            (f, next)
+        });
         let before = feet.rms();
         let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
             refusals += 1;
@@ -407,7 +441,14 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         let Some((mesh, params)) = refined_mesh(&fit, add, tolerance, &opts.layout) else {
             break;
         };
-        let Ok(next) = fit_on_control_mesh(fit.component.clone(), mesh, params, opts) else {
+        // Only the last fit runs all its rounds: the ones before only show where to refine.
+        let last = round + 1 == opts.refine.rounds || add == room;
+        let round_opts = if last {
+            opts.clone()
+        } else {
+            intermediate(opts)
+        };
+        let Ok(next) = fit_on_control_mesh(fit.component.clone(), mesh, params, &round_opts) else {
             break;
         };
         stages.push(RefineRound::of(&next, tolerance));
@@ -420,6 +461,17 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     fit.times.refine_ms = ms_since(t);
     fit.refinement = stages;
     fit
+}
+
+/// Foot-point rounds of a fit that refinement follows.
+const INTERMEDIATE_ROUNDS: usize = 2;
+
+/// The options of a fit that only shows where to refine.
+fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
+    ObjectOptions {
+        rounds: opts.rounds.min(INTERMEDIATE_ROUNDS),
+        ..opts.clone()
+    }
 }
 
 fn ms_since(t: Instant) -> f64 {
