@@ -71,6 +71,20 @@ fn main() {
         if let Some(r) = refine_rounds {
             opts.refine.rounds = r;
         }
+        // Variants for comparison runs, from the environment.
+        let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
+        if let Some(r) = env("OBJ_LAYOUT_ROUNDS") {
+            opts.layout.rounds = r as usize;
+        }
+        if let Some(s) = env("OBJ_REFINE_SHARE") {
+            opts.refine.start_share = s;
+        }
+        if let Some(l) = env("OBJ_MIN_LOOP") {
+            opts.simplify.min_boundary_loop = l as usize;
+        }
+        if let Some(r) = env("OBJ_RELAX_STEPS") {
+            opts.layout.relax_steps = r as usize;
+        }
         let cpu_before = cpu_ms();
         let fit = match fit_object(&mesh, &opts) {
             Ok(f) => f,
@@ -84,6 +98,7 @@ fn main() {
         let (tess_rms, tess_max) = rms_max(&fit.data, &tess);
         let (_, stray) = rms_max(&tess.positions, &fit.component);
         let stray_pct = 100.0 * stray / fit.component.bounds_diagonal();
+        let inner_pct = 100.0 * interior_stray(&fit, &tess) / fit.component.bounds_diagonal();
         // The baseline: plain quadric decimation (no isotropy term) to the control count.
         let baseline = simplify(
             &fit.component,
@@ -106,7 +121,7 @@ fn main() {
         let m = fit.controls.len();
         let ts = &fit.times;
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} {}",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} {}",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -122,6 +137,7 @@ fn main() {
             fit.control_topology.genus,
             fit.control_topology.boundary_loops,
             stray_pct,
+            inner_pct,
             read_ms,
             ts.clean_ms,
             ts.simplify_ms,
@@ -204,6 +220,27 @@ fn torus_knot(n: usize, m: usize, noise: f64) -> TriMesh {
         }
     }
     TriMesh::new(positions, triangles)
+}
+
+/// The stray of the tessellation over the control faces with no boundary corner (the
+/// tessellation holds `(TESS + 1)(TESS + 2) / 2` vertices per face, in face order).
+fn interior_stray(fit: &ObjectFit, tess: &TriMesh) -> f64 {
+    let control = fit.control_mesh();
+    let Ok(topo) = trispline::mesh::topology::Topology::from_mesh(&control) else {
+        return f64::NAN;
+    };
+    let per_face = (TESS + 1) * (TESS + 2) / 2;
+    let md = MeshDistance::new(&fit.component);
+    let mut worst = 0.0f64;
+    for (f, t) in control.triangles.iter().enumerate() {
+        if t.iter().any(|&v| topo.boundary[v as usize]) {
+            continue;
+        }
+        for p in &tess.positions[f * per_face..(f + 1) * per_face] {
+            worst = worst.max(md.distance(*p).unwrap_or(f64::INFINITY));
+        }
+    }
+    worst
 }
 
 /// RMS and max distance of `points` to `mesh`.

@@ -4,7 +4,7 @@
 use glam::DVec3;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::SurfaceTopology;
+use trispline::mesh::simplify::{simplify, SimplifyOptions, SurfaceTopology};
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::TriSurface;
 use trispline::testdata::shared_data;
@@ -44,9 +44,18 @@ fn distance_to_torus(p: DVec3) -> f64 {
     ((p.x.hypot(p.y) - MAJOR).hypot(p.z) - MINOR).abs()
 }
 
-/// RMS of the data's distances to the decimated mesh the fit started from.
+/// RMS of the data's distances to a plain quadric decimation of the data with as many
+/// vertices as the fit has controls (the mesh a user would otherwise keep).
 fn decimated_rms(fit: &ObjectFit) -> f64 {
-    let md = MeshDistance::new(&fit.simplified);
+    let decimated = simplify(
+        &fit.component,
+        &SimplifyOptions {
+            target_vertices: fit.controls.len(),
+            ..Default::default()
+        },
+    )
+    .expect("decimated");
+    let md = MeshDistance::new(&decimated.mesh);
     let sum: f64 = fit
         .data
         .iter()

@@ -3,14 +3,17 @@
 //! every data point.
 //!
 //! Stages: clean and keep the largest component; simplify it by quadric edge collapse to
-//! the control budget (`mesh::simplify`: the topology is kept, so the control mesh has the
-//! component's Euler characteristic and boundary loops, and every data vertex is carried
-//! to a control face: its initial parameter); a point-to-point least-squares fit at those
-//! parameters with a small umbrella fairness term; then rounds of foot points (Newton on
-//! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
-//! with a small tangential share) until a round gains less than `min_gain` of the RMS.
-//! Sharp edges of the data (`mesh::crease`) are kept through the simplification and
-//! become crease edges of the limit surface.
+//! a share of the control budget (`mesh::simplify`: the topology is kept, so the control
+//! mesh has the component's Euler characteristic and boundary loops, and every data vertex
+//! is carried to a control face: its initial parameter); even the valences by edge flips
+//! (`layout`); a point-to-point least-squares fit at those parameters with a small umbrella
+//! fairness term; then rounds of foot points (Newton on the limit surface, crossing faces,
+//! the data's rim held on the surface's boundary curve) and squared-distance minimisation
+//! (point-to-plane with a small tangential share) until a round gains less than `min_gain`
+//! of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
+//! error is, each followed by a fit on the refined mesh.
+//! Sharp edges of the data (`mesh::crease`) are kept through the simplification, the
+//! flips and the splits, and become crease edges of the limit surface.
 
 mod component;
 mod layout;
@@ -34,7 +37,7 @@ use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 use refine::refined_mesh;
 pub use refine::{RefineOptions, RefineRound};
-use solve::{point_fit, rows_at, DistanceRound, Feet};
+use solve::{point_fit, rows_at, DistanceRound, Feet, Rim};
 use std::time::Instant;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
@@ -178,9 +181,9 @@ pub struct ObjectFit {
     pub data: Vec<DVec3>,
     /// The component itself (data points and their triangles).
     pub component: TriMesh,
-    /// The control mesh before fitting: the simplification after the layout stage, at its
-    /// initial positions (a quadric-decimated mesh of as many vertices as there are
-    /// controls, with flipped edges and relaxed vertices when the layout stage ran).
+    /// The control mesh before the final fit: the simplification after the layout stage
+    /// at its initial positions or, after refinement, the refined mesh at the previous
+    /// fit's limit positions.
     pub simplified: TriMesh,
     /// The limit surface's structure (faces and evaluation), independent of positions.
     pub surface: LoopLimitSurface,
@@ -238,8 +241,19 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         target
     };
+    // The holes' minimum never takes more than a quarter of the budget (a broken scan can
+    // have dozens of tiny holes).
+    let loops = SurfaceTopology::of(&component)
+        .map(|t| t.boundary_loops)
+        .unwrap_or(0);
+    let min_boundary_loop = opts
+        .simplify
+        .min_boundary_loop
+        .min(first_target / (4 * loops.max(1)))
+        .max(3);
     let simplify_opts = SimplifyOptions {
         target_vertices: first_target,
+        min_boundary_loop,
         ..opts.simplify.clone()
     };
     let data_creases = match Topology::from_mesh(&component) {
@@ -268,9 +282,20 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     let (control_mesh, params, crease_edges, layout) =
         improve_layout(&component, control_mesh, params, &crease_edges, &opts.layout);
     times.layout_ms = ms_since(t);
-    let mut fit =
-        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, opts)?;
-    if opts.refine.rounds > 0 {
+    let refining = opts.refine.rounds > 0 && first_target < target;
+    let first_opts = if refining {
+        intermediate(opts)
+    } else {
+        opts.clone()
+    };
+    let mut fit = fit_on_creased_control_mesh(
+        component,
+        control_mesh,
+        &crease_edges,
+        params,
+        &first_opts,
+    )?;
+    if refining {
         fit = refine_fit(fit, target, opts);
     }
     fit.layout = layout;
@@ -322,6 +347,8 @@ pub fn fit_on_creased_control_mesh(
     )
     .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
+    let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
+    let rim = Rim::new(&control_topo.twin, &near_boundary(&component, 0));
     let fairness = Collocation::new(umbrella_laplacian_with_creases(
         m,
         &control_mesh.triangles,
@@ -333,7 +360,9 @@ pub fn fit_on_creased_control_mesh(
     let t = Instant::now();
     let data = component.positions.clone();
     let params = if opts.limit_start {
-        Feet::find(&surface, &control_mesh.positions, &data, &params).params
+        let mut start = Feet::find(&surface, &control_mesh.positions, &data, &params);
+        rim.hold(&mut start, &surface, &control_mesh.positions, &data);
+        start.params
     } else {
         params
     };
@@ -349,6 +378,7 @@ pub fn fit_on_creased_control_mesh(
     .ok_or(ObjectError::Solve { stage: "first" })?;
     drop(rows);
     let mut feet = Feet::find(&surface, &controls, &data, &params);
+    rim.hold(&mut feet, &surface, &controls, &data);
     times.first_fit_ms = ms_since(t);
 
     let t = Instant::now();
@@ -363,13 +393,20 @@ pub fn fit_on_creased_control_mesh(
     // fixed large share makes slow.
     let mut share = opts.tangential;
     let near_edge = near_boundary(&component, opts.edge_rings);
+    let on_rim = rim.marks(n);
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
     let mut refusals = 0;
     let mut taken = 0;
     while taken < opts.rounds && refusals < MAX_REFUSALS {
+        // Rim points pull point to point: the boundary curve has to reach them.
         let tangential: Vec<f64> = near_edge
             .iter()
-            .map(|&e| share * if e { edge_factor } else { 1.0 })
+            .zip(&on_rim)
+            .map(|(&e, &r)| match (r, e) {
+                (true, _) => 1.0,
+                (false, true) => share * edge_factor,
+                (false, false) => share,
+            })
             .collect();
         let round = DistanceRound {
             surface: &surface,
@@ -379,9 +416,11 @@ pub fn fit_on_creased_control_mesh(
             tangential: &tangential,
             max_iterations: opts.max_iterations,
         };
-        let next_feet = round
-            .solve(&feet, controls.clone())
-            .map(|next| (Feet::find(&surface, &next, &data, &feet.params), next));
+        let next_feet = round.solve(&feet, controls.clone()).map(|next| {
+            let mut f = Feet::find(&surface, &next, &data, &feet.params);
+            rim.hold(&mut f, &surface, &next, &data);
+            (f, next)
+        });
         let before = feet.rms();
         let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
             refusals += 1;
@@ -441,9 +480,20 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         else {
             break;
         };
-        let Ok(next) =
-            fit_on_creased_control_mesh(fit.component.clone(), mesh, &creases, params, opts)
-        else {
+        // Only the last fit runs all its rounds: the ones before only show where to refine.
+        let last = round + 1 == opts.refine.rounds || add == room;
+        let round_opts = if last {
+            opts.clone()
+        } else {
+            intermediate(opts)
+        };
+        let Ok(next) = fit_on_creased_control_mesh(
+            fit.component.clone(),
+            mesh,
+            &creases,
+            params,
+            &round_opts,
+        ) else {
             break;
         };
         stages.push(RefineRound::of(&next, tolerance));
@@ -456,6 +506,17 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     fit.times.refine_ms = ms_since(t);
     fit.refinement = stages;
     fit
+}
+
+/// Foot-point rounds of a fit that refinement follows.
+const INTERMEDIATE_ROUNDS: usize = 2;
+
+/// The options of a fit that only shows where to refine.
+fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
+    ObjectOptions {
+        rounds: opts.rounds.min(INTERMEDIATE_ROUNDS),
+        ..opts.clone()
+    }
 }
 
 fn ms_since(t: Instant) -> f64 {

@@ -32,8 +32,8 @@ pub struct RefineOptions {
 impl Default for RefineOptions {
     fn default() -> Self {
         Self {
-            rounds: 2,
-            start_share: 0.8,
+            rounds: 3,
+            start_share: 0.6,
             tolerance: None,
         }
     }

@@ -259,12 +259,12 @@ pub(crate) fn run_patch_with(
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
         || {
             if object_info.is_some() {
+                let t = Instant::now();
                 let check = object::object_tessellation(&fitted, object_start(&fitted, cfg));
                 let tess = tessellate_mesh_faces(&fitted, check.per_face);
-                return (
-                    tessellated_glb(&fitted, &tess, budget.tolerance),
-                    Some(check),
-                );
+                let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
+                let shown_ms = t.elapsed().as_secs_f64() * 1e3;
+                return (glb, Some((check, shown_ms)));
             }
             let tess = match &planar_info {
                 Some(info) => tessellate_planar(&fitted, info, cfg.tessellation.max(1)),
@@ -294,7 +294,11 @@ pub(crate) fn run_patch_with(
         report["path"] = json!("object");
         report["topology"] = object_report["topology"].clone();
         report["object"] = object_report;
-        report["tessellation"] = json!(check);
+        if let Some((check, shown_ms)) = check {
+            report["tessellation"] = json!(check);
+            // The tessellation and its GLB (beside the report, in parallel with it).
+            report["object"]["stages"]["shown_ms"] = json!(shown_ms);
+        }
         warm.object = object::object_warm(&fitted, info);
     }
     if let Some(cloud) = input.report() {
