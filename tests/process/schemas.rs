@@ -26,7 +26,7 @@ fn read_json(p: &Path) -> serde_json::Value {
 fn violations(validator: &jsonschema::Validator, doc: &serde_json::Value) -> Vec<String> {
     validator
         .iter_errors(doc)
-        .map(|e| format!("{} at {}", e, e.instance_path))
+        .map(|e| format!("{} at {}", e, e.instance_path()))
         .collect()
 }
 
