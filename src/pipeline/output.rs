@@ -165,8 +165,12 @@ impl Tessellation {
 pub struct Coverage {
     triangles: Vec<[u32; 3]>,
     params: Vec<DVec2>,
-    /// Parameters of the data points the surface passes within the reach of.
+    /// Parameters of the data points the surface passes within `reach` of...
     footprint: Vec<DVec2>,
+    /// ... and those points.
+    footprint_points: Vec<DVec3>,
+    /// How far a shown vertex marked by a data point may stand from it.
+    reach: f64,
 }
 
 const MAX_STRETCH: f64 = 3.0;
@@ -204,19 +208,32 @@ impl Coverage {
             triangles,
             params,
             footprint: Vec::new(),
+            footprint_points: Vec::new(),
+            reach: 0.0,
         }
     }
 
-    /// Adds the fitted data's footprint: the parameters of the data points whose geometric
-    /// error is at most `reach` (a point the surface misses by more does not vouch for the
-    /// surface at its parameter).
-    pub fn with_footprint(mut self, params: &[SurfaceParam], errors: &[f64], reach: f64) -> Self {
-        self.footprint = params
-            .iter()
-            .zip(errors)
-            .filter(|(_, e)| **e <= reach)
-            .map(|(p, _)| DVec2::new(p.u, p.v))
+    /// Adds the fitted data's footprint: the data points whose geometric error is at most
+    /// `reach` (a point the surface misses by more does not vouch for the surface at its
+    /// parameter), at their parameters. A tessellation triangle holding one is shown only
+    /// when all its corners lie within `reach` of the point (where the map squeezes the
+    /// surface, one triangle of parameters can span far more than that).
+    pub fn with_footprint(
+        mut self,
+        params: &[SurfaceParam],
+        points: &[DVec3],
+        errors: &[f64],
+        reach: f64,
+    ) -> Self {
+        let near: Vec<usize> = (0..params.len().min(points.len()).min(errors.len()))
+            .filter(|&k| errors[k] <= reach)
             .collect();
+        self.footprint = near
+            .iter()
+            .map(|&k| DVec2::new(params[k].u, params[k].v))
+            .collect();
+        self.footprint_points = near.iter().map(|&k| points[k]).collect();
+        self.reach = reach;
         self
     }
 
@@ -232,6 +249,7 @@ impl Coverage {
         )
         .with_footprint(
             &fit.params,
+            &fit.data,
             &fit.geometric_errors,
             scan.trims.plan.max_bridge,
         )
@@ -243,12 +261,13 @@ impl Coverage {
         move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
     }
 
-    /// The triangles of a tessellation (vertices at `params`) that are shown; `mapped`
-    /// tells a parameter inside the mapped region.
+    /// The triangles of a tessellation (vertices at `params`, surface there `evals`) that
+    /// are shown; `mapped` tells a parameter inside the mapped region.
     fn shown(
         &self,
         mapped: impl Fn(f64, f64) -> bool + Sync,
         params: &[SurfaceParam],
+        evals: &[Derivatives],
         triangles: Vec<[u32; 3]>,
     ) -> Vec<[u32; 3]> {
         let mut inside: Vec<bool> = params.par_iter().map(|p| mapped(p.u, p.v)).collect();
@@ -258,10 +277,14 @@ impl Coverage {
             let holding: Vec<usize> = self
                 .footprint
                 .par_iter()
-                .filter_map(|&q| {
+                .zip(self.footprint_points.par_iter())
+                .filter_map(|(&q, &p)| {
                     let (t, _) = locator.locate(q);
                     let corners = triangles[t].map(|v| plane[v as usize]);
-                    holds(corners, q).then_some(t)
+                    let near = triangles[t]
+                        .iter()
+                        .all(|&v| evals[v as usize].position.distance(p) <= self.reach);
+                    (near && holds(corners, q)).then_some(t)
                 })
                 .collect();
             for t in holding {
@@ -301,7 +324,7 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         || sample_surface(f, segments),
     );
     let triangles = match (coverage, covers) {
-        (Some(c), Some(mapped)) => c.shown(mapped, &params, triangles),
+        (Some(c), Some(mapped)) => c.shown(mapped, &params, &evals, triangles),
         _ => triangles,
     };
     Tessellation::from_evaluations(&evals, params, triangles)
