@@ -35,7 +35,7 @@ use component::largest_component;
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
-use refine::refined_mesh;
+use refine::{refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet, Rim};
 use std::time::Instant;
@@ -468,7 +468,9 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     let t = Instant::now();
     let tolerance = opts.refine.tolerance;
     let first_times = first.times.clone();
-    let mut stages = vec![RefineRound::of(&first, tolerance)];
+    let round_of =
+        |f: &ObjectFit| RefineRound::of(f.controls.len(), f.rms, f.max, &f.distances, tolerance);
+    let mut stages = vec![round_of(&first)];
     let mut fit = first;
     for round in 0..opts.refine.rounds {
         let room = cap.saturating_sub(fit.controls.len());
@@ -476,7 +478,14 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             break;
         }
         let add = room.div_ceil(opts.refine.rounds - round);
-        let Some((mesh, params, creases)) = refined_mesh(&fit, add, tolerance, &opts.layout)
+        let fitted = Fitted {
+            component: &fit.component,
+            surface: &fit.surface,
+            controls: &fit.controls,
+            params: &fit.params,
+            distances: &fit.distances,
+        };
+        let Some((mesh, params, creases)) = refined_mesh(&fitted, add, tolerance, &opts.layout)
         else {
             break;
         };
@@ -496,7 +505,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         ) else {
             break;
         };
-        stages.push(RefineRound::of(&next, tolerance));
+        stages.push(round_of(&next));
         if next.rms >= fit.rms {
             break;
         }

@@ -11,7 +11,7 @@
 //! unchanged faces keep their foot points exactly.
 
 use super::layout::{LayoutOptions, Net};
-use super::ObjectFit;
+use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
@@ -53,28 +53,49 @@ pub struct RefineRound {
 }
 
 impl RefineRound {
-    pub(super) fn of(fit: &ObjectFit, tolerance: Option<f64>) -> Self {
+    /// The round's figures from a fit's controls and distances.
+    pub(super) fn of(
+        controls: usize,
+        rms: f64,
+        max: f64,
+        distances: &[f64],
+        tolerance: Option<f64>,
+    ) -> Self {
         let tol = tolerance.unwrap_or(0.0);
         Self {
-            controls: fit.controls.len(),
-            rms: fit.rms,
-            max: fit.max,
-            beyond: fit.distances.iter().filter(|&&d| d > tol).count(),
+            controls,
+            rms,
+            max,
+            beyond: distances.iter().filter(|&&d| d > tol).count(),
         }
     }
+}
+
+/// What refinement reads of a fit.
+pub(super) struct Fitted<'a> {
+    /// The data mesh.
+    pub component: &'a TriMesh,
+    /// The fitted surface.
+    pub surface: &'a LoopLimitSurface,
+    /// Its control points.
+    pub controls: &'a [DVec3],
+    /// Each data point's foot point ...
+    pub params: &'a [SurfaceParam],
+    /// ... and distance.
+    pub distances: &'a [f64],
 }
 
 /// The control mesh of `fit` with up to `add` edges split where the error is (see the
 /// module docs) and each data point's landing on it; `None` when no face has a point
 /// beyond the tolerance or the net cannot be built.
 pub(super) fn refined_mesh(
-    fit: &ObjectFit,
+    fit: &Fitted,
     add: usize,
     tolerance: Option<f64>,
     layout: &LayoutOptions,
 ) -> Option<(TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>)> {
     let faces = fit.surface.faces();
-    let evaluate = fit.surface.evaluator(&fit.controls);
+    let evaluate = fit.surface.evaluator(fit.controls);
     let corner = |f: usize, k: usize| {
         let (u, v) = match k {
             0 => (1.0, 0.0),
@@ -97,13 +118,13 @@ pub(super) fn refined_mesh(
     }
     let limit: Vec<DVec3> = limit
         .iter()
-        .zip(&fit.controls)
+        .zip(fit.controls)
         .map(|(l, c)| l.unwrap_or(*c))
         .collect();
 
     let tol = tolerance.unwrap_or(0.0);
     let mut error = vec![0.0; faces.len()];
-    for (p, &d) in fit.params.iter().zip(&fit.distances) {
+    for (p, &d) in fit.params.iter().zip(fit.distances) {
         if d > tol {
             if let Some(e) = error.get_mut(p.face as usize) {
                 *e += d * d;
@@ -148,9 +169,9 @@ pub(super) fn refined_mesh(
 
     let control = TriMesh::new(limit, faces.to_vec());
     let mut net = Net::new(
-        &fit.component,
+        fit.component,
         control,
-        &fit.params,
+        fit.params,
         fit.surface.crease_edges(),
     )?;
     for (a, b, at) in splits {
