@@ -580,7 +580,10 @@ mod tests {
         for (p, l) in landing.iter().enumerate() {
             let t = mesh.triangles[l.face as usize].map(|v| mesh.positions[v as usize]);
             let x = t[0] * l.u + t[1] * l.v + t[2] * (1.0 - l.u - l.v);
-            assert!(x.distance(data.positions[p]) < 1e-12, "point {p} landed at {x}");
+            assert!(
+                x.distance(data.positions[p]) < 1e-12,
+                "point {p} landed at {x}"
+            );
         }
     }
 

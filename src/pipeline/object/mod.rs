@@ -279,8 +279,13 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         })
         .collect();
     let t = Instant::now();
-    let (control_mesh, params, crease_edges, layout) =
-        improve_layout(&component, control_mesh, params, &crease_edges, &opts.layout);
+    let (control_mesh, params, crease_edges, layout) = improve_layout(
+        &component,
+        control_mesh,
+        params,
+        &crease_edges,
+        &opts.layout,
+    );
     times.layout_ms = ms_since(t);
     let refining = opts.refine.rounds > 0 && first_target < target;
     let first_opts = if refining {
@@ -288,13 +293,8 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         opts.clone()
     };
-    let mut fit = fit_on_creased_control_mesh(
-        component,
-        control_mesh,
-        &crease_edges,
-        params,
-        &first_opts,
-    )?;
+    let mut fit =
+        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, &first_opts)?;
     if refining {
         fit = refine_fit(fit, target, opts);
     }
@@ -496,13 +496,9 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         } else {
             intermediate(opts)
         };
-        let Ok(next) = fit_on_creased_control_mesh(
-            fit.component.clone(),
-            mesh,
-            &creases,
-            params,
-            &round_opts,
-        ) else {
+        let Ok(next) =
+            fit_on_creased_control_mesh(fit.component.clone(), mesh, &creases, params, &round_opts)
+        else {
             break;
         };
         stages.push(round_of(&next));

@@ -11,8 +11,8 @@ use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_creased_control_mesh, LayoutReport, ObjectFit, ObjectOptions,
-    ObjectTimes, RefineRound, RoundReport,
+    fit_object, fit_on_creased_control_mesh, LayoutReport, ObjectFit, ObjectOptions, ObjectTimes,
+    RefineRound, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
