@@ -395,7 +395,8 @@ mod tests {
         .expect_err("lengths");
         assert_eq!(e.kind(), "bad_header");
         let e = read_pcd(
-            format!("{HEAD}DATA ascii\n1 2 3\n").as_bytes(),
+            // Enough bytes for both declared points, so only the short first line is wrong.
+            format!("{HEAD}DATA ascii\n1 2 3\n4 5 6 0\n").as_bytes(),
             "c.pcd",
             &opts,
         )
