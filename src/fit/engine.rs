@@ -520,16 +520,22 @@ pub fn umbrella_laplacian_with_creases(
                 2 => crease,
                 _ => Vec::new(),
             };
-            if nb.is_empty() {
-                return Vec::new();
-            }
-            let w = 1.0 / nb.len() as f64;
-            std::iter::once((i as u32, 1.0))
-                .chain(nb.iter().map(|&j| (j, -w)))
-                .collect()
+            umbrella_row(i as u32, &nb)
         })
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
+}
+
+/// Row `i` of an umbrella Laplacian: 1 at `i`, the mean over `neighbours` subtracted;
+/// empty (no fairing) for a vertex without neighbours.
+fn umbrella_row(i: u32, neighbours: &[u32]) -> Vec<(u32, f64)> {
+    if neighbours.is_empty() {
+        return Vec::new();
+    }
+    let w = 1.0 / neighbours.len() as f64;
+    std::iter::once((i, 1.0))
+        .chain(neighbours.iter().map(|&j| (j, -w)))
+        .collect()
 }
 
 /// The umbrella Laplacian of a net given by its edges (either direction, repeats allowed).
@@ -548,13 +554,7 @@ pub fn umbrella_laplacian_of_edges(
         .map(|(i, nb)| {
             nb.sort_unstable();
             nb.dedup();
-            if nb.is_empty() {
-                return Vec::new();
-            }
-            let w = 1.0 / nb.len() as f64;
-            std::iter::once((i as u32, 1.0))
-                .chain(nb.iter().map(|&j| (j, -w)))
-                .collect()
+            umbrella_row(i as u32, nb)
         })
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
