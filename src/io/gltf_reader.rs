@@ -25,7 +25,7 @@ pub(crate) fn read_gltf(
 ) -> Result<TriMesh, IoError> {
     let e = |kind: IoErrorKind| IoError::new(file, None, kind);
     let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
-        let gltf = gltf::Gltf::from_slice(bytes).map_err(IoErrorKind::Gltf)?;
+        let gltf = parse_validated(bytes)?;
         for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
             if COMPRESSED.contains(&ext) {
                 return Err(IoErrorKind::unsupported(format!(
@@ -49,6 +49,45 @@ pub(crate) fn read_gltf(
             ))))
         }
     }
+}
+
+/// Parses and validates the document. The `gltf` crate's own validation indexes
+/// `accessors` with a primitive's POSITION index unchecked (gltf-json 1.4.1, mesh.rs:151),
+/// so attribute, index and morph-target accessor indices are bounds-checked first.
+fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
+    let unvalidated =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(IoErrorKind::Gltf)?;
+    let json = unvalidated.document.as_json();
+    let accessors = json.accessors.len();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let targets = primitive
+                .targets
+                .iter()
+                .flatten()
+                .flat_map(|t| [t.positions, t.normals, t.tangents].into_iter().flatten());
+            let referenced = primitive
+                .attributes
+                .values()
+                .copied()
+                .chain(primitive.indices)
+                .chain(targets);
+            for index in referenced {
+                if index.value() >= accessors {
+                    return Err(IoErrorKind::malformed(format!(
+                        "mesh {m} primitive {p} names accessor {} of {accessors}",
+                        index.value()
+                    )));
+                }
+            }
+        }
+    }
+    let document =
+        gltf::Document::from_json(unvalidated.document.into_json()).map_err(IoErrorKind::Gltf)?;
+    Ok(gltf::Gltf {
+        document,
+        blob: unvalidated.blob,
+    })
 }
 
 /// The data of every buffer, external ones read from beside the file. The input and its
