@@ -55,6 +55,7 @@ pub(crate) fn read_gltf(
 /// `accessors` with a primitive's POSITION index unchecked (gltf-json 1.4.1, mesh.rs:151),
 /// so attribute, index and morph-target accessor indices are bounds-checked first.
 fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
+    check_glb_header(bytes)?;
     let unvalidated =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(IoErrorKind::Gltf)?;
     let json = unvalidated.document.as_json();
@@ -88,6 +89,27 @@ fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
         document,
         blob: unvalidated.blob,
     })
+}
+
+/// The `gltf` crate subtracts the 12-byte header from the GLB's declared total length
+/// unchecked (gltf 1.4.1, binary.rs:252): a declared length under 12 is refused here.
+fn check_glb_header(bytes: &[u8]) -> Result<(), IoErrorKind> {
+    const HEADER_BYTES: u32 = 12;
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let Some(length) = bytes.get(8..12) else {
+        return Err(IoErrorKind::malformed(
+            "GLB header is shorter than 12 bytes",
+        ));
+    };
+    let declared = u32::from_le_bytes([length[0], length[1], length[2], length[3]]);
+    if declared < HEADER_BYTES {
+        return Err(IoErrorKind::malformed(format!(
+            "GLB header declares a total length of {declared} bytes, less than the header itself"
+        )));
+    }
+    Ok(())
 }
 
 /// The data of every buffer, external ones read from beside the file. The input and its
