@@ -281,3 +281,93 @@ fn holds(c: [DVec2; 3], q: DVec2) -> bool {
     let l2 = (c[1] - c[0]).perp_dot(q - c[0]) / det;
     (1.0 - l1 - l2).min(l1).min(l2) >= -0.25
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The plane z = 0 with (u, v) as its coordinates.
+    fn flat(p: SurfaceParam) -> Derivatives {
+        Derivatives {
+            position: DVec3::new(p.u, p.v, 0.0),
+            du: DVec3::X,
+            dv: DVec3::Y,
+            ..Derivatives::default()
+        }
+    }
+
+    fn at(u: f64, v: f64) -> SurfaceParam {
+        SurfaceParam { face: 0, u, v }
+    }
+
+    /// One fitted point at (1, 1), within reach 1.5 of the surface: the footprint alone
+    /// decides (nothing is inside a mapped patch).
+    fn one_point(reach: f64) -> Coverage {
+        Coverage::new(&[], &[], &[], &[]).with_footprint(
+            &[at(1.0, 1.0)],
+            &[DVec3::new(1.0, 1.0, 0.2)],
+            &[0.2],
+            reach,
+        )
+    }
+
+    #[test]
+    fn a_triangle_near_its_point_is_shown_whole() {
+        let mut params = vec![at(0.0, 0.0), at(2.0, 0.0), at(0.0, 2.0)];
+        let mut evals: Vec<Derivatives> = params.iter().map(|p| flat(*p)).collect();
+        let shown = one_point(2.5).shown(
+            |_, _| false,
+            &mut params,
+            &mut evals,
+            vec![[0, 1, 2]],
+            &flat,
+        );
+        assert_eq!(shown, vec![[0, 1, 2]]);
+        assert_eq!(params.len(), 3, "nothing cut");
+    }
+
+    #[test]
+    fn a_rim_triangle_spanning_past_the_reach_shows_only_its_pieces_near_the_data() {
+        let reach = 1.5;
+        let point = DVec3::new(1.0, 1.0, 0.2);
+        let mut params = vec![at(0.0, 0.0), at(10.0, 0.0), at(0.0, 10.0), at(10.0, 10.0)];
+        let mut evals: Vec<Derivatives> = params.iter().map(|p| flat(*p)).collect();
+        // The second triangle holds no point: it stays hidden, cut or not.
+        let shown = one_point(reach).shown(
+            |_, _| false,
+            &mut params,
+            &mut evals,
+            vec![[0, 1, 2], [1, 3, 2]],
+            &flat,
+        );
+        assert!(!shown.is_empty(), "the point's surroundings are shown");
+        assert!(!shown.contains(&[0, 1, 2]), "not the whole 10 m triangle");
+        let used: Vec<u32> = shown.iter().flatten().copied().collect();
+        for &v in &used {
+            let p = evals[v as usize].position;
+            assert!(
+                p.distance(point) <= reach + 1e-12,
+                "{p} is beyond the reach"
+            );
+            assert!(
+                p.x + p.y <= 10.0 + 1e-12,
+                "{p} is outside the holding triangle"
+            );
+        }
+        // The point's own foot (1, 1) lies in a shown piece: it is covered.
+        let q = DVec2::new(1.0, 1.0);
+        let covered = shown.iter().any(|t| {
+            let c = t.map(|v| evals[v as usize].position.truncate());
+            let det = (c[1] - c[0]).perp_dot(c[2] - c[0]);
+            let l1 = (q - c[0]).perp_dot(c[2] - c[0]) / det;
+            let l2 = (c[1] - c[0]).perp_dot(q - c[0]) / det;
+            (1.0 - l1 - l2).min(l1).min(l2) >= -1e-12
+        });
+        assert!(covered, "the point's parameter is in a shown piece");
+        // Pieces keep the orientation of the triangle they were cut from.
+        for t in &shown {
+            let [a, b, c] = t.map(|v| evals[v as usize].position);
+            assert!((b - a).cross(c - a).z > 0.0);
+        }
+    }
+}
