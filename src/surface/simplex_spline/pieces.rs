@@ -1,0 +1,335 @@
+//! The polynomial pieces of a `SimplexFamily`, converted once per cell and kept.
+//!
+//! A simplex spline of degree m is one polynomial of degree m on each cell of the
+//! arrangement of the lines through pairs of its knots: the recurrence's leaves are
+//! indicators of knot triangles (constant off those lines) and its factors are affine. So
+//! the side of every knot line a point lies on (its cell's sign key) fixes every leaf, and
+//! running the recurrence on polynomials instead of numbers gives each root's polynomial on
+//! that cell. A key's polynomials depend on the key alone (not on the point that first
+//! reached the cell), so evaluations are reproducible whatever the order points come in.
+//!
+//! Why not per domain triangle (one Bezier patch each)? With knot clouds spread around the
+//! vertices, knot lines cross the domain triangles: the splines are polynomial only on the
+//! finer cells of the knot-line arrangement.
+//!
+//! Signs are those of the family's own recurrence: the same float filter as
+//! `orient_sign`, and the exact symbolic test (`perturbed_side`) where it cannot decide, so a
+//! point on a knot line gets the piece its perturbation direction points into.
+//!
+//! An evaluation is then the sign key (a float test per knot line), one hash look-up and a
+//! polynomial per root: several times cheaper than walking the recurrence per point, which
+//! visits every node (hundreds for a degree-2 family) with exact orientation tests at the
+//! leaves.
+
+use super::node::{CompiledNode, Jet, Node};
+use super::predicates::perturbed_side;
+use glam::DVec2;
+use rustc_hash::FxHashMap;
+use std::sync::{PoisonError, RwLock};
+
+/// Highest degree kept in piece form (the monomials of degree <= 3: 10 coefficients).
+pub(super) const MAX_PIECE_DEGREE: usize = 3;
+const MONOMIALS: usize = 10;
+
+/// A family keeps at most this many cells; past it pieces are converted on each call
+/// (a bound on memory for points sprayed over a large domain: every cell still evaluates
+/// exactly).
+const MAX_PIECES: usize = 1 << 13;
+
+/// The knot lines: more than 128 would not fit a key (a 16-knot pool has 120 pairs).
+const MAX_LINES: usize = 128;
+
+/// Index of monomial X^a Y^b (by total degree, then by b).
+#[inline]
+const fn mono(a: usize, b: usize) -> usize {
+    (a + b) * (a + b + 1) / 2 + b
+}
+
+type Poly = [f64; MONOMIALS];
+
+/// One cell's polynomials, root after root (`coefficients` each), in local coordinates.
+#[derive(Debug)]
+struct Piece {
+    zero: bool,
+    coefficients: Box<[f64]>,
+}
+
+/// A family's knot lines, its local frame and the cells met so far.
+pub(super) struct Pieces {
+    /// Per knot line (knot i < knot j): knot i and knot j - knot i.
+    origin: Vec<DVec2>,
+    direction: Vec<DVec2>,
+    ends: Vec<(DVec2, DVec2)>,
+    /// Per node that is a leaf: its three edges as (line, true when the ccw edge runs from
+    /// the line's higher knot to its lower one).
+    leaf_edges: Vec<[(u8, bool); 3]>,
+    centre: DVec2,
+    inv_scale: f64,
+    /// Monomials per root polynomial: (m + 1)(m + 2) / 2 for the highest root degree m.
+    per_root: usize,
+    cells: RwLock<FxHashMap<u128, Piece>>,
+}
+
+impl Clone for Pieces {
+    /// A copy starts with no cells (they are a cache: refilled on use).
+    fn clone(&self) -> Self {
+        Self {
+            origin: self.origin.clone(),
+            direction: self.direction.clone(),
+            ends: self.ends.clone(),
+            leaf_edges: self.leaf_edges.clone(),
+            centre: self.centre,
+            inv_scale: self.inv_scale,
+            per_root: self.per_root,
+            cells: RwLock::new(FxHashMap::default()),
+        }
+    }
+}
+
+impl std::fmt::Debug for Pieces {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pieces")
+            .field("lines", &self.origin.len())
+            .field("cells", &self.cell_count())
+            .finish()
+    }
+}
+
+impl Pieces {
+    /// The piece form of a compiled family whose roots have degree <= `MAX_PIECE_DEGREE`;
+    /// `None` when it has more knot lines than a key holds.
+    pub(super) fn new(
+        knots: &[DVec2],
+        nodes: &[CompiledNode],
+        root_degree: usize,
+        min: DVec2,
+        max: DVec2,
+    ) -> Option<Self> {
+        if root_degree > MAX_PIECE_DEGREE {
+            return None;
+        }
+        let mut line_of: FxHashMap<(u8, u8), u8> = FxHashMap::default();
+        let mut ends: Vec<(DVec2, DVec2)> = Vec::new();
+        let mut leaf_edges = Vec::new();
+        for cn in nodes {
+            let Node::Leaf { knots: ids, .. } = &cn.node else {
+                continue;
+            };
+            let mut edges = [(0u8, false); 3];
+            for (k, edge) in edges.iter_mut().enumerate() {
+                let (u, v) = (ids[k], ids[(k + 1) % 3]);
+                let key = (u.min(v), u.max(v));
+                let line = match line_of.get(&key) {
+                    Some(&l) => l,
+                    None => {
+                        if ends.len() >= MAX_LINES {
+                            return None;
+                        }
+                        ends.push((knots[key.0 as usize], knots[key.1 as usize]));
+                        let l = (ends.len() - 1) as u8;
+                        line_of.insert(key, l);
+                        l
+                    }
+                };
+                *edge = (line, u > v);
+            }
+            leaf_edges.push(edges);
+        }
+        let extent = (max - min).max_element();
+        Some(Self {
+            origin: ends.iter().map(|e| e.0).collect(),
+            direction: ends.iter().map(|e| e.1 - e.0).collect(),
+            ends,
+            leaf_edges,
+            centre: (min + max) * 0.5,
+            inv_scale: if extent > 0.0 { 1.0 / extent } else { 1.0 },
+            per_root: (root_degree + 1) * (root_degree + 2) / 2,
+            cells: RwLock::new(FxHashMap::default()),
+        })
+    }
+
+    /// Cells converted so far.
+    pub(super) fn cell_count(&self) -> usize {
+        self.cells
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len()
+    }
+
+    /// Bit l set when x (perturbed along `dir`) lies left of knot line l.
+    fn key(&self, x: DVec2, dir: DVec2) -> u128 {
+        let mut key = 0u128;
+        for (l, (p, d)) in self.origin.iter().zip(&self.direction).enumerate() {
+            // `orient_sign`'s filter, term for term, so that a decided sign is its sign.
+            let left = d.x * (x.y - p.y);
+            let right = d.y * (x.x - p.x);
+            let det = left - right;
+            let bound = 1e-15 * (left.abs() + right.abs());
+            let positive = if det > bound {
+                true
+            } else if -det > bound {
+                false
+            } else {
+                let (a, b) = self.ends[l];
+                perturbed_side(a, b, x, dir) > 0
+            };
+            key |= (positive as u128) << l;
+        }
+        key
+    }
+
+    /// Every root's polynomial on the cell of `key`: the recurrence run on polynomials.
+    fn convert(&self, key: u128, nodes: &[CompiledNode], roots: &[(u32, f64)]) -> Piece {
+        let mut polys: Vec<Option<Poly>> = Vec::with_capacity(nodes.len());
+        let mut leaf = 0usize;
+        let (c, s) = (self.centre, 1.0 / self.inv_scale);
+        for cn in nodes {
+            let poly = match &cn.node {
+                Node::Zero => None,
+                Node::Leaf { inv_abs_det, .. } => {
+                    let edges = &self.leaf_edges[leaf];
+                    leaf += 1;
+                    let inside = edges
+                        .iter()
+                        .all(|&(l, flipped)| ((key >> l) & 1 == 1) != flipped);
+                    inside.then(|| {
+                        let mut p = [0.0; MONOMIALS];
+                        p[0] = *inv_abs_det;
+                        p
+                    })
+                }
+                Node::Inner { lambda, children } => {
+                    let mut acc: Option<Poly> = None;
+                    for (l, &child) in lambda.iter().zip(children) {
+                        let Some(m) = &polys[child as usize] else {
+                            continue;
+                        };
+                        // lambda(x) with x = c + s X: affine in the local X, Y.
+                        let (l0, l1, l2) = (l[0] + l[1] * c.x + l[2] * c.y, l[1] * s, l[2] * s);
+                        let out = acc.get_or_insert([0.0; MONOMIALS]);
+                        multiply_affine(m, [l0, l1, l2], out);
+                    }
+                    acc
+                }
+            };
+            polys.push(poly);
+        }
+        let mut coefficients = vec![0.0; roots.len() * self.per_root].into_boxed_slice();
+        let mut zero = true;
+        for (r, &(id, factor)) in roots.iter().enumerate() {
+            if let Some(p) = &polys[id as usize] {
+                zero = false;
+                for (dst, src) in coefficients[r * self.per_root..(r + 1) * self.per_root]
+                    .iter_mut()
+                    .zip(p)
+                {
+                    *dst = src * factor;
+                }
+            }
+        }
+        Piece { zero, coefficients }
+    }
+
+    /// Root jets at x (perturbed along `dir`), converting and keeping its cell if new.
+    pub(super) fn evaluate<const DERIV: bool>(
+        &self,
+        x: DVec2,
+        dir: DVec2,
+        nodes: &[CompiledNode],
+        roots: &[(u32, f64)],
+        out: &mut Vec<Jet>,
+    ) {
+        let key = self.key(x, dir);
+        {
+            let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
+            if let Some(piece) = cells.get(&key) {
+                self.jets::<DERIV>(piece, roots.len(), x, out);
+                return;
+            }
+        }
+        let piece = self.convert(key, nodes, roots);
+        self.jets::<DERIV>(&piece, roots.len(), x, out);
+        let mut cells = self.cells.write().unwrap_or_else(PoisonError::into_inner);
+        if cells.len() < MAX_PIECES {
+            cells.entry(key).or_insert(piece);
+        }
+    }
+
+    fn jets<const DERIV: bool>(&self, piece: &Piece, roots: usize, x: DVec2, out: &mut Vec<Jet>) {
+        out.clear();
+        if piece.zero {
+            out.resize(roots, [0.0; 6]);
+            return;
+        }
+        let basis = monomial_jets::<DERIV>((x - self.centre) * self.inv_scale, self.inv_scale);
+        let n = self.per_root;
+        out.extend(piece.coefficients.chunks_exact(n).map(|coef| {
+            let mut jet = [0.0; 6];
+            for (c, b) in coef.iter().zip(&basis[..n]) {
+                if *c == 0.0 {
+                    continue;
+                }
+                jet[0] += c * b[0];
+                if DERIV {
+                    for k in 1..6 {
+                        jet[k] += c * b[k];
+                    }
+                }
+            }
+            jet
+        }));
+    }
+}
+
+/// out += m * (l0 + l1 X + l2 Y). Only polynomials of degree <= 2 are ever multiplied
+/// (a child has one knot less than its parent, and no node has degree above the roots'
+/// <= 3), so m's degree-3 terms are zero and the product fits.
+fn multiply_affine(m: &Poly, [l0, l1, l2]: [f64; 3], out: &mut Poly) {
+    for d in 0..MAX_PIECE_DEGREE {
+        for b in 0..=d {
+            let a = d - b;
+            let v = m[mono(a, b)];
+            if v == 0.0 {
+                continue;
+            }
+            out[mono(a, b)] += l0 * v;
+            out[mono(a + 1, b)] += l1 * v;
+            out[mono(a, b + 1)] += l2 * v;
+        }
+    }
+}
+
+/// Per monomial X^a Y^b at X: value and x/y derivatives up to second order, in the
+/// caller's coordinates (X = (x - centre) * inv_scale).
+fn monomial_jets<const DERIV: bool>(p: DVec2, inv_scale: f64) -> [Jet; MONOMIALS] {
+    let px = [1.0, p.x, p.x * p.x, p.x * p.x * p.x];
+    let py = [1.0, p.y, p.y * p.y, p.y * p.y * p.y];
+    let (s1, s2) = (inv_scale, inv_scale * inv_scale);
+    let mut out = [[0.0; 6]; MONOMIALS];
+    for d in 0..=MAX_PIECE_DEGREE {
+        for b in 0..=d {
+            let a = d - b;
+            let jet = &mut out[mono(a, b)];
+            jet[0] = px[a] * py[b];
+            if DERIV {
+                let (fa, fb) = (a as f64, b as f64);
+                if a > 0 {
+                    jet[1] = fa * px[a - 1] * py[b] * s1;
+                }
+                if b > 0 {
+                    jet[2] = fb * px[a] * py[b - 1] * s1;
+                }
+                if a > 1 {
+                    jet[3] = fa * (fa - 1.0) * px[a - 2] * py[b] * s2;
+                }
+                if a > 0 && b > 0 {
+                    jet[4] = fa * fb * px[a - 1] * py[b - 1] * s2;
+                }
+                if b > 1 {
+                    jet[5] = fb * (fb - 1.0) * px[a] * py[b - 2] * s2;
+                }
+            }
+        }
+    }
+    out
+}
