@@ -250,10 +250,11 @@ fn dms_basis_is_a_non_negative_partition_of_unity_on_random_clouds() {
                     (sum - 1.0).abs() < 1e-10,
                     "degree {degree} seed {seed} {p:?}: sum {sum}"
                 );
-                assert!(
-                    row.iter().all(|r| r.1 >= -1e-13),
-                    "negative basis value at {p:?}"
-                );
+                // Exact zeros where the recurrence multiplies by vanishing indicators come
+                // out of a cell's polynomial (the evaluation path) as cancellations of a few
+                // ulps of its coefficients: zero within 1e-11.
+                let low = row.iter().map(|r| r.1).fold(f64::INFINITY, f64::min);
+                assert!(low >= -1e-11, "negative basis value {low:e} at {p:?}");
             }
         }
     }

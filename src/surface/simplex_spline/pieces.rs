@@ -22,7 +22,7 @@
 //! leaves.
 
 use super::node::{CompiledNode, Jet, Node};
-use super::predicates::perturbed_side;
+use super::predicates::{orient_sign, perturbed_side};
 use glam::DVec2;
 use rustc_hash::FxHashMap;
 use std::sync::{PoisonError, RwLock};
@@ -56,10 +56,15 @@ struct Piece {
 
 /// A family's knot lines, its local frame and the cells met so far.
 pub(super) struct Pieces {
-    /// Per knot line (knot i < knot j): knot i and knot j - knot i.
-    origin: Vec<DVec2>,
-    direction: Vec<DVec2>,
+    /// Per knot line (knot i < knot j): knot i (`px`, `py`) and knot j - knot i (`dx`,
+    /// `dy`), apart so that the sign loop runs without branches.
+    px: Vec<f64>,
+    py: Vec<f64>,
+    dx: Vec<f64>,
+    dy: Vec<f64>,
     ends: Vec<(DVec2, DVec2)>,
+    /// The pool's convex hull, counter-clockwise: every spline vanishes outside it.
+    hull: Vec<DVec2>,
     /// Per node that is a leaf: its three edges as (line, true when the ccw edge runs from
     /// the line's higher knot to its lower one).
     leaf_edges: Vec<[(u8, bool); 3]>,
@@ -74,9 +79,12 @@ impl Clone for Pieces {
     /// A copy starts with no cells (they are a cache: refilled on use).
     fn clone(&self) -> Self {
         Self {
-            origin: self.origin.clone(),
-            direction: self.direction.clone(),
+            px: self.px.clone(),
+            py: self.py.clone(),
+            dx: self.dx.clone(),
+            dy: self.dy.clone(),
             ends: self.ends.clone(),
+            hull: self.hull.clone(),
             leaf_edges: self.leaf_edges.clone(),
             centre: self.centre,
             inv_scale: self.inv_scale,
@@ -89,7 +97,7 @@ impl Clone for Pieces {
 impl std::fmt::Debug for Pieces {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Pieces")
-            .field("lines", &self.origin.len())
+            .field("lines", &self.ends.len())
             .field("cells", &self.cell_count())
             .finish()
     }
@@ -137,9 +145,12 @@ impl Pieces {
         }
         let extent = (max - min).max_element();
         Some(Self {
-            origin: ends.iter().map(|e| e.0).collect(),
-            direction: ends.iter().map(|e| e.1 - e.0).collect(),
+            px: ends.iter().map(|e| e.0.x).collect(),
+            py: ends.iter().map(|e| e.0.y).collect(),
+            dx: ends.iter().map(|e| e.1.x - e.0.x).collect(),
+            dy: ends.iter().map(|e| e.1.y - e.0.y).collect(),
             ends,
+            hull: convex_hull(knots),
             leaf_edges,
             centre: (min + max) * 0.5,
             inv_scale: if extent > 0.0 { 1.0 / extent } else { 1.0 },
@@ -158,24 +169,45 @@ impl Pieces {
 
     /// Bit l set when x (perturbed along `dir`) lies left of knot line l.
     fn key(&self, x: DVec2, dir: DVec2) -> u128 {
-        let mut key = 0u128;
-        for (l, (p, d)) in self.origin.iter().zip(&self.direction).enumerate() {
-            // `orient_sign`'s filter, term for term, so that a decided sign is its sign.
-            let left = d.x * (x.y - p.y);
-            let right = d.y * (x.x - p.x);
-            let det = left - right;
-            let bound = 1e-15 * (left.abs() + right.abs());
-            let positive = if det > bound {
-                true
-            } else if -det > bound {
-                false
-            } else {
-                let (a, b) = self.ends[l];
-                perturbed_side(a, b, x, dir) > 0
-            };
-            key |= (positive as u128) << l;
+        let (mut key, mut unsure) = (0u128, 0u128);
+        let lines = self.ends.len();
+        for start in (0..lines).step_by(64) {
+            let end = (start + 64).min(lines);
+            let (mut k, mut u) = (0u64, 0u64);
+            for (i, l) in (start..end).enumerate() {
+                // `orient_sign`'s filter, term for term, so that a decided sign is its sign.
+                let left = self.dx[l] * (x.y - self.py[l]);
+                let right = self.dy[l] * (x.x - self.px[l]);
+                let det = left - right;
+                let bound = 1e-15 * (left.abs() + right.abs());
+                k |= ((det > 0.0) as u64) << i;
+                u |= ((det.abs() <= bound) as u64) << i;
+            }
+            key |= (k as u128) << start;
+            unsure |= (u as u128) << start;
+        }
+        // Where the filter cannot tell (on or next to a line): the exact symbolic side.
+        while unsure != 0 {
+            let l = unsure.trailing_zeros() as usize;
+            unsure &= unsure - 1;
+            let (a, b) = self.ends[l];
+            let left = (perturbed_side(a, b, x, dir) > 0) as u128;
+            key = (key & !(1u128 << l)) | (left << l);
         }
         key
+    }
+
+    /// True when x lies strictly outside the pool's hull (exactly so: the float filter of
+    /// `orient_sign` must decide it), where every spline of the family is zero.
+    fn outside(&self, x: DVec2) -> bool {
+        let n = self.hull.len();
+        (0..n).any(|k| {
+            let (p, q) = (self.hull[k], self.hull[(k + 1) % n]);
+            let left = (q.x - p.x) * (x.y - p.y);
+            let right = (q.y - p.y) * (x.x - p.x);
+            let det = left - right;
+            -det > 1e-15 * (left.abs() + right.abs())
+        })
     }
 
     /// Every root's polynomial on the cell of `key`: the recurrence run on polynomials.
@@ -239,6 +271,11 @@ impl Pieces {
         roots: &[(u32, f64)],
         out: &mut Vec<Jet>,
     ) {
+        if self.outside(x) {
+            out.clear();
+            out.resize(roots.len(), [0.0; 6]);
+            return;
+        }
         let key = self.key(x, dir);
         {
             let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
@@ -332,4 +369,37 @@ fn monomial_jets<const DERIV: bool>(p: DVec2, inv_scale: f64) -> [Jet; MONOMIALS
         }
     }
     out
+}
+
+/// Convex hull of `points`, counter-clockwise, without collinear points (Andrew's monotone
+/// chain; fewer than three distinct points give no hull, and `outside` is then never true).
+fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
+    let mut sorted = points.to_vec();
+    sorted.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    sorted.dedup();
+    if sorted.len() < 3 {
+        return Vec::new();
+    }
+    let mut hull: Vec<DVec2> = Vec::with_capacity(2 * sorted.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 {
+            Box::new(sorted.iter())
+        } else {
+            Box::new(sorted.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && orient_sign(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    if hull.len() < 3 {
+        return Vec::new();
+    }
+    hull
 }
