@@ -12,8 +12,9 @@
 //!
 //! Knot-only data is computed once: per domain triangle one `SimplexFamily` (its
 //! (n+1)(n+2)/2 basis functions share one recurrence DAG over the triangle's 3(n+1) knots;
-//! each cell of the knot-line arrangement a point meets is converted once to polynomials
-//! and kept, so later points in the cell cost a sign key and a polynomial per function)
+//! at degree <= 2 each cell of the knot-line arrangement a point meets is converted once to
+//! polynomials and kept, so later points in the cell cost a sign key and a polynomial per
+//! function; degree 3 walks the recurrence)
 //! and a grid that lists, per cell, the triangles whose knot clouds' bounding box may cover
 //! it (the support of every N^I lies in the hull of I's clouds).
 //!

@@ -52,7 +52,8 @@ pub struct SimplexFamily {
     roots: Vec<(u32, f64)>,
     min: DVec2,
     max: DVec2,
-    /// The polynomial pieces met so far (`None` above degree 3: `evaluate` serves).
+    /// The polynomial pieces met so far (`None` above `pieces::PIECE_DEGREE`: `evaluate`
+    /// serves).
     pieces: Option<Pieces>,
 }
 
@@ -199,7 +200,7 @@ impl SimplexFamily {
     }
 
     /// What `evaluate` gives, from the polynomial of x's knot-line cell (converted on the
-    /// first visit and kept; module docs), equal up to rounding. Families above degree 3
+    /// first visit and kept; module docs), equal up to rounding. Families above degree 2
     /// walk the recurrence (`scratch` serves only then).
     pub fn evaluate_cached<const DERIV: bool>(
         &self,
@@ -308,7 +309,7 @@ mod tests {
     #[test]
     fn pieces_equal_the_recurrence_off_and_on_knot_lines_whatever_the_order() {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        for degree in 0..=3usize {
+        for degree in 0..=pieces::PIECE_DEGREE {
             for _ in 0..12 {
                 let size = degree + 3;
                 let pool: Vec<DVec2> = (0..size + 2)

@@ -27,8 +27,15 @@ use glam::DVec2;
 use rustc_hash::FxHashMap;
 use std::sync::{PoisonError, RwLock};
 
-/// Highest degree kept in piece form (the monomials of degree <= 3: 10 coefficients).
-pub(super) const MAX_PIECE_DEGREE: usize = 3;
+/// Polynomials up to this degree are representable (the monomials of degree <= 3: 10
+/// coefficients).
+const MAX_PIECE_DEGREE: usize = 3;
+
+/// Families up to this degree are kept in piece form. Degree 3 is not: in monomials about
+/// the pool's centre its cells' coefficients cancel too much (a DMS partition of unity on
+/// random clouds came out 4e-9 off at a domain-edge point, the recurrence 1e-15), so
+/// cubic families walk the recurrence.
+pub(super) const PIECE_DEGREE: usize = 2;
 const MONOMIALS: usize = 10;
 
 /// A family keeps at most this many cells; past it pieces are converted on each call
@@ -113,7 +120,7 @@ impl Pieces {
         min: DVec2,
         max: DVec2,
     ) -> Option<Self> {
-        if root_degree > MAX_PIECE_DEGREE {
+        if root_degree > PIECE_DEGREE {
             return None;
         }
         let mut line_of: FxHashMap<(u8, u8), u8> = FxHashMap::default();
