@@ -3,8 +3,8 @@
 //! while a publish waits (a server away means versions wait and coalesce locally; the
 //! sources never block on the queue).
 
+use super::queue::{now_ms, spool_dir, ClusterError, Queue, REQUEST_TIMEOUT};
 use super::wire::{encode, JobHeader};
-use super::{ClusterError, Queue, REQUEST_TIMEOUT};
 use crate::daemon::config::DaemonConfig;
 use crate::daemon::job::{still_changing, Job, JobDone, Outcome, Timings};
 use crate::daemon::messages::Msg;
@@ -28,7 +28,7 @@ pub(crate) fn offload(
     cfg: &DaemonConfig,
     out_dir: &std::path::Path,
 ) -> Result<Offload, ClusterError> {
-    let spool = super::spool_dir(out_dir);
+    let spool = spool_dir(out_dir);
     let name = format!("trispline-source-{}", std::process::id());
     let queue = Queue::connect(url, &cfg.cluster, &name)?;
     Ok(Offload {
@@ -147,7 +147,7 @@ fn publish(queue: &Queue, header: &JobHeader, payload: Vec<u8>, metrics: &Metric
         header.id,
         header.version,
         header.hash,
-        super::now_ms()
+        now_ms()
     );
     let payload = bytes::Bytes::from(payload);
     let mut delay = Duration::from_millis(100);
@@ -179,5 +179,63 @@ fn publish(queue: &Queue, header: &JobHeader, payload: Vec<u8>, metrics: &Metric
                 delay = (delay * 2).min(Duration::from_secs(2));
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cluster::wire::decode;
+    use crate::daemon::scheduler::{Arrival, VersionKey};
+    use std::sync::Arc;
+    use std::time::{Instant, SystemTime};
+
+    fn job(input: Input) -> Job {
+        Job {
+            arrival: Arrival {
+                id: "ear".into(),
+                input,
+                key: VersionKey {
+                    time: SystemTime::now(),
+                    tie: "ear@1.ply".into(),
+                },
+                version: "ear@1.ply".into(),
+                label: "ear@1.ply".into(),
+                detected: Instant::now(),
+            },
+            cfg: Arc::new(DaemonConfig::embedded_default().expect("default config")),
+            warm: None,
+        }
+    }
+
+    /// Bytes under the limit travel in the message; a file over it travels as its path; a
+    /// pipe record over it is spooled to the shared folder and travels as that path.
+    #[test]
+    fn small_inputs_travel_whole_and_large_ones_by_path() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let spool = dir.path().join("spool");
+        let small = dir.path().join("ear@1.ply");
+        std::fs::write(&small, b"ply small").expect("write");
+        let (h, msg) = message(&job(Input::File(small.clone())), 100, &spool).expect("read");
+        let (back, body) = decode(&msg).expect("decodes");
+        assert_eq!((back, body), (h.clone(), b"ply small".as_slice()));
+        assert_eq!(h.path, None);
+        assert_eq!(h.hash, format!("{:016x}", content_hash(b"ply small")));
+        assert_eq!(h.format, Some(Format::Ply));
+
+        let (h, msg) = message(&job(Input::File(small.clone())), 4, &spool).expect("read");
+        assert_eq!(h.path.as_deref(), Some(small.as_path()));
+        assert!(decode(&msg).expect("decodes").1.is_empty());
+
+        let data = Arc::new(vec![7u8; 50]);
+        let inline = Input::Inline {
+            data: Arc::clone(&data),
+            format: Format::Stl,
+        };
+        let (h, msg) = message(&job(inline), 10, &spool).expect("spooled");
+        let path = h.path.clone().expect("a spool path");
+        assert!(path.starts_with(&spool));
+        assert_eq!(std::fs::read(&path).expect("spooled bytes"), *data);
+        assert!(decode(&msg).expect("decodes").1.is_empty());
     }
 }

@@ -4,8 +4,8 @@
 //! that dies leaves the job unacknowledged: the server hands it to another after the ack
 //! wait, and the claim (renewed while the fit runs) has run out by then.
 
+use super::queue::{now_ms, spool_dir, states_dir, ClusterError, Queue};
 use super::wire::{self, decide, Decision, JobHeader, PatchRecord, StateRecord};
-use super::{now_ms, ClusterError, Queue};
 use crate::daemon::config::DaemonConfig;
 use crate::daemon::job::{run_job, Job, JobDone, Outcome};
 use crate::daemon::kinds::{rejection_kind, Cause};
@@ -69,7 +69,9 @@ pub fn run_worker(opts: WorkerOptions, ctl: &Control) -> Result<WorkerSummary, C
             .map_err(folder(Path::new(addr)))?;
         tracing::info!(addr = %local, "serving /metrics and /healthz");
     }
-    let queue = Queue::connect(&opts.url, &opts.config.cluster, &opts.name)?;
+    let Some(queue) = connect_patiently(&opts, ctl)? else {
+        return Ok(Summary::default());
+    };
     let consumer = queue.block_on(queue.stream.get_or_create_consumer(
         "trispline-workers",
         pull::Config {
@@ -94,7 +96,8 @@ pub fn run_worker(opts: WorkerOptions, ctl: &Control) -> Result<WorkerSummary, C
         .unwrap_or_else(|| opts.out_dir.join("quarantine"));
     let cell = Arc::new(ConfigCell::new(opts.config.clone()));
     let store = Arc::new(StateStore::new(scratch.path().to_path_buf()));
-    let (acks, _unheard) = crossbeam_channel::unbounded();
+    // Nobody listens: the scheduler that needs "written" lives in the source.
+    let (acks, _) = crossbeam_channel::unbounded();
     let (wtx, wrx) = crossbeam_channel::unbounded();
     let writer = Writer {
         out_dir: opts.out_dir.clone(),
@@ -146,6 +149,26 @@ pub fn run_worker(opts: WorkerOptions, ctl: &Control) -> Result<WorkerSummary, C
     }
     let _ = ctx.wtx.send(WriterMsg::Shutdown);
     Ok(writer.join().unwrap_or_default())
+}
+
+/// A worker may start before the server (boot order, a server restart): it waits for it,
+/// until stopped. Other failures (credentials, setup) end it.
+fn connect_patiently(opts: &WorkerOptions, ctl: &Control) -> Result<Option<Queue>, ClusterError> {
+    loop {
+        match Queue::connect(&opts.url, &opts.config.cluster, &opts.name) {
+            Ok(q) => return Ok(Some(q)),
+            Err(e @ ClusterError::Connect { .. }) => {
+                tracing::warn!(error = %e, "queue server not reachable yet; waiting");
+            }
+            Err(e) => return Err(e),
+        }
+        for _ in 0..10 {
+            if ctl.stop.load(Ordering::Relaxed) {
+                return Ok(None);
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
 }
 
 /// The job's version as the daemon's writer knows versions.
@@ -508,7 +531,7 @@ fn fit(
         }
     });
     if let Some(path) = &h.path {
-        if path.starts_with(super::spool_dir(&ctx.out_dir)) {
+        if path.starts_with(spool_dir(&ctx.out_dir)) {
             let _ = std::fs::remove_file(path);
         }
     }
@@ -542,7 +565,7 @@ fn save_state(ctx: &Ctx, h: &JobHeader) {
     let limit = ctx.cell.get().cluster.payload_limit;
     let mut bytes = serde_json::to_vec(&StateRecord::Inline((*state).clone())).unwrap_or_default();
     if bytes.len() > limit {
-        let dir = super::states_dir(&ctx.out_dir);
+        let dir = states_dir(&ctx.out_dir);
         let path = dir.join(format!("{}.json", wire::token(&h.id)));
         let written = std::fs::create_dir_all(&dir)
             .map_err(|e| e.to_string())

@@ -35,6 +35,15 @@ fn nats_server() -> Option<PathBuf> {
     found
 }
 
+/// The server's log, appended across restarts.
+fn log_file(store: &Path) -> std::fs::File {
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(store.join("server.log"))
+        .expect("server log")
+}
+
 struct Server {
     bin: PathBuf,
     port: u16,
@@ -64,12 +73,16 @@ impl Server {
             .args(["-js", "-a", "127.0.0.1", "-p", &port.to_string(), "-sd"])
             .arg(store)
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
+            .stderr(log_file(store))
             .spawn()
             .expect("nats-server starts");
         let up = wait_until(|| std::net::TcpStream::connect(("127.0.0.1", port)).is_ok());
         assert!(up, "nats-server listens on {port}");
         child
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(self.store.path().join("server.log")).unwrap_or_default()
     }
 
     fn url(&self) -> String {
@@ -210,31 +223,34 @@ fn a_warm_start_crosses_workers() {
     let s = setup(&cluster_config());
     let source = s.spawn(&["--queue", &server.url()]);
     let a = spawn_worker(&s, &server, "A");
-    drop_file(&s.inbox, "ear@0001.ply", &patch_ply(12, 1));
+    // The second version is the same surface with other bytes: a warm start applies.
+    let v1 = patch_obj(12, 1);
+    drop_file(&s.inbox, "ear@0001.obj", &v1);
     let fitted = |v: &str| {
         events(&s.out)
             .into_iter()
             .find(|e| is_fitted(e) && e["version"] == v)
     };
     assert!(
-        wait_until(|| fitted("ear@0001.ply").is_some()),
+        wait_until(|| fitted("ear@0001.obj").is_some()),
         "{}",
         logs(&s, &["A"])
     );
     assert!(stop(a).is_some_and(|st| st.success()));
-    let first = fitted("ear@0001.ply").expect("fitted");
+    let first = fitted("ear@0001.obj").expect("fitted");
     assert_eq!(
         (first["worker"].as_str(), first["warm_start"].as_bool()),
         (Some("A"), Some(false))
     );
     let b = spawn_worker(&s, &server, "B");
-    drop_file(&s.inbox, "ear@0002.ply", &patch_ply(12, 2));
+    let v2 = [v1.as_slice(), b"# version 2\n"].concat();
+    drop_file(&s.inbox, "ear@0002.obj", &v2);
     assert!(
-        wait_until(|| fitted("ear@0002.ply").is_some()),
+        wait_until(|| fitted("ear@0002.obj").is_some()),
         "{}",
         logs(&s, &["A", "B"])
     );
-    let second = fitted("ear@0002.ply").expect("fitted");
+    let second = fitted("ear@0002.obj").expect("fitted");
     assert_eq!(second["worker"], "B");
     assert_eq!(
         second["warm_start"], true,
@@ -268,9 +284,9 @@ fn a_job_whose_worker_is_killed_completes_on_another_and_poison_is_quarantined()
     };
     // A slower fit (a 150 x 150 grid on the default Loop surface), so that a kill lands
     // inside it.
-    let s = setup(&format!(
-        "[daemon]\nsettle_ms = 200\nworkers = 1\n[cluster]\nack_wait_ms = 2000\nmax_deliveries = 2\n"
-    ));
+    let s = setup(
+        "[daemon]\nsettle_ms = 200\nworkers = 1\n[cluster]\nack_wait_ms = 2000\nmax_deliveries = 2\n",
+    );
     let source = s.spawn(&["--queue", &server.url()]);
     let big = patch_ply(150, 7);
     drop_file(&s.inbox, "big@0001.ply", &big);
@@ -346,6 +362,13 @@ fn a_server_restart_mid_run_is_ridden_out() {
         }
     };
     drop_round(1);
+    // Mid-run: the first round is through (everyone is connected), the second in flight.
+    let first: Vec<String> = (0..6).map(|p| format!("q{p}@0001.ply")).collect();
+    assert!(
+        wait_until(|| accounted(&s.out, &first)),
+        "{}",
+        logs(&s, &names)
+    );
     drop_round(2);
     let t = Instant::now();
     server.restart(Duration::from_millis(1500));
