@@ -162,8 +162,10 @@ fn check_newest_fitted_last(out: &Path, newest: &HashMap<String, String>) {
             .filter_map(|e| e["version"].as_str())
             .collect();
         assert_eq!(fitted.last(), Some(&last.as_str()), "{patch}: {fitted:?}");
+        // Delivery is at least once: a fit whose acknowledgement was lost (the server away)
+        // may be written again, but never after a newer version.
         assert!(
-            fitted.windows(2).all(|w| w[0] < w[1]),
+            fitted.windows(2).all(|w| w[0] <= w[1]),
             "{patch}: {fitted:?}"
         );
         let report = read_json(&out.join(patch).join("report.json"));
@@ -223,8 +225,9 @@ fn a_warm_start_crosses_workers() {
     let s = setup(&cluster_config());
     let source = s.spawn(&["--queue", &server.url()]);
     let a = spawn_worker(&s, &server, "A");
-    // The second version is the same surface with other bytes: a warm start applies.
-    let v1 = patch_obj(12, 1);
+    // The second version is the same surface with other bytes: a warm start applies (the
+    // patch is big enough for the scan path to reuse its controls, as in one process).
+    let v1 = patch_obj(40, 1);
     drop_file(&s.inbox, "ear@0001.obj", &v1);
     let fitted = |v: &str| {
         events(&s.out)
@@ -375,8 +378,9 @@ fn a_server_restart_mid_run_is_ridden_out() {
     drop_round(3);
     assert!(
         wait_until(|| accounted(&s.out, &all)),
-        "{}",
-        logs(&s, &names)
+        "{}\n--- server\n{}",
+        logs(&s, &names),
+        server.log()
     );
     eprintln!(
         "run completed {:.1} s after the restart began",
