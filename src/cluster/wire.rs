@@ -153,7 +153,7 @@ pub(crate) fn decide(
 /// on shared storage (a 40k-point scan's state is ~2 MB of JSON).
 #[derive(serde::Serialize, serde::Deserialize)]
 pub(crate) enum StateRecord {
-    Inline(PatchState),
+    Inline(Box<PatchState>),
     File(PathBuf),
 }
 

@@ -548,7 +548,7 @@ fn load_state(ctx: &Ctx, id: &str) -> Option<PatchState> {
         }
     };
     match serde_json::from_slice::<StateRecord>(&bytes).ok()? {
-        StateRecord::Inline(s) => Some(s),
+        StateRecord::Inline(s) => Some(*s),
         StateRecord::File(path) => serde_json::from_slice(&std::fs::read(path).ok()?).ok(),
     }
 }
@@ -563,7 +563,8 @@ fn save_state(ctx: &Ctx, h: &JobHeader) {
         return;
     }
     let limit = ctx.cell.get().cluster.payload_limit;
-    let mut bytes = serde_json::to_vec(&StateRecord::Inline((*state).clone())).unwrap_or_default();
+    let mut bytes =
+        serde_json::to_vec(&StateRecord::Inline(Box::new((*state).clone()))).unwrap_or_default();
     if bytes.len() > limit {
         let dir = states_dir(&ctx.out_dir);
         let path = dir.join(format!("{}.json", wire::token(&h.id)));
