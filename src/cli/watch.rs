@@ -44,6 +44,11 @@ pub struct WatchArgs {
     /// outputs in OUT/scans/ear/ (sets daemon.recursive).
     #[arg(long)]
     pub recursive: bool,
+    /// Publish the jobs to this NATS JetStream server (`nats://HOST:PORT`, sets cluster.url)
+    /// for `trispline worker` processes to fit, instead of fitting them here. OUT must be
+    /// the workers' shared OUT.
+    #[arg(long)]
+    pub queue: Option<String>,
 }
 
 /// Runs `watch`: loads the configuration, then the daemon until it is stopped (or, with
@@ -62,6 +67,9 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
     let config = match DaemonConfig::parse(&text, &name) {
         Ok(mut c) => {
             c.daemon.recursive |= args.recursive;
+            if args.queue.is_some() {
+                c.cluster.url.clone_from(&args.queue);
+            }
             c
         }
         Err(e) => {
@@ -95,6 +103,13 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
             PipeSpec::Fifo(p.clone())
         }
     });
+    let offload = match &config.cluster.url {
+        Some(url) => Some(
+            crate::cluster::offload(url, &config, &args.out)
+                .with_context(|| format!("queue {url}"))?,
+        ),
+        None => None,
+    };
     let opts = DaemonOptions {
         watch_dir: args.dir.clone(),
         out_dir: args.out.clone(),
@@ -106,6 +121,7 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         config,
         config_path: args.config.clone(),
         pipe,
+        offload,
     };
     let summary = run(opts, &ctl)?;
     eprintln!(
@@ -115,11 +131,11 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-type SetLevel = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
+pub(crate) type SetLevel = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
 
 /// Logs to stderr, human or JSON, with a filter that a config reload can replace. RUST_LOG,
 /// when set, wins at start-up; a reload applies `log.level`.
-fn init_logging(config: &DaemonConfig, force_json: bool) -> SetLevel {
+pub(crate) fn init_logging(config: &DaemonConfig, force_json: bool) -> SetLevel {
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     use tracing_subscriber::{fmt, reload, EnvFilter};

@@ -1,5 +1,6 @@
 //! Daemon configuration: TOML with unknown keys refused and ranges checked.
 
+pub use super::cluster_config::ClusterSection;
 use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
@@ -21,6 +22,9 @@ pub struct DaemonConfig {
     /// `[log]`: filter and format of the log lines.
     #[serde(default)]
     pub log: LogSection,
+    /// `[cluster]`: the shared work queue and state store (`--queue`).
+    #[serde(default)]
+    pub cluster: ClusterSection,
 }
 
 /// The `[daemon]` table.
@@ -296,6 +300,7 @@ impl DaemonConfig {
     fn validate(&self, source_name: &str) -> Result<(), ConfigError> {
         let ranges = validate_fit(&self.fit)
             .and_then(|()| validate_daemon(&self.daemon))
+            .and_then(|()| super::cluster_config::validate_cluster(&self.cluster))
             .and_then(|()| {
                 let t = self.output.tessellation;
                 check(
@@ -390,6 +395,9 @@ impl DaemonConfig {
         }
         if self.output.quarantine_dir != new.output.quarantine_dir {
             keys.push("output.quarantine_dir");
+        }
+        if self.cluster != new.cluster {
+            keys.push("cluster");
         }
         keys
     }
