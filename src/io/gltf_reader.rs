@@ -394,8 +394,10 @@ fn check_accessor(
     if view_end.is_none_or(|end| end > buffer_len) {
         return Err(bad("buffer view runs past its buffer".into()));
     }
+    // glTF requires count >= 1, and the `gltf` crate's readers compute `count - 1`
+    // unchecked (gltf 1.4.1, accessor/util.rs:384).
     if a.count() == 0 {
-        return Ok(());
+        return Err(bad("count 0 (glTF requires at least one element)".into()));
     }
     let end = (a.count() - 1)
         .checked_mul(stride)
