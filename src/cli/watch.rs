@@ -4,7 +4,7 @@ use crate::daemon::config::{DaemonConfig, LogFormat, DEFAULT_CONFIG};
 use crate::daemon::pipe::PipeSpec;
 use crate::daemon::{run, Control, DaemonOptions};
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -51,20 +51,33 @@ pub struct WatchArgs {
     pub queue: Option<String>,
 }
 
+/// The daemon configuration from `path`, or the embedded default without one. An invalid
+/// configuration is printed and becomes exit code 2; an unreadable file is an error.
+pub(crate) fn load_config(path: Option<&Path>) -> anyhow::Result<Result<DaemonConfig, ExitCode>> {
+    let text = match path {
+        Some(p) => {
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
+        }
+        None => DEFAULT_CONFIG.to_string(),
+    };
+    Ok(DaemonConfig::parse(&text, &config_name(path)).map_err(|e| {
+        eprintln!("{e}");
+        ExitCode::from(2)
+    }))
+}
+
+/// How messages name the configuration's source.
+fn config_name(path: Option<&Path>) -> String {
+    path.map_or_else(
+        || "embedded config/default.toml".to_string(),
+        |p| p.display().to_string(),
+    )
+}
+
 /// Runs `watch`: loads the configuration, then the daemon until it is stopped (or, with
 /// --once, until the folder's files are processed).
 pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
-    let (text, name) = match &args.config {
-        Some(p) => (
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
-            p.display().to_string(),
-        ),
-        None => (
-            DEFAULT_CONFIG.to_string(),
-            "embedded config/default.toml".to_string(),
-        ),
-    };
-    let config = match DaemonConfig::parse(&text, &name) {
+    let config = match load_config(args.config.as_deref())? {
         Ok(mut c) => {
             c.daemon.recursive |= args.recursive;
             if args.queue.is_some() {
@@ -72,17 +85,14 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
             }
             c
         }
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(2));
-        }
+        Err(code) => return Ok(code),
     };
     if args.print_config {
         print!("{}", config.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     if args.check_config {
-        println!("{name}: ok");
+        println!("{}: ok", config_name(args.config.as_deref()));
         return Ok(ExitCode::SUCCESS);
     }
     let set_log_level = init_logging(&config, args.log_json);

@@ -1,7 +1,6 @@
 //! `trispline worker`: fits jobs from a NATS JetStream work queue into a shared OUT.
 
 use crate::cluster::{run_worker, WorkerOptions};
-use crate::daemon::config::{DaemonConfig, DEFAULT_CONFIG};
 use crate::daemon::Control;
 use anyhow::Context;
 use std::path::PathBuf;
@@ -34,22 +33,9 @@ pub struct WorkerArgs {
 
 /// Runs a worker until SIGTERM/SIGINT (the fit in progress finishes first).
 pub fn run(args: &WorkerArgs) -> anyhow::Result<ExitCode> {
-    let (text, source) = match &args.config {
-        Some(p) => (
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
-            p.display().to_string(),
-        ),
-        None => (
-            DEFAULT_CONFIG.to_string(),
-            "embedded config/default.toml".to_string(),
-        ),
-    };
-    let mut config = match DaemonConfig::parse(&text, &source) {
+    let mut config = match super::watch::load_config(args.config.as_deref())? {
         Ok(c) => c,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(2));
-        }
+        Err(code) => return Ok(code),
     };
     if args.metrics_addr.is_some() {
         config.daemon.metrics_addr.clone_from(&args.metrics_addr);
