@@ -30,18 +30,7 @@ fn main() {
         .nth(1)
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
-    let files = [
-        "range_scans/bun000_tri.ply",
-        "range_scans/bun045_tri.ply",
-        "range_scans/chin_tri.ply",
-        "range_scans/bun000_range_grid.ply",
-        "range_scans/bun000_meshlab_triangulated.ply",
-        "range_scans/registered/bun000.ply",
-        "range_scans/registered/bun045.ply",
-        "range_scans/registered/bun180.ply",
-        "range_scans/registered/bun270.ply",
-        "range_scans/registered/chin.ply",
-    ];
+    let files = trispline::testdata::STANFORD_SCANS;
     let only = std::env::args().nth(2);
     for rel in files {
         if only.as_deref().is_some_and(|o| !rel.contains(o)) {

@@ -42,18 +42,7 @@ fn main() {
         None => SurfaceKind::Loop,
     };
     let only = std::env::args().nth(4);
-    let files = [
-        "range_scans/bun000_tri.ply",
-        "range_scans/bun045_tri.ply",
-        "range_scans/chin_tri.ply",
-        "range_scans/bun000_range_grid.ply",
-        "range_scans/bun000_meshlab_triangulated.ply",
-        "range_scans/registered/bun000.ply",
-        "range_scans/registered/bun045.ply",
-        "range_scans/registered/bun180.ply",
-        "range_scans/registered/bun270.ply",
-        "range_scans/registered/chin.ply",
-    ];
+    let files = trispline::testdata::STANFORD_SCANS;
     println!("| file | components | parts | fitted pts | fitted within 1 mm | input within 1 mm | not fitted (share) | worst rms um | max ctrl % | shown->input max um | worker ms |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for rel in files {

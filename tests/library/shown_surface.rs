@@ -29,18 +29,7 @@ fn glb_json(bytes: &[u8]) -> serde_json::Value {
 
 #[test]
 fn every_stanford_scan_is_shown_where_it_was_fitted() {
-    let scans = [
-        "range_scans/bun000_tri.ply",
-        "range_scans/bun045_tri.ply",
-        "range_scans/chin_tri.ply",
-        "range_scans/bun000_range_grid.ply",
-        "range_scans/bun000_meshlab_triangulated.ply",
-        "range_scans/registered/bun000.ply",
-        "range_scans/registered/bun045.ply",
-        "range_scans/registered/bun180.ply",
-        "range_scans/registered/bun270.ply",
-        "range_scans/registered/chin.ply",
-    ];
+    let scans = trispline::testdata::STANFORD_SCANS;
     let cfg = WorkerConfig::default();
     let mut failures = Vec::new();
     for rel in scans {
