@@ -229,37 +229,53 @@ fn collect_mesh(
 ) -> Result<TriMesh, IoErrorKind> {
     let mut mesh = TriMesh::default();
     let scenes: Vec<gltf::Scene> = gltf.scenes().collect();
-    let mut stack: Vec<(gltf::Node, DMat4)> = Vec::new();
-    if scenes.is_empty() {
-        // No scene: take every mesh node as a root.
-        stack.extend(gltf.nodes().map(|n| (n, DMat4::IDENTITY)));
+    let roots: Vec<Vec<gltf::Node>> = if scenes.is_empty() {
+        // No scene: take every node as a root of one implicit scene.
+        vec![gltf.nodes().collect()]
     } else {
-        for s in &scenes {
-            stack.extend(s.nodes().map(|n| (n, DMat4::IDENTITY)));
-        }
-    }
-    let mut visited = 0usize;
-    while let Some((node, parent)) = stack.pop() {
-        visited += 1;
-        if visited > 1_000_000 {
-            return Err(IoErrorKind::malformed("node hierarchy too deep or cyclic"));
-        }
-        let m = node.transform().matrix();
-        let local = DMat4::from_cols_array_2d(&m.map(|c| c.map(|x| x as f64)));
-        let world = parent * local;
-        if let Some(gm) = node.mesh() {
-            for prim in gm.primitives() {
-                add_primitive(
-                    &mut mesh,
-                    &prim,
-                    gm.name().unwrap_or(""),
-                    world,
-                    buffers,
-                    opts,
-                )?;
+        scenes.iter().map(|s| s.nodes().collect()).collect()
+    };
+    // glTF requires the node hierarchy to be disjoint strict trees. A node met twice in one
+    // scene is a cycle or a shared child: refused, since following it would repeat the
+    // subtree without end (or exponentially). Scenes may share nodes; a node an earlier
+    // scene already placed is skipped so the merged mesh does not hold it twice.
+    let mut placed_by: Vec<Option<usize>> = vec![None; gltf.nodes().len()];
+    for (scene, scene_roots) in roots.into_iter().enumerate() {
+        let mut stack: Vec<(gltf::Node, DMat4)> = scene_roots
+            .into_iter()
+            .map(|n| (n, DMat4::IDENTITY))
+            .collect();
+        while let Some((node, parent)) = stack.pop() {
+            match placed_by.get(node.index()).copied().flatten() {
+                Some(s) if s == scene => {
+                    return Err(IoErrorKind::malformed(format!(
+                        "node {} is reached twice: the node hierarchy has a cycle or a shared child",
+                        node.index()
+                    )));
+                }
+                Some(_) => continue,
+                None => {}
             }
+            if let Some(slot) = placed_by.get_mut(node.index()) {
+                *slot = Some(scene);
+            }
+            let m = node.transform().matrix();
+            let local = DMat4::from_cols_array_2d(&m.map(|c| c.map(|x| x as f64)));
+            let world = parent * local;
+            if let Some(gm) = node.mesh() {
+                for prim in gm.primitives() {
+                    add_primitive(
+                        &mut mesh,
+                        &prim,
+                        gm.name().unwrap_or(""),
+                        world,
+                        buffers,
+                        opts,
+                    )?;
+                }
+            }
+            stack.extend(node.children().map(|c| (c, world)));
         }
-        stack.extend(node.children().map(|c| (c, world)));
     }
     Ok(mesh)
 }

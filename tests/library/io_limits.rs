@@ -290,6 +290,58 @@ fn io_gltf_accessor_mistakes_are_typed_errors() {
     }
 }
 
+/// An embedded-buffer .gltf with one triangle mesh and the given `scenes` and `nodes` JSON.
+fn gltf_with_hierarchy(scenes: &str, nodes: &str) -> String {
+    let data = "AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA=";
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scenes":{scenes},"nodes":{nodes},"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"indices":1}}]}}],"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}},{{"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR"}}],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}},{{"buffer":0,"byteOffset":36,"byteLength":6}}],"buffers":[{{"byteLength":44,"uri":"data:application/octet-stream;base64,{data}"}}]}}"#
+    )
+}
+
+#[test]
+fn io_gltf_node_cycles_and_shared_children_are_refused_at_once() {
+    // The fuzzer's slow unit: a node that is its own child was followed a million times,
+    // adding its mesh at every visit (10 s under ASan). glTF requires disjoint strict trees.
+    let read = |scenes: &str, nodes: &str| {
+        read_mesh_bytes(
+            gltf_with_hierarchy(scenes, nodes).as_bytes(),
+            Format::Gltf,
+            "scene.gltf",
+            &LoadOptions::default(),
+        )
+    };
+    for (what, scenes, nodes) in [
+        (
+            "self cycle",
+            r#"[{"nodes":[0]}]"#,
+            r#"[{"mesh":0,"children":[0]}]"#,
+        ),
+        (
+            "two-node cycle",
+            r#"[{"nodes":[0]}]"#,
+            r#"[{"mesh":0,"children":[1]},{"mesh":0,"children":[0]}]"#,
+        ),
+        (
+            "shared child",
+            r#"[{"nodes":[0,1]}]"#,
+            r#"[{"children":[2]},{"children":[2]},{"mesh":0}]"#,
+        ),
+    ] {
+        let e = read(scenes, nodes).expect_err(what);
+        assert_eq!(e.kind(), "malformed", "{what}: {e}");
+        assert!(e.to_string().contains("reached twice"), "{what}: {e}");
+    }
+    // Two scenes may list the same node: its mesh is taken once.
+    let shared = read(r#"[{"nodes":[0]},{"nodes":[0]}]"#, r#"[{"mesh":0}]"#).expect("shared root");
+    assert_eq!(shared.mesh.triangles.len(), 1);
+    let tree = read(
+        r#"[{"nodes":[0]}]"#,
+        r#"[{"children":[1,2]},{"mesh":0},{"mesh":0,"translation":[2,0,0]}]"#,
+    )
+    .expect("a proper tree");
+    assert_eq!(tree.mesh.triangles.len(), 2);
+}
+
 #[test]
 fn io_gltf_external_buffers_load_from_beside_the_file_and_nowhere_else() {
     let root = tempfile::tempdir().expect("temp dir");
