@@ -118,6 +118,7 @@ pub(crate) fn fit_planar(
         &prepared,
         &fit_cfg.scan,
         &domain_points,
+        &rounds.errors,
         rounds.rms.clone(),
         built.spacing,
         built.reused,
@@ -158,11 +159,13 @@ fn locate_all(
     Ok(located.into_iter().flatten().collect())
 }
 
-/// The covered region and trims in domain coordinates.
+/// The covered region (with the fitted points' footprint: `errors` per data point) and
+/// trims in domain coordinates.
 fn planar_info(
     prepared: &Prepared,
     scan: &crate::pipeline::scan::ScanConfig,
     domain_points: &[DVec2],
+    errors: &[f64],
     correction_rms: Vec<f64>,
     spacing: Option<f64>,
     reused_controls: usize,
@@ -206,7 +209,15 @@ fn planar_info(
             v: x.y,
         })
         .collect();
-    let coverage = Coverage::new(&plan.covered, &corrected, &map.plane, &map.near_fold);
+    // The footprint as the other kinds': the fitted points the surface passes within the
+    // bridging distance of, at their final domain points.
+    let coverage = Coverage::new(&plan.covered, &corrected, &map.plane, &map.near_fold)
+        .with_footprint(
+            &corrected,
+            &prepared.part.positions,
+            errors,
+            plan.max_bridge,
+        );
     ScatteredInfo {
         preparation: Preparation {
             components: prepared.components,
