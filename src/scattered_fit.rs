@@ -118,12 +118,15 @@ pub enum ScatteredFitError {
     },
 }
 
+/// A chunk's collocation rows: where each ends in the chunk's entries, and the entries.
+type RowChunk = (Vec<usize>, Vec<(u32, f64)>);
+
 /// The collocation rows at `params` (parallel over chunks; each chunk's rows in one buffer,
 /// not one allocation per row: in the profile of a 40k-point DMS fit, allocating and
 /// freeing took about 4 % of the fit).
 pub fn collocation_matrix(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Csr {
     const CHUNK: usize = 2048;
-    let chunks: Vec<(Vec<usize>, Vec<(u32, f64)>)> = params
+    let chunks: Vec<RowChunk> = params
         .par_chunks(CHUNK)
         .map(|chunk| {
             let (mut ends, mut entries) = (Vec::with_capacity(chunk.len()), Vec::new());

@@ -118,8 +118,7 @@ pub(crate) fn fit_planar(
         &prepared,
         &fit_cfg.scan,
         &domain_points,
-        &rounds.errors,
-        rounds.rms.clone(),
+        &rounds,
         built.spacing,
         built.reused,
         cold_start,
@@ -159,14 +158,13 @@ fn locate_all(
     Ok(located.into_iter().flatten().collect())
 }
 
-/// The covered region (with the fitted points' footprint: `errors` per data point) and
-/// trims in domain coordinates.
+/// The covered region (with the footprint of the fitted points the rounds left) and trims in
+/// domain coordinates.
 fn planar_info(
     prepared: &Prepared,
     scan: &crate::pipeline::scan::ScanConfig,
     domain_points: &[DVec2],
-    errors: &[f64],
-    correction_rms: Vec<f64>,
+    rounds: &rounds::Rounds,
     spacing: Option<f64>,
     reused_controls: usize,
     cold_start: Option<String>,
@@ -215,7 +213,7 @@ fn planar_info(
         .with_footprint(
             &corrected,
             &prepared.part.positions,
-            errors,
+            &rounds.errors,
             plan.max_bridge,
         );
     ScatteredInfo {
@@ -231,7 +229,7 @@ fn planar_info(
         coverage,
         outer,
         holes,
-        correction_rms,
+        correction_rms: rounds.rms.clone(),
         spacing,
         reused_controls,
         cold_start,
