@@ -37,8 +37,8 @@ pub fn tessellate_planar(f: &PatchFit, shown: &Coverage, segments: usize) -> Tes
     tessellate_in(f, segments, Some(shown), Some(&frame))
 }
 
-/// The parameter of domain point (q.u, q.v); outside the domain (round-off at its rim), the
-/// nearest point of face q.face.
+/// The parameter of domain point (q.u, q.v); outside the domain (round-off at its rim), a
+/// point of face q.face (its barycentric coordinates clamped to the face).
 fn surface_param(surface: &dyn PlanarSurface, q: SurfaceParam) -> SurfaceParam {
     let x = DVec2::new(q.u, q.v);
     if let Some(p) = surface.locate(x) {
