@@ -118,20 +118,35 @@ pub enum ScatteredFitError {
     },
 }
 
-/// The collocation rows at `params` (parallel over chunks).
+/// A chunk's collocation rows: where each ends in the chunk's entries, and the entries.
+type RowChunk = (Vec<usize>, Vec<(u32, f64)>);
+
+/// The collocation rows at `params` (parallel over chunks; each chunk's rows in one buffer,
+/// not one allocation per row: in the profile of a 40k-point DMS fit, allocating and
+/// freeing took about 4 % of the fit).
 pub fn collocation_matrix(surface: &dyn TriSurface, params: &[SurfaceParam]) -> Csr {
     const CHUNK: usize = 2048;
-    let rows: Vec<Vec<(u32, f64)>> = params
+    let chunks: Vec<RowChunk> = params
         .par_chunks(CHUNK)
-        .flat_map_iter(|chunk| {
-            chunk.iter().map(|p| {
-                let mut row = Vec::new();
+        .map(|chunk| {
+            let (mut ends, mut entries) = (Vec::with_capacity(chunk.len()), Vec::new());
+            let mut row = Vec::new();
+            for p in chunk {
                 surface.basis_row(*p, &mut row);
-                row
-            })
+                entries.extend_from_slice(&row);
+                ends.push(entries.len());
+            }
+            (ends, entries)
         })
         .collect();
-    Csr::from_rows(surface.control_count(), rows.iter().map(|r| r.as_slice()))
+    let rows = chunks.iter().flat_map(|(ends, entries)| {
+        ends.iter().scan(0, move |start, &end| {
+            let row = &entries[*start..end];
+            *start = end;
+            Some(row)
+        })
+    });
+    Csr::from_rows(surface.control_count(), rows)
 }
 
 /// Umbrella Laplacian over the control net: row i is `P_i - mean(neighbours)`.
@@ -230,8 +245,9 @@ pub fn foot_points(
 
 /// A Newton step that moves the surface point less than this share of its distance to the
 /// data point ends the search: sliding t along the surface changes a distance d by about
-/// t^2 / (2 d), here under 1e-6 of it.
-const FOOT_STEP_SHARE: f64 = 1e-3;
+/// t^2 / (2 d), here under 5e-5 of it (1e-3, 5e-7 of it, cost a Newton step per point
+/// and round more on a 40k-point DMS fit for no visible change of the RMS).
+const FOOT_STEP_SHARE: f64 = 1e-2;
 
 /// `foot_points` with the surface's derivatives at each foot (what callers want next:
 /// the distance, the normal), so that nobody evaluates the feet again.

@@ -149,6 +149,26 @@ impl Tessellation {
 /// chordal error far below scan noise at scan-like curvatures). With a coverage, only
 /// the triangles it shows are kept (see [`Coverage`]).
 pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) -> Tessellation {
+    tessellate_in(f, segments, coverage, None)
+}
+
+/// Where a coverage's coordinates are not the surface's own parameters (the planar kinds:
+/// a coverage in domain points, a surface in (face, barycentric)): both ways between them.
+pub(crate) struct CoverageFrame<'a> {
+    /// A surface parameter's coverage coordinates (its `u`, `v`; the face is kept).
+    pub to_coverage: &'a (dyn Fn(SurfaceParam) -> SurfaceParam + Sync),
+    /// The surface parameter at coverage coordinates (the face given is a hint: the
+    /// parameter's face before `to_coverage`, or the face of the triangle it was cut from).
+    pub to_surface: &'a (dyn Fn(SurfaceParam) -> SurfaceParam + Sync),
+}
+
+/// `tessellate` with the coverage in its own coordinates (`frame`; `None`: the surface's).
+pub(crate) fn tessellate_in(
+    f: &PatchFit,
+    segments: usize,
+    coverage: Option<&Coverage>,
+    frame: Option<&CoverageFrame>,
+) -> Tessellation {
     // The coverage's point locator and the surface's samples need nothing of each other:
     // built side by side (each about a third of a 40k-point scan's tessellation).
     let (covers, (params, triangles, evals)) = rayon::join(
@@ -159,13 +179,25 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
     let triangles = match (coverage, covers) {
         (Some(c), Some(mapped)) => {
             let evaluate = f.model.as_surface().evaluator(&f.controls);
-            c.shown(
-                mapped,
-                &mut params,
-                &mut evals,
-                triangles,
-                evaluate.as_ref(),
-            )
+            match frame {
+                None => c.shown(
+                    mapped,
+                    &mut params,
+                    &mut evals,
+                    triangles,
+                    evaluate.as_ref(),
+                ),
+                Some(frame) => {
+                    let sampled = params.len();
+                    let mut at: Vec<SurfaceParam> =
+                        params.par_iter().map(|p| (frame.to_coverage)(*p)).collect();
+                    let evaluate_at = |q: SurfaceParam| evaluate((frame.to_surface)(q));
+                    let shown = c.shown(mapped, &mut at, &mut evals, triangles, &evaluate_at);
+                    // The sampled vertices keep their parameters; the rim pieces' come back.
+                    params.extend(at[sampled..].iter().map(|q| (frame.to_surface)(*q)));
+                    shown
+                }
+            }
         }
         _ => triangles,
     };

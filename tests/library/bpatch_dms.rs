@@ -310,6 +310,49 @@ fn dms_derivatives_match_finite_differences() {
     }
 }
 
+/// A surface evaluation's six vectors, for comparing bit for bit.
+fn parts(d: &trispline::surface::Derivatives) -> [DVec3; 6] {
+    [d.position, d.du, d.dv, d.duu, d.duv, d.dvv]
+}
+
+/// The evaluator for one control set (degree <= 2: the triangles' shares of the surface
+/// frozen per kept cell) equals `evaluate` up to rounding, and gives the same bits whether
+/// the cells it meets were kept before it was made or not.
+#[test]
+fn dms_evaluator_matches_evaluate_whichever_cells_are_kept() {
+    for degree in 1..=3 {
+        let s = random_dms(degree, 900 + degree as u64);
+        let c: Vec<DVec3> = (0..s.control_count())
+            .map(|i| {
+                let t = i as f64;
+                DVec3::new((t * 0.29).sin(), (t * 0.17).cos(), (t * 0.41).sin() * 0.5)
+            })
+            .collect();
+        let mut rng = Rng(31 + degree as u64);
+        let params = test_params(s.domain_face_count(), &mut rng, 400);
+        // A fresh spline keeps no cells: the first evaluator freezes none.
+        let first: Vec<[DVec3; 6]> = {
+            let cold = s.evaluator(&c);
+            params.iter().map(|p| parts(&cold(*p))).collect()
+        };
+        let warm = s.evaluator(&c);
+        for (p, want) in params.iter().zip(&first) {
+            let got = parts(&warm(*p));
+            assert_eq!(
+                &got, want,
+                "degree {degree} at {p:?}: frozen cells changed bits"
+            );
+            let reference = parts(&s.evaluate(&c, *p));
+            for (g, r) in got.iter().zip(&reference) {
+                assert!(
+                    (*g - *r).length() <= 1e-9 * (1.0 + r.length()),
+                    "degree {degree} at {p:?}: {g} vs {r}"
+                );
+            }
+        }
+    }
+}
+
 /// A polynomial of degree n over a reference triangle, in Bezier form.
 fn polynomial(n: usize) -> ([DVec2; 3], Vec<DVec3>) {
     let reference = [

@@ -1,21 +1,26 @@
 //! B-patch and DMS fits in the product (`fit.surface = "bpatch" | "dms"`): the tessellation
 //! written into the GLB against an independent evaluation of the surface.json read back
 //! (Seidel's recursion on the controls for B-patches, simplex splines evaluated directly by
-//! Micchelli's recurrence for DMS), and curvature of both read-back surfaces.
+//! Micchelli's recurrence for DMS), curvature of both read-back surfaces, and what a DMS
+//! fit of a range scan shows.
 
 use glam::{DVec2, DVec3};
 use trispline::curvature::planar::DmsPatch;
 use trispline::curvature::regions::{analyze, AnalysisOptions};
 use trispline::curvature::{DerivativeSurface, Triangular};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
-use trispline::io::{read_mesh_bytes, Format, LoadOptions};
+use trispline::io::{read_mesh_bytes, read_mesh_file, Format, LoadOptions};
+use trispline::mesh::clean::{clean, CleanOptions};
+use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellated_glb};
+use trispline::pipeline::scan::components::cleaned_components;
 use trispline::pipeline::scattered::tessellate_planar;
-use trispline::pipeline::worker::{fit_patch, WorkerConfig};
+use trispline::pipeline::worker::{fit_patch, run_input, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::surface::bpatch::de_boor;
 use trispline::surface::dms::DmsSpline;
 use trispline::surface::SurfaceParam;
+use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
 /// A height field over [-h, h]^2 sampled on an n x n grid, split into triangles.
@@ -156,7 +161,7 @@ fn written_and_read(
     let cfg = config(kind);
     let fitted = fit_patch(mesh, None, &cfg).expect("fits");
     let info = fitted.scattered.as_ref().expect("a planar fit");
-    let tess = tessellate_planar(&fitted.fit, info, 24);
+    let tess = tessellate_planar(&fitted.fit, &info.coverage, 24);
     assert!(!tess.triangles.is_empty());
     let glb = tessellated_glb(&fitted.fit, &tess, fitted.budget.tolerance);
     let surface = surface_json(&fitted.fit, None, &serde_json::json!({}));
@@ -256,4 +261,54 @@ fn curvature_reads_both_kinds_back() {
             "{kind}: median K {k}, the sphere's {sphere}"
         );
     }
+}
+
+/// Issue 24: a DMS fit of a range scan is shown by the rule of the other kinds' GLBs
+/// (`pipeline::coverage`: the mapped patch and the fitted points' footprint, rims cut
+/// finer): the GLB read back covers the fitted points and stays near the data.
+#[test]
+fn a_dms_fit_of_a_range_scan_is_shown_where_it_was_fitted() {
+    let Some(path) = shared_data("range_scans/bun045_tri.ply") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("reads")
+        .mesh;
+    let mut cfg = WorkerConfig::default();
+    cfg.fit.surface = SurfaceKind::Dms;
+    let outputs = run_input(&mesh, None, &cfg).expect("fits");
+    let out = &outputs.parts[0].outputs;
+    // The fitted points: the largest piece of the cleaned input.
+    let fitted = cleaned_components(&clean(&mesh, &CleanOptions::default()))
+        .into_iter()
+        .next()
+        .expect("a piece");
+    let shown = read_mesh_bytes(&out.glb, Format::Glb, "dms.glb", &LoadOptions::default())
+        .expect("the GLB reads back")
+        .mesh;
+    let md = MeshDistance::new(&shown);
+    let within = fitted
+        .positions
+        .iter()
+        .filter(|p| md.distance(**p).is_some_and(|d| d <= 1e-3))
+        .count() as f64
+        / fitted.positions.len() as f64;
+    let data = MeshDistance::new(&mesh);
+    let farthest = shown
+        .positions
+        .iter()
+        .filter_map(|p| data.distance(*p))
+        .fold(0.0f64, f64::max);
+    println!(
+        "bun045_tri as DMS: {:.3} % of {} fitted points within 1 mm of the GLB, farthest shown vertex {:.0} um",
+        100.0 * within,
+        fitted.positions.len(),
+        farthest * 1e6
+    );
+    // Before the coverage rule: 94.8 % (the mapped patch alone lost the rims).
+    assert!(within >= 0.995, "{:.3} % within 1 mm", 100.0 * within);
+    assert!(
+        farthest < 1.5e-3,
+        "a shown vertex {farthest} m from the data"
+    );
 }

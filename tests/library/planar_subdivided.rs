@@ -1,11 +1,13 @@
 //! B-patch and DMS fits of inputs with Loop subdivision connectivity (issue 24): the
 //! domain is the coarse net's parameter triangulation after `fit.levels` inverse levels
 //! (DMS: one domain triangle per coarse face; B-patch: the lattice's one triangle), and no
-//! planar map of the fine mesh is made.
+//! planar map of the fine mesh is made. The GLB shows only where the fine mesh has data.
 
 use glam::DVec3;
+use trispline::io::{read_mesh_bytes, Format, LoadOptions};
+use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::loop_subdiv::subdivide;
-use trispline::pipeline::worker::{fit_patch, FittedPatch, WorkerConfig};
+use trispline::pipeline::worker::{fit_patch, run_patch, FittedPatch, WorkerConfig};
 use trispline::pipeline::{SurfaceKind, SurfaceModel};
 use trispline::surface::bezier::{lattice_points, lattice_triangles};
 use trispline::TriMesh;
@@ -148,5 +150,80 @@ fn a_subdivided_net_that_is_no_lattice_gets_a_bpatch_around_its_map() {
     assert!(
         rms < 0.1 * plane,
         "rms {rms:.3e} against the plane's {plane:.3e}"
+    );
+}
+
+/// Issue 24: a subdivided input with a hole is fitted over a domain whose hole is closed
+/// (a fan around a virtual centre), but the GLB shows only where the fine mesh has data,
+/// by the rule the scan kinds' GLBs follow (`pipeline::coverage`).
+#[test]
+fn a_subdivided_dms_fit_does_not_show_its_coarse_hole_filled() {
+    // A 5-segment lattice without the four triangles of its interior sub-triangle
+    // (1, 1), (3, 1), (1, 3): a hole of inradius 0.115 in a unit triangle.
+    let n = 5;
+    let mut coarse = lattice_net(n);
+    let points = lattice_points(n);
+    let in_sub = |v: u32| {
+        let (i, j) = points[v as usize];
+        i >= 1 && j >= 1 && i + j <= 4
+    };
+    let before = coarse.triangles.len();
+    coarse.triangles.retain(|t| !t.iter().all(|&v| in_sub(v)));
+    assert_eq!(
+        coarse.triangles.len(),
+        before - 4,
+        "four interior triangles removed"
+    );
+    // Three levels: fine edges of 0.025, so the bridging reach (1.5 fine edges) stays
+    // well inside the hole.
+    let mesh = subdivide(&coarse, 3).expect("manifold");
+    let mut cfg = WorkerConfig::default();
+    cfg.fit.surface = SurfaceKind::Dms;
+    cfg.fit.levels = 3;
+    cfg.fit.method = trispline::fit::Method::Direct;
+    let out = run_patch(&mesh, None, &cfg).expect("fits");
+    let shown = read_mesh_bytes(&out.glb, Format::Glb, "s.glb", &LoadOptions::default())
+        .expect("the GLB reads back")
+        .mesh;
+    assert!(!shown.triangles.is_empty());
+    // The hole's centre and its inradius.
+    let lift = |(i, j): (usize, usize)| {
+        let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+        glam::DVec2::new(u + 0.5 * v, v * 3f64.sqrt() / 2.0)
+    };
+    let centre = (lift((1, 1)) + lift((3, 1)) + lift((1, 3))) / 3.0;
+    let inradius = 0.4 / (2.0 * 3f64.sqrt());
+    let in_hole = shown
+        .triangles
+        .iter()
+        .filter(|t| {
+            let c = t
+                .iter()
+                .map(|&v| shown.positions[v as usize])
+                .sum::<DVec3>()
+                / 3.0;
+            (c.truncate() - centre).length() < 0.5 * inradius
+        })
+        .count();
+    // The fine data near the hole's rim are shown: the share of fine points within a
+    // tenth of a fine edge of the GLB.
+    let md = MeshDistance::new(&shown);
+    let fine_edge = 0.2 / 8.0;
+    let near = mesh
+        .positions
+        .iter()
+        .filter(|p| md.distance(**p).is_some_and(|d| d <= 0.1 * fine_edge))
+        .count() as f64
+        / mesh.positions.len() as f64;
+    println!(
+        "dms over a 5-lattice with a hole, 3 levels: {} shown triangles, {in_hole} in the hole, {:.2} % of the fine points within 0.1 fine edge",
+        shown.triangles.len(),
+        100.0 * near
+    );
+    assert_eq!(in_hole, 0, "the hole is shown filled");
+    assert!(
+        near > 0.99,
+        "{:.2} % of the fine points shown",
+        100.0 * near
     );
 }

@@ -117,7 +117,7 @@ const EDGE_SAMPLE_TRIANGLES: usize = 10_000;
 
 /// Median edge length of a mesh, from at most ~30k edges spread over it: the data's
 /// sample spacing, the unit in which hole widths are judged.
-fn median_edge_length(mesh: &TriMesh) -> f64 {
+pub(crate) fn median_edge_length(mesh: &TriMesh) -> f64 {
     let stride = (mesh.triangles.len() / EDGE_SAMPLE_TRIANGLES).max(1);
     let mut lengths: Vec<f64> = mesh
         .triangles

@@ -118,7 +118,7 @@ pub(crate) fn fit_planar(
         &prepared,
         &fit_cfg.scan,
         &domain_points,
-        rounds.rms.clone(),
+        &rounds,
         built.spacing,
         built.reused,
         cold_start,
@@ -158,12 +158,13 @@ fn locate_all(
     Ok(located.into_iter().flatten().collect())
 }
 
-/// The covered region and trims in domain coordinates.
+/// The covered region (with the footprint of the fitted points the rounds left) and trims in
+/// domain coordinates.
 fn planar_info(
     prepared: &Prepared,
     scan: &crate::pipeline::scan::ScanConfig,
     domain_points: &[DVec2],
-    correction_rms: Vec<f64>,
+    rounds: &rounds::Rounds,
     spacing: Option<f64>,
     reused_controls: usize,
     cold_start: Option<String>,
@@ -206,7 +207,15 @@ fn planar_info(
             v: x.y,
         })
         .collect();
-    let coverage = Coverage::new(&plan.covered, &corrected, &map.plane, &map.near_fold);
+    // The footprint as the other kinds': the fitted points the surface passes within the
+    // bridging distance of, at their final domain points.
+    let coverage = Coverage::new(&plan.covered, &corrected, &map.plane, &map.near_fold)
+        .with_footprint(
+            &corrected,
+            &prepared.part.positions,
+            &rounds.errors,
+            plan.max_bridge,
+        );
     ScatteredInfo {
         preparation: Preparation {
             components: prepared.components,
@@ -220,7 +229,7 @@ fn planar_info(
         coverage,
         outer,
         holes,
-        correction_rms,
+        correction_rms: rounds.rms.clone(),
         spacing,
         reused_controls,
         cold_start,

@@ -4,33 +4,64 @@
 
 use super::info::{planar_surface, ScatteredInfo};
 use super::warm::ScatteredWarm;
-use crate::pipeline::output::{tessellate, Tessellation};
+use crate::pipeline::output::{tessellate, tessellate_in, Coverage, CoverageFrame, Tessellation};
 use crate::pipeline::scan::WarmFeet;
 use crate::pipeline::worker::WarmStart;
 use crate::pipeline::{PatchFit, SurfaceModel};
+use crate::surface::dms::PlanarSurface;
+use crate::surface::SurfaceParam;
 use glam::DVec2;
-use rayon::prelude::*;
 use serde_json::{json, Value};
 
 /// The tessellation of a planar fit (the B-patch's triangle as one lattice, DMS triangle by
-/// triangle), keeping the triangles whose corners all lie on the scanned region.
-pub fn tessellate_planar(f: &PatchFit, info: &ScatteredInfo, segments: usize) -> Tessellation {
-    let mut tess = tessellate(f, segments, None);
+/// triangle), shown where `pipeline::coverage` shows the other kinds' (its rule in domain
+/// points, `shown`: the mapped patch at the data's final domain points, and the fitted
+/// points' footprint, rim triangles cut finer).
+pub fn tessellate_planar(f: &PatchFit, shown: &Coverage, segments: usize) -> Tessellation {
     let Some(surface) = planar_surface(&f.model) else {
-        return tess;
+        return tessellate(f, segments, None);
     };
-    let covers = info.coverage.tester();
-    let inside: Vec<bool> = tess
-        .params
-        .par_iter()
-        .map(|p| {
-            let x = surface.domain_point(*p);
-            covers(x.x, x.y)
-        })
-        .collect();
-    tess.triangles
-        .retain(|t| t.iter().all(|&v| inside[v as usize]));
-    tess
+    let to_coverage = |p: SurfaceParam| {
+        let x = surface.domain_point(p);
+        SurfaceParam {
+            u: x.x,
+            v: x.y,
+            ..p
+        }
+    };
+    let to_surface = |q: SurfaceParam| surface_param(surface, q);
+    let frame = CoverageFrame {
+        to_coverage: &to_coverage,
+        to_surface: &to_surface,
+    };
+    tessellate_in(f, segments, Some(shown), Some(&frame))
+}
+
+/// The parameter of domain point (q.u, q.v); outside the domain (round-off at its rim), a
+/// point of face q.face (its barycentric coordinates clamped to the face).
+fn surface_param(surface: &dyn PlanarSurface, q: SurfaceParam) -> SurfaceParam {
+    let x = DVec2::new(q.u, q.v);
+    if let Some(p) = surface.locate(x) {
+        return p;
+    }
+    let corner = |u, v| surface.domain_point(SurfaceParam { face: q.face, u, v });
+    let (a, b, c) = (corner(1.0, 0.0), corner(0.0, 1.0), corner(0.0, 0.0));
+    let det = (a - c).perp_dot(b - c);
+    if det == 0.0 || !det.is_finite() {
+        return SurfaceParam {
+            u: 0.0,
+            v: 0.0,
+            ..q
+        };
+    }
+    let u = ((x - c).perp_dot(b - c) / det).max(0.0);
+    let v = ((a - c).perp_dot(x - c) / det).max(0.0);
+    let s = (u + v).max(1.0);
+    SurfaceParam {
+        face: q.face,
+        u: u / s,
+        v: v / s,
+    }
 }
 
 /// The plane, trims and report keys of a planar fit, and its warm state.

@@ -18,13 +18,16 @@
 //!   elsewhere.
 //!
 //! Then the rounds of the scan path's planar kinds (`rounds`): the first fit at these
-//! parameters, foot-point squared-distance rounds while they gain.
+//! parameters, foot-point squared-distance rounds while they gain; and the region shown
+//! (`shown_region`): where the fine mesh has triangles, so the input's holes stay open.
 
 use super::error::ScatteredError;
 use super::rounds::{fit_rounds, start_net, NEWTON_STEPS};
 use crate::fit::Budget;
 use crate::mesh::inverse::coarsen;
+use crate::pipeline::coverage::Coverage;
 use crate::pipeline::scan::domain::enclosing_triangle;
+use crate::pipeline::scan::prepare::median_edge_length;
 use crate::pipeline::subdivided::{hierarchy_of, lattice::lattice_coordinates};
 use crate::pipeline::worker::{WarmStart, WorkerConfig};
 use crate::pipeline::{NoSubdivision, PatchFit, PipelineError, SurfaceKind, SurfaceModel};
@@ -60,14 +63,14 @@ struct CoarseDomain {
 }
 
 /// Fits `mesh` as `cfg.fit.surface` (bpatch or dms) over its coarse net when it has
-/// subdivision connectivity `cfg.fit.levels` (>= 1) deep; `Ok(None)` when it has not (the
-/// caller maps it as a scan).
+/// subdivision connectivity `cfg.fit.levels` (>= 1) deep, with the region to show (in
+/// domain points); `Ok(None)` when it has not (the caller maps it as a scan).
 pub(crate) fn fit_planar_subdivided(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
     budget: &Budget,
-) -> Result<Option<PatchFit>, PipelineError> {
+) -> Result<Option<(PatchFit, Coverage)>, PipelineError> {
     let t0 = Instant::now();
     let fit_cfg = &cfg.fit;
     let kind = fit_cfg.surface;
@@ -108,9 +111,19 @@ pub(crate) fn fit_planar_subdivided(
         newton_steps: NEWTON_STEPS,
         initial,
     };
+    let mapped: Vec<DVec2> = params.iter().map(|p| surface.domain_point(*p)).collect();
     let rounds = fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
-    Ok(Some(PatchFit {
+    let reach = fit_cfg.scan.hole_bridge_edges * median_edge_length(mesh);
+    let shown = shown_region(
+        surface,
+        mesh,
+        &mapped,
+        &rounds.params,
+        &rounds.errors,
+        reach,
+    );
+    let fit = PatchFit {
         surface: kind,
         degree,
         controls: rounds.outcome.controls.clone(),
@@ -122,7 +135,40 @@ pub(crate) fn fit_planar_subdivided(
         warm_start,
         prepare_ms,
         fit_ms,
-    }))
+    };
+    Ok(Some((fit, shown)))
+}
+
+/// What of a subdivided fit is shown, by `pipeline::coverage`'s rule in domain points: the
+/// fine triangles with their vertices at their final domain points (a hole of the input has
+/// none, so the fans that close it in the domain stay hidden) and the footprint of the
+/// fitted points the surface passes within `reach` of (the scan path's hole-bridging
+/// distance in fine edges).
+fn shown_region(
+    surface: &dyn PlanarSurface,
+    mesh: &TriMesh,
+    mapped: &[DVec2],
+    feet: &[SurfaceParam],
+    errors: &[f64],
+    reach: f64,
+) -> Coverage {
+    let corrected: Vec<SurfaceParam> = feet
+        .iter()
+        .map(|p| {
+            let x = surface.domain_point(*p);
+            SurfaceParam {
+                face: 0,
+                u: x.x,
+                v: x.y,
+            }
+        })
+        .collect();
+    Coverage::new(&mesh.triangles, &corrected, mapped, &[]).with_footprint(
+        &corrected,
+        &mesh.positions,
+        errors,
+        reach,
+    )
 }
 
 /// The coarse net `levels` deep and its parameter triangulation (module docs); `None`

@@ -66,6 +66,8 @@ pub struct FittedPatch {
     pub object: Option<ObjectInfo>,
     /// B-patch and DMS fits: the planar map, coverage and trims.
     pub scattered: Option<ScatteredInfo>,
+    /// B-patch and DMS fits of subdivided inputs: the region shown, in domain points.
+    pub planar_shown: Option<Coverage>,
 }
 
 /// The fit alone: with `domain = "mesh"` the object path; else subdivision connectivity
@@ -100,7 +102,7 @@ pub(crate) fn fit_patch_with(
     };
     if matches!(fit_cfg.surface, SurfaceKind::Bpatch | SurfaceKind::Dms) {
         // Subdivision connectivity: over the coarse net, as the other kinds.
-        if let Some(fit) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
+        if let Some((fit, shown)) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
             return Ok(FittedPatch {
                 fit,
                 scan: None,
@@ -109,6 +111,7 @@ pub(crate) fn fit_patch_with(
                 refinement: Vec::new(),
                 object: None,
                 scattered: None,
+                planar_shown: Some(shown),
             });
         }
         let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
@@ -120,6 +123,7 @@ pub(crate) fn fit_patch_with(
             refinement: Vec::new(),
             object: None,
             scattered: Some(info),
+            planar_shown: None,
         });
     }
     if fit_cfg.domain == Domain::Mesh {
@@ -157,6 +161,7 @@ pub(crate) fn fit_patch_with(
                 refinement,
                 object: None,
                 scattered: None,
+                planar_shown: None,
             })
         }
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
@@ -209,6 +214,7 @@ pub(crate) fn fit_patch_with(
         refinement,
         object: None,
         scattered: None,
+        planar_shown: None,
     })
 }
 
@@ -237,6 +243,7 @@ fn object_patch(
         refinement: Vec::new(),
         object: Some(info),
         scattered: None,
+        planar_shown: None,
     })
 }
 
@@ -267,6 +274,7 @@ pub(crate) fn run_patch_with(
         refinement,
         object: object_info,
         scattered: planar_info,
+        planar_shown,
     } = fit_patch_with(mesh, previous, cfg, on_step)?;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
@@ -280,8 +288,9 @@ pub(crate) fn run_patch_with(
                 let shown_ms = t.elapsed().as_secs_f64() * 1e3;
                 return (glb, Some((check, shown_ms)));
             }
-            let tess = match &planar_info {
-                Some(info) => tessellate_planar(&fitted, info, cfg.tessellation.max(1)),
+            let planar = planar_info.as_ref().map(|i| &i.coverage);
+            let tess = match planar.or(planar_shown.as_ref()) {
+                Some(shown) => tessellate_planar(&fitted, shown, cfg.tessellation.max(1)),
                 None => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
             };
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)

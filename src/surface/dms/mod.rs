@@ -31,7 +31,7 @@ pub use error::DmsError;
 pub use knots::KnotRule;
 
 use super::bezier::{lattice_index, lattice_len, lattice_points, lattice_triangles};
-use super::simplex_spline::{det2, Jet, SimplexFamily};
+use super::simplex_spline::{det2, FrozenCells, Jet, SimplexFamily};
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
 use glam::{DVec2, DVec3};
 use locate::BoxGrid;
@@ -239,6 +239,22 @@ impl DmsSpline {
     }
 }
 
+/// Derivatives along a face's parameter directions `eu`, `ev` from the x/y jet `sum`
+/// (value, d/dx, d/dy, d2/dx2, d2/dxdy, d2/dy2).
+fn in_face_directions(sum: [DVec3; 6], eu: DVec2, ev: DVec2) -> Derivatives {
+    let hess = |p: DVec2, q: DVec2| {
+        (sum[3] * q.x + sum[4] * q.y) * p.x + (sum[4] * q.x + sum[5] * q.y) * p.y
+    };
+    Derivatives {
+        position: sum[0],
+        du: sum[1] * eu.x + sum[2] * eu.y,
+        dv: sum[1] * ev.x + sum[2] * ev.y,
+        duu: hess(eu, eu),
+        duv: hess(eu, ev),
+        dvv: hess(ev, ev),
+    }
+}
+
 fn bounding_box(points: impl Iterator<Item = DVec2>) -> (DVec2, DVec2) {
     points.fold(
         (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
@@ -335,17 +351,54 @@ impl TriSurface for DmsSpline {
                 }
             }
         });
-        let hess = |p: DVec2, q: DVec2| {
-            (sum[3] * q.x + sum[4] * q.y) * p.x + (sum[4] * q.x + sum[5] * q.y) * p.y
-        };
-        Derivatives {
-            position: sum[0],
-            du: sum[1] * eu.x + sum[2] * eu.y,
-            dv: sum[1] * ev.x + sum[2] * ev.y,
-            duu: hess(eu, eu),
-            duv: hess(eu, ev),
-            dvv: hess(ev, ev),
+        in_face_directions(sum, eu, ev)
+    }
+
+    /// Per domain triangle, its share of the surface of `controls` frozen on the cells
+    /// kept so far (`SimplexFamily::freeze`): a foot-point search evaluates one surface at
+    /// every Newton step, and a frozen cell costs one polynomial in place of one per basis
+    /// function. Degree 3 (no cells) evaluates as `evaluate`.
+    fn evaluator<'a>(
+        &'a self,
+        controls: &'a [DVec3],
+    ) -> Box<dyn Fn(SurfaceParam) -> Derivatives + Sync + 'a> {
+        let per = lattice_len(self.degree);
+        let frozen: Vec<Option<FrozenCells>> = self
+            .families
+            .par_iter()
+            .enumerate()
+            .map(|(t, family)| {
+                controls
+                    .get(t * per..(t + 1) * per)
+                    .and_then(|c| family.freeze(c))
+            })
+            .collect();
+        if frozen.iter().any(Option::is_none) {
+            return Box::new(move |p| self.evaluate(controls, p));
         }
+        let empty = FrozenCells::default();
+        Box::new(move |p| {
+            let (x, dir) = self.param_point_and_direction(p);
+            let [a, b, c] = self.corners(p.face as usize);
+            let mut sum = [DVec3::ZERO; 6];
+            for &t in self.basis_grid.candidates(x) {
+                let t = t as usize;
+                let family = &self.families[t];
+                if !family.may_touch(x) {
+                    continue;
+                }
+                let share = family.surface_jet(
+                    frozen[t].as_ref().unwrap_or(&empty),
+                    x,
+                    dir,
+                    &controls[t * per..(t + 1) * per],
+                );
+                for (s, v) in sum.iter_mut().zip(share) {
+                    *s += v;
+                }
+            }
+            in_face_directions(sum, a - c, b - c)
+        })
     }
 
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {

@@ -37,9 +37,10 @@ mod pieces;
 mod predicates;
 
 pub use node::Jet;
+pub use pieces::FrozenCells;
 pub use predicates::{barycentric_affine, det2, orient_sign, perturbed_side};
 
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use node::{CompiledNode, Node};
 use pieces::Pieces;
 use std::collections::HashMap;
@@ -212,6 +213,42 @@ impl SimplexFamily {
         match &self.pieces {
             Some(pieces) => pieces.evaluate::<DERIV>(x, dir, &self.nodes, &self.roots, out),
             None => self.evaluate::<DERIV>(x, dir, scratch, out),
+        }
+    }
+
+    /// The family's shares of the surface of `controls` (one per root, in root order) on
+    /// the cells kept so far, for `surface_jet`; `None` when the family walks the
+    /// recurrence (degree 3) or `controls` does not match its roots.
+    pub fn freeze(&self, controls: &[DVec3]) -> Option<FrozenCells> {
+        if controls.len() != self.roots.len() {
+            return None;
+        }
+        self.pieces.as_ref()?.freeze(controls)
+    }
+
+    /// Value and x/y derivatives of `sum_r controls[r] * root_r` at x (knot lines resolved
+    /// towards `dir`), `frozen` from `freeze` with the same controls; equal up to rounding
+    /// to combining `evaluate`'s jets, and the same whichever cells `frozen` holds.
+    pub fn surface_jet(
+        &self,
+        frozen: &FrozenCells,
+        x: DVec2,
+        dir: DVec2,
+        controls: &[DVec3],
+    ) -> [DVec3; 6] {
+        match &self.pieces {
+            Some(pieces) => pieces.surface_jet(frozen, x, dir, &self.nodes, &self.roots, controls),
+            None => {
+                let (mut scratch, mut out) = (Vec::new(), Vec::new());
+                self.evaluate::<true>(x, dir, &mut scratch, &mut out);
+                let mut sum = [DVec3::ZERO; 6];
+                for (jet, c) in out.iter().zip(controls) {
+                    for (s, w) in sum.iter_mut().zip(jet) {
+                        *s += *c * *w;
+                    }
+                }
+                sum
+            }
         }
     }
 

@@ -23,7 +23,7 @@
 
 use super::node::{CompiledNode, Jet, Node};
 use super::predicates::{orient_sign, perturbed_side};
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use rustc_hash::FxHashMap;
 use std::sync::{PoisonError, RwLock};
 
@@ -53,6 +53,18 @@ const fn mono(a: usize, b: usize) -> usize {
 }
 
 type Poly = [f64; MONOMIALS];
+
+/// Monomials of a share of the surface (`Pieces::share`): those of degree <= 2.
+const SHARE_MONOMIALS: usize = 6;
+
+/// A family's share of one surface on a cell, per monomial of degree <= 2 (zero past the
+/// roots' degree).
+type SurfaceCell = [DVec3; SHARE_MONOMIALS];
+
+/// A family's shares of one surface on the cells kept when it was frozen
+/// (`SimplexFamily::freeze`).
+#[derive(Debug, Default)]
+pub struct FrozenCells(FxHashMap<u128, SurfaceCell>);
 
 /// One cell's polynomials, root after root (`coefficients` each), in local coordinates.
 #[derive(Debug)]
@@ -284,19 +296,97 @@ impl Pieces {
             return;
         }
         let key = self.key(x, dir);
+        self.with_piece(key, nodes, roots, |piece| {
+            self.jets::<DERIV>(piece, roots.len(), x, out)
+        });
+    }
+
+    /// The cell of `key`'s piece: kept, or converted (and kept while there is room).
+    fn with_piece<R>(
+        &self,
+        key: u128,
+        nodes: &[CompiledNode],
+        roots: &[(u32, f64)],
+        f: impl FnOnce(&Piece) -> R,
+    ) -> R {
         {
             let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
             if let Some(piece) = cells.get(&key) {
-                self.jets::<DERIV>(piece, roots.len(), x, out);
-                return;
+                return f(piece);
             }
         }
         let piece = self.convert(key, nodes, roots);
-        self.jets::<DERIV>(&piece, roots.len(), x, out);
+        let result = f(&piece);
         let mut cells = self.cells.write().unwrap_or_else(PoisonError::into_inner);
         if cells.len() < MAX_PIECES {
             cells.entry(key).or_insert(piece);
         }
+        result
+    }
+
+    /// The family's share of one surface on a cell: per monomial, the sum over the roots of
+    /// the root's coefficient times its control point (`controls`, in root order).
+    fn share(&self, piece: &Piece, controls: &[DVec3]) -> SurfaceCell {
+        let mut cell = [DVec3::ZERO; SHARE_MONOMIALS];
+        if piece.zero {
+            return cell;
+        }
+        for (coef, c) in piece.coefficients.chunks_exact(self.per_root).zip(controls) {
+            for (m, k) in cell.iter_mut().zip(coef) {
+                *m += *c * *k;
+            }
+        }
+        cell
+    }
+
+    /// The family's shares of the surface of `controls` on every cell kept so far (a
+    /// foot-point search evaluates one surface many times: a hit costs the sign key, a
+    /// look-up and one polynomial in place of one per root). `None` above degree 2.
+    pub(super) fn freeze(&self, controls: &[DVec3]) -> Option<FrozenCells> {
+        if self.per_root > SHARE_MONOMIALS {
+            return None;
+        }
+        let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
+        Some(FrozenCells(
+            cells
+                .iter()
+                .map(|(key, piece)| (*key, self.share(piece, controls)))
+                .collect(),
+        ))
+    }
+
+    /// Value and x/y derivatives of the family's share of the surface of `controls` at x
+    /// (perturbed along `dir`), from `frozen` or from the cell's piece: the same arithmetic
+    /// either way, so the result does not depend on which cells were kept.
+    pub(super) fn surface_jet(
+        &self,
+        frozen: &FrozenCells,
+        x: DVec2,
+        dir: DVec2,
+        nodes: &[CompiledNode],
+        roots: &[(u32, f64)],
+        controls: &[DVec3],
+    ) -> [DVec3; 6] {
+        if self.outside(x) {
+            return [DVec3::ZERO; 6];
+        }
+        let key = self.key(x, dir);
+        let cell = match frozen.0.get(&key) {
+            Some(cell) => *cell,
+            None => self.with_piece(key, nodes, roots, |piece| self.share(piece, controls)),
+        };
+        // c0 + c1 X + c2 Y + c3 X^2 + c4 X Y + c5 Y^2, X = (x - centre) * s.
+        let s = self.inv_scale;
+        let p = (x - self.centre) * s;
+        let [c0, c1, c2, c3, c4, c5] = cell;
+        [
+            c0 + (c1 + c3 * p.x + c4 * p.y) * p.x + (c2 + c5 * p.y) * p.y,
+            (c1 + c3 * (2.0 * p.x) + c4 * p.y) * s,
+            (c2 + c4 * p.x + c5 * (2.0 * p.y)) * s,
+            c3 * (2.0 * s * s),
+            c4 * (s * s),
+            c5 * (2.0 * s * s),
+        ]
     }
 
     fn jets<const DERIV: bool>(&self, piece: &Piece, roots: usize, x: DVec2, out: &mut Vec<Jet>) {
