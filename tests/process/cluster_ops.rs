@@ -56,6 +56,8 @@ fn a_source_started_before_its_server_waits_coalesces_and_publishes_once_it_is_u
     );
     assert!(s.log().contains("not reachable"), "{}", s.log());
     let server = Server::start_on(bin, port);
+    // The worker reads the same file: without the source's metrics address, which is taken.
+    std::fs::write(&s.cfg, cluster_config()).expect("config");
     let w = spawn_worker(&s, &server, "w1");
     assert!(
         wait_until(|| accounted(&s.out, &all)),
