@@ -9,8 +9,8 @@
 //! 3. tiny patches whose fit takes a few ms: jobs/s of a burst, and the end-to-end latency
 //!    (file renamed in -> its `fitted` event) of jobs sent one at a time.
 //!
-//!     cargo build --release --bin trispline
-//!     cargo run --release --example cluster_throughput [-- SCANS TINY]
+//! Run it with `cargo build --release --bin trispline`, then
+//! `cargo run --release --example cluster_throughput [-- SCANS TINY]`.
 //!
 //! Needs `nats-server` (scripts/install_nats.sh; or $TRISPLINE_NATS_SERVER) and
 //! `../shared/data/range_scans/bun000_tri.ply` (40,256 points, 1.5 MB: over the default
