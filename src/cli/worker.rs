@@ -17,7 +17,7 @@ pub struct WorkerArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// TOML config (the same `[fit]` as the sources', for identical results); without it
-    /// the embedded default.
+    /// the embedded default. Re-read on SIGHUP and when the file changes (between jobs).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// This worker's name in events and claims (default: host name and process id).
@@ -44,12 +44,17 @@ pub fn run(args: &WorkerArgs) -> anyhow::Result<ExitCode> {
         eprintln!("worker: no queue (--queue nats://HOST:PORT or cluster.url)");
         return Ok(ExitCode::from(2));
     };
-    let _ = super::watch::init_logging(&config, args.log_json);
-    let ctl = Control::default();
+    let set_log_level = super::watch::init_logging(&config, args.log_json);
+    let ctl = Control {
+        set_log_level: Some(set_log_level),
+        ..Control::default()
+    };
     for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(sig, Arc::clone(&ctl.stop))
             .context("installing signal handlers")?;
     }
+    signal_hook::flag::register(signal_hook::consts::SIGHUP, Arc::clone(&ctl.reload))
+        .context("installing the SIGHUP handler")?;
     let name = args.name.clone().unwrap_or_else(|| {
         let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
         format!("{}-{}", host.trim(), std::process::id())
@@ -58,6 +63,7 @@ pub fn run(args: &WorkerArgs) -> anyhow::Result<ExitCode> {
         url,
         out_dir: args.out.clone(),
         config,
+        config_path: args.config.clone(),
         name,
     };
     let summary = run_worker(opts, &ctl).context("worker")?;

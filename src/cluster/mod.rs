@@ -7,8 +7,11 @@
 //! synchronous and calls in through `Queue::block_on`.
 #![warn(missing_docs)]
 
+mod context;
+mod fit;
 mod publisher;
 mod queue;
+mod states;
 mod wire;
 mod worker;
 

@@ -167,6 +167,20 @@ impl Queue {
     pub(crate) fn subject(&self, id: &str) -> String {
         format!("{}.{}", self.cfg.subject, super::wire::token(id))
     }
+
+    /// Where the completions of `source`'s path jobs go: outside the stream's subjects (its
+    /// second token is `jobs-done`, not `jobs`), plain NATS: a completion lost while the
+    /// source is away only leaves the file in place, and the next start queues it again,
+    /// where it is found unchanged and completed.
+    pub(crate) fn done_subject(&self, source: &str) -> String {
+        format!("{}-done.{}", self.cfg.subject, super::wire::token(source))
+    }
+}
+
+/// This process's name in claims and completions: host name and process id.
+pub(crate) fn process_name() -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+    format!("{}-{}", host.trim(), std::process::id())
 }
 
 /// The stream (work queue: a job leaves it when acknowledged) and the bucket (one revision
@@ -229,7 +243,12 @@ pub(crate) fn states_dir(out_dir: &std::path::Path) -> PathBuf {
 
 /// Unix time in ms.
 pub(crate) fn now_ms() -> u64 {
+    now_us() / 1000
+}
+
+/// Unix time in µs.
+pub(crate) fn now_us() -> u64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_millis() as u64)
+        .map_or(0, |d| d.as_micros() as u64)
 }

@@ -26,6 +26,23 @@ pub(crate) struct JobHeader {
     /// Set when the bytes are not in the message (over the payload limit, or unreadable at
     /// the source): the worker reads them here, on shared storage.
     pub(crate) path: Option<PathBuf>,
+    /// The source that published it: a path job's completion goes back to it, which alone
+    /// knows its folders and so may apply its processed-file policy. Empty: no completion.
+    #[serde(default)]
+    pub(crate) source: String,
+    /// When the source handed it to the server, µs since the Unix epoch: the worker measures
+    /// the queue's wait from it (the sources and workers of one site share a clock).
+    #[serde(default)]
+    pub(crate) published_us: u64,
+}
+
+/// What a worker tells a path job's source once the job is finished (its outputs written,
+/// or its content found unchanged): the input file may now be moved or deleted.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub(crate) struct Completion {
+    pub(crate) id: String,
+    pub(crate) version: String,
+    pub(crate) path: PathBuf,
 }
 
 /// The message body: magic, header length (u32 LE), header JSON, mesh bytes.
@@ -170,6 +187,8 @@ mod tests {
             format: Some(Format::Ply),
             hash: "00ff".into(),
             path: None,
+            source: "host-1".into(),
+            published_us: 1_700_000_000_000_000,
         };
         let body = b"ply\nformat ascii 1.0\n";
         let msg = encode(&h, body);

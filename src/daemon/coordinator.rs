@@ -264,37 +264,49 @@ impl Loop {
     }
 
     fn reload(&mut self, reloader: &mut Reloader, ctl: &Control) {
-        sdnotify::notify(sdnotify::State::Reloading);
-        match reloader.reload(&self.cell) {
-            Reloaded::Applied { restart_needed } => {
-                let cfg = self.cell.get();
-                if let Some(set) = &ctl.set_log_level {
-                    if let Err(e) = set(&cfg.log.level) {
-                        tracing::warn!(error = %e, "cannot apply log.level");
-                    }
-                }
-                self.metrics.reloads.inc();
-                if restart_needed.is_empty() {
-                    tracing::info!("config reloaded");
-                } else {
-                    tracing::warn!(
-                        ?restart_needed,
-                        "config reloaded; some changes need a restart"
-                    );
-                }
-                let _ = self.wtx.send(WriterMsg::Event(json!({
-                    "status": "config_reloaded", "restart_needed": restart_needed,
-                })));
-            }
-            Reloaded::Refused { reason } => {
-                tracing::error!(%reason, "config reload refused; the old config stays");
-                self.metrics.reload_failures.inc();
-                self.metrics.error("config_rejected");
-                let _ = self.wtx.send(WriterMsg::Event(json!({
-                    "status": "config_rejected", "reason": reason,
-                })));
-            }
-        }
-        sdnotify::notify(sdnotify::State::Ready);
+        reload_config(reloader, &self.cell, ctl, &self.metrics, &self.wtx);
     }
+}
+
+/// Re-reads the config into `cell` and reports the outcome (log, metrics, event): the
+/// daemon's reload, shared with `trispline worker`.
+pub(crate) fn reload_config(
+    reloader: &mut Reloader,
+    cell: &ConfigCell,
+    ctl: &Control,
+    metrics: &Metrics,
+    wtx: &Sender<WriterMsg>,
+) {
+    sdnotify::notify(sdnotify::State::Reloading);
+    match reloader.reload(cell) {
+        Reloaded::Applied { restart_needed } => {
+            let cfg = cell.get();
+            if let Some(set) = &ctl.set_log_level {
+                if let Err(e) = set(&cfg.log.level) {
+                    tracing::warn!(error = %e, "cannot apply log.level");
+                }
+            }
+            metrics.reloads.inc();
+            if restart_needed.is_empty() {
+                tracing::info!("config reloaded");
+            } else {
+                tracing::warn!(
+                    ?restart_needed,
+                    "config reloaded; some changes need a restart"
+                );
+            }
+            let _ = wtx.send(WriterMsg::Event(json!({
+                "status": "config_reloaded", "restart_needed": restart_needed,
+            })));
+        }
+        Reloaded::Refused { reason } => {
+            tracing::error!(%reason, "config reload refused; the old config stays");
+            metrics.reload_failures.inc();
+            metrics.error("config_rejected");
+            let _ = wtx.send(WriterMsg::Event(json!({
+                "status": "config_rejected", "reason": reason,
+            })));
+        }
+    }
+    sdnotify::notify(sdnotify::State::Ready);
 }

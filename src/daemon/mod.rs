@@ -6,7 +6,7 @@
 mod cluster_config;
 pub mod config;
 mod confine;
-mod coordinator;
+pub(crate) mod coordinator;
 pub(crate) mod job;
 pub(crate) mod kinds;
 pub(crate) mod layout;
@@ -184,7 +184,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     let job_tx = match opts.offload {
         Some(o) => {
             let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
-            (o.start)(job_rx, tx.clone(), Arc::clone(&metrics)).map_err(|source| {
+            (o.start)(job_rx, tx.clone(), wtx.clone(), Arc::clone(&metrics)).map_err(|source| {
                 DaemonError::Spawn {
                     name: "queue publisher".into(),
                     source,

@@ -5,14 +5,18 @@
 use super::job::Job;
 use super::messages::Msg;
 use super::ops::metrics::Metrics;
+use super::writer::WriterMsg;
 use crossbeam_channel::{Receiver, Sender};
 use std::sync::Arc;
 
 /// Starts the thread(s) that take jobs off the daemon; each job taken is answered on the
 /// `Msg` channel with `Msg::Queued` (handed on) or `Msg::Fitted` (an `Incomplete` outcome:
-/// read again later).
-pub(crate) type StartOffload =
-    Box<dyn FnOnce(Receiver<Job>, Sender<Msg>, Arc<Metrics>) -> std::io::Result<()> + Send>;
+/// read again later). The writer's channel is for the processed-file policy of inputs
+/// finished elsewhere (`WriterMsg::Processed`): the writer alone moves inputs.
+pub(crate) type StartOffload = Box<
+    dyn FnOnce(Receiver<Job>, Sender<Msg>, Sender<WriterMsg>, Arc<Metrics>) -> std::io::Result<()>
+        + Send,
+>;
 
 /// Where jobs go instead of the local worker pool.
 pub(crate) struct Offload {

@@ -101,6 +101,8 @@ impl Reloader {
         new.daemon.metrics_addr = old.daemon.metrics_addr.clone();
         new.log.format = old.log.format;
         new.output.quarantine_dir = old.output.quarantine_dir.clone();
+        // The connection, stream and bucket are set up once, like the other keys above.
+        new.cluster = old.cluster.clone();
         cell.set(new);
         Reloaded::Applied { restart_needed }
     }

@@ -57,6 +57,9 @@ pub enum WriterMsg {
     /// Everything sent before this is handled: answered on the channel (a cluster worker
     /// acknowledges a job only once its outputs and events are written).
     Barrier(Sender<()>),
+    /// An input whose version was fitted elsewhere (`watch --queue`): the processed-file
+    /// policy applies to it now, inside the same roots as a local fit's.
+    Processed(PathBuf, ProcessedPolicy),
 }
 
 pub struct Writer {
@@ -247,6 +250,7 @@ impl Writer {
                 WriterMsg::Barrier(done) => {
                     let _ = done.send(());
                 }
+                WriterMsg::Processed(path, policy) => self.processed_path(&path, policy),
             }
         }
         self.summary
@@ -462,7 +466,12 @@ impl Writer {
     }
 
     fn processed(&self, a: &Arrival, policy: ProcessedPolicy) {
-        let Input::File(path) = &a.input else { return };
+        if let Input::File(path) = &a.input {
+            self.processed_path(path, policy);
+        }
+    }
+
+    fn processed_path(&self, path: &Path, policy: ProcessedPolicy) {
         if policy == ProcessedPolicy::Leave || !self.may_touch(path) {
             return;
         }

@@ -11,7 +11,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// The server binary: $TRISPLINE_NATS_SERVER, `nats-server` on PATH, or pip's --user bin.
-fn nats_server() -> Option<PathBuf> {
+pub(crate) fn nats_server() -> Option<PathBuf> {
     let from_env = std::env::var_os("TRISPLINE_NATS_SERVER").map(PathBuf::from);
     let on_path = std::env::var_os("PATH").and_then(|p| {
         std::env::split_paths(&p)
@@ -35,6 +35,14 @@ fn nats_server() -> Option<PathBuf> {
     found
 }
 
+/// A loopback port free a moment ago.
+pub(crate) fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
 /// The server's log, appended across restarts.
 fn log_file(store: &Path) -> std::fs::File {
     std::fs::OpenOptions::new()
@@ -44,7 +52,7 @@ fn log_file(store: &Path) -> std::fs::File {
         .expect("server log")
 }
 
-struct Server {
+pub(crate) struct Server {
     bin: PathBuf,
     port: u16,
     store: tempfile::TempDir,
@@ -52,20 +60,21 @@ struct Server {
 }
 
 impl Server {
-    fn start() -> Option<Server> {
+    pub(crate) fn start() -> Option<Server> {
         let bin = nats_server()?;
-        let port = TcpListener::bind("127.0.0.1:0")
-            .and_then(|l| l.local_addr())
-            .expect("a free port")
-            .port();
+        Some(Self::start_on(bin, free_port()))
+    }
+
+    /// A server on `port` (a source may already be waiting for it there).
+    pub(crate) fn start_on(bin: PathBuf, port: u16) -> Server {
         let store = tempfile::tempdir().expect("tmp");
         let child = Self::spawn(&bin, port, store.path());
-        Some(Server {
+        Server {
             bin,
             port,
             store,
             child,
-        })
+        }
     }
 
     fn spawn(bin: &Path, port: u16, store: &Path) -> Child {
@@ -85,7 +94,7 @@ impl Server {
         std::fs::read_to_string(self.store.path().join("server.log")).unwrap_or_default()
     }
 
-    fn url(&self) -> String {
+    pub(crate) fn url(&self) -> String {
         format!("nats://127.0.0.1:{}", self.port)
     }
 
@@ -106,14 +115,14 @@ impl Drop for Server {
 }
 
 /// Fast fits and a short ack wait, so that a dead worker's job moves on in seconds.
-fn cluster_config() -> String {
+pub(crate) fn cluster_config() -> String {
     format!(
         "{}\n[cluster]\nack_wait_ms = 2000\nmax_deliveries = 2\n",
         config(200, "native", "")
     )
 }
 
-fn spawn_worker(s: &Setup, server: &Server, name: &str) -> Child {
+pub(crate) fn spawn_worker(s: &Setup, server: &Server, name: &str) -> Child {
     let log = std::fs::File::create(s._tmp.path().join(format!("{name}.log"))).expect("log");
     bin()
         .args(["worker", "--queue", &server.url(), "--name", name])
@@ -127,11 +136,11 @@ fn spawn_worker(s: &Setup, server: &Server, name: &str) -> Child {
         .expect("worker starts")
 }
 
-fn worker_log(s: &Setup, name: &str) -> String {
+pub(crate) fn worker_log(s: &Setup, name: &str) -> String {
     std::fs::read_to_string(s._tmp.path().join(format!("{name}.log"))).unwrap_or_default()
 }
 
-fn logs(s: &Setup, names: &[&str]) -> String {
+pub(crate) fn logs(s: &Setup, names: &[&str]) -> String {
     let mut all = format!("--- source\n{}", s.log());
     for n in names {
         all.push_str(&format!("\n--- {n}\n{}", worker_log(s, n)));
@@ -140,7 +149,7 @@ fn logs(s: &Setup, names: &[&str]) -> String {
 }
 
 /// Every version of `names` has an event saying what became of it.
-fn accounted(out: &Path, names: &[String]) -> bool {
+pub(crate) fn accounted(out: &Path, names: &[String]) -> bool {
     let ev = events(out);
     names.iter().all(|n| {
         ev.iter().any(|e| {
@@ -153,7 +162,7 @@ fn accounted(out: &Path, names: &[String]) -> bool {
 }
 
 /// For each patch, the versions fitted in log order rise and end at `newest`.
-fn check_newest_fitted_last(out: &Path, newest: &HashMap<String, String>) {
+pub(crate) fn check_newest_fitted_last(out: &Path, newest: &HashMap<String, String>) {
     let ev = events(out);
     for (patch, last) in newest {
         let fitted: Vec<&str> = ev

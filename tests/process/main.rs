@@ -10,6 +10,7 @@ mod cli_fit_scan;
 mod cli_mesh;
 mod cli_object;
 mod cluster;
+mod cluster_ops;
 mod components;
 mod daemon_crash;
 mod daemon_harden;
