@@ -64,12 +64,17 @@ pub struct LayoutReport {
     pub flips: usize,
     /// Relaxation steps made.
     pub relax_steps: usize,
+    /// Corners of the data's rim made Loop corners of the control mesh.
+    pub corners: usize,
+    /// Other boundary vertices of a single face (Loop corners the data does not ask for)
+    /// given a second face by a split, each adding a control.
+    pub stray_corners_opened: usize,
 }
 
 /// Faces of a quality below this are never created by a flip.
-const MIN_FLIP_QUALITY: f64 = 0.05;
+pub(super) const MIN_FLIP_QUALITY: f64 = 0.05;
 /// Faces around a vertex at most after a flip (the simplification's limit).
-const MAX_FACES: usize = 12;
+pub(super) const MAX_FACES: usize = 12;
 /// A relaxation step is refused where it turns a face normal by more than this.
 const MAX_RELAX_TURN_DEG: f64 = 30.0;
 /// Passes of re-landing after a relaxation step (a point moves at most one face ring per
@@ -77,24 +82,32 @@ const MAX_RELAX_TURN_DEG: f64 = 30.0;
 const RELAND_PASSES: usize = 2;
 
 /// Improves the layout of `control` (simplified from `data`, each data vertex landed at
-/// `landing` on it) and carries the landings along.
+/// `landing` on it) and carries the landings along; the boundary vertices `corners` are
+/// made Loop corners first where flips allow (see `corners`).
 pub(super) fn improve_layout(
     data: &TriMesh,
     control: TriMesh,
     landing: Vec<SurfaceParam>,
     creases: &[[u32; 2]],
+    corners: &[u32],
     opts: &LayoutOptions,
 ) -> (TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>, LayoutReport) {
     let Some(mut net) = Net::new(data, control.clone(), &landing, creases) else {
         return (control, landing, creases.to_vec(), LayoutReport::default());
     };
-    let report = net.tidy(opts);
+    let stray_corners_opened = net.open_stray_corners(corners);
+    let corners = net.make_corners(corners, opts.max_fold_deg.to_radians().cos());
+    let report = LayoutReport {
+        corners,
+        stray_corners_opened,
+        ..net.tidy(opts)
+    };
     let (mesh, landing, creases) = net.finish();
     (mesh, landing, creases, report)
 }
 
 /// An undirected edge as a key.
-fn edge_key(a: u32, b: u32) -> [u32; 2] {
+pub(super) fn edge_key(a: u32, b: u32) -> [u32; 2] {
     [a.min(b), a.max(b)]
 }
 
@@ -103,16 +116,20 @@ pub(super) struct Net<'a> {
     data: &'a TriMesh,
     /// Data triangles per data vertex (for putting moved controls back on the data).
     data_faces: Vec<Vec<u32>>,
-    pos: Vec<DVec3>,
-    faces: Vec<[u32; 3]>,
-    vfaces: Vec<Vec<u32>>,
-    boundary: Vec<bool>,
+    pub(super) pos: Vec<DVec3>,
+    pub(super) faces: Vec<[u32; 3]>,
+    pub(super) vfaces: Vec<Vec<u32>>,
+    pub(super) boundary: Vec<bool>,
     /// Per data point: its face and barycentric weights of the face's corners.
     land: Vec<(u32, [f64; 3])>,
     face_points: Vec<Vec<u32>>,
     /// Crease edges (sorted pairs) and the vertices on them.
-    creases: HashSet<[u32; 2]>,
+    pub(super) creases: HashSet<[u32; 2]>,
     on_crease: Vec<bool>,
+    /// Loop corners kept: boundary vertices of a single face, which the limit surface
+    /// interpolates (see `corners`); no flip or split gives them a second face. None
+    /// until `make_corners` or `keep_corners` marks them.
+    pub(super) corner: Vec<bool>,
 }
 
 impl<'a> Net<'a> {
@@ -158,6 +175,7 @@ impl<'a> Net<'a> {
             })
             .collect();
         Some(Self {
+            corner: vec![false; vfaces.len()],
             data,
             data_faces,
             pos: control.positions,
@@ -197,7 +215,8 @@ impl<'a> Net<'a> {
 
     /// Splits the edge (a, b) at a new vertex placed at `at`: each face (x, y, c) on it
     /// (x, y being a, b in the face's order) becomes (x, m, c) and (m, y, c), and the
-    /// face's points are re-landed on the two halves. `false` if there is no such edge.
+    /// face's points are re-landed on the two halves. `false` if there is no such edge or
+    /// a corner is opposite it.
     pub(super) fn split_edge(&mut self, a: u32, b: u32, at: DVec3) -> bool {
         let on_edge: Vec<u32> = self.vfaces[a as usize]
             .iter()
@@ -207,8 +226,18 @@ impl<'a> Net<'a> {
         if on_edge.is_empty() || on_edge.len() > 2 {
             return false;
         }
+        // Splitting the edge opposite a corner would give the corner a second face.
+        let opposite_corner = on_edge.iter().any(|&f| {
+            self.faces[f as usize]
+                .iter()
+                .any(|&c| c != a && c != b && self.corner[c as usize])
+        });
+        if opposite_corner {
+            return false;
+        }
         let m = self.pos.len() as u32;
         self.pos.push(at);
+        self.corner.push(false);
         self.vfaces.push(Vec::with_capacity(6));
         self.boundary.push(on_edge.len() == 1);
         let crease = self.creases.remove(&edge_key(a, b));
@@ -245,6 +274,13 @@ impl<'a> Net<'a> {
             }
         }
         true
+    }
+
+    /// Whether the edge (a, b) is in the mesh.
+    pub(super) fn has_edge(&self, a: u32, b: u32) -> bool {
+        self.vfaces[a as usize]
+            .iter()
+            .any(|&f| self.faces[f as usize].contains(&b))
     }
 
     /// Neighbours of `v` (faces around it, plus one on the boundary).
@@ -302,6 +338,8 @@ impl<'a> Net<'a> {
 
     fn flip_wanted(&self, a: u32, b: u32, c: u32, d: u32, cos_fold: f64) -> bool {
         if c == d
+            || self.corner[c as usize]
+            || self.corner[d as usize]
             || self.creases.contains(&edge_key(a, b))
             || self.vfaces[c as usize]
                 .iter()
@@ -342,7 +380,7 @@ impl<'a> Net<'a> {
     }
 
     /// Faces f = (a, b, c) and g = (b, a, d) become (a, d, c) and (d, b, c).
-    fn flip(&mut self, f: u32, g: u32, [a, b, c, d]: [u32; 4]) {
+    pub(super) fn flip(&mut self, f: u32, g: u32, [a, b, c, d]: [u32; 4]) {
         self.faces[f as usize] = [a, d, c];
         self.faces[g as usize] = [d, b, c];
         self.vfaces[a as usize].retain(|&h| h != g);
@@ -483,12 +521,12 @@ impl<'a> Net<'a> {
     }
 }
 
-fn normal(p: [DVec3; 3]) -> DVec3 {
+pub(super) fn normal(p: [DVec3; 3]) -> DVec3 {
     (p[1] - p[0]).cross(p[2] - p[0])
 }
 
 /// `4 sqrt(3) area / sum of squared edges`: 1 for an equilateral triangle.
-fn quality(p: [DVec3; 3]) -> f64 {
+pub(super) fn quality(p: [DVec3; 3]) -> f64 {
     let edges = (p[1] - p[0]).length_squared()
         + (p[2] - p[1]).length_squared()
         + (p[0] - p[2]).length_squared();
@@ -559,12 +597,13 @@ mod tests {
     }
 
     #[test]
-    fn flips_lower_irregular_valences_and_keep_every_point_landed() {
+    fn flips_make_the_centre_regular_and_keep_every_point_landed() {
         let (data, bad_mesh, landing) = disc_with_a_flipped_spoke();
         let (mesh, landing, creases, report) = improve_layout(
             &data,
             bad_mesh,
             landing,
+            &[],
             &[],
             &LayoutOptions {
                 rounds: 1,
@@ -573,7 +612,10 @@ mod tests {
             },
         );
         assert!(report.flips >= 1);
-        assert!(report.irregular_after < report.irregular_before);
+        // What matters: the centre is regular again (the count of irregular vertices may
+        // rise on the rim, where a hexagon's six corners have valence 3, not 4).
+        let centre_valence = mesh.triangles.iter().filter(|t| t.contains(&0)).count();
+        assert_eq!(centre_valence, 6);
         assert!(has_edge(&mesh, 0, 2));
         assert!(creases.is_empty());
         // All is flat, so every point's landing reproduces it exactly.
@@ -598,6 +640,7 @@ mod tests {
             bad_mesh,
             landing,
             &[[3, 1]],
+            &[],
             &LayoutOptions {
                 rounds: 2,
                 ..Default::default()

@@ -16,6 +16,7 @@
 //! flips and the splits, and become crease edges of the limit surface.
 
 mod component;
+mod corners;
 mod layout;
 mod refine;
 mod solve;
@@ -32,6 +33,7 @@ use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
+use corners::rim_corners;
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
@@ -256,9 +258,10 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         min_boundary_loop,
         ..opts.simplify.clone()
     };
-    let data_creases = match Topology::from_mesh(&component) {
-        Ok(topo) => detect_creases(&component, &topo, &opts.crease),
-        Err(_) => Vec::new(),
+    let data_topo = Topology::from_mesh(&component).ok();
+    let data_creases = match &data_topo {
+        Some(topo) => detect_creases(&component, topo, &opts.crease),
+        None => Vec::new(),
     };
     let simplified = simplify_with_creases(&component, &simplify_opts, &data_creases)
         .map_err(ObjectError::Simplify)?;
@@ -268,8 +271,19 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         mesh: control_mesh,
         landing,
         crease_edges,
+        control_of,
         ..
     } = simplified;
+    let corners = match &data_topo {
+        Some(topo) => rim_corners(
+            &component,
+            topo,
+            &control_mesh,
+            &control_of,
+            opts.simplify.corner_turn_deg,
+        ),
+        None => Vec::new(),
+    };
     let params: Vec<SurfaceParam> = landing
         .iter()
         .map(|l| SurfaceParam {
@@ -284,6 +298,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         control_mesh,
         params,
         &crease_edges,
+        &corners,
         &opts.layout,
     );
     times.layout_ms = ms_since(t);

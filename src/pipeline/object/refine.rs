@@ -136,46 +136,46 @@ pub(super) fn refined_mesh(
         return None;
     }
     worst.sort_by(|&a, &b| error[b].total_cmp(&error[a]).then(a.cmp(&b)));
-    // The longest edge of each worst face (by the interpolating net), each edge once,
-    // with the limit point of its midpoint.
-    let mut splits: Vec<(u32, u32, DVec3)> = Vec::with_capacity(add);
-    for f in worst {
-        if splits.len() >= add {
-            break;
-        }
-        let t = faces[f];
-        let k = (0..3)
-            .max_by(|&i, &j| {
-                let len = |k: usize| limit[t[k] as usize].distance(limit[t[(k + 1) % 3] as usize]);
-                len(i).total_cmp(&len(j))
-            })
-            .unwrap_or(0);
-        let (a, b) = (t[k], t[(k + 1) % 3]);
-        let key = (a.min(b), a.max(b));
-        if splits.iter().any(|&(x, y, _)| (x, y) == key) {
-            continue;
-        }
-        let mut w = [0.0; 3];
-        w[k] = 0.5;
-        w[(k + 1) % 3] = 0.5;
-        let mid = evaluate(SurfaceParam {
-            face: f as u32,
-            u: w[0],
-            v: w[1],
-        })
-        .position;
-        splits.push((key.0, key.1, mid));
-    }
-
-    let control = TriMesh::new(limit, faces.to_vec());
+    let control = TriMesh::new(limit.clone(), faces.to_vec());
     let mut net = Net::new(
         fit.component,
         control,
         fit.params,
         fit.surface.crease_edges(),
     )?;
-    for (a, b, at) in splits {
-        net.split_edge(a, b, at);
+    net.keep_corners();
+    // The longest edge of each worst face (by the interpolating net) is split at the limit
+    // point of its midpoint, each edge once; where a corner is opposite it (the split
+    // would give the corner a second face), the next longest.
+    let mut added = 0;
+    for f in worst {
+        if added >= add {
+            break;
+        }
+        let t = faces[f];
+        let len = |k: usize| limit[t[k] as usize].distance(limit[t[(k + 1) % 3] as usize]);
+        let mut order = [0, 1, 2];
+        order.sort_by(|&i, &j| len(j).total_cmp(&len(i)));
+        for k in order {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if !net.has_edge(a, b) {
+                // Split already from a neighbouring face.
+                break;
+            }
+            let mut w = [0.0; 3];
+            w[k] = 0.5;
+            w[(k + 1) % 3] = 0.5;
+            let mid = evaluate(SurfaceParam {
+                face: f as u32,
+                u: w[0],
+                v: w[1],
+            })
+            .position;
+            if net.split_edge(a, b, mid) {
+                added += 1;
+                break;
+            }
+        }
     }
     // Flips only: relaxing would move the vertices just placed where the error is.
     net.tidy(&LayoutOptions {

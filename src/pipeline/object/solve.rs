@@ -170,13 +170,14 @@ pub(super) fn rms(e: &[f64]) -> f64 {
 }
 
 /// The data's rim held on the surface's rim: each data point on the data's boundary keeps
-/// its foot point on the boundary edge of its control face (where that face has one), so
+/// its foot point on a boundary edge of its control face (where that face has one), so
 /// the limit surface's boundary curve is fitted to the data's boundary. Left free, those
 /// foot points slide inside and nothing stops the surface from running on past the rim
 /// (on bun_zipper by up to 2 % of the diagonal over the holes).
 pub(super) struct Rim {
-    /// Per control face: the corner k whose edge (k, k + 1) is on the boundary, if any.
-    edge_of_face: Vec<Option<usize>>,
+    /// Per control face: which of its edges k (corner k to k + 1) are on the boundary (a
+    /// face at a corner of the rim has two).
+    edges_of_face: Vec<[bool; 3]>,
     /// The data points on the data's boundary.
     points: Vec<usize>,
 }
@@ -188,22 +189,22 @@ impl Rim {
     /// `control_twins`: the control mesh's half-edge twins (`NONE` on the boundary);
     /// `data_boundary`: per data point, whether it is on the data's boundary.
     pub(super) fn new(control_twins: &[u32], data_boundary: &[bool]) -> Rim {
-        let edge_of_face = control_twins
+        let edges_of_face = control_twins
             .chunks(3)
-            .map(|t| t.iter().position(|&h| h == crate::mesh::topology::NONE))
+            .map(|t| [0, 1, 2].map(|k| t.get(k) == Some(&crate::mesh::topology::NONE)))
             .collect();
         let points = (0..data_boundary.len())
             .filter(|&p| data_boundary[p])
             .collect();
         Rim {
-            edge_of_face,
+            edges_of_face,
             points,
         }
     }
 
-    /// Moves each rim point's foot parameter onto its face's boundary edge (the nearest
-    /// point of the edge's limit curve, by Gauss-Newton along it) and updates its normal
-    /// and distance.
+    /// Moves each rim point's foot parameter onto the nearest boundary edge of its face
+    /// (the nearest point of the edge's limit curve, by Gauss-Newton along it) and updates
+    /// its normal and distance.
     pub(super) fn hold(
         &self,
         feet: &mut Feet,
@@ -217,47 +218,21 @@ impl Rim {
             .par_iter()
             .map(|&p| {
                 let param = feet.params[p];
-                let k = (*self.edge_of_face.get(param.face as usize)?)?;
-                let w = [param.u, param.v, 1.0 - param.u - param.v];
-                let sum = w[k] + w[(k + 1) % 3];
-                let mut t = if sum > 0.0 { w[k] / sum } else { 0.5 };
-                let at = |t: f64| {
-                    let mut w = [0.0; 3];
-                    w[k] = t;
-                    w[(k + 1) % 3] = 1.0 - t;
-                    SurfaceParam {
-                        face: param.face,
-                        u: w[0],
-                        v: w[1],
-                    }
-                };
-                let mut d = evaluate(at(t));
-                for _ in 0..RIM_STEPS {
-                    // d/dt of the position along the edge in (u, v) terms.
-                    let along = match k {
-                        0 => d.du - d.dv,
-                        1 => d.dv,
-                        _ => -d.du,
-                    };
-                    let len2 = along.length_squared();
-                    if len2 <= 0.0 {
-                        break;
-                    }
-                    t = (t - (d.position - data[p]).dot(along) / len2).clamp(0.0, 1.0);
-                    d = evaluate(at(t));
-                }
-                let r = d.position - data[p];
-                // A rim point whose own face's edge lies far off (a control face between
-                // two small holes of a broken scan) is left free: the hold pulls a rim
-                // along its data, never across to another.
-                let t3 = surface.faces().get(param.face as usize)?;
-                let (a, b) = (t3[k] as usize, t3[(k + 1) % 3] as usize);
-                let edge = controls.get(a)?.distance(*controls.get(b)?);
-                if r.length() > feet.distances[p] + 0.5 * edge {
-                    return None;
-                }
-                let n = d.du.cross(d.dv).try_normalize().unwrap_or(feet.normals[p]);
-                Some((at(t), n, r.length()))
+                let edges = self.edges_of_face.get(param.face as usize)?;
+                (0..3)
+                    .filter(|&k| edges[k])
+                    .filter_map(|k| {
+                        let held = hold_on_edge(&*evaluate, param, k, data[p])?;
+                        // A rim point whose own face's edge lies far off (a control face
+                        // between two small holes of a broken scan) is left free: the hold
+                        // pulls a rim along its data, never across to another.
+                        let t3 = surface.faces().get(param.face as usize)?;
+                        let (a, b) = (t3[k] as usize, t3[(k + 1) % 3] as usize);
+                        let edge = controls.get(a)?.distance(*controls.get(b)?);
+                        (held.2 <= feet.distances[p] + 0.5 * edge).then_some(held)
+                    })
+                    .min_by(|x, y| x.2.total_cmp(&y.2))
+                    .map(|(at, n, d)| (at, n.unwrap_or(feet.normals[p]), d))
             })
             .collect();
         for (&p, h) in self.points.iter().zip(held) {
@@ -277,4 +252,49 @@ impl Rim {
         }
         m
     }
+}
+
+/// The point of edge k (corner k to k + 1) of `param`'s face nearest to `q`, by
+/// Gauss-Newton along the edge from the projection of `param` onto it: the parameter, the
+/// unit normal there (if the tangents span a plane) and the distance. `None` when the
+/// tangent along the edge vanishes at the start.
+fn hold_on_edge(
+    evaluate: &(dyn Fn(SurfaceParam) -> crate::surface::Derivatives + Sync),
+    param: SurfaceParam,
+    k: usize,
+    q: DVec3,
+) -> Option<(SurfaceParam, Option<DVec3>, f64)> {
+    let w = [param.u, param.v, 1.0 - param.u - param.v];
+    let sum = w[k] + w[(k + 1) % 3];
+    let mut t = if sum > 0.0 { w[k] / sum } else { 0.5 };
+    let at = |t: f64| {
+        let mut w = [0.0; 3];
+        w[k] = t;
+        w[(k + 1) % 3] = 1.0 - t;
+        SurfaceParam {
+            face: param.face,
+            u: w[0],
+            v: w[1],
+        }
+    };
+    let mut d = evaluate(at(t));
+    for step in 0..RIM_STEPS {
+        // d/dt of the position along the edge in (u, v) terms.
+        let along = match k {
+            0 => d.du - d.dv,
+            1 => d.dv,
+            _ => -d.du,
+        };
+        let len2 = along.length_squared();
+        if len2 <= 0.0 {
+            if step == 0 {
+                return None;
+            }
+            break;
+        }
+        t = (t - (d.position - q).dot(along) / len2).clamp(0.0, 1.0);
+        d = evaluate(at(t));
+    }
+    let n = d.du.cross(d.dv).try_normalize();
+    Some((at(t), n, (d.position - q).length()))
 }
