@@ -95,6 +95,8 @@ pub(super) fn improve_layout(
     let Some(mut net) = Net::new(data, control.clone(), &landing, creases) else {
         return (control, landing, creases.to_vec(), LayoutReport::default());
     };
+    // Before the flips: opened after them, bun_zipper's rim sliver at 2 % controls left a
+    // boundary control 4 mm off the data (1.1 mm when opened first).
     let stray_corners_opened = net.open_stray_corners(corners);
     let corners = net.make_corners(corners, opts.max_fold_deg.to_radians().cos());
     let report = LayoutReport {
@@ -599,18 +601,17 @@ mod tests {
     #[test]
     fn flips_make_the_centre_regular_and_keep_every_point_landed() {
         let (data, bad_mesh, landing) = disc_with_a_flipped_spoke();
-        let (mesh, landing, creases, report) = improve_layout(
-            &data,
-            bad_mesh,
-            landing,
-            &[],
-            &[],
-            &LayoutOptions {
-                rounds: 1,
-                relax_steps: 0,
-                ..Default::default()
-            },
-        );
+        // Through the flips alone: `improve_layout` would first open vertex 2 (a single
+        // face, a Loop corner nobody asked for) by a split.
+        let Some(mut net) = Net::new(&data, bad_mesh, &landing, &[]) else {
+            panic!("the disc is a manifold");
+        };
+        let report = net.tidy(&LayoutOptions {
+            rounds: 1,
+            relax_steps: 0,
+            ..Default::default()
+        });
+        let (mesh, landing, creases) = net.finish();
         assert!(report.flips >= 1);
         // What matters: the centre is regular again (the count of irregular vertices may
         // rise on the rim, where a hexagon's six corners have valence 3, not 4).
@@ -640,7 +641,9 @@ mod tests {
             bad_mesh,
             landing,
             &[[3, 1]],
-            &[],
+            // Vertex 2, left with one face by the crease, is kept as a corner (not
+            // opened by a split of the crease edge).
+            &[2],
             &LayoutOptions {
                 rounds: 2,
                 ..Default::default()
