@@ -5,7 +5,10 @@
 //! input points within 1 mm of anything shown, the farthest shown vertex from the input
 //! (garbage would be far), RMS, control points, dropped share and the worker's time.
 //!
-//!     cargo run --release --example shown_coverage [-- DATA_DIR [largest|all]]
+//!     cargo run --release --example shown_coverage [-- DATA_DIR [largest|all|both [SURFACE [FILE]]]]
+//!
+//! SURFACE: `loop` (default), `bezier`, `dms`, `bpatch`; FILE: only the scans whose path
+//! contains it.
 
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -15,6 +18,7 @@ use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::scan::components::{cleaned_components, ComponentMode};
 use trispline::pipeline::worker::{run_input, WorkerConfig};
+use trispline::pipeline::SurfaceKind;
 use trispline::{DVec3, TriMesh};
 
 #[global_allocator]
@@ -33,33 +37,31 @@ fn main() {
         Some("all") => vec![ComponentMode::All],
         _ => vec![ComponentMode::Largest, ComponentMode::All],
     };
-    let files = [
-        "range_scans/bun000_tri.ply",
-        "range_scans/bun045_tri.ply",
-        "range_scans/chin_tri.ply",
-        "range_scans/bun000_range_grid.ply",
-        "range_scans/bun000_meshlab_triangulated.ply",
-        "range_scans/registered/bun000.ply",
-        "range_scans/registered/bun045.ply",
-        "range_scans/registered/bun180.ply",
-        "range_scans/registered/bun270.ply",
-        "range_scans/registered/chin.ply",
-    ];
+    let surface: SurfaceKind = match std::env::args().nth(3) {
+        Some(name) => name.parse().unwrap_or_else(|e| panic!("{e}")),
+        None => SurfaceKind::Loop,
+    };
+    let only = std::env::args().nth(4);
+    let files = trispline::testdata::STANFORD_SCANS;
     println!("| file | components | parts | fitted pts | fitted within 1 mm | input within 1 mm | not fitted (share) | worst rms um | max ctrl % | shown->input max um | worker ms |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for rel in files {
+        if only.as_deref().is_some_and(|o| !rel.contains(o)) {
+            continue;
+        }
         let Ok(loaded) = read_mesh_file(&root.join(rel), &LoadOptions::default()) else {
             println!("| {rel} | missing |");
             continue;
         };
         for &mode in &modes {
-            row(rel, &loaded.mesh, mode);
+            row(rel, &loaded.mesh, mode, surface);
         }
     }
 }
 
-fn row(rel: &str, mesh: &TriMesh, mode: ComponentMode) {
+fn row(rel: &str, mesh: &TriMesh, mode: ComponentMode, surface: SurfaceKind) {
     let mut cfg = WorkerConfig::default();
+    cfg.fit.surface = surface;
     cfg.fit.components.mode = mode;
     let t = Instant::now();
     let outputs = match run_input(mesh, None, &cfg) {

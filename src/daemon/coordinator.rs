@@ -185,6 +185,10 @@ impl Loop {
                 }
             }
             Msg::Written(id) => self.sched.finish(&id),
+            Msg::Queued(id) => {
+                self.in_flight = self.in_flight.saturating_sub(1);
+                self.sched.finish(&id);
+            }
         }
     }
 

@@ -10,7 +10,7 @@ use crate::pipeline::worker::{run_input, InputOutputs, WarmStart};
 use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
-pub struct Job {
+pub(crate) struct Job {
     pub arrival: Arrival,
     pub cfg: Arc<DaemonConfig>,
     /// The warm start of a fit that was dropped as stale (a newer version was waiting): newer
@@ -18,7 +18,7 @@ pub struct Job {
     pub warm: Option<WarmStart>,
 }
 
-pub enum Outcome {
+pub(crate) enum Outcome {
     Fitted {
         outputs: Box<InputOutputs>,
         hash: u64,
@@ -45,7 +45,7 @@ pub enum Outcome {
 }
 
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
-pub struct Timings {
+pub(crate) struct Timings {
     /// Detection to a worker picking it up.
     pub queued_ms: f64,
     pub read_ms: f64,
@@ -54,7 +54,7 @@ pub struct Timings {
     pub fit_ms: f64,
 }
 
-pub struct JobDone {
+pub(crate) struct JobDone {
     pub arrival: Arrival,
     pub cfg: Arc<DaemonConfig>,
     pub outcome: Outcome,
@@ -65,7 +65,7 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-pub fn run_job(job: Job, store: &StateStore) -> JobDone {
+pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
     let span =
         tracing::info_span!("patch", patch = %job.arrival.id, version = %job.arrival.version);
     let _guard = span.enter();
@@ -237,7 +237,11 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
 
 /// Whether the file is no longer what was read: another size or mtime than before the
 /// read, or another length than the bytes read.
-fn still_changing(path: &std::path::Path, before: (u64, Option<SystemTime>), read: usize) -> bool {
+pub(crate) fn still_changing(
+    path: &std::path::Path,
+    before: (u64, Option<SystemTime>),
+    read: usize,
+) -> bool {
     match std::fs::metadata(path) {
         Ok(m) => m.len() != before.0 || m.modified().ok() != before.1 || read as u64 != m.len(),
         // Gone or replaced mid-read: whatever was read is not the file any more.

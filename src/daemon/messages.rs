@@ -50,6 +50,8 @@ pub(crate) enum Msg {
     Fitted(Box<JobDone>),
     /// The writer is done with the patch's version.
     Written(String),
+    /// The patch's version went to the cluster queue: a worker elsewhere fits it.
+    Queued(String),
 }
 
 /// Output names a patch folder must never take: OUT holds them beside the patch folders.

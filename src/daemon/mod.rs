@@ -3,22 +3,24 @@
 //! for the threads and their invariants.
 #![warn(missing_docs)]
 
+mod cluster_config;
 pub mod config;
 mod confine;
 mod coordinator;
-mod job;
-mod kinds;
-mod layout;
-mod messages;
+pub(crate) mod job;
+pub(crate) mod kinds;
+pub(crate) mod layout;
+pub(crate) mod messages;
+pub(crate) mod offload;
 mod open_files;
 pub(crate) mod ops;
 pub(crate) mod pipe;
 mod publish;
-mod reload;
+pub(crate) mod reload;
 pub(crate) mod scheduler;
 pub mod state;
 mod watcher;
-mod writer;
+pub(crate) mod writer;
 
 use config::DaemonConfig;
 use coordinator::{Loop, Sources};
@@ -118,6 +120,8 @@ pub struct DaemonOptions {
     pub config_path: Option<PathBuf>,
     /// A pipe to read records from as well.
     pub pipe: Option<PipeSpec>,
+    /// Jobs go to this instead of local worker threads (the cluster queue of `--queue`).
+    pub(crate) offload: Option<offload::Offload>,
 }
 
 /// Temp files of writes cut short by a crash: never outputs, removed at start-up.
@@ -145,7 +149,10 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
             path: configured.map(Path::to_path_buf).unwrap_or_default(),
             reason: e.to_string(),
         })?;
-    let workers = opts.config.worker_threads();
+    let workers = match &opts.offload {
+        Some(o) => o.capacity,
+        None => opts.config.worker_threads(),
+    };
     let metrics = Arc::new(Metrics::default());
     if let Some(addr) = &opts.config.daemon.metrics_addr {
         let local = ops::http::serve(addr, Arc::clone(&metrics)).map_err(|source| {
@@ -171,9 +178,22 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         summary: Summary::default(),
         cell: Arc::clone(&cell),
         seen: writer::SeenVersions::load(&opts.state_dir),
+        node: None,
     };
     let writer = spawn("writer", move || writer.run(wrx))?;
-    let job_tx = start_workers(workers, &store, &tx)?;
+    let job_tx = match opts.offload {
+        Some(o) => {
+            let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
+            (o.start)(job_rx, tx.clone(), Arc::clone(&metrics)).map_err(|source| {
+                DaemonError::Spawn {
+                    name: "queue publisher".into(),
+                    source,
+                }
+            })?;
+            job_tx
+        }
+        None => start_workers(workers, &store, &tx)?,
+    };
     let intake_stop = Arc::new(AtomicBool::new(false));
     let partial = Arc::new(Mutex::new(None));
     let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);

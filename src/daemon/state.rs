@@ -122,6 +122,16 @@ impl StateStore {
         state
     }
 
+    /// Drops a patch's state from memory and its file: a cluster worker then holds only
+    /// what the shared store says (which may be nothing).
+    pub(crate) fn forget(&self, id: &str) {
+        let mut recent = self.recent();
+        recent.states.remove(id);
+        recent.order.retain(|k| k != id);
+        drop(recent);
+        let _ = std::fs::remove_file(self.path(id));
+    }
+
     /// Writes a state to its file (atomically).
     pub(crate) fn persist(&self, id: &str, state: &PatchState) -> Result<(), crate::io::IoError> {
         let bytes = serde_json::to_vec(state).unwrap_or_default();

@@ -54,6 +54,9 @@ pub enum WriterMsg {
     Spill(Arrival),
     /// Everything sent before this is handled; the thread then returns.
     Shutdown,
+    /// Everything sent before this is handled: answered on the channel (a cluster worker
+    /// acknowledges a job only once its outputs and events are written).
+    Barrier(Sender<()>),
 }
 
 pub struct Writer {
@@ -67,6 +70,8 @@ pub struct Writer {
     /// For `daemon.pipe_roots`: inputs are moved or deleted only inside the roots.
     pub cell: Arc<ConfigCell>,
     pub seen: SeenVersions,
+    /// A cluster worker's name, added to its events (several processes share the log).
+    pub node: Option<String>,
 }
 
 /// Superseded file versions already in the event log, kept across starts in the state
@@ -239,6 +244,9 @@ impl Writer {
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
                 WriterMsg::Shutdown => break,
+                WriterMsg::Barrier(done) => {
+                    let _ = done.send(());
+                }
             }
         }
         self.summary
@@ -551,6 +559,9 @@ impl Writer {
     fn event(&self, mut line: serde_json::Value) {
         use std::io::Write;
         line["time"] = json!(secs(SystemTime::now()));
+        if let Some(node) = &self.node {
+            line["worker"] = json!(node);
+        }
         let path = self.event_log();
         let appended = std::fs::OpenOptions::new()
             .create(true)

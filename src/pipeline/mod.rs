@@ -14,6 +14,7 @@
 #![warn(missing_docs)]
 
 mod collocation;
+mod coverage;
 mod error;
 mod geometric;
 mod names;

@@ -1,14 +1,14 @@
 //! What a fit turns into: the surface.json value, the tessellation (trimmed to the scanned
 //! region) and its error colours. Bytes and values only; callers write them.
 
+pub use super::coverage::Coverage;
 use super::scan::ScanFit;
 use super::{PatchFit, SurfaceKind, SurfaceModel};
 use crate::io::glb::{glb_bytes_with_extras, GlbAttributes, ERROR_RAMP};
-use crate::remesh::param::{ring_cells, Locator};
+use crate::remesh::param::ring_cells;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::{Derivatives, SurfaceParam};
 use crate::TriMesh;
-use glam::DVec2;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde_json::json;
@@ -144,174 +144,6 @@ impl Tessellation {
     }
 }
 
-/// The scanned region in parameter space, and what of the tessellation is shown of it.
-///
-/// Two sources, united per tessellation vertex:
-/// - the triangles of the mapped patch (data and bridged hole fills) with the data vertices
-///   at their corrected parameters. A triangle that the correction stretched to more than
-///   `MAX_STRETCH` times its mapped size (a foot point that slid far, typically on a
-///   grazing wall) or that touches a fold of the map is left out of this source: there the
-///   mapped triangles say little about where the data lie.
-/// - the fitted data's footprint: every data point that the surface passes within `reach`
-///   of marks the corners of the tessellation triangle its parameter lies in. Triangles
-///   of the mapped patch are too coarse a guide at the rims (a tessellation triangle only
-///   partly inside the last data triangle would be lost, and with it the rim's points) and
-///   say nothing where they were left out above; the data's own parameters are exact there.
-///
-/// A tessellation triangle is shown when its three corners are: inside the mapped region,
-/// or corners of a triangle holding data. It is so never more than one tessellation
-/// triangle away from a fitted point or from the mapped patch, and the surface is shown
-/// where it was fitted, never where it only extrapolates.
-pub struct Coverage {
-    triangles: Vec<[u32; 3]>,
-    params: Vec<DVec2>,
-    /// Parameters of the data points the surface passes within `reach` of...
-    footprint: Vec<DVec2>,
-    /// ... and those points.
-    footprint_points: Vec<DVec3>,
-    /// How far a shown vertex marked by a data point may stand from it.
-    reach: f64,
-}
-
-const MAX_STRETCH: f64 = 3.0;
-
-impl Coverage {
-    /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
-    /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map;
-    /// `untrusted[v]`: a vertex of a folded triangle of the map, whose triangles are left out
-    /// (at a folded silhouette the map overlaps itself and the mapped triangles are a guess).
-    /// No footprint: see [`Coverage::with_footprint`].
-    pub fn new(
-        triangles: &[[u32; 3]],
-        corrected: &[SurfaceParam],
-        mapped: &[DVec2],
-        untrusted: &[bool],
-    ) -> Self {
-        let params: Vec<DVec2> = mapped
-            .iter()
-            .enumerate()
-            .map(|(v, m)| corrected.get(v).map_or(*m, |q| DVec2::new(q.u, q.v)))
-            .collect();
-        let triangles = triangles
-            .par_iter()
-            .copied()
-            .filter(|t| !t.iter().any(|&v| untrusted.get(v as usize) == Some(&true)))
-            .filter(|t| {
-                (0..3).all(|k| {
-                    let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
-                    (params[a] - params[b]).length()
-                        <= MAX_STRETCH * (mapped[a] - mapped[b]).length() + 1e-12
-                })
-            })
-            .collect();
-        Self {
-            triangles,
-            params,
-            footprint: Vec::new(),
-            footprint_points: Vec::new(),
-            reach: 0.0,
-        }
-    }
-
-    /// Adds the fitted data's footprint: the data points whose geometric error is at most
-    /// `reach` (a point the surface misses by more does not vouch for the surface at its
-    /// parameter), at their parameters. A tessellation triangle holding one is shown only
-    /// when all its corners lie within `reach` of the point (where the map squeezes the
-    /// surface, one triangle of parameters can span far more than that).
-    pub fn with_footprint(
-        mut self,
-        params: &[SurfaceParam],
-        points: &[DVec3],
-        errors: &[f64],
-        reach: f64,
-    ) -> Self {
-        let near: Vec<usize> = (0..params.len().min(points.len()).min(errors.len()))
-            .filter(|&k| errors[k] <= reach)
-            .collect();
-        self.footprint = near
-            .iter()
-            .map(|&k| DVec2::new(params[k].u, params[k].v))
-            .collect();
-        self.footprint_points = near.iter().map(|&k| points[k]).collect();
-        self.reach = reach;
-        self
-    }
-
-    /// The scanned region of a scan fit: its mapped patch and the footprint of the data
-    /// the surface passes within the hole-bridging distance of (the furthest the shown
-    /// surface may stand from a measured point).
-    pub fn of(fit: &PatchFit, scan: &ScanFit) -> Self {
-        Self::new(
-            &scan.trims.plan.covered,
-            &fit.params,
-            &scan.mapping.mapped_params,
-            &scan.mapping.near_fold,
-        )
-        .with_footprint(
-            &fit.params,
-            &fit.data,
-            &fit.geometric_errors,
-            scan.trims.plan.max_bridge,
-        )
-    }
-
-    /// Returns a test for parameters: inside a kept triangle of the mapped patch.
-    pub(crate) fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
-        let locator = Locator::new(&self.triangles, &self.params);
-        move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
-    }
-
-    /// The triangles of a tessellation (vertices at `params`, surface there `evals`) that
-    /// are shown; `mapped` tells a parameter inside the mapped region.
-    fn shown(
-        &self,
-        mapped: impl Fn(f64, f64) -> bool + Sync,
-        params: &[SurfaceParam],
-        evals: &[Derivatives],
-        triangles: Vec<[u32; 3]>,
-    ) -> Vec<[u32; 3]> {
-        let mut inside: Vec<bool> = params.par_iter().map(|p| mapped(p.u, p.v)).collect();
-        if !self.footprint.is_empty() && !triangles.is_empty() {
-            let plane: Vec<DVec2> = params.iter().map(|p| DVec2::new(p.u, p.v)).collect();
-            let locator = Locator::new(&triangles, &plane);
-            let holding: Vec<usize> = self
-                .footprint
-                .par_iter()
-                .zip(self.footprint_points.par_iter())
-                .filter_map(|(&q, &p)| {
-                    let (t, _) = locator.locate(q);
-                    let corners = triangles[t].map(|v| plane[v as usize]);
-                    let near = triangles[t]
-                        .iter()
-                        .all(|&v| evals[v as usize].position.distance(p) <= self.reach);
-                    (near && holds(corners, q)).then_some(t)
-                })
-                .collect();
-            for t in holding {
-                for v in triangles[t] {
-                    inside[v as usize] = true;
-                }
-            }
-        }
-        triangles
-            .into_iter()
-            .filter(|t| t.iter().all(|&v| inside[v as usize]))
-            .collect()
-    }
-}
-
-/// Whether `q` lies in the triangle `c` or within a quarter of its size outside it (a data
-/// parameter on the surface's last edge, beside rounding).
-fn holds(c: [DVec2; 3], q: DVec2) -> bool {
-    let det = (c[1] - c[0]).perp_dot(c[2] - c[0]);
-    if det == 0.0 {
-        return false;
-    }
-    let l1 = (q - c[0]).perp_dot(c[2] - c[0]) / det;
-    let l2 = (c[1] - c[0]).perp_dot(q - c[0]) / det;
-    (1.0 - l1 - l2).min(l1).min(l2) >= -0.25
-}
-
 /// `segments`: per side of the Bezier triangle; for a grid, the total budget spread over
 /// the cells, at least 4 per cell side (a quartic cell flattened into 4 x 4 keeps the
 /// chordal error far below scan noise at scan-like curvatures). With a coverage, only
@@ -323,8 +155,18 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         || coverage.map(Coverage::tester),
         || sample_surface(f, segments),
     );
+    let (mut params, mut evals) = (params, evals);
     let triangles = match (coverage, covers) {
-        (Some(c), Some(mapped)) => c.shown(mapped, &params, &evals, triangles),
+        (Some(c), Some(mapped)) => {
+            let evaluate = f.model.as_surface().evaluator(&f.controls);
+            c.shown(
+                mapped,
+                &mut params,
+                &mut evals,
+                triangles,
+                evaluate.as_ref(),
+            )
+        }
         _ => triangles,
     };
     Tessellation::from_evaluations(&evals, params, triangles)

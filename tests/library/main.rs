@@ -22,6 +22,7 @@ mod object_crease;
 mod object_fit;
 mod object_pipeline;
 mod planar_product;
+mod planar_subdivided;
 mod point_clouds;
 mod scan_pipeline;
 mod shown_surface;

@@ -9,6 +9,7 @@ mod cli_fit;
 mod cli_fit_scan;
 mod cli_mesh;
 mod cli_object;
+mod cluster;
 mod components;
 mod daemon_crash;
 mod daemon_harden;

@@ -100,6 +100,19 @@ fn answer(mut stream: TcpStream, metrics: &Metrics) -> std::io::Result<()> {
         ("GET" | "HEAD", "/healthz") if metrics.stopping.load(Ordering::Relaxed) => {
             ("503 Service Unavailable", "text/plain", "stopping\n".into())
         }
+        ("GET" | "HEAD", "/healthz")
+            if metrics.queue_configured.load(Ordering::Relaxed)
+                && metrics.queue_reachable.get() == 0 =>
+        {
+            (
+                "503 Service Unavailable",
+                "text/plain",
+                "queue unreachable\n".into(),
+            )
+        }
+        ("GET" | "HEAD", "/healthz") if metrics.queue_configured.load(Ordering::Relaxed) => {
+            ("200 OK", "text/plain", "ok, queue reachable\n".into())
+        }
         ("GET" | "HEAD", "/healthz") => ("200 OK", "text/plain", "ok\n".into()),
         ("GET" | "HEAD", _) => ("404 Not Found", "text/plain", "not found\n".into()),
         _ => ("405 Method Not Allowed", "text/plain", "GET only\n".into()),
@@ -142,6 +155,19 @@ mod tests {
         assert!(r.starts_with("HTTP/1.1 404"), "{r}");
         let r = get(addr, "POST /metrics HTTP/1.1\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 405"), "{r}");
+        // With a cluster queue, health follows its connection.
+        m.queue_configured.store(true, Ordering::Relaxed);
+        let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
+        assert!(
+            r.starts_with("HTTP/1.1 503") && r.ends_with("queue unreachable\n"),
+            "{r}"
+        );
+        m.queue_reachable.set(1);
+        let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
+        assert!(
+            r.starts_with("HTTP/1.1 200") && r.ends_with("queue reachable\n"),
+            "{r}"
+        );
         m.stopping.store(true, Ordering::Relaxed);
         let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 503"), "{r}");

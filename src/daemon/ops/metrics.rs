@@ -39,6 +39,11 @@ pub struct Metrics {
     pub reloads: Counter,
     pub reload_failures: Counter,
     pub stopping: AtomicBool,
+    /// Set when jobs go through a cluster queue: `/healthz` then reports whether it is
+    /// reachable.
+    pub queue_configured: AtomicBool,
+    /// 1 while the cluster queue's server is connected.
+    pub queue_reachable: Gauge,
     fit: Histogram,
     /// When the last error happened, labelled with its kind: one series at a time.
     last_error: Family<KindLabel, Gauge<f64, AtomicU64>>,
@@ -92,6 +97,12 @@ impl Default for Metrics {
             "Patches being fitted or written.",
             in_flight.clone(),
         );
+        let queue_reachable = Gauge::default();
+        registry.register(
+            "trispline_queue_reachable",
+            "1 while the cluster queue's server is connected (0 without a queue).",
+            queue_reachable.clone(),
+        );
         let fit = Histogram::new(BUCKETS);
         registry.register(
             "trispline_fit_duration_seconds",
@@ -120,6 +131,8 @@ impl Default for Metrics {
             reloads,
             reload_failures,
             stopping: AtomicBool::new(false),
+            queue_configured: AtomicBool::new(false),
+            queue_reachable,
             fit,
             last_error,
             last_error_lock: Mutex::new(()),

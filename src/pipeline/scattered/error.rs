@@ -35,6 +35,17 @@ pub enum ScatteredError {
     /// The fitting engine failed.
     #[error("{0}")]
     Fit(#[source] ScatteredFitError),
+    /// A subdivided input's coarse net could not be mapped to the plane (closed, not
+    /// manifold, or the map failed).
+    #[error("the coarse net has no parameter triangulation: {0}")]
+    CoarseNet(String),
+    /// The coarse net's planar map turned some faces over (a numerical failure of the
+    /// mean-value map, whose convex boundary otherwise keeps it one-to-one).
+    #[error("the coarse net's planar map folds {triangles} triangles")]
+    CoarseNetFolded {
+        /// Triangles turned over or flat.
+        triangles: usize,
+    },
     /// A kind of surface that is not fitted over a planar domain reached this path.
     #[error("surface kind {0} is not a planar-domain kind")]
     NotPlanarKind(&'static str),
@@ -51,6 +62,8 @@ impl ScatteredError {
             ScatteredError::BPatch(_) => "bpatch_refused",
             ScatteredError::Fit(_) => "fit_failed",
             ScatteredError::NotPlanarKind(_) => "not_planar_kind",
+            ScatteredError::CoarseNet(_) => "coarse_net_unmapped",
+            ScatteredError::CoarseNetFolded { .. } => "coarse_net_folded",
         }
     }
 }

@@ -2,9 +2,9 @@
 //! triangle around the scan's planar map) and `surface = "dms"` (a DMS triangular B-spline
 //! over a triangulation of the map: the grid path's cells at a coarser spacing).
 //!
-//! Any input these kinds are asked for goes through the scan's preparation (clean, largest
-//! component, holes, planar map: `scan::prepare`), so subdivided inputs are fitted over their
-//! planar map too, not over their coarse net. Then: the domain (`domain`), every data point
+//! Inputs with subdivision connectivity `fit.levels` deep are fitted over their coarse net's
+//! parameter triangulation (`subdivided`). Any other input goes through the scan's
+//! preparation (clean, largest component, holes, planar map: `scan::prepare`). Then: the domain (`domain`), every data point
 //! located in it, a first fit by `scattered_fit::fit_scattered`, then rounds at the foot
 //! points (`rounds`: squared-distance minimisation like the scan path's, or point-to-point
 //! again with `fit.correction.kind = "parameters"`) while a round gains
@@ -19,6 +19,7 @@ mod info;
 pub mod kinds;
 mod output;
 mod rounds;
+mod subdivided;
 mod warm;
 
 pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
@@ -27,6 +28,7 @@ use info::planar_surface;
 pub use info::ScatteredInfo;
 pub(crate) use output::add_outputs;
 pub use output::tessellate_planar;
+pub(crate) use subdivided::fit_planar_subdivided;
 pub use warm::ScatteredWarm;
 
 use super::output::Coverage;
@@ -36,10 +38,10 @@ use super::scan::{Preparation, ScanOptions, ScanWarm};
 use super::worker::{WarmStart, WorkerConfig};
 use super::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::fit::Budget;
-use crate::scattered_fit::{initial_net, InitialNet, ScatteredOptions};
+use crate::scattered_fit::ScatteredOptions;
 use crate::surface::dms::PlanarSurface;
 use crate::surface::SurfaceParam;
-use glam::{DVec2, DVec3};
+use glam::DVec2;
 use rayon::prelude::*;
 use std::time::Instant;
 
@@ -102,7 +104,7 @@ pub(crate) fn fit_planar(
         smoothing,
         correction_rounds: 0,
         newton_steps: rounds::NEWTON_STEPS,
-        initial: start_net(surface, &params, data, built.controls.clone()),
+        initial: rounds::start_net(surface, &params, data, built.controls.clone()),
     };
     let rounds = rounds::fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
@@ -154,34 +156,6 @@ fn locate_all(
         return Err(ScatteredError::OutsideDomain { points: outside }.into());
     }
     Ok(located.into_iter().flatten().collect())
-}
-
-/// The first round's start: the previous version's controls where it gave them, the plane
-/// of the data (`InitialNet::Affine`) elsewhere.
-fn start_net(
-    surface: &dyn PlanarSurface,
-    params: &[SurfaceParam],
-    data: &[DVec3],
-    previous: Option<Vec<Option<DVec3>>>,
-) -> InitialNet {
-    let Some(start) = previous else {
-        return InitialNet::Affine;
-    };
-    let plane_fill = if start.iter().any(Option::is_none) {
-        initial_net(surface, params, data, &InitialNet::Affine)
-    } else {
-        Vec::new()
-    };
-    InitialNet::Given(
-        start
-            .into_iter()
-            .enumerate()
-            .map(|(k, c)| {
-                c.or_else(|| plane_fill.get(k).copied())
-                    .unwrap_or(DVec3::ZERO)
-            })
-            .collect(),
-    )
 }
 
 /// The covered region and trims in domain coordinates.

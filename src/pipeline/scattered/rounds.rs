@@ -15,12 +15,12 @@ use crate::fit::{Collocation, FitOutcome};
 use crate::pipeline::scan::{Correction, CorrectionConfig};
 use crate::pipeline::PipelineError;
 use crate::scattered_fit::{
-    collocation_matrix, fairness_operator, fit_scattered, foot_points, InitialNet, ScatteredOptions,
+    collocation_matrix, fairness_operator, feet_with_derivatives, fit_scattered, initial_net,
+    InitialNet, ScatteredOptions,
 };
 use crate::surface::dms::PlanarSurface;
 use crate::surface::SurfaceParam;
 use glam::DVec3;
-use rayon::prelude::*;
 
 /// Newton steps per foot point and round.
 pub(super) const NEWTON_STEPS: usize = 6;
@@ -40,48 +40,55 @@ pub(super) struct Rounds {
     pub(super) rms: Vec<f64>,
 }
 
-/// Foot points of `data` on the surface of `controls` (from `params`) and the distances.
+/// The data's feet on the surface of `controls` (from `params`): each foot, its unit
+/// normal and its distance, and the RMS distance.
+struct Feet {
+    params: Vec<SurfaceParam>,
+    normals: Vec<DVec3>,
+    errors: Vec<f64>,
+    rms: f64,
+}
+
 fn feet_and_errors(
     surface: &dyn PlanarSurface,
     controls: &[DVec3],
     params: &[SurfaceParam],
     data: &[DVec3],
-) -> (Vec<SurfaceParam>, Vec<f64>, f64) {
-    let feet = foot_points(surface, controls, params, data, NEWTON_STEPS);
-    let eval = surface.evaluator(controls);
+) -> Feet {
+    let feet = feet_with_derivatives(surface, controls, params, data, NEWTON_STEPS);
     let errors: Vec<f64> = feet
-        .par_iter()
-        .zip(data.par_iter())
-        .map(|(p, x)| (eval(*p).position - *x).length())
+        .iter()
+        .zip(data)
+        .map(|((_, d), x)| (d.position - *x).length())
         .collect();
     let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
-    (feet, errors, rms)
+    Feet {
+        normals: feet
+            .iter()
+            .map(|(_, d)| d.du.cross(d.dv).normalize_or_zero())
+            .collect(),
+        params: feet.into_iter().map(|(p, _)| p).collect(),
+        errors,
+        rms,
+    }
 }
 
-/// One squared-distance round at the foot points `feet` of the surface of `controls`.
+/// One squared-distance round at the feet of the surface of `controls`.
 fn distance_round(
     surface: &dyn PlanarSurface,
     controls: &[DVec3],
-    feet: &[SurfaceParam],
+    feet: &Feet,
     data: &[DVec3],
     fairness: &Collocation,
     smoothing: f64,
     tangential: f64,
 ) -> Vec<DVec3> {
-    let basis = collocation_matrix(surface, feet);
-    let eval = surface.evaluator(controls);
-    let normals: Vec<DVec3> = feet
-        .par_iter()
-        .map(|p| {
-            let d = eval(*p);
-            d.du.cross(d.dv).normalize_or_zero()
-        })
-        .collect();
+    let basis = collocation_matrix(surface, &feet.params);
     let tangential = vec![tangential; data.len()];
     let problem = DistanceProblem {
         basis: &basis,
         data,
-        normals: &normals,
+        normals: &feet.normals,
         tangential: &tangential,
         fairness: Some(fairness),
         smoothing,
@@ -113,9 +120,8 @@ pub(super) fn fit_rounds(
         .into_iter()
         .last()
         .ok_or(ScatteredError::EmptyDomain)?;
-    let (mut feet, mut errors, mut best) =
-        feet_and_errors(surface, &outcome.controls, &params, data);
-    let mut rms_history = vec![best];
+    let mut feet = feet_and_errors(surface, &outcome.controls, &params, data);
+    let mut rms_history = vec![feet.rms];
     let fairness = Collocation::new(fairness_operator(surface));
     for _ in 0..correction.rounds {
         let controls = match correction.kind {
@@ -130,7 +136,7 @@ pub(super) fn fit_rounds(
             ),
             Correction::Parameters => {
                 options.initial = InitialNet::Given(outcome.controls.clone());
-                let refit = fit_scattered(surface, &feet, data, &options, None)
+                let refit = fit_scattered(surface, &feet.params, data, &options, None)
                     .map_err(ScatteredError::Fit)?;
                 refit
                     .rounds
@@ -140,11 +146,12 @@ pub(super) fn fit_rounds(
                     .controls
             }
         };
-        let (next_feet, next_errors, rms) = feet_and_errors(surface, &controls, &feet, data);
-        rms_history.push(rms);
-        let gain = (best - rms) / best.max(f64::MIN_POSITIVE);
-        if rms < best {
-            (feet, errors, best) = (next_feet, next_errors, rms);
+        let next = feet_and_errors(surface, &controls, &feet.params, data);
+        rms_history.push(next.rms);
+        let best = feet.rms;
+        let gain = (best - next.rms) / best.max(f64::MIN_POSITIVE);
+        if next.rms < best {
+            feet = next;
             outcome.controls = controls;
         }
         if gain < correction.min_gain {
@@ -153,8 +160,36 @@ pub(super) fn fit_rounds(
     }
     Ok(Rounds {
         outcome,
-        params: feet,
-        errors,
+        params: feet.params,
+        errors: feet.errors,
         rms: rms_history,
     })
+}
+
+/// The first round's start: the previous version's controls where it gave them, the plane
+/// of the data (`InitialNet::Affine`) elsewhere.
+pub(super) fn start_net(
+    surface: &dyn PlanarSurface,
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    previous: Option<Vec<Option<DVec3>>>,
+) -> InitialNet {
+    let Some(start) = previous else {
+        return InitialNet::Affine;
+    };
+    let plane_fill = if start.iter().any(Option::is_none) {
+        initial_net(surface, params, data, &InitialNet::Affine)
+    } else {
+        Vec::new()
+    };
+    InitialNet::Given(
+        start
+            .into_iter()
+            .enumerate()
+            .map(|(k, c)| {
+                c.or_else(|| plane_fill.get(k).copied())
+                    .unwrap_or(DVec3::ZERO)
+            })
+            .collect(),
+    )
 }

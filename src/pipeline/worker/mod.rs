@@ -21,7 +21,9 @@ use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
 use super::scan::{fit_scan, ScanFit, ScanOptions, ScanWarm};
-use super::scattered::{add_outputs, fit_planar, tessellate_planar, ScatteredInfo};
+use super::scattered::{
+    add_outputs, fit_planar, fit_planar_subdivided, tessellate_planar, ScatteredInfo,
+};
 use super::subdivided::fit_subdivided;
 use super::{FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, StepHook};
@@ -97,6 +99,18 @@ pub(crate) fn fit_patch_with(
         on_step,
     };
     if matches!(fit_cfg.surface, SurfaceKind::Bpatch | SurfaceKind::Dms) {
+        // Subdivision connectivity: over the coarse net, as the other kinds.
+        if let Some(fit) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
+            return Ok(FittedPatch {
+                fit,
+                scan: None,
+                budget,
+                levels: fit_cfg.levels,
+                refinement: Vec::new(),
+                object: None,
+                scattered: None,
+            });
+        }
         let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
         return Ok(FittedPatch {
             fit,
