@@ -48,7 +48,7 @@ fn main() {
         "generated: square patch",
     ];
     println!(
-        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | {:>7} | times ms: read clean simplify layout surface first rounds (rounds) refine | fit cpu | irregular before/after, rim corners, refinement controls:rms",
+        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | {:>7} | times ms: read clean simplify layout surface first rounds (rounds) refine | fit cpu | irregular before/after, rim corners, sampled faces, refinement controls:rms",
         "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b", "stray%"
     );
     for name in models {
@@ -125,7 +125,7 @@ fn main() {
         let m = fit.controls.len();
         let ts = &fit.times;
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} {}",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} s{} {}",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -155,6 +155,7 @@ fn main() {
             fit.layout.irregular_before,
             fit.layout.irregular_after,
             fit.layout.corners,
+            fit.sampled_faces,
             fit.refinement
                 .iter()
                 .map(|r| format!("{}:{:.3e}", r.controls, r.rms))

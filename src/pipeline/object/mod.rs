@@ -25,6 +25,7 @@ use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{detect_creases, CreaseOptions};
+use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::{
     simplify_with_creases, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
 };
@@ -39,7 +40,7 @@ use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 use refine::{refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
-use solve::{point_fit, rows_at, DistanceRound, Feet, Rim};
+use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
@@ -86,6 +87,9 @@ pub struct ObjectOptions {
     pub layout: LayoutOptions,
     /// Adaptive refinement after the first fit.
     pub refine: RefineOptions,
+    /// Pull sample points of control faces with few foot points to the data (the
+    /// surface-to-data term; without it such patches are held only by the fairness term).
+    pub surface_samples: bool,
 }
 
 impl Default for ObjectOptions {
@@ -110,6 +114,7 @@ impl Default for ObjectOptions {
             limit_start: true,
             layout: LayoutOptions::default(),
             refine: RefineOptions::default(),
+            surface_samples: true,
         }
     }
 }
@@ -212,6 +217,9 @@ pub struct ObjectFit {
     /// The fit before refinement, then after each refinement round (empty when refinement
     /// is off).
     pub refinement: Vec<RefineRound>,
+    /// Control faces the last round sampled for the surface-to-data term (those holding
+    /// fewer than four foot points).
+    pub sampled_faces: usize,
 }
 
 impl ObjectFit {
@@ -343,6 +351,19 @@ pub fn fit_on_creased_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
+    fit_from(component, control_mesh, crease_edges, params, None, opts)
+}
+
+/// [`fit_on_creased_control_mesh`], its first point fit skipped when `warm` gives control
+/// positions to start the rounds from (one per control mesh vertex).
+fn fit_from(
+    component: TriMesh,
+    control_mesh: TriMesh,
+    crease_edges: &[[u32; 2]],
+    params: Vec<SurfaceParam>,
+    warm: Option<Vec<DVec3>>,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let t = Instant::now();
@@ -374,26 +395,26 @@ pub fn fit_on_creased_control_mesh(
 
     let t = Instant::now();
     let data = component.positions.clone();
-    let params = if opts.limit_start {
-        let mut start = Feet::find(&surface, &control_mesh.positions, &data, &params);
-        rim.hold(&mut start, &surface, &control_mesh.positions, &data);
-        start.params
-    } else {
-        params
+    let warm = warm.filter(|w| w.len() == m);
+    let (mut controls, mut feet) = match warm {
+        Some(controls) => {
+            let mut feet = Feet::find(&surface, &controls, &data, &params);
+            rim.hold(&mut feet, &surface, &controls, &data);
+            (controls, feet)
+        }
+        None => first_fit(
+            FirstFit {
+                surface: &surface,
+                control_mesh: &control_mesh,
+                data: &data,
+                rim: &rim,
+                fairness: &fairness,
+                smoothing,
+            },
+            params,
+            opts,
+        )?,
     };
-    let rows = rows_at(&surface, &params);
-    let mut controls = point_fit(
-        &rows,
-        &data,
-        &fairness,
-        smoothing,
-        control_mesh.positions.clone(),
-        opts.max_iterations,
-    )
-    .ok_or(ObjectError::Solve { stage: "first" })?;
-    drop(rows);
-    let mut feet = Feet::find(&surface, &controls, &data, &params);
-    rim.hold(&mut feet, &surface, &controls, &data);
     times.first_fit_ms = ms_since(t);
 
     let t = Instant::now();
@@ -412,17 +433,15 @@ pub fn fit_on_creased_control_mesh(
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
     let mut refusals = 0;
     let mut taken = 0;
+    let nearest = opts.surface_samples.then(|| MeshDistance::new(&component));
+    let mut sampled_faces = 0;
     while taken < opts.rounds && refusals < MAX_REFUSALS {
-        // Rim points pull point to point: the boundary curve has to reach them.
-        let tangential: Vec<f64> = near_edge
-            .iter()
-            .zip(&on_rim)
-            .map(|(&e, &r)| match (r, e) {
-                (true, _) => 1.0,
-                (false, true) => share * edge_factor,
-                (false, false) => share,
-            })
-            .collect();
+        let samples = match &nearest {
+            Some(nearest) => Samples::find(&surface, &controls, &feet.params, &component, nearest),
+            None => Samples::none(),
+        };
+        sampled_faces = samples.faces;
+        let tangential = shares(&near_edge, &on_rim, share, edge_factor);
         let round = DistanceRound {
             surface: &surface,
             data: &data,
@@ -430,6 +449,8 @@ pub fn fit_on_creased_control_mesh(
             smoothing,
             tangential: &tangential,
             max_iterations: opts.max_iterations,
+            samples: &samples,
+            sample_tangential: share,
         };
         let next_feet = round.solve(&feet, controls.clone()).map(|next| {
             let mut f = Feet::find(&surface, &next, &data, &feet.params);
@@ -455,9 +476,11 @@ pub fn fit_on_creased_control_mesh(
             break;
         }
     }
+    drop(nearest);
     times.rounds_ms = ms_since(t);
     times.total_ms = ms_since(start);
     Ok(ObjectFit {
+        sampled_faces,
         data,
         component,
         simplified: control_mesh,
@@ -474,6 +497,47 @@ pub fn fit_on_creased_control_mesh(
         layout: LayoutReport::default(),
         refinement: Vec::new(),
     })
+}
+
+/// What the first point fit works on.
+struct FirstFit<'a> {
+    surface: &'a LoopLimitSurface,
+    control_mesh: &'a TriMesh,
+    data: &'a [DVec3],
+    rim: &'a Rim,
+    fairness: &'a Collocation,
+    smoothing: f64,
+}
+
+/// The point-to-point fit at the initial parameters (or, with `limit_start`, at their foot
+/// points on the initial control mesh's limit surface) and the data's foot points on it.
+fn first_fit(
+    f: FirstFit,
+    params: Vec<SurfaceParam>,
+    opts: &ObjectOptions,
+) -> Result<(Vec<DVec3>, Feet), ObjectError> {
+    let positions = &f.control_mesh.positions;
+    let params = if opts.limit_start {
+        let mut start = Feet::find(f.surface, positions, f.data, &params);
+        f.rim.hold(&mut start, f.surface, positions, f.data);
+        start.params
+    } else {
+        params
+    };
+    let rows = rows_at(f.surface, &params);
+    let controls = point_fit(
+        &rows,
+        f.data,
+        f.fairness,
+        f.smoothing,
+        positions.clone(),
+        opts.max_iterations,
+    )
+    .ok_or(ObjectError::Solve { stage: "first" })?;
+    drop(rows);
+    let mut feet = Feet::find(f.surface, &controls, f.data, &params);
+    f.rim.hold(&mut feet, f.surface, &controls, f.data);
+    Ok((controls, feet))
 }
 
 /// Refinement rounds after the first fit (see `refine`): each refines the control mesh
@@ -500,8 +564,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             params: &fit.params,
             distances: &fit.distances,
         };
-        let Some((mesh, params, creases)) = refined_mesh(&fitted, add, tolerance, &opts.layout)
-        else {
+        let Some(refined) = refined_mesh(&fitted, add, tolerance, &opts.layout) else {
             break;
         };
         // Only the last fit runs all its rounds: the ones before only show where to refine.
@@ -511,9 +574,14 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         } else {
             intermediate(opts)
         };
-        let Ok(next) =
-            fit_on_creased_control_mesh(fit.component.clone(), mesh, &creases, params, &round_opts)
-        else {
+        let Ok(next) = fit_from(
+            fit.component.clone(),
+            refined.mesh,
+            &refined.creases,
+            refined.params,
+            Some(refined.warm),
+            &round_opts,
+        ) else {
             break;
         };
         stages.push(round_of(&next));
@@ -537,6 +605,21 @@ fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
         rounds: opts.rounds.min(INTERMEDIATE_ROUNDS),
         ..opts.clone()
     }
+}
+
+/// Per data point, the share of the point-to-point term in a round: `share` inside,
+/// `edge_factor` times more near the data's boundary, and all of it on the rim, where the
+/// boundary curve has to reach the points.
+fn shares(near_edge: &[bool], on_rim: &[bool], share: f64, edge_factor: f64) -> Vec<f64> {
+    near_edge
+        .iter()
+        .zip(on_rim)
+        .map(|(&e, &r)| match (r, e) {
+            (true, _) => 1.0,
+            (false, true) => share * edge_factor,
+            (false, false) => share,
+        })
+        .collect()
 }
 
 fn ms_since(t: Instant) -> f64 {

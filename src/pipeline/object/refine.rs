@@ -10,7 +10,7 @@
 //! faces land on it by projection as they did on the simplification, and the points of
 //! unchanged faces keep their foot points exactly.
 
-use super::layout::{LayoutOptions, Net};
+use super::layout::{edge_key, LayoutOptions, Net};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -85,6 +85,20 @@ pub(super) struct Fitted<'a> {
     pub distances: &'a [f64],
 }
 
+/// A refined control mesh, ready to be fitted.
+pub(super) struct Refined {
+    /// The control mesh at the interpolating net's positions.
+    pub mesh: TriMesh,
+    /// Each data point's landing on it.
+    pub params: Vec<SurfaceParam>,
+    /// Its crease edges.
+    pub creases: Vec<[u32; 2]>,
+    /// Control positions to start the fit from: the fitted controls, and each new vertex
+    /// by Loop's edge rule from the controls around its edge. Far from the splits the
+    /// surface is the fitted one, so the fit needs no first point fit and fewer rounds.
+    pub warm: Vec<DVec3>,
+}
+
 /// The control mesh of `fit` with up to `add` edges split where the error is (see the
 /// module docs) and each data point's landing on it; `None` when no face has a point
 /// beyond the tolerance or the net cannot be built.
@@ -93,7 +107,7 @@ pub(super) fn refined_mesh(
     add: usize,
     tolerance: Option<f64>,
     layout: &LayoutOptions,
-) -> Option<(TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>)> {
+) -> Option<Refined> {
     let faces = fit.surface.faces();
     let evaluate = fit.surface.evaluator(fit.controls);
     let corner = |f: usize, k: usize| {
@@ -148,6 +162,7 @@ pub(super) fn refined_mesh(
     // point of its midpoint, each edge once; where a corner is opposite it (the split
     // would give the corner a second face), the next longest.
     let mut added = 0;
+    let mut warm = fit.controls.to_vec();
     for f in worst {
         if added >= add {
             break;
@@ -171,7 +186,9 @@ pub(super) fn refined_mesh(
                 v: w[1],
             })
             .position;
+            let warm_at = edge_rule(&net, &warm, a, b);
             if net.split_edge(a, b, mid) {
+                warm.push(warm_at);
                 added += 1;
                 break;
             }
@@ -183,5 +200,30 @@ pub(super) fn refined_mesh(
         rounds: 1,
         ..layout.clone()
     });
-    Some(net.finish())
+    let (mesh, params, creases) = net.finish();
+    Some(Refined {
+        mesh,
+        params,
+        creases,
+        warm,
+    })
+}
+
+/// Loop's odd (edge) rule for edge (a, b) of `net` at the positions `at`: 3/8 of each end
+/// and 1/8 of each opposite corner inside, the midpoint on a boundary or crease edge.
+fn edge_rule(net: &Net, at: &[DVec3], a: u32, b: u32) -> DVec3 {
+    let mid = 0.5 * (at[a as usize] + at[b as usize]);
+    if net.creases.contains(&edge_key(a, b)) {
+        return mid;
+    }
+    let opposite: Vec<u32> = net.vfaces[a as usize]
+        .iter()
+        .map(|&f| net.faces[f as usize])
+        .filter(|t| t.contains(&b))
+        .filter_map(|t| t.iter().copied().find(|&c| c != a && c != b))
+        .collect();
+    match opposite[..] {
+        [c, d] => 0.75 * mid + 0.125 * (at[c as usize] + at[d as usize]),
+        _ => mid,
+    }
 }

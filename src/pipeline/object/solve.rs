@@ -6,9 +6,11 @@
 use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
+use crate::mesh::distance::MeshDistance;
 use crate::pipeline::geometric::foot_point;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
+use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -80,7 +82,8 @@ pub(super) fn point_fit(
     x.iter().all(|p| p.is_finite()).then_some(x)
 }
 
-/// One squared-distance solve at the current foot points.
+/// One squared-distance solve at the current foot points, with the surface-to-data
+/// samples as further points.
 pub(super) struct DistanceRound<'a> {
     pub surface: &'a LoopLimitSurface,
     pub data: &'a [DVec3],
@@ -88,16 +91,29 @@ pub(super) struct DistanceRound<'a> {
     pub smoothing: f64,
     pub tangential: &'a [f64],
     pub max_iterations: usize,
+    pub samples: &'a Samples,
+    /// Tangential share of the samples' point-to-point term.
+    pub sample_tangential: f64,
 }
 
 impl DistanceRound<'_> {
     pub(super) fn solve(&self, feet: &Feet, start: Vec<DVec3>) -> Option<Vec<DVec3>> {
-        let rows = rows_at(self.surface, &feet.params);
+        let s = self.samples;
+        let params: Vec<SurfaceParam> = feet.params.iter().chain(&s.params).copied().collect();
+        let data: Vec<DVec3> = self.data.iter().chain(&s.targets).copied().collect();
+        let normals: Vec<DVec3> = feet.normals.iter().chain(&s.normals).copied().collect();
+        let tangential: Vec<f64> = self
+            .tangential
+            .iter()
+            .copied()
+            .chain(std::iter::repeat_n(self.sample_tangential, s.params.len()))
+            .collect();
+        let rows = rows_at(self.surface, &params);
         let problem = DistanceProblem {
             basis: &rows,
-            data: self.data,
-            normals: &feet.normals,
-            tangential: self.tangential,
+            data: &data,
+            normals: &normals,
+            tangential: &tangential,
             fairness: Some(self.fairness),
             smoothing: self.smoothing,
         };
@@ -106,6 +122,101 @@ impl DistanceRound<'_> {
             None => solve_distance(&problem, start, self.max_iterations, CG_REL_TOL).0,
         };
         x.iter().all(|p| p.is_finite()).then_some(x)
+    }
+}
+
+/// Where a sparse control face is sampled, as (u, v): its centre and the centres of its
+/// three corner sub-triangles.
+const SAMPLE_AT: [(f64, f64); 4] = [
+    (1.0 / 3.0, 1.0 / 3.0),
+    (2.0 / 3.0, 1.0 / 6.0),
+    (1.0 / 6.0, 2.0 / 3.0),
+    (1.0 / 6.0, 1.0 / 6.0),
+];
+
+/// The surface-to-data term (the squared distance of Cheng, Wang et al. 2004 taken from
+/// the surface's side): sample points of the limit patches over control faces that hold
+/// fewer foot points than samples, each pulled to its nearest point of the data mesh.
+///
+/// Data-to-surface terms see only the patches the data's feet land on. A patch the feet
+/// have slid off is held by nothing but the fairness term, and no foot point sees it
+/// bulge: on bun_zipper such patches stood 1.4 mm (0.56 % of the diagonal) off the data.
+/// Each sample weighs as one data point, so where feet are dense the data decide.
+pub(super) struct Samples {
+    /// The samples' parameters on the surface.
+    pub params: Vec<SurfaceParam>,
+    /// Their nearest points on the data mesh.
+    pub targets: Vec<DVec3>,
+    /// The direction of the squared distance's gradient there: the data triangle's
+    /// normal, or the direction to the nearest point where that is an edge or a corner.
+    pub normals: Vec<DVec3>,
+    /// Control faces sampled.
+    pub faces: usize,
+}
+
+impl Samples {
+    /// No samples (a fit without the term).
+    pub(super) fn none() -> Samples {
+        Samples {
+            params: Vec::new(),
+            targets: Vec::new(),
+            normals: Vec::new(),
+            faces: 0,
+        }
+    }
+
+    /// Samples of the sparse faces of the surface at `controls`, given the data's foot
+    /// parameters `feet`.
+    pub(super) fn find(
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        feet: &[SurfaceParam],
+        data: &TriMesh,
+        nearest: &MeshDistance,
+    ) -> Samples {
+        let mut count = vec![0usize; surface.domain_face_count()];
+        for p in feet {
+            if let Some(c) = count.get_mut(p.face as usize) {
+                *c += 1;
+            }
+        }
+        let params: Vec<SurfaceParam> = (0..count.len())
+            .filter(|&f| count[f] < SAMPLE_AT.len())
+            .flat_map(|f| {
+                SAMPLE_AT.map(|(u, v)| SurfaceParam {
+                    face: f as u32,
+                    u,
+                    v,
+                })
+            })
+            .collect();
+        let evaluate = surface.evaluator(controls);
+        let found: Vec<Option<(SurfaceParam, DVec3, DVec3)>> = params
+            .par_iter()
+            .with_min_len(64)
+            .map(|&param| {
+                let at = evaluate(param).position;
+                let c = nearest.closest(at)?;
+                let t = data.triangles.get(c.triangle as usize)?;
+                let p = t.map(|v| data.positions[v as usize]);
+                let face_normal = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize()?;
+                // Off a data edge or corner the distance grows along the offset, not the
+                // triangle's normal.
+                let n = match (at - c.point).try_normalize() {
+                    Some(g) if g.dot(face_normal).abs() < 0.9 => g,
+                    _ => face_normal,
+                };
+                Some((param, c.point, n))
+            })
+            .collect();
+        let mut samples = Samples::none();
+        samples.faces = params.len() / SAMPLE_AT.len();
+        for (param, target, n) in found.into_iter().flatten() {
+            samples.params.push(param);
+            samples.targets.push(target);
+            samples.normals.push(n);
+        }
+        samples
     }
 }
 
