@@ -86,6 +86,12 @@ fn main() {
         if let Some(l) = env("OBJ_MIN_LOOP") {
             opts.simplify.min_boundary_loop = l as usize;
         }
+        if let Some(r) = env("OBJ_INTERMEDIATE_ROUNDS") {
+            opts.refine.intermediate_rounds = r as usize;
+        }
+        if let Some(s) = env("OBJ_SAMPLES") {
+            opts.surface_samples = s != 0.0;
+        }
         if let Some(r) = env("OBJ_RELAX_STEPS") {
             opts.layout.relax_steps = r as usize;
         }

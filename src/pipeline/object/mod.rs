@@ -596,13 +596,10 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     fit
 }
 
-/// Foot-point rounds of a fit that refinement follows.
-const INTERMEDIATE_ROUNDS: usize = 2;
-
 /// The options of a fit that only shows where to refine.
 fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
     ObjectOptions {
-        rounds: opts.rounds.min(INTERMEDIATE_ROUNDS),
+        rounds: opts.rounds.min(opts.refine.intermediate_rounds),
         ..opts.clone()
     }
 }

@@ -27,6 +27,9 @@ pub struct RefineOptions {
     /// Distance beyond which a data point asks for refinement; `None`: every point
     /// counts, so the budget goes where the squared error is largest.
     pub tolerance: Option<f64>,
+    /// Foot-point rounds of the fits between refinements, which only show where to refine
+    /// next (the last fit runs all of `ObjectOptions::rounds`).
+    pub intermediate_rounds: usize,
 }
 
 impl Default for RefineOptions {
@@ -35,6 +38,7 @@ impl Default for RefineOptions {
             rounds: 3,
             start_share: 0.6,
             tolerance: None,
+            intermediate_rounds: 2,
         }
     }
 }
