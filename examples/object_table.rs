@@ -89,6 +89,9 @@ fn main() {
         if let Some(r) = env("OBJ_INTERMEDIATE_ROUNDS") {
             opts.refine.intermediate_rounds = r as usize;
         }
+        if let Some(w) = env("OBJ_WARM_REFINE") {
+            opts.refine.warm = w != 0.0;
+        }
         if let Some(s) = env("OBJ_SAMPLES") {
             opts.surface_samples = s != 0.0;
         }

@@ -579,7 +579,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             refined.mesh,
             &refined.creases,
             refined.params,
-            Some(refined.warm),
+            opts.refine.warm.then_some(refined.warm),
             &round_opts,
         ) else {
             break;

@@ -30,6 +30,9 @@ pub struct RefineOptions {
     /// Foot-point rounds of the fits between refinements, which only show where to refine
     /// next (the last fit runs all of `ObjectOptions::rounds`).
     pub intermediate_rounds: usize,
+    /// Start each refit from the previous fit's controls (`Refined::warm`) instead of a
+    /// point fit at the refined mesh's landings.
+    pub warm: bool,
 }
 
 impl Default for RefineOptions {
@@ -39,6 +42,7 @@ impl Default for RefineOptions {
             start_share: 0.6,
             tolerance: None,
             intermediate_rounds: 2,
+            warm: true,
         }
     }
 }
