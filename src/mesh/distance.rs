@@ -52,11 +52,17 @@ impl<'a> MeshDistance<'a> {
 
     /// Distance to the nearest triangle, or `None` for an empty mesh or non-finite point.
     pub fn distance(&self, q: DVec3) -> Option<f64> {
+        self.closest(q).map(|c| (c.point - q).length())
+    }
+
+    /// The nearest point of the mesh to `q` and its triangle, or `None` for an empty mesh
+    /// or non-finite point.
+    pub fn closest(&self, q: DVec3) -> Option<Closest> {
         if self.mesh.triangles.is_empty() || !q.is_finite() {
             return None;
         }
         let c = Self::key(self.cell, q);
-        let mut best = f64::MAX;
+        let mut best: Option<(f64, Closest)> = None;
         // Shell r holds every triangle within r cells; once the best distance is inside
         // the searched radius no farther shell can beat it.
         for r in 0i64.. {
@@ -70,24 +76,36 @@ impl<'a> MeshDistance<'a> {
                         for &f in self.buckets.get(&(x, y, z)).map_or(&[][..], |v| v) {
                             let t = self.mesh.triangles[f as usize];
                             let p = &self.mesh.positions;
-                            let d = (closest_on_triangle(
+                            let point = closest_on_triangle(
                                 q,
                                 p[t[0] as usize],
                                 p[t[1] as usize],
                                 p[t[2] as usize],
-                            ) - q)
-                                .length();
-                            best = best.min(d);
+                            );
+                            let d = (point - q).length();
+                            if best.as_ref().is_none_or(|(b, _)| d < *b) {
+                                best = Some((d, Closest { point, triangle: f }));
+                            }
                         }
                     }
                 }
             }
-            if best <= r as f64 * self.cell || r > 10_000 {
+            let reached = best.as_ref().map_or(f64::MAX, |(d, _)| *d);
+            if reached <= r as f64 * self.cell || r > 10_000 {
                 break;
             }
         }
-        (best < f64::MAX).then_some(best)
+        best.map(|(_, c)| c)
     }
+}
+
+/// The nearest point of a mesh to a query.
+#[derive(Clone, Copy, Debug)]
+pub struct Closest {
+    /// The point itself.
+    pub point: DVec3,
+    /// Index of the triangle it lies on.
+    pub triangle: u32,
 }
 
 /// Closest point of triangle abc to p (Voronoi regions of vertices, edges, face).
@@ -165,6 +183,11 @@ mod tests {
                 .fold(f64::MAX, f64::min);
             let got = md.distance(q).expect("non-empty");
             assert!((got - brute).abs() < 1e-12, "{q}: {got} vs {brute}");
+            // The closest point is the one of the triangle it names.
+            let c = md.closest(q).expect("non-empty");
+            let t = mesh.triangles[c.triangle as usize].map(|v| mesh.positions[v as usize]);
+            let on = closest_on_triangle(q, t[0], t[1], t[2]);
+            assert!(on.distance(c.point) < 1e-12, "{q}: {on} vs {}", c.point);
         }
     }
 }

@@ -4,7 +4,8 @@
 //! A collapse is taken only if it keeps the surface's topology and a usable control mesh:
 //! the link condition (the two end points share exactly the neighbours opposite the edge),
 //! no interior edge between two boundary vertices (that would pinch or bridge a hole), no
-//! boundary loop below three edges, faces per vertex in 3..=max (2.. on the boundary), no
+//! boundary loop below `min_boundary_loop` edges, faces per vertex in 3..=max (2.. on the
+//! boundary), no
 //! face turning by more than `max_normal_turn_deg`, no face worse than both
 //! `min_quality` and the worst face it replaces. Boundary edges carry constraint planes
 //! (perpendicular to their face through the edge) so holes keep their shape, and boundary
@@ -61,6 +62,10 @@ pub struct SimplifyOptions {
     /// the more even, isotropic triangles a control mesh needs (a Loop limit surface over
     /// long thin faces and widely spread valences fits far worse than over an even mesh).
     pub isotropy: f64,
+    /// Edges a boundary loop keeps at least (a loop that starts shorter keeps all of
+    /// its edges); at least 3. A hole's rim is the cubic B-spline of its loop on a Loop
+    /// surface: a loop of very few controls cannot follow a round rim.
+    pub min_boundary_loop: usize,
 }
 
 impl Default for SimplifyOptions {
@@ -73,6 +78,7 @@ impl Default for SimplifyOptions {
             boundary_weight: 20.0,
             corner_turn_deg: 75.0,
             isotropy: 0.0,
+            min_boundary_loop: 3,
         }
     }
 }
@@ -471,7 +477,7 @@ impl<'a> State<'a> {
         if common != opposite {
             return false;
         }
-        if on_boundary && self.boundary_loop_of_three(k, r) {
+        if on_boundary && self.boundary_loop_at_most(k, r, self.opts.min_boundary_loop.max(3)) {
             return false;
         }
         if !self.face_counts_allowed(k, r, shared.len(), &opposite) {
@@ -529,10 +535,10 @@ impl<'a> State<'a> {
         worst_after >= self.opts.min_quality.min(worst_before)
     }
 
-    /// Whether the boundary edge (a, b) lies on a loop of three edges.
-    fn boundary_loop_of_three(&self, a: u32, b: u32) -> bool {
+    /// Whether the boundary edge (a, b) lies on a loop of at most `edges` edges.
+    fn boundary_loop_at_most(&self, a: u32, b: u32, edges: usize) -> bool {
         let (mut prev, mut cur) = (a, b);
-        for _ in 0..2 {
+        for _ in 0..edges - 1 {
             let Some(next) = self.next_on_boundary(cur, prev) else {
                 return false;
             };

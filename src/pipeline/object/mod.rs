@@ -3,22 +3,29 @@
 //! every data point.
 //!
 //! Stages: clean and keep the largest component; simplify it by quadric edge collapse to
-//! the control budget (`mesh::simplify`: the topology is kept, so the control mesh has the
-//! component's Euler characteristic and boundary loops, and every data vertex is carried
-//! to a control face: its initial parameter); a point-to-point least-squares fit at those
-//! parameters with a small umbrella fairness term; then rounds of foot points (Newton on
-//! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
-//! with a small tangential share) until a round gains less than `min_gain` of the RMS.
-//! Sharp edges of the data (`mesh::crease`) are kept through the simplification and
-//! become crease edges of the limit surface.
+//! a share of the control budget (`mesh::simplify`: the topology is kept, so the control
+//! mesh has the component's Euler characteristic and boundary loops, and every data vertex
+//! is carried to a control face: its initial parameter); even the valences by edge flips
+//! (`layout`); a point-to-point least-squares fit at those parameters with a small umbrella
+//! fairness term; then rounds of foot points (Newton on the limit surface, crossing faces,
+//! the data's rim held on the surface's boundary curve) and squared-distance minimisation
+//! (point-to-plane with a small tangential share) until a round gains less than `min_gain`
+//! of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
+//! error is, each followed by a fit on the refined mesh.
+//! Sharp edges of the data (`mesh::crease`) are kept through the simplification, the
+//! flips and the splits, and become crease edges of the limit surface.
 
 mod component;
+mod corners;
+mod layout;
+mod refine;
 mod solve;
 
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{detect_creases, CreaseOptions};
+use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::{
     simplify_with_creases, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
 };
@@ -27,13 +34,22 @@ use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
+use corners::rim_corners;
 use glam::DVec3;
-use solve::{point_fit, rows_at, DistanceRound, Feet};
+use layout::improve_layout;
+pub use layout::{LayoutOptions, LayoutReport};
+use refine::{refined_mesh, Fitted};
+pub use refine::{RefineOptions, RefineRound};
+use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
 /// stop.
 const MAX_REFUSALS: usize = 3;
+
+/// Controls a hole's rim keeps at least (fewer pull the rim's limit curve inward: it is the
+/// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
+const MIN_BOUNDARY_LOOP: usize = 6;
 
 /// Budget, cleaning, simplification and fitting settings of [`fit_object`].
 #[derive(Clone, Debug)]
@@ -67,6 +83,13 @@ pub struct ObjectOptions {
     /// Start the first fit from the data's foot points on the limit surface of the initial
     /// control mesh instead of their projections onto the control faces.
     pub limit_start: bool,
+    /// Flips and relaxation of the simplified control mesh before fitting.
+    pub layout: LayoutOptions,
+    /// Adaptive refinement after the first fit.
+    pub refine: RefineOptions,
+    /// Pull sample points of control faces with few foot points to the data (the
+    /// surface-to-data term; without it such patches are held only by the fairness term).
+    pub surface_samples: bool,
 }
 
 impl Default for ObjectOptions {
@@ -78,6 +101,7 @@ impl Default for ObjectOptions {
             crease: CreaseOptions::default(),
             simplify: SimplifyOptions {
                 isotropy: 1e-3,
+                min_boundary_loop: MIN_BOUNDARY_LOOP,
                 ..Default::default()
             },
             smoothing: 1e-5,
@@ -88,6 +112,9 @@ impl Default for ObjectOptions {
             edge_rings: 3,
             max_iterations: 400,
             limit_start: true,
+            layout: LayoutOptions::default(),
+            refine: RefineOptions::default(),
+            surface_samples: true,
         }
     }
 }
@@ -131,6 +158,11 @@ pub struct ObjectTimes {
     pub clean_ms: f64,
     /// Simplifying the component to the control mesh.
     pub simplify_ms: f64,
+    /// Flips and relaxation of the control mesh.
+    pub layout_ms: f64,
+    /// Adaptive refinement: every refined control mesh and its whole fit (the surface,
+    /// first fit and rounds times are those of the fit before refinement).
+    pub refine_ms: f64,
     /// Topology counts, the limit surface and the fairness operator.
     pub surface_ms: f64,
     /// Initial parameters, the first point fit and its foot points.
@@ -156,8 +188,9 @@ pub struct ObjectFit {
     pub data: Vec<DVec3>,
     /// The component itself (data points and their triangles).
     pub component: TriMesh,
-    /// The simplification before fitting: the control faces at their initial positions
-    /// (also the quadric-decimated mesh with as many vertices as there are controls).
+    /// The control mesh before the final fit: the simplification after the layout stage
+    /// at its initial positions or, after refinement, the refined mesh at the previous
+    /// fit's limit positions.
     pub simplified: TriMesh,
     /// The limit surface's structure (faces and evaluation), independent of positions.
     pub surface: LoopLimitSurface,
@@ -179,6 +212,14 @@ pub struct ObjectFit {
     pub control_topology: SurfaceTopology,
     /// Stage times.
     pub times: ObjectTimes,
+    /// What the layout stage changed (all zero when it did not run).
+    pub layout: LayoutReport,
+    /// The fit before refinement, then after each refinement round (empty when refinement
+    /// is off).
+    pub refinement: Vec<RefineRound>,
+    /// Control faces the last round sampled for the surface-to-data term (those holding
+    /// fewer than four foot points).
+    pub sampled_faces: usize,
 }
 
 impl ObjectFit {
@@ -203,13 +244,32 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         .unwrap_or((opts.target_controls_pct / 100.0 * n as f64).round() as usize)
         .max(4)
         .min(n);
+    // With refinement on, the simplification keeps a share of the budget and the rounds
+    // spend the rest where the first fit leaves the error.
+    let first_target = if opts.refine.rounds > 0 {
+        ((target as f64 * opts.refine.start_share).round() as usize).clamp(4.min(target), target)
+    } else {
+        target
+    };
+    // The holes' minimum never takes more than a quarter of the budget (a broken scan can
+    // have dozens of tiny holes).
+    let loops = SurfaceTopology::of(&component)
+        .map(|t| t.boundary_loops)
+        .unwrap_or(0);
+    let min_boundary_loop = opts
+        .simplify
+        .min_boundary_loop
+        .min(first_target / (4 * loops.max(1)))
+        .max(3);
     let simplify_opts = SimplifyOptions {
-        target_vertices: target,
+        target_vertices: first_target,
+        min_boundary_loop,
         ..opts.simplify.clone()
     };
-    let data_creases = match Topology::from_mesh(&component) {
-        Ok(topo) => detect_creases(&component, &topo, &opts.crease),
-        Err(_) => Vec::new(),
+    let data_topo = Topology::from_mesh(&component).ok();
+    let data_creases = match &data_topo {
+        Some(topo) => detect_creases(&component, topo, &opts.crease),
+        None => Vec::new(),
     };
     let simplified = simplify_with_creases(&component, &simplify_opts, &data_creases)
         .map_err(ObjectError::Simplify)?;
@@ -219,8 +279,19 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         mesh: control_mesh,
         landing,
         crease_edges,
+        control_of,
         ..
     } = simplified;
+    let corners = match &data_topo {
+        Some(topo) => rim_corners(
+            &component,
+            topo,
+            &control_mesh,
+            &control_of,
+            opts.simplify.corner_turn_deg,
+        ),
+        None => Vec::new(),
+    };
     let params: Vec<SurfaceParam> = landing
         .iter()
         .map(|l| SurfaceParam {
@@ -229,10 +300,31 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
             v: l.v,
         })
         .collect();
+    let t = Instant::now();
+    let (control_mesh, params, crease_edges, layout) = improve_layout(
+        &component,
+        control_mesh,
+        params,
+        &crease_edges,
+        &corners,
+        &opts.layout,
+    );
+    times.layout_ms = ms_since(t);
+    let refining = opts.refine.rounds > 0 && first_target < target;
+    let first_opts = if refining {
+        intermediate(opts)
+    } else {
+        opts.clone()
+    };
     let mut fit =
-        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, opts)?;
+        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, &first_opts)?;
+    if refining {
+        fit = refine_fit(fit, target, opts);
+    }
+    fit.layout = layout;
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
+    fit.times.layout_ms = times.layout_ms;
     fit.times.total_ms = ms_since(start);
     Ok(fit)
 }
@@ -259,6 +351,19 @@ pub fn fit_on_creased_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
+    fit_from(component, control_mesh, crease_edges, params, None, opts)
+}
+
+/// [`fit_on_creased_control_mesh`], its first point fit skipped when `warm` gives control
+/// positions to start the rounds from (one per control mesh vertex).
+fn fit_from(
+    component: TriMesh,
+    control_mesh: TriMesh,
+    crease_edges: &[[u32; 2]],
+    params: Vec<SurfaceParam>,
+    warm: Option<Vec<DVec3>>,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let t = Instant::now();
@@ -278,6 +383,8 @@ pub fn fit_on_creased_control_mesh(
     )
     .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
+    let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
+    let rim = Rim::new(&control_topo.twin, &near_boundary(&component, 0));
     let fairness = Collocation::new(umbrella_laplacian_with_creases(
         m,
         &control_mesh.triangles,
@@ -288,23 +395,26 @@ pub fn fit_on_creased_control_mesh(
 
     let t = Instant::now();
     let data = component.positions.clone();
-    let params = if opts.limit_start {
-        Feet::find(&surface, &control_mesh.positions, &data, &params).params
-    } else {
-        params
+    let warm = warm.filter(|w| w.len() == m);
+    let (mut controls, mut feet) = match warm {
+        Some(controls) => {
+            let mut feet = Feet::find(&surface, &controls, &data, &params);
+            rim.hold(&mut feet, &surface, &controls, &data);
+            (controls, feet)
+        }
+        None => first_fit(
+            FirstFit {
+                surface: &surface,
+                control_mesh: &control_mesh,
+                data: &data,
+                rim: &rim,
+                fairness: &fairness,
+                smoothing,
+            },
+            params,
+            opts,
+        )?,
     };
-    let rows = rows_at(&surface, &params);
-    let mut controls = point_fit(
-        &rows,
-        &data,
-        &fairness,
-        smoothing,
-        control_mesh.positions.clone(),
-        opts.max_iterations,
-    )
-    .ok_or(ObjectError::Solve { stage: "first" })?;
-    drop(rows);
-    let mut feet = Feet::find(&surface, &controls, &data, &params);
     times.first_fit_ms = ms_since(t);
 
     let t = Instant::now();
@@ -319,14 +429,19 @@ pub fn fit_on_creased_control_mesh(
     // fixed large share makes slow.
     let mut share = opts.tangential;
     let near_edge = near_boundary(&component, opts.edge_rings);
+    let on_rim = rim.marks(n);
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
     let mut refusals = 0;
     let mut taken = 0;
+    let nearest = opts.surface_samples.then(|| MeshDistance::new(&component));
+    let mut sampled_faces = 0;
     while taken < opts.rounds && refusals < MAX_REFUSALS {
-        let tangential: Vec<f64> = near_edge
-            .iter()
-            .map(|&e| share * if e { edge_factor } else { 1.0 })
-            .collect();
+        let samples = match &nearest {
+            Some(nearest) => Samples::find(&surface, &controls, &feet.params, &component, nearest),
+            None => Samples::none(),
+        };
+        sampled_faces = samples.faces;
+        let tangential = shares(&near_edge, &on_rim, share, edge_factor);
         let round = DistanceRound {
             surface: &surface,
             data: &data,
@@ -334,10 +449,14 @@ pub fn fit_on_creased_control_mesh(
             smoothing,
             tangential: &tangential,
             max_iterations: opts.max_iterations,
+            samples: &samples,
+            sample_tangential: share,
         };
-        let next_feet = round
-            .solve(&feet, controls.clone())
-            .map(|next| (Feet::find(&surface, &next, &data, &feet.params), next));
+        let next_feet = round.solve(&feet, controls.clone()).map(|next| {
+            let mut f = Feet::find(&surface, &next, &data, &feet.params);
+            rim.hold(&mut f, &surface, &next, &data);
+            (f, next)
+        });
         let before = feet.rms();
         let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
             refusals += 1;
@@ -357,9 +476,11 @@ pub fn fit_on_creased_control_mesh(
             break;
         }
     }
+    drop(nearest);
     times.rounds_ms = ms_since(t);
     times.total_ms = ms_since(start);
     Ok(ObjectFit {
+        sampled_faces,
         data,
         component,
         simplified: control_mesh,
@@ -373,7 +494,129 @@ pub fn fit_on_creased_control_mesh(
         data_topology,
         control_topology,
         times,
+        layout: LayoutReport::default(),
+        refinement: Vec::new(),
     })
+}
+
+/// What the first point fit works on.
+struct FirstFit<'a> {
+    surface: &'a LoopLimitSurface,
+    control_mesh: &'a TriMesh,
+    data: &'a [DVec3],
+    rim: &'a Rim,
+    fairness: &'a Collocation,
+    smoothing: f64,
+}
+
+/// The point-to-point fit at the initial parameters (or, with `limit_start`, at their foot
+/// points on the initial control mesh's limit surface) and the data's foot points on it.
+fn first_fit(
+    f: FirstFit,
+    params: Vec<SurfaceParam>,
+    opts: &ObjectOptions,
+) -> Result<(Vec<DVec3>, Feet), ObjectError> {
+    let positions = &f.control_mesh.positions;
+    let params = if opts.limit_start {
+        let mut start = Feet::find(f.surface, positions, f.data, &params);
+        f.rim.hold(&mut start, f.surface, positions, f.data);
+        start.params
+    } else {
+        params
+    };
+    let rows = rows_at(f.surface, &params);
+    let controls = point_fit(
+        &rows,
+        f.data,
+        f.fairness,
+        f.smoothing,
+        positions.clone(),
+        opts.max_iterations,
+    )
+    .ok_or(ObjectError::Solve { stage: "first" })?;
+    drop(rows);
+    let mut feet = Feet::find(f.surface, &controls, f.data, &params);
+    f.rim.hold(&mut feet, f.surface, &controls, f.data);
+    Ok((controls, feet))
+}
+
+/// Refinement rounds after the first fit (see `refine`): each refines the control mesh
+/// where the error is and fits again; a round that fails or does not lower the RMS ends
+/// them, its fit dropped.
+fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
+    let t = Instant::now();
+    let tolerance = opts.refine.tolerance;
+    let first_times = first.times.clone();
+    let round_of =
+        |f: &ObjectFit| RefineRound::of(f.controls.len(), f.rms, f.max, &f.distances, tolerance);
+    let mut stages = vec![round_of(&first)];
+    let mut fit = first;
+    for round in 0..opts.refine.rounds {
+        let room = cap.saturating_sub(fit.controls.len());
+        if room == 0 {
+            break;
+        }
+        let add = room.div_ceil(opts.refine.rounds - round);
+        let fitted = Fitted {
+            component: &fit.component,
+            surface: &fit.surface,
+            controls: &fit.controls,
+            params: &fit.params,
+            distances: &fit.distances,
+        };
+        let Some(refined) = refined_mesh(&fitted, add, tolerance, &opts.layout) else {
+            break;
+        };
+        // Only the last fit runs all its rounds: the ones before only show where to refine.
+        let last = round + 1 == opts.refine.rounds || add == room;
+        let round_opts = if last {
+            opts.clone()
+        } else {
+            intermediate(opts)
+        };
+        let Ok(next) = fit_from(
+            fit.component.clone(),
+            refined.mesh,
+            &refined.creases,
+            refined.params,
+            opts.refine.warm.then_some(refined.warm),
+            &round_opts,
+        ) else {
+            break;
+        };
+        stages.push(round_of(&next));
+        if next.rms >= fit.rms {
+            break;
+        }
+        fit = next;
+    }
+    fit.times = first_times;
+    fit.times.refine_ms = ms_since(t);
+    fit.refinement = stages;
+    fit
+}
+
+/// The options of a fit that only shows where to refine.
+fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
+    ObjectOptions {
+        rounds: opts.rounds.min(opts.refine.intermediate_rounds),
+        ..opts.clone()
+    }
+}
+
+/// Per data point, the share of the point-to-point term in a round: `share` inside,
+/// `edge_factor` times more near the data's boundary, and all of it on the rim, where the
+/// boundary curve has to reach the points.
+fn shares(near_edge: &[bool], on_rim: &[bool], share: f64, edge_factor: f64) -> Vec<f64> {
+    near_edge
+        .iter()
+        .zip(on_rim)
+        .map(|(&e, &r)| match (r, e) {
+            (true, _) => 1.0,
+            (false, true) => share * edge_factor,
+            (false, false) => share,
+        })
+        .collect()
 }
 
 fn ms_since(t: Instant) -> f64 {

@@ -6,9 +6,11 @@
 use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
+use crate::mesh::distance::MeshDistance;
 use crate::pipeline::geometric::foot_point;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
+use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -80,7 +82,8 @@ pub(super) fn point_fit(
     x.iter().all(|p| p.is_finite()).then_some(x)
 }
 
-/// One squared-distance solve at the current foot points.
+/// One squared-distance solve at the current foot points, with the surface-to-data
+/// samples as further points.
 pub(super) struct DistanceRound<'a> {
     pub surface: &'a LoopLimitSurface,
     pub data: &'a [DVec3],
@@ -88,16 +91,29 @@ pub(super) struct DistanceRound<'a> {
     pub smoothing: f64,
     pub tangential: &'a [f64],
     pub max_iterations: usize,
+    pub samples: &'a Samples,
+    /// Tangential share of the samples' point-to-point term.
+    pub sample_tangential: f64,
 }
 
 impl DistanceRound<'_> {
     pub(super) fn solve(&self, feet: &Feet, start: Vec<DVec3>) -> Option<Vec<DVec3>> {
-        let rows = rows_at(self.surface, &feet.params);
+        let s = self.samples;
+        let params: Vec<SurfaceParam> = feet.params.iter().chain(&s.params).copied().collect();
+        let data: Vec<DVec3> = self.data.iter().chain(&s.targets).copied().collect();
+        let normals: Vec<DVec3> = feet.normals.iter().chain(&s.normals).copied().collect();
+        let tangential: Vec<f64> = self
+            .tangential
+            .iter()
+            .copied()
+            .chain(std::iter::repeat_n(self.sample_tangential, s.params.len()))
+            .collect();
+        let rows = rows_at(self.surface, &params);
         let problem = DistanceProblem {
             basis: &rows,
-            data: self.data,
-            normals: &feet.normals,
-            tangential: self.tangential,
+            data: &data,
+            normals: &normals,
+            tangential: &tangential,
             fairness: Some(self.fairness),
             smoothing: self.smoothing,
         };
@@ -106,6 +122,101 @@ impl DistanceRound<'_> {
             None => solve_distance(&problem, start, self.max_iterations, CG_REL_TOL).0,
         };
         x.iter().all(|p| p.is_finite()).then_some(x)
+    }
+}
+
+/// Where a sparse control face is sampled, as (u, v): its centre and the centres of its
+/// three corner sub-triangles.
+const SAMPLE_AT: [(f64, f64); 4] = [
+    (1.0 / 3.0, 1.0 / 3.0),
+    (2.0 / 3.0, 1.0 / 6.0),
+    (1.0 / 6.0, 2.0 / 3.0),
+    (1.0 / 6.0, 1.0 / 6.0),
+];
+
+/// The surface-to-data term (the squared distance of Cheng, Wang et al. 2004 taken from
+/// the surface's side): sample points of the limit patches over control faces that hold
+/// fewer foot points than samples, each pulled to its nearest point of the data mesh.
+///
+/// Data-to-surface terms see only the patches the data's feet land on. A patch the feet
+/// have slid off is held by nothing but the fairness term, and no foot point sees it
+/// bulge: on bun_zipper such patches stood 1.4 mm (0.56 % of the diagonal) off the data.
+/// Each sample weighs as one data point, so where feet are dense the data decide.
+pub(super) struct Samples {
+    /// The samples' parameters on the surface.
+    pub params: Vec<SurfaceParam>,
+    /// Their nearest points on the data mesh.
+    pub targets: Vec<DVec3>,
+    /// The direction of the squared distance's gradient there: the data triangle's
+    /// normal, or the direction to the nearest point where that is an edge or a corner.
+    pub normals: Vec<DVec3>,
+    /// Control faces sampled.
+    pub faces: usize,
+}
+
+impl Samples {
+    /// No samples (a fit without the term).
+    pub(super) fn none() -> Samples {
+        Samples {
+            params: Vec::new(),
+            targets: Vec::new(),
+            normals: Vec::new(),
+            faces: 0,
+        }
+    }
+
+    /// Samples of the sparse faces of the surface at `controls`, given the data's foot
+    /// parameters `feet`.
+    pub(super) fn find(
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        feet: &[SurfaceParam],
+        data: &TriMesh,
+        nearest: &MeshDistance,
+    ) -> Samples {
+        let mut count = vec![0usize; surface.domain_face_count()];
+        for p in feet {
+            if let Some(c) = count.get_mut(p.face as usize) {
+                *c += 1;
+            }
+        }
+        let params: Vec<SurfaceParam> = (0..count.len())
+            .filter(|&f| count[f] < SAMPLE_AT.len())
+            .flat_map(|f| {
+                SAMPLE_AT.map(|(u, v)| SurfaceParam {
+                    face: f as u32,
+                    u,
+                    v,
+                })
+            })
+            .collect();
+        let evaluate = surface.evaluator(controls);
+        let found: Vec<Option<(SurfaceParam, DVec3, DVec3)>> = params
+            .par_iter()
+            .with_min_len(64)
+            .map(|&param| {
+                let at = evaluate(param).position;
+                let c = nearest.closest(at)?;
+                let t = data.triangles.get(c.triangle as usize)?;
+                let p = t.map(|v| data.positions[v as usize]);
+                let face_normal = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize()?;
+                // Off a data edge or corner the distance grows along the offset, not the
+                // triangle's normal.
+                let n = match (at - c.point).try_normalize() {
+                    Some(g) if g.dot(face_normal).abs() < 0.9 => g,
+                    _ => face_normal,
+                };
+                Some((param, c.point, n))
+            })
+            .collect();
+        let mut samples = Samples::none();
+        samples.faces = params.len() / SAMPLE_AT.len();
+        for (param, target, n) in found.into_iter().flatten() {
+            samples.params.push(param);
+            samples.targets.push(target);
+            samples.normals.push(n);
+        }
+        samples
     }
 }
 
@@ -167,4 +278,134 @@ pub(super) fn rms(e: &[f64]) -> f64 {
         return 0.0;
     }
     (e.iter().map(|d| d * d).sum::<f64>() / e.len() as f64).sqrt()
+}
+
+/// The data's rim held on the surface's rim: each data point on the data's boundary keeps
+/// its foot point on a boundary edge of its control face (where that face has one), so
+/// the limit surface's boundary curve is fitted to the data's boundary. Left free, those
+/// foot points slide inside and nothing stops the surface from running on past the rim
+/// (on bun_zipper by up to 2 % of the diagonal over the holes).
+pub(super) struct Rim {
+    /// Per control face: which of its edges k (corner k to k + 1) are on the boundary (a
+    /// face at a corner of the rim has two).
+    edges_of_face: Vec<[bool; 3]>,
+    /// The data points on the data's boundary.
+    points: Vec<usize>,
+}
+
+/// Gauss-Newton steps along a boundary edge.
+const RIM_STEPS: usize = 4;
+
+impl Rim {
+    /// `control_twins`: the control mesh's half-edge twins (`NONE` on the boundary);
+    /// `data_boundary`: per data point, whether it is on the data's boundary.
+    pub(super) fn new(control_twins: &[u32], data_boundary: &[bool]) -> Rim {
+        let edges_of_face = control_twins
+            .chunks(3)
+            .map(|t| [0, 1, 2].map(|k| t.get(k) == Some(&crate::mesh::topology::NONE)))
+            .collect();
+        let points = (0..data_boundary.len())
+            .filter(|&p| data_boundary[p])
+            .collect();
+        Rim {
+            edges_of_face,
+            points,
+        }
+    }
+
+    /// Moves each rim point's foot parameter onto the nearest boundary edge of its face
+    /// (the nearest point of the edge's limit curve, by Gauss-Newton along it) and updates
+    /// its normal and distance.
+    pub(super) fn hold(
+        &self,
+        feet: &mut Feet,
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        data: &[DVec3],
+    ) {
+        let evaluate = surface.evaluator(controls);
+        let held: Vec<Option<(SurfaceParam, DVec3, f64)>> = self
+            .points
+            .par_iter()
+            .map(|&p| {
+                let param = feet.params[p];
+                let edges = self.edges_of_face.get(param.face as usize)?;
+                (0..3)
+                    .filter(|&k| edges[k])
+                    .filter_map(|k| {
+                        let held = hold_on_edge(&*evaluate, param, k, data[p])?;
+                        // A rim point whose own face's edge lies far off (a control face
+                        // between two small holes of a broken scan) is left free: the hold
+                        // pulls a rim along its data, never across to another.
+                        let t3 = surface.faces().get(param.face as usize)?;
+                        let (a, b) = (t3[k] as usize, t3[(k + 1) % 3] as usize);
+                        let edge = controls.get(a)?.distance(*controls.get(b)?);
+                        (held.2 <= feet.distances[p] + 0.5 * edge).then_some(held)
+                    })
+                    .min_by(|x, y| x.2.total_cmp(&y.2))
+                    .map(|(at, n, d)| (at, n.unwrap_or(feet.normals[p]), d))
+            })
+            .collect();
+        for (&p, h) in self.points.iter().zip(held) {
+            if let Some((param, n, dist)) = h {
+                feet.params[p] = param;
+                feet.normals[p] = n;
+                feet.distances[p] = dist;
+            }
+        }
+    }
+
+    /// Whether data point `p` is on the rim (for its share of the point-to-point term).
+    pub(super) fn marks(&self, count: usize) -> Vec<bool> {
+        let mut m = vec![false; count];
+        for &p in &self.points {
+            m[p] = true;
+        }
+        m
+    }
+}
+
+/// The point of edge k (corner k to k + 1) of `param`'s face nearest to `q`, by
+/// Gauss-Newton along the edge from the projection of `param` onto it: the parameter, the
+/// unit normal there (if the tangents span a plane) and the distance. `None` when the
+/// tangent along the edge vanishes at the start.
+fn hold_on_edge(
+    evaluate: &(dyn Fn(SurfaceParam) -> crate::surface::Derivatives + Sync),
+    param: SurfaceParam,
+    k: usize,
+    q: DVec3,
+) -> Option<(SurfaceParam, Option<DVec3>, f64)> {
+    let w = [param.u, param.v, 1.0 - param.u - param.v];
+    let sum = w[k] + w[(k + 1) % 3];
+    let mut t = if sum > 0.0 { w[k] / sum } else { 0.5 };
+    let at = |t: f64| {
+        let mut w = [0.0; 3];
+        w[k] = t;
+        w[(k + 1) % 3] = 1.0 - t;
+        SurfaceParam {
+            face: param.face,
+            u: w[0],
+            v: w[1],
+        }
+    };
+    let mut d = evaluate(at(t));
+    for step in 0..RIM_STEPS {
+        // d/dt of the position along the edge in (u, v) terms.
+        let along = match k {
+            0 => d.du - d.dv,
+            1 => d.dv,
+            _ => -d.du,
+        };
+        let len2 = along.length_squared();
+        if len2 <= 0.0 {
+            if step == 0 {
+                return None;
+            }
+            break;
+        }
+        t = (t - (d.position - q).dot(along) / len2).clamp(0.0, 1.0);
+        d = evaluate(at(t));
+    }
+    let n = d.du.cross(d.dv).try_normalize();
+    Some((at(t), n, (d.position - q).length()))
 }

@@ -11,7 +11,8 @@ use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_creased_control_mesh, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
+    fit_object, fit_on_creased_control_mesh, LayoutReport, ObjectFit, ObjectOptions, ObjectTimes,
+    RefineRound, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -160,6 +161,10 @@ pub struct ObjectInfo {
     pub rounds: Vec<RoundReport>,
     /// Stage times.
     pub times: ObjectTimes,
+    /// What the layout stage changed in the simplified control mesh.
+    pub layout: LayoutReport,
+    /// The fit before refinement and after each refinement round.
+    pub refinement: Vec<RefineRound>,
 }
 
 /// Whether a warm start was used.
@@ -194,7 +199,8 @@ pub(super) fn fit_as_object(
     budget: &Budget,
     reason: String,
 ) -> Result<(PatchFit, ObjectInfo), PipelineError> {
-    let opts = options(cfg);
+    let mut opts = options(cfg);
+    opts.refine.tolerance = Some(budget.tolerance);
     let object = |source| PipelineError::Object { source };
     let creases = previous.map(|w| w.crease_edges.as_slice()).unwrap_or(&[]);
     let (fit, warm) = match previous.map(|w| warm_start(mesh, w, previous_controls)) {
@@ -216,6 +222,8 @@ pub(super) fn fit_as_object(
         control_topology: fit.control_topology,
         rounds: fit.rounds.clone(),
         times: fit.times.clone(),
+        layout: fit.layout,
+        refinement: fit.refinement.clone(),
     };
     let patch = patch_fit(fit, budget, matches!(info.warm, WarmDecision::Used));
     Ok((patch, info))
@@ -483,12 +491,23 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "control_points": fit.controls.len(),
         "control_faces": faces,
         "crease_edges": creases,
-        "initial_positions": "simplification",
+        "initial_positions": initial_positions(info),
+        "layout": info.layout,
+        "refinement": info.refinement,
         "topology": {"data": topology(&info.data_topology), "control": topology(&info.control_topology)},
         "rounds": info.rounds,
         "stages": info.times,
         "warm": warm,
     })
+}
+
+/// How the control mesh the fit started from was made.
+fn initial_positions(info: &ObjectInfo) -> &'static str {
+    match (&info.warm, info.layout.flips + info.layout.relax_steps) {
+        (WarmDecision::Used, _) => "previous version",
+        (_, 0) => "simplification",
+        _ => "simplification, valence flips, tangential relaxation",
+    }
 }
 
 /// The tessellation of an object fit is refined until its flat triangles' own error (RMS
