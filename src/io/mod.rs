@@ -9,6 +9,7 @@ pub mod obj;
 pub mod off;
 pub mod ply;
 pub mod polylines;
+pub mod registration;
 pub mod step;
 pub mod stl;
 pub mod surface_json;

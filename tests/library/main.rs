@@ -19,5 +19,6 @@ mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_fit;
 mod object_pipeline;
+mod object_session;
 mod scan_pipeline;
 mod step_export;

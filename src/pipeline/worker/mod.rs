@@ -219,6 +219,13 @@ pub(crate) fn run_patch_with(
     on_step: Option<StepHook>,
 ) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
+    let fitted = fit_patch_with(mesh, previous, cfg, on_step)?;
+    Ok(outputs_of(fitted, cfg, wall))
+}
+
+/// The outputs of a fit (`fit_patch`'s result): surface.json, report.json, the GLB and the
+/// warm start; `wall` is when the work on the input began (report.json's `wall_ms`).
+pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> PatchOutputs {
     let FittedPatch {
         fit: fitted,
         scan: scan_info,
@@ -226,7 +233,7 @@ pub(crate) fn run_patch_with(
         levels,
         refinement,
         object: object_info,
-    } = fit_patch_with(mesh, previous, cfg, on_step)?;
+    } = fitted;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
@@ -264,13 +271,13 @@ pub(crate) fn run_patch_with(
         warm.object = object::object_warm(&fitted, info);
     }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
-    Ok(PatchOutputs {
+    PatchOutputs {
         surface,
         report,
         glb,
         warm,
         status: fitted.outcome.status,
-    })
+    }
 }
 
 /// One fitted surface of an input: the whole patch (`suffix` empty) or one component

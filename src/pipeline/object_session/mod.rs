@@ -1,0 +1,317 @@
+//! One object scanned view by view: registered scans are added, replaced and removed, and
+//! after each change the object has one surface fitted to the merge of all its scans.
+//!
+//! State: the scans (id, transform, samples in the object frame), the merge grid's cell
+//! size (fixed by the first scan so that cells mean the same place in every update), the
+//! last merged mesh (to say which region changed) and the worker's warm start. Each update
+//! merges every scan (`pipeline::merge`) and hands the merged mesh to the worker, whose
+//! `auto` dispatch chooses the path: a grid over the planar map while the merged data is
+//! disk-like, the whole-object control mesh once it closes or wraps around. A new version
+//! of the object starts from the previous control mesh when the worker's warm guard
+//! accepts it (same topology, size and place), else cold.
+
+mod measure;
+
+pub use measure::{distance_stats, surface_mesh, DistanceStats};
+
+use crate::mesh::rigid::RigidTransform;
+use crate::pipeline::merge::{
+    median_edge, merge, scan_samples, MergeChange, MergeOptions, Merged, ScanSamples,
+};
+use crate::pipeline::worker::{fit_patch, outputs_of, PatchOutputs, WarmStart, WorkerConfig};
+use crate::pipeline::{PatchFit, PipelineError};
+use crate::TriMesh;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Merged vertices that move less than this share of a cell count as unchanged.
+const UNCHANGED_SHARE_OF_CELL: f64 = 1e-3;
+
+/// How a session merges and fits.
+#[derive(Clone, Debug, Default)]
+pub struct SessionOptions {
+    /// The merge of the scans.
+    pub merge: MergeOptions,
+    /// The worker's configuration (the fit of the merged data).
+    pub worker: WorkerConfig,
+    /// Measure every scan's distance to the new surface after each update (costs a
+    /// tessellation and a point-to-mesh query per scan point).
+    pub measure_scans: bool,
+}
+
+/// Why an update failed (the session keeps its previous state).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SessionError {
+    /// The scan has no triangle with area: nothing to merge.
+    #[error("scan '{id}' has no usable triangles")]
+    EmptyScan {
+        /// The scan.
+        id: String,
+    },
+    /// The last scan was removed: there is no object left to fit.
+    #[error("the object has no scans left")]
+    NoScans,
+    /// No scan of that id.
+    #[error("no scan '{id}' in the object")]
+    UnknownScan {
+        /// The id asked for.
+        id: String,
+    },
+    /// The fit of the merged data failed.
+    #[error("fitting the merged scans failed")]
+    Fit(#[source] PipelineError),
+}
+
+impl SessionError {
+    /// A stable snake_case name of the variant.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::EmptyScan { .. } => "empty_scan",
+            Self::NoScans => "no_scans",
+            Self::UnknownScan { .. } => "unknown_scan",
+            Self::Fit(e) => e.kind(),
+        }
+    }
+}
+
+/// One scan of the object.
+#[derive(Clone, Debug)]
+pub struct SessionScan {
+    /// Its transform into the object frame.
+    pub transform: RigidTransform,
+    /// Its samples in the object frame.
+    pub samples: ScanSamples,
+    /// Vertices of the scan as given.
+    pub vertices: usize,
+}
+
+/// Stage times of one update, in milliseconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct UpdateTimes {
+    /// The new scan's samples (normals, rim weights, transform).
+    pub samples_ms: f64,
+    /// Merging every scan into one mesh.
+    pub merge_ms: f64,
+    /// The worker's fit of the merged mesh.
+    pub fit_ms: f64,
+    /// surface.json, report.json and the GLB.
+    pub outputs_ms: f64,
+    /// Measuring the scans against the surface (when asked).
+    pub measure_ms: f64,
+    /// The whole update.
+    pub total_ms: f64,
+}
+
+/// A scan's distance to the object's surface.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScanDistance {
+    /// The scan.
+    pub id: String,
+    /// Its distances' statistics.
+    #[serde(flatten)]
+    pub stats: DistanceStats,
+}
+
+/// What one update produced.
+pub struct SessionUpdate {
+    /// The object's outputs (report.json carries a `session` key with what is below).
+    pub outputs: PatchOutputs,
+    /// The fit (the merged data, the surface, the controls).
+    pub fit: PatchFit,
+    /// `"object"` (control mesh) or `"scan"` (grid over a planar map).
+    pub path: &'static str,
+    /// Merged vertices and triangles fitted.
+    pub merged_vertices: usize,
+    /// Triangles of the merged mesh.
+    pub merged_triangles: usize,
+    /// Where the merged data changed since the previous update.
+    pub change: MergeChange,
+    /// Stage times.
+    pub times: UpdateTimes,
+    /// Every scan's distance to the surface (empty unless `measure_scans`).
+    pub scans: Vec<ScanDistance>,
+}
+
+/// An object and its scans (see the module docs).
+pub struct ObjectSession {
+    opts: SessionOptions,
+    cell: Option<f64>,
+    scans: BTreeMap<String, SessionScan>,
+    merged: Option<Merged>,
+    warm: Option<WarmStart>,
+}
+
+impl ObjectSession {
+    /// An object with no scans yet.
+    pub fn new(opts: SessionOptions) -> Self {
+        Self {
+            opts,
+            cell: None,
+            scans: BTreeMap::new(),
+            merged: None,
+            warm: None,
+        }
+    }
+
+    /// The scans, by id.
+    pub fn scans(&self) -> &BTreeMap<String, SessionScan> {
+        &self.scans
+    }
+
+    /// The merge grid's cell size (set by the first scan).
+    pub fn cell(&self) -> Option<f64> {
+        self.cell
+    }
+
+    /// Adds the scan `id` (its mesh in its own frame, and its transform into the object's),
+    /// or replaces the scan of that id, and refits.
+    pub fn add_scan(
+        &mut self,
+        id: &str,
+        mesh: &TriMesh,
+        transform: RigidTransform,
+    ) -> Result<SessionUpdate, SessionError> {
+        let start = Instant::now();
+        let samples = scan_samples(mesh, &transform, &self.opts.merge);
+        if samples.points.is_empty() {
+            return Err(SessionError::EmptyScan { id: id.into() });
+        }
+        let cell = match self.cell {
+            Some(c) => c,
+            None => {
+                let edge = median_edge(mesh);
+                if edge <= 0.0 {
+                    return Err(SessionError::EmptyScan { id: id.into() });
+                }
+                self.opts.merge.cell_edges * edge
+            }
+        };
+        let samples_ms = ms_since(start);
+        let scan = SessionScan {
+            transform,
+            samples,
+            vertices: mesh.positions.len(),
+        };
+        let previous = self.scans.insert(id.into(), scan);
+        match self.update(cell, start, samples_ms) {
+            Ok(u) => {
+                self.cell = Some(cell);
+                Ok(u)
+            }
+            Err(e) => {
+                match previous {
+                    Some(p) => self.scans.insert(id.into(), p),
+                    None => self.scans.remove(id),
+                };
+                Err(e)
+            }
+        }
+    }
+
+    /// Removes the scan `id` and refits the rest.
+    pub fn remove_scan(&mut self, id: &str) -> Result<SessionUpdate, SessionError> {
+        let start = Instant::now();
+        let cell = self.cell.ok_or(SessionError::NoScans)?;
+        let removed = self
+            .scans
+            .remove(id)
+            .ok_or_else(|| SessionError::UnknownScan { id: id.into() })?;
+        if self.scans.is_empty() {
+            self.merged = None;
+            self.warm = None;
+            return Err(SessionError::NoScans);
+        }
+        self.update(cell, start, 0.0).inspect_err(|_| {
+            self.scans.insert(id.into(), removed);
+        })
+    }
+
+    /// Merges every scan, fits the merged mesh from the previous warm start and measures.
+    fn update(
+        &mut self,
+        cell: f64,
+        start: Instant,
+        samples_ms: f64,
+    ) -> Result<SessionUpdate, SessionError> {
+        let mut times = UpdateTimes {
+            samples_ms,
+            ..Default::default()
+        };
+        let t = Instant::now();
+        let all: Vec<&ScanSamples> = self.scans.values().map(|s| &s.samples).collect();
+        let merged = merge(&all, cell, &self.opts.merge);
+        times.merge_ms = ms_since(t);
+        let t = Instant::now();
+        let fitted = fit_patch(&merged.mesh, self.warm.as_ref(), &self.opts.worker)
+            .map_err(SessionError::Fit)?;
+        times.fit_ms = ms_since(t);
+        let path = if fitted.object.is_some() {
+            "object"
+        } else {
+            "scan"
+        };
+        let fit = fitted.fit.clone();
+        let t = Instant::now();
+        let mut outputs = outputs_of(fitted, &self.opts.worker, t);
+        times.outputs_ms = ms_since(t);
+        let t = Instant::now();
+        let scans = if self.opts.measure_scans {
+            let surface = surface_mesh(&fit);
+            self.scans
+                .iter()
+                .map(|(id, s)| ScanDistance {
+                    id: id.clone(),
+                    stats: distance_stats(&s.samples.points, &surface),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        times.measure_ms = ms_since(t);
+        let empty = Merged::default();
+        let change = MergeChange::between(
+            self.merged.as_ref().unwrap_or(&empty),
+            &merged,
+            UNCHANGED_SHARE_OF_CELL * cell,
+        );
+        times.total_ms = ms_since(start);
+        outputs.report["session"] = json!({
+            "scans": self.scans.iter().map(|(id, s)| json!({
+                "id": id,
+                "vertices": s.vertices,
+                "samples": s.samples.points.len(),
+                "transform": s.transform.to_row_major(),
+            })).collect::<Vec<_>>(),
+            "merge": {
+                "cell": cell,
+                "vertices": merged.mesh.positions.len(),
+                "triangles": merged.mesh.triangles.len(),
+                "corners_evaluated": merged.corners_evaluated,
+                "dropped_vertices": merged.dropped_vertices,
+            },
+            "path": path,
+            "updated_region": change,
+            "scan_distances": scans,
+            "stages": times,
+        });
+        self.warm = Some(outputs.warm.clone());
+        let update = SessionUpdate {
+            outputs,
+            fit,
+            path,
+            merged_vertices: merged.mesh.positions.len(),
+            merged_triangles: merged.mesh.triangles.len(),
+            change,
+            times,
+            scans,
+        };
+        self.merged = Some(merged);
+        Ok(update)
+    }
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
