@@ -69,7 +69,8 @@ pub fn parse_xf(text: &str, name: &str) -> Result<RigidTransform, IoError> {
     if words.is_empty() {
         return Err(IoError::new(name, None, IoErrorKind::Empty));
     }
-    let values = numbers(&words).map_err(|d| IoError::new(name, None, IoErrorKind::malformed(d)))?;
+    let values =
+        numbers(&words).map_err(|d| IoError::new(name, None, IoErrorKind::malformed(d)))?;
     RigidTransform::from_row_major(&values).map_err(|e| not_rigid(name, None, e))
 }
 
@@ -106,9 +107,12 @@ pub fn conf_transform(
                         },
                     ));
                 }
-                RigidTransform::from_quaternion(DVec3::new(v[0], v[1], v[2]), [v[3], v[4], v[5], v[6]])
-                    .map(RigidTransform::with_rotation_transposed)
-                    .map_err(|e| not_rigid(name, location.clone(), e))
+                RigidTransform::from_quaternion(
+                    DVec3::new(v[0], v[1], v[2]),
+                    [v[3], v[4], v[5], v[6]],
+                )
+                .map(RigidTransform::with_rotation_transposed)
+                .map_err(|e| not_rigid(name, location.clone(), e))
             });
         return Some(parsed.map(|t| (t, k + 1)));
     }
@@ -144,7 +148,11 @@ pub fn registration_for(scan: &Path, scan_id: &str) -> Result<Registration, IoEr
     let mut confs: Vec<PathBuf> = std::fs::read_dir(folder)
         .map_err(|e| IoError::new(folder.display().to_string(), None, IoErrorKind::Open(e)))?
         .filter_map(|entry| entry.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("conf")) && p.is_file())
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("conf"))
+                && p.is_file()
+        })
         .collect();
     confs.sort();
     for conf in confs {
@@ -212,17 +220,26 @@ mod tests {
         let xf = "1 0 0 0.5\n0 0 -1 0\n0 1 0 0\n0 0 0 1\n";
         let t = parse_xf(xf, "s.xf").expect("rigid");
         assert!((t.apply(DVec3::new(0.0, 1.0, 0.0)) - DVec3::new(0.5, 0.0, 1.0)).length() < 1e-15);
-        assert_eq!(parse_xf("", "s.xf").map_err(|e| e.kind()).err(), Some("empty"));
         assert_eq!(
-            parse_xf("1 0 0 0 0 1 0 0 0 0 1 0", "s.xf").map_err(|e| e.kind()).err(),
+            parse_xf("", "s.xf").map_err(|e| e.kind()).err(),
+            Some("empty")
+        );
+        assert_eq!(
+            parse_xf("1 0 0 0 0 1 0 0 0 0 1 0", "s.xf")
+                .map_err(|e| e.kind())
+                .err(),
             Some("not_rigid")
         );
         assert_eq!(
-            parse_xf("2 0 0 0 0 2 0 0 0 0 2 0 0 0 0 1", "s.xf").map_err(|e| e.kind()).err(),
+            parse_xf("2 0 0 0 0 2 0 0 0 0 2 0 0 0 0 1", "s.xf")
+                .map_err(|e| e.kind())
+                .err(),
             Some("not_rigid")
         );
         assert_eq!(
-            parse_xf("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 one", "s.xf").map_err(|e| e.kind()).err(),
+            parse_xf("1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 one", "s.xf")
+                .map_err(|e| e.kind())
+                .err(),
             Some("malformed")
         );
     }
@@ -233,9 +250,15 @@ mod tests {
         std::fs::write(dir.path().join("bun.conf"), CONF).expect("write");
         let scan = dir.path().join("bun045.ply");
         let from_conf = registration_for(&scan, "bun045").expect("conf");
-        assert!(matches!(from_conf.source, RegistrationSource::Conf { line: 3, .. }));
-        std::fs::write(dir.path().join("bun045.xf"), "1 0 0 1 0 1 0 2 0 0 1 3 0 0 0 1")
-            .expect("write");
+        assert!(matches!(
+            from_conf.source,
+            RegistrationSource::Conf { line: 3, .. }
+        ));
+        std::fs::write(
+            dir.path().join("bun045.xf"),
+            "1 0 0 1 0 1 0 2 0 0 1 3 0 0 0 1",
+        )
+        .expect("write");
         let sidecar = registration_for(&scan, "bun045").expect("xf");
         assert!(matches!(sidecar.source, RegistrationSource::Sidecar { .. }));
         assert_eq!(sidecar.transform.translation, DVec3::new(1.0, 2.0, 3.0));

@@ -16,8 +16,8 @@
 mod collocation;
 mod error;
 mod geometric;
-mod names;
 pub mod merge;
+mod names;
 pub mod object;
 pub mod object_session;
 pub mod output;

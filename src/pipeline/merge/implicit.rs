@@ -1,7 +1,7 @@
 //! The merged scans' implicit function: a bucket grid over every scan's samples and the
 //! weighted signed distance along the samples' normals (see the module docs of `merge`).
 
-use super::ScanSamples;
+use super::types::ScanSamples;
 use glam::DVec3;
 use nalgebra::{Matrix6, Vector6};
 use rustc_hash::FxHashMap;
@@ -63,6 +63,9 @@ pub(super) struct Sample {
     pub normal: DVec3,
     /// Distance to the nearest sample.
     pub nearest: f64,
+    /// Distance, across the normal, from the point to the weighted centroid of the samples:
+    /// small inside the data, about half the Gaussian width on a scan's outer rim.
+    pub centroid_shift: f64,
 }
 
 /// The weighted signed distance of the samples within `radius`.
@@ -138,7 +141,7 @@ impl Implicit<'_> {
         let &(_, bs, bi) = near.get(best.1)?;
         let sheet = self.scans[bs as usize].normals[bi as usize];
         let inv = 1.0 / (self.sigma * self.sigma);
-        let (mut sum_w, mut sum_f, mut sum_n) = (0.0, 0.0, DVec3::ZERO);
+        let (mut sum_w, mut sum_f, mut sum_n, mut sum_p) = (0.0, 0.0, DVec3::ZERO, DVec3::ZERO);
         for &(d2, s, i) in &near {
             let scan = self.scans[s as usize];
             let n = scan.normals[i as usize];
@@ -149,12 +152,17 @@ impl Implicit<'_> {
             sum_w += w;
             sum_f += w * n.dot(x - scan.points[i as usize]);
             sum_n += w * n;
+            sum_p += w * (scan.points[i as usize] - x);
         }
         let normal = sum_n.try_normalize()?;
-        (sum_w > 0.0).then(|| Sample {
-            value: sum_f / sum_w,
-            normal,
-            nearest: best.0.sqrt(),
+        (sum_w > 0.0).then(|| {
+            let shift = sum_p / sum_w;
+            Sample {
+                value: sum_f / sum_w,
+                normal,
+                nearest: best.0.sqrt(),
+                centroid_shift: (shift - shift.dot(normal) * normal).length(),
+            }
         })
     }
 }

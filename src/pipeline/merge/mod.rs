@@ -17,6 +17,7 @@
 
 mod implicit;
 mod nets;
+mod types;
 
 use crate::mesh::rigid::RigidTransform;
 use crate::TriMesh;
@@ -25,60 +26,16 @@ use implicit::{Implicit, PointIndex};
 use rustc_hash::FxHashMap;
 use std::collections::VecDeque;
 
-pub use nets::CellKey;
-
-/// How scans are merged.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct MergeOptions {
-    /// Cell size of the merge grid in median edge lengths of the first scan (about one
-    /// merged vertex per `cell_edges^2` scan points of one view).
-    pub cell_edges: f64,
-    /// Radius of the samples averaged at a point, in cells.
-    pub radius_cells: f64,
-    /// Gaussian width of their weights, in cells.
-    pub sigma_cells: f64,
-    /// Vertex rings over which a scan's weight ramps up from its rim.
-    pub ramp_rings: usize,
-    /// The weight of a scan's rim vertices (the ramp's start): where a view alone covers
-    /// the object its rim still counts.
-    pub rim_weight: f64,
-    /// Projections of each vertex onto the zero set.
-    pub projections: usize,
-    /// A merged vertex is kept only within this many cells of a sample: the surface stops
-    /// where the data stops.
-    pub keep_cells: f64,
-}
-
-impl Default for MergeOptions {
-    fn default() -> Self {
-        Self {
-            cell_edges: 1.5,
-            radius_cells: 2.0,
-            sigma_cells: 1.0,
-            ramp_rings: 6,
-            rim_weight: 0.05,
-            projections: 2,
-            keep_cells: 0.75,
-        }
-    }
-}
-
-/// One scan's oriented samples in the object frame.
-#[derive(Clone, Debug, Default)]
-pub struct ScanSamples {
-    /// The points (the scan's vertices that some triangle uses).
-    pub points: Vec<DVec3>,
-    /// Their unit normals (area-weighted face normals; the scan's orientation).
-    pub normals: Vec<DVec3>,
-    /// Their weights in (0, 1]: `rim_weight` on the rim, 1 from `ramp_rings` rings in.
-    pub weights: Vec<f64>,
-}
+pub use types::{CellKey, MergeOptions, Merged, ScanSamples};
 
 /// The samples of a scan mesh (in its own frame) moved by `transform` into the object
 /// frame. Vertices no triangle uses, or whose faces have no area, carry no normal and are
 /// left out.
-pub fn scan_samples(mesh: &TriMesh, transform: &RigidTransform, opts: &MergeOptions) -> ScanSamples {
+pub fn scan_samples(
+    mesh: &TriMesh,
+    transform: &RigidTransform,
+    opts: &MergeOptions,
+) -> ScanSamples {
     let n = mesh.positions.len();
     let mut normals = vec![DVec3::ZERO; n];
     let valid = |t: &[u32; 3]| t.iter().all(|&v| (v as usize) < n);
@@ -117,7 +74,11 @@ pub fn scan_samples(mesh: &TriMesh, transform: &RigidTransform, opts: &MergeOpti
 fn rings_from_rim(mesh: &TriMesh, cap: usize) -> Vec<usize> {
     let n = mesh.positions.len();
     let mut edges: FxHashMap<(u32, u32), u32> = FxHashMap::default();
-    for t in mesh.triangles.iter().filter(|t| t.iter().all(|&v| (v as usize) < n)) {
+    for t in mesh
+        .triangles
+        .iter()
+        .filter(|t| t.iter().all(|&v| (v as usize) < n))
+    {
         for k in 0..3 {
             let (a, b) = (t[k], t[(k + 1) % 3]);
             *edges.entry((a.min(b), a.max(b))).or_default() += 1;
@@ -160,9 +121,7 @@ pub fn median_edge(mesh: &TriMesh) -> f64 {
         .triangles
         .iter()
         .filter(|t| t.iter().all(|&v| (v as usize) < n))
-        .flat_map(|t| {
-            (0..3).map(move |k| (t[k], t[(k + 1) % 3]))
-        })
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
         .map(|(a, b)| mesh.positions[a as usize].distance(mesh.positions[b as usize]))
         .filter(|l| l.is_finite() && *l > 0.0)
         .collect();
@@ -171,25 +130,6 @@ pub fn median_edge(mesh: &TriMesh) -> f64 {
     }
     let mid = lengths.len() / 2;
     *lengths.select_nth_unstable_by(mid, f64::total_cmp).1
-}
-
-/// The merged data: one vertex per crossed grid cell, triangulated by surface nets.
-#[derive(Clone, Debug, Default)]
-pub struct Merged {
-    /// The vertices and triangles (oriented as the scans' normals; a few non-manifold
-    /// configurations of surface nets are left for cleaning).
-    pub mesh: TriMesh,
-    /// Each vertex's unit normal (of the implicit function).
-    pub normals: Vec<DVec3>,
-    /// Each vertex's grid cell: vertices of two merges with the same cell are the same
-    /// place of the object.
-    pub cells: Vec<CellKey>,
-    /// The cell size used.
-    pub cell: f64,
-    /// Grid corners at which the implicit function was evaluated.
-    pub corners_evaluated: usize,
-    /// Crossed cells whose vertex was dropped (no sample within `keep_cells`).
-    pub dropped_vertices: usize,
 }
 
 /// Merges the samples of every scan on a grid of cell size `cell` (see the module docs).
@@ -259,5 +199,76 @@ impl MergeChange {
             }
         }
         change
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{merge, MergeOptions, ScanSamples};
+    use glam::DVec3;
+
+    /// Samples of a sphere of radius `r` (a Fibonacci lattice), outward normals.
+    fn sphere(r: f64, n: usize, offset: DVec3) -> ScanSamples {
+        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+        let mut s = ScanSamples::default();
+        for i in 0..n {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;
+            let rho = (1.0 - y * y).sqrt();
+            let a = golden * i as f64;
+            let d = DVec3::new(rho * a.cos(), y, rho * a.sin());
+            s.points.push(d * r + offset);
+            s.normals.push(d);
+            s.weights.push(1.0);
+        }
+        s
+    }
+
+    #[test]
+    fn a_sampled_sphere_merges_into_a_closed_mesh_on_the_sphere() {
+        let s = sphere(1.0, 20_000, DVec3::ZERO);
+        let m = merge(&[&s], 0.05, &MergeOptions::default());
+        let worst = m
+            .mesh
+            .positions
+            .iter()
+            .map(|p| (p.length() - 1.0).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 2e-3, "vertex off the sphere by {worst}");
+        let stats = crate::mesh::stats::mesh_stats(&m.mesh, 0);
+        assert_eq!(stats.boundary_loops, 0, "{stats:?}");
+        // Outward: the signed volume is positive.
+        let volume: f64 = m
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| m.mesh.positions[v as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum();
+        assert!(
+            (volume - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.05,
+            "{volume}"
+        );
+    }
+
+    #[test]
+    fn two_offset_views_merge_midway_without_doubling_vertices() {
+        let a = sphere(1.0, 20_000, DVec3::ZERO);
+        let b = sphere(1.0, 20_000, DVec3::new(0.0, 0.0, 0.004));
+        let one = merge(&[&a], 0.05, &MergeOptions::default());
+        let two = merge(&[&a, &b], 0.05, &MergeOptions::default());
+        // One vertex per crossed cell whatever the number of views.
+        let ratio = two.mesh.positions.len() as f64 / one.mesh.positions.len() as f64;
+        assert!((0.97..1.03).contains(&ratio), "{ratio}");
+        // Each vertex midway between the two spheres (2 mm from each along z at the poles).
+        let centre = DVec3::new(0.0, 0.0, 0.002);
+        let worst = two
+            .mesh
+            .positions
+            .iter()
+            .map(|p| ((*p - centre).length() - 1.0).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 2.5e-3, "{worst}");
     }
 }

@@ -37,6 +37,16 @@ pub fn surface_mesh(fit: &PatchFit) -> TriMesh {
     TriMesh::new(tess.positions, tess.triangles)
 }
 
+/// The fitted surface at every data point's parameter: where the surface was fitted,
+/// never where it only extrapolates (a grid's untrimmed cells).
+pub fn surface_points_at_data(fit: &PatchFit) -> Vec<DVec3> {
+    let evaluate = fit.model.as_surface().evaluator(&fit.controls);
+    fit.params
+        .par_iter()
+        .map(|p| evaluate(*p).position)
+        .collect()
+}
+
 /// Distances of `points` to `mesh` (points with no distance, e.g. non-finite, are left out).
 pub fn distance_stats(points: &[DVec3], mesh: &TriMesh) -> DistanceStats {
     let query = MeshDistance::new(mesh);

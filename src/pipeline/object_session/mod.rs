@@ -12,13 +12,15 @@
 
 mod measure;
 
-pub use measure::{distance_stats, surface_mesh, DistanceStats};
+pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{
     median_edge, merge, scan_samples, MergeChange, MergeOptions, Merged, ScanSamples,
 };
-use crate::pipeline::worker::{fit_patch, outputs_of, PatchOutputs, WarmStart, WorkerConfig};
+use crate::pipeline::worker::{
+    fit_patch, outputs_of, Domain, PatchOutputs, WarmStart, WorkerConfig,
+};
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
 use serde_json::json;
@@ -244,8 +246,21 @@ impl ObjectSession {
         let merged = merge(&all, cell, &self.opts.merge);
         times.merge_ms = ms_since(t);
         let t = Instant::now();
-        let fitted = fit_patch(&merged.mesh, self.warm.as_ref(), &self.opts.worker)
-            .map_err(SessionError::Fit)?;
+        let fitted = match fit_patch(&merged.mesh, self.warm.as_ref(), &self.opts.worker) {
+            Ok(f) => f,
+            // Views that wrap around without closing can pass the worker's disk test and
+            // still fold on any plane: the merged data is no disk, the control mesh takes it.
+            Err(
+                PipelineError::ScanFailed { .. }
+                | PipelineError::MapFailed { .. }
+                | PipelineError::NotDiskLike { .. },
+            ) if self.opts.worker.fit.domain == Domain::Auto => {
+                let mut whole = self.opts.worker.clone();
+                whole.fit.domain = Domain::Mesh;
+                fit_patch(&merged.mesh, self.warm.as_ref(), &whole).map_err(SessionError::Fit)?
+            }
+            Err(e) => return Err(SessionError::Fit(e)),
+        };
         times.fit_ms = ms_since(t);
         let path = if fitted.object.is_some() {
             "object"
