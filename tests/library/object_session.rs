@@ -258,11 +258,8 @@ fn two_arrival_orders_end_at_the_same_surface() {
     };
     let (a, _) = fit_in(&[0, 1, 2, 3, 4, 5]);
     let (_, b) = fit_in(&[5, 2, 4, 0, 3, 1]);
-    let d = distance_stats(&a.positions, &b);
-    eprintln!(
-        "a to b {d:?}, a off the sphere {}",
-        sphere_error(&a.positions)
-    );
+    let d = distance_stats(&a, &b);
+    eprintln!("a to b {d:?}, a off the sphere {}", sphere_error(&a));
     assert!(sphere_error(&a) < 1e-4);
     assert!(d.rms < 5e-5, "{d:?}");
 }
