@@ -4,9 +4,13 @@
 //! CG / LSPIA / PIA need on a B-patch against the Bezier patch of the same degree (the same
 //! polynomials: knots change only the conditioning). Cases: `examples/bpatch_dms/cases.rs`.
 //!
+//! Also: one DMS triangle's basis (degree 2 and 3) by the recurrence at every point against
+//! its kept polynomial pieces, and the product path (`pipeline::worker::fit_patch`, DMS
+//! degree 2) on the 40k-point range scan bun045_tri when the shared data is there.
+//!
 //! Times are min / median of repeated runs (the machine is shared).
 //!
-//! Run: cargo run --release --example bpatch_dms_bench
+//! Run: cargo run --release --example bpatch_dms_bench [-- --scan-only]
 
 #[path = "bpatch_dms/cases.rs"]
 mod cases;
@@ -218,7 +222,117 @@ impl PlanarSurface for BezierAsPlanar {
     }
 }
 
+/// One DMS domain triangle's family (knot clouds as the perturbed rule puts them, roots as
+/// `DmsSpline` builds them) at `count` points: microseconds per point by the recurrence
+/// and by the kept pieces (the second pass, once every cell met is converted).
+fn recurrence_against_pieces(degree: usize, count: usize) {
+    use glam::DVec2;
+    use trispline::surface::bezier::lattice_points;
+    use trispline::surface::simplex_spline::{det2, SimplexFamily};
+    let corners = [
+        DVec2::new(0.0, 0.0),
+        DVec2::new(1.0, 0.0),
+        DVec2::new(0.5, 0.866),
+    ];
+    let clouds: Vec<Vec<DVec2>> = corners
+        .iter()
+        .enumerate()
+        .map(|(v, &c)| {
+            (0..=degree)
+                .map(|i| {
+                    let phi = 0.5 + 2.4 * (i + 3 * v) as f64;
+                    c + DVec2::new(phi.cos(), phi.sin()) * (0.6 * i as f64 / degree as f64)
+                })
+                .collect()
+        })
+        .collect();
+    let pool: Vec<DVec2> = clouds.iter().flatten().copied().collect();
+    let bits = |first: usize, n: usize| -> u16 { (((1u32 << n) - 1) as u16) << first };
+    let roots: Vec<(u16, f64)> = lattice_points(degree)
+        .into_iter()
+        .map(|(i, j)| {
+            let k = degree - i - j;
+            let mask = bits(0, i + 1) | bits(degree + 1, j + 1) | bits(2 * (degree + 1), k + 1);
+            (mask, det2(clouds[0][i], clouds[1][j], clouds[2][k]).abs())
+        })
+        .collect();
+    let family = SimplexFamily::compile(&pool, &roots).expect("valid knots");
+    let points: Vec<DVec2> = cases::scattered_uv(count)
+        .into_iter()
+        .map(|(u, v)| cases::plane(u, v))
+        .collect();
+    let (mut scratch, mut out) = (Vec::new(), Vec::new());
+    let mut per_point = |cached: bool| {
+        let t = Instant::now();
+        for x in &points {
+            if cached {
+                family.evaluate_cached::<true>(*x, DVec2::ZERO, &mut scratch, &mut out);
+            } else {
+                family.evaluate::<true>(*x, DVec2::ZERO, &mut scratch, &mut out);
+            }
+            std::hint::black_box(&out);
+        }
+        t.elapsed().as_secs_f64() * 1e6 / count as f64
+    };
+    let recurrence = per_point(false);
+    let first = per_point(true);
+    let kept = per_point(true);
+    println!(
+        "one DMS triangle, degree {degree} ({} nodes): {recurrence:.3} us per point by the recurrence, {first:.3} us converting pieces ({} cells), {kept:.3} us from the kept pieces ({:.1}x)",
+        family.node_count(),
+        family.piece_count(),
+        recurrence / kept
+    );
+}
+
+/// `fit_patch` on bun045_tri as DMS of degree 2 (the worker's defaults otherwise).
+fn product_scan() {
+    use trispline::io::{read_mesh_file, LoadOptions};
+    use trispline::pipeline::worker::{fit_patch, WorkerConfig};
+    use trispline::pipeline::SurfaceKind;
+    let Some(file) = trispline::testdata::shared_data("range_scans/bun045_tri.ply") else {
+        println!("bun045_tri.ply not found: product path skipped");
+        return;
+    };
+    let mesh = match read_mesh_file(&file, &LoadOptions::default()) {
+        Ok(l) => l.mesh,
+        Err(e) => {
+            println!("{}: {e}", file.display());
+            return;
+        }
+    };
+    for degree in [2, 3] {
+        let mut cfg = WorkerConfig::default();
+        cfg.fit.surface = SurfaceKind::Dms;
+        cfg.fit.dms.degree = degree;
+        let mut last = None;
+        let (min, median) = time_runs(3, || last = Some(fit_patch(&mesh, None, &cfg)));
+        match last {
+            Some(Ok(f)) => {
+                let rounds = f
+                    .scattered
+                    .as_ref()
+                    .map_or(0, |i| i.correction_rms.len().saturating_sub(1));
+                println!(
+                    "bun045_tri as DMS degree {degree} (fit_patch): {min:.0} ms min, {median:.0} ms median; last run: prepare {:.0} ms, fit {:.0} ms ({rounds} rounds); {} points, {} controls, rms {:.1} um",
+                    f.fit.prepare_ms,
+                    f.fit.fit_ms,
+                    f.fit.data.len(),
+                    f.fit.controls.len(),
+                    f.fit.geometric_rms() * 1e6
+                );
+            }
+            Some(Err(e)) => println!("bun045_tri as DMS degree {degree}: {e}"),
+            None => {}
+        }
+    }
+}
+
 fn main() {
+    if std::env::args().any(|a| a == "--scan-only") {
+        product_scan();
+        return;
+    }
     let bp = BPatchCase::new(0.5);
     println!(
         "B-patch: degree 3, {} points, {} controls (outward knots, spread 0.5)",
@@ -299,6 +413,12 @@ fn main() {
         &big.spline,
         &big.params[..20_000],
     );
+
+    println!();
+    recurrence_against_pieces(2, 20_000);
+    recurrence_against_pieces(3, 20_000);
+    println!();
+    product_scan();
 
     conditioning_table();
 }

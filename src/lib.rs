@@ -8,6 +8,7 @@
 pub mod allocator;
 pub mod bspline;
 pub mod cli;
+pub mod cluster;
 pub mod curvature;
 pub mod daemon;
 pub mod fit;

@@ -30,6 +30,8 @@ enum Command {
     Fit(cli::fit::FitArgs),
     /// The daemon: watch a folder, fit every patch that arrives.
     Watch(cli::watch::WatchArgs),
+    /// A cluster worker: fit jobs from a NATS JetStream queue (`watch --queue`) into a shared OUT.
+    Worker(cli::worker::WorkerArgs),
     /// Fit a tensor-product B-spline surface to grid or scattered points (JSON, IGES, STEP, GLB).
     BsplineFit(cli::bspline_fit::BsplineFitArgs),
     /// Curvature, convex/concave/saddle regions and their boundaries of a surface.json.
@@ -48,6 +50,7 @@ fn main() -> ExitCode {
         Command::Coarsen(a) => cli::mesh_tools::coarsen_cmd(a),
         Command::Fit(a) => cli::fit::run(a),
         Command::Watch(a) => cli::watch::run_watch(a),
+        Command::Worker(a) => cli::worker::run(a),
         Command::BsplineFit(a) => cli::bspline_fit::run(a),
         Command::Curvature(a) => cli::curvature::run(a),
         Command::Export(a) => cli::export::run(a),

@@ -19,7 +19,7 @@
 use crate::fit::engine::{umbrella_laplacian_of_edges, PiaOperator};
 use crate::fit::{fit, Budget, Collocation, Csr, FitError, FitOutcome, FitProblem, Method};
 use crate::surface::dms::PlanarSurface;
-use crate::surface::{SurfaceParam, TriSurface};
+use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -222,6 +222,26 @@ pub fn foot_points(
     data: &[DVec3],
     steps: usize,
 ) -> Vec<SurfaceParam> {
+    feet_with_derivatives(surface, controls, params, data, steps)
+        .into_iter()
+        .map(|(p, _)| p)
+        .collect()
+}
+
+/// A Newton step that moves the surface point less than this share of its distance to the
+/// data point ends the search: sliding t along the surface changes a distance d by about
+/// t^2 / (2 d), here under 1e-6 of it.
+const FOOT_STEP_SHARE: f64 = 1e-3;
+
+/// `foot_points` with the surface's derivatives at each foot (what callers want next:
+/// the distance, the normal), so that nobody evaluates the feet again.
+pub fn feet_with_derivatives(
+    surface: &dyn TriSurface,
+    controls: &[DVec3],
+    params: &[SurfaceParam],
+    data: &[DVec3],
+    steps: usize,
+) -> Vec<(SurfaceParam, Derivatives)> {
     let eval = surface.evaluator(controls);
     params
         .par_iter()
@@ -247,8 +267,10 @@ pub fn foot_points(
                 }
                 let mut du = -(h[2] * g[0] - h[1] * g[1]) / det;
                 let mut dv = -(h[0] * g[1] - h[1] * g[0]) / det;
-                // Converged: a step this small in barycentric units moves nothing visible.
-                if du.abs() + dv.abs() < 1e-10 {
+                // Converged: a step this small in barycentric units moves nothing visible,
+                // nor does one that slides the point a small share of its distance.
+                let slide2 = (d.du * du + d.dv * dv).length_squared();
+                if du.abs() + dv.abs() < 1e-10 || slide2 <= FOOT_STEP_SHARE.powi(2) * dist2 {
                     break;
                 }
                 let mut moved = false;
@@ -267,7 +289,7 @@ pub fn foot_points(
                     break;
                 }
             }
-            p
+            (p, d)
         })
         .collect()
 }

@@ -19,3 +19,19 @@ pub fn shared_data(relative: &str) -> Option<PathBuf> {
     eprintln!("skipping: {} not found", path.display());
     None
 }
+
+/// Every Stanford range scan in the shared data, relative to its root: the raw and the
+/// registered views, the range grid and MeshLab's triangulation (the scans the coverage
+/// goal is measured on).
+pub const STANFORD_SCANS: [&str; 10] = [
+    "range_scans/bun000_tri.ply",
+    "range_scans/bun045_tri.ply",
+    "range_scans/chin_tri.ply",
+    "range_scans/bun000_range_grid.ply",
+    "range_scans/bun000_meshlab_triangulated.ply",
+    "range_scans/registered/bun000.ply",
+    "range_scans/registered/bun045.ply",
+    "range_scans/registered/bun180.ply",
+    "range_scans/registered/bun270.ply",
+    "range_scans/registered/chin.ply",
+];

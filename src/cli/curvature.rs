@@ -2,6 +2,7 @@
 //! `boundaries.json`, `boundaries.obj`, `boundaries.igs` and `regions.json` out.
 
 use crate::bspline::{BSplineCurve, BSplineSurface};
+use crate::curvature::planar::DmsPatch;
 use crate::curvature::regions::{analyze, Analysis, AnalysisOptions};
 use crate::curvature::{
     BezierPatch, DerivativeSurface, GridPatch, LoopMeshPatch, RegionKind, Triangular,
@@ -38,7 +39,9 @@ pub enum Colouring {
 /// Arguments of `trispline curvature`.
 #[derive(clap::Args, Debug)]
 pub struct CurvatureArgs {
-    /// A surface.json written by `fit` (bezier, loop) or `bspline-fit` (bspline).
+    /// A surface.json written by `fit` (bezier, loop, bpatch, dms) or `bspline-fit`
+    /// (bspline). B-patches are sampled on their domain triangle (barycentric parameters),
+    /// DMS splines triangle by triangle over their domain (parameters: domain points).
     pub surface: PathBuf,
     /// Samples per side of the parameter lattice (N x N on a rectangle, a triangular
     /// lattice of N a side on the reference triangle).
@@ -55,8 +58,10 @@ pub struct CurvatureArgs {
     /// white to red (positive), saturating at the 98th percentile of their magnitude.
     #[arg(long, value_enum, default_value = "region")]
     pub colour: Colouring,
-    /// Units declared in boundaries.igs.
-    #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "mm")]
+    /// The length unit of the surface's coordinates (those of the input it was fitted to),
+    /// declared in boundaries.igs so that CAD tools read the loops at true size: `m`
+    /// (the scans' unit), `mm` or `in`. A size implausible in that unit is warned about.
+    #[arg(long, value_parser = super::bspline_fit::units_parser(), default_value = "m")]
     pub units: IgesUnits,
     /// Output folder (created if missing): curvature.glb, boundaries.json, boundaries.obj,
     /// boundaries.igs and regions.json.
@@ -135,6 +140,16 @@ fn load(args: &CurvatureArgs) -> anyhow::Result<Loaded> {
             }),
             "loop",
         ),
+        SurfaceDescription::BPatch { patch, controls } => (
+            Box::new(Triangular {
+                surface: patch,
+                controls,
+            }),
+            "bpatch",
+        ),
+        SurfaceDescription::Dms { spline, controls } => {
+            (Box::new(DmsPatch { spline, controls }), "dms")
+        }
     };
     Ok((surface, kind, packing))
 }
@@ -173,6 +188,13 @@ pub fn run(args: &CurvatureArgs) -> anyhow::Result<ExitCode> {
         &args.out.join("boundaries.obj"),
         &obj_polylines_bytes(&loops),
     )?;
+    let points: Vec<DVec3> = loops.iter().flatten().copied().collect();
+    if let Some(w) = args
+        .units
+        .size_warning(super::bspline_fit::largest_side(&points))
+    {
+        eprintln!("warning: {w}");
+    }
     // Degree-1 B-spline curves with chord-length knots are the polylines exactly.
     let curves: Vec<BSplineCurve> = loops.iter().filter_map(|l| polyline_curve(l)).collect();
     let iges = iges_bytes(

@@ -13,6 +13,7 @@ use super::bspline_fit::{largest_side, units_parser};
 use crate::bspline::scattered::ScatteredSolver;
 use crate::bspline::scattered::{fit_scattered, planar_parameters, ScatteredOptions};
 use crate::bspline::BSplineSurface;
+use crate::curvature::planar::DmsPatch;
 use crate::curvature::{
     BezierPatch, DerivativeSurface, Domain, GridPatch, LoopMeshPatch, Triangular,
 };
@@ -90,6 +91,11 @@ fn triangular(d: SurfaceDescription) -> Result<Box<dyn DerivativeSurface>, BSpli
             surface: LatticeSpline::new(domain_segments),
             controls,
         }),
+        SurfaceDescription::BPatch { patch, controls } => Box::new(Triangular {
+            surface: patch,
+            controls,
+        }),
+        SurfaceDescription::Dms { spline, controls } => Box::new(DmsPatch { spline, controls }),
     })
 }
 

@@ -1,16 +1,17 @@
 //! `trispline fit`: one patch in, `surface.json`, `surface.glb` and `report.json` out.
 
 use super::progress::Progress;
-use crate::fit::Method;
+use crate::fit::{FitStatus, Method};
 use crate::io::{read_mesh_file, write_atomic, write_atomic_group, LoadOptions};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
 use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConfig};
+use crate::pipeline::scattered::{BPatchConfig, DmsConfig};
 use crate::pipeline::worker::{
     run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
-    DEFAULT_TESSELLATION,
+    DEFAULT_CREASE_ANGLE_DEG, DEFAULT_TESSELLATION,
 };
-use crate::pipeline::{SurfaceKind, UnknownName};
+use crate::pipeline::SurfaceKind;
 use anyhow::Context;
 use clap::builder::{PossibleValuesParser, TypedValueParser};
 use serde_json::json;
@@ -20,9 +21,10 @@ use std::str::FromStr;
 
 /// A parser for a core enum spelled by fixed names: `--help` lists them, and the core needs
 /// no command-line library.
-fn named<T>(names: &'static [&'static str]) -> impl TypedValueParser<Value = T>
+fn named<T>(names: impl IntoIterator<Item = &'static str>) -> impl TypedValueParser<Value = T>
 where
-    T: FromStr<Err = UnknownName> + Clone + Send + Sync + 'static,
+    T: FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::error::Error + Send + Sync + 'static,
 {
     PossibleValuesParser::new(names).try_map(|s| s.parse::<T>())
 }
@@ -31,20 +33,25 @@ where
 #[derive(clap::Args, Debug)]
 pub struct FitArgs {
     /// The input mesh: a disk-like scan patch (any connectivity), a whole object (closed,
-    /// holed, any genus) or a mesh with Loop subdivision connectivity (fitted exactly).
+    /// holed, any genus) or a mesh with Loop subdivision connectivity (fitted exactly); or a
+    /// point cloud (.xyz, .pts, .pcd, vertices-only .ply) of a scan that is a height field
+    /// over some plane, triangulated and fitted as a scan.
     pub input: PathBuf,
     /// The surface fitted: `loop` (scans: a Loop surface over a grid; subdivided inputs: the
     /// Loop limit surface of their coarse net; whole objects: the Loop limit surface of a
     /// control mesh simplified from the data) or `bezier` (scans: one quartic Bezier patch
     /// per grid cell; subdivided inputs: one patch over a lattice-shaped coarse net; whole
-    /// objects are fitted with `loop` whatever is asked).
-    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES), default_value = "loop")]
+    /// objects are fitted with `loop` whatever is asked), `bpatch` (one B-patch of degree
+    /// --bpatch-degree over a triangle around the planar map) or `dms` (a DMS triangular
+    /// B-spline of degree --dms-degree over grid triangles of the planar map); the last two
+    /// map every input to the plane, subdivided ones too.
+    #[arg(long, value_parser = named::<SurfaceKind>(SurfaceKind::NAMES.iter().copied()), default_value = "loop")]
     pub surface: SurfaceKind,
     /// Inputs without subdivision connectivity: `auto` (disk-like scans on a grid over their
     /// planar map; closed, higher-genus and nearly closed inputs on a control mesh), `grid`
     /// (always the planar map) or `mesh` (always a control mesh simplified from the data,
     /// subdivided inputs too).
-    #[arg(long, value_parser = named::<Domain>(Domain::NAMES), default_value = "auto")]
+    #[arg(long, value_parser = named::<Domain>(Domain::NAMES.iter().copied()), default_value = "auto")]
     pub domain: Domain,
     /// Levels of inverse subdivision (subdivided inputs: the depth of their connectivity;
     /// scans: the resampling depth of the initial net).
@@ -57,11 +64,11 @@ pub struct FitArgs {
     /// How the control points are solved for: `pia` (progressive iterative approximation),
     /// `lspia` (least-squares PIA), `cg` (conjugate gradients on the normal equations) or
     /// `direct` (sparse Cholesky, one step).
-    #[arg(long, default_value = "cg")]
+    #[arg(long, value_parser = named::<Method>(Method::ALL.map(Method::name)), default_value = "cg")]
     pub method: Method,
     /// Subdivided inputs: how the coarse net is recovered, `exact` (the inverse of the
     /// subdivision rules) or `lsq` (the net whose subdivision is closest in least squares).
-    #[arg(long, default_value = "exact")]
+    #[arg(long, value_parser = named::<InverseMethod>(InverseMethod::ALL.map(InverseMethod::name)), default_value = "exact")]
     pub inverse: InverseMethod,
     /// Maximum number of fitting steps.
     #[arg(long, default_value_t = BudgetConfig::default().max_iterations)]
@@ -98,7 +105,7 @@ pub struct FitArgs {
     pub corrections: usize,
     /// Scans: what a correction round refits: `distance` (squared-distance minimisation)
     /// or `parameters` (point-to-point again).
-    #[arg(long, value_parser = named::<Correction>(Correction::NAMES), default_value = "distance")]
+    #[arg(long, value_parser = named::<Correction>(Correction::NAMES.iter().copied()), default_value = "distance")]
     pub correction: Correction,
     /// Scans: correction rounds stop once one lowers the geometric RMS by less than this
     /// fraction.
@@ -117,7 +124,7 @@ pub struct FitArgs {
     pub smoothing: f64,
     /// Scans: fit the largest component (`largest`) or every component big enough (`all`,
     /// written to OUT/c0, OUT/c1, ... largest first, with OUT/components.json).
-    #[arg(long, value_parser = named::<ComponentMode>(ComponentMode::NAMES), default_value = "largest")]
+    #[arg(long, value_parser = named::<ComponentMode>(ComponentMode::NAMES.iter().copied()), default_value = "largest")]
     pub components: ComponentMode,
     /// Scans: components with fewer vertices are not fitted.
     #[arg(long, default_value_t = ComponentsConfig::default().min_vertices)]
@@ -129,13 +136,29 @@ pub struct FitArgs {
     /// Scans with `--surface bezier`: `patches` (one quartic Bezier patch per grid cell,
     /// the Bezier form of the grid fit) or `single` (one patch of degree `--lattice`, 16 by
     /// default; implied by `--lattice`).
-    #[arg(long, value_parser = named::<BezierLayout>(BezierLayout::NAMES), default_value = "patches")]
+    #[arg(long, value_parser = named::<BezierLayout>(BezierLayout::NAMES.iter().copied()), default_value = "patches")]
     pub bezier_layout: BezierLayout,
     /// Scans: holes whose bridging radius (largest distance from the hole's flat fill to
     /// its rim) exceeds this many median edge lengths of the data are trimmed out of the
     /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
     #[arg(long, default_value_t = ScanConfig::default().hole_bridge_edges)]
     pub hole_bridge_edges: f64,
+    /// `--surface dms`: the degree, 2 or 3 (C1 or C2 surfaces; 6 or 10 controls per domain
+    /// triangle, their number set by --target-controls-pct).
+    #[arg(long, default_value_t = DmsConfig::default().degree, value_parser = clap::value_parser!(u8).range(2..=3).map(usize::from))]
+    pub dms_degree: usize,
+    /// `--surface bpatch`: the degree (1-20).
+    #[arg(long, default_value_t = BPatchConfig::default().degree, value_parser = clap::value_parser!(u8).range(1..=20).map(usize::from))]
+    pub bpatch_degree: usize,
+    /// `--surface dms`: knot cloud radius as a fraction of each domain vertex's shortest
+    /// edge, in (0, 1); `bpatch`: knots pushed out along the medians by this fraction, in
+    /// [0, 2] (0: the Bezier patch). Default: 0.6 for dms, 0.5 for bpatch.
+    #[arg(long)]
+    pub knot_spread: Option<f64>,
+    /// Whole objects: data edges whose faces turn by more than this many degrees become
+    /// sharp crease edges of the surface (0: none).
+    #[arg(long, default_value_t = DEFAULT_CREASE_ANGLE_DEG)]
+    pub crease_angle_deg: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
@@ -184,10 +207,21 @@ impl FitArgs {
                 tangential: self.correction_tangential,
                 tangential_edge: self.correction_tangential_edge,
             },
+            crease_angle_deg: self.crease_angle_deg,
             components: ComponentsConfig {
                 mode: self.components,
                 min_vertices: self.min_component_vertices,
                 min_fraction: self.min_component_fraction,
+            },
+            dms: DmsConfig {
+                degree: self.dms_degree,
+                knot_spread: self.knot_spread.unwrap_or(DmsConfig::default().knot_spread),
+            },
+            bpatch: BPatchConfig {
+                degree: self.bpatch_degree,
+                knot_spread: self
+                    .knot_spread
+                    .unwrap_or(BPatchConfig::default().knot_spread),
             },
         };
         WorkerConfig {
@@ -203,6 +237,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let cfg = args.worker_config();
+    check_knot_spread(args)?;
     let progress = Progress::new(cfg.fit.budget.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
     let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));
@@ -224,6 +259,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     if args.components == ComponentMode::Largest {
         for part in input.parts {
+            println!("{}", summary(&label, &part.outputs, &args.out));
             write_outputs(&args.out, part.outputs, &source)?;
         }
         return Ok(ExitCode::SUCCESS);
@@ -237,7 +273,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
             "data_points": part.outputs.report["data_points"],
             "final": part.outputs.report["final"],
         }));
-        write_outputs(&args.out.join(&name), part.outputs, &source)?;
+        let dir = args.out.join(&name);
+        println!(
+            "{}",
+            summary(&format!("{label} [{name}]"), &part.outputs, &dir)
+        );
+        write_outputs(&dir, part.outputs, &source)?;
     }
     for (suffix, reason) in &input.failed {
         eprintln!("{label}: component {suffix} not fitted: {reason}");
@@ -254,6 +295,62 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `--knot-spread` within the range of the kind asked for (the degrees are range-checked
+/// by their parsers).
+fn check_knot_spread(args: &FitArgs) -> anyhow::Result<()> {
+    let Some(k) = args.knot_spread else {
+        return Ok(());
+    };
+    match args.surface {
+        SurfaceKind::Dms if !(k > 0.0 && k < 1.0) => {
+            anyhow::bail!("--knot-spread {k}: dms needs a value in (0, 1)")
+        }
+        SurfaceKind::Bpatch if !(0.0..=2.0).contains(&k) => {
+            anyhow::bail!("--knot-spread {k}: bpatch needs a value in [0, 2]")
+        }
+        _ => Ok(()),
+    }
+}
+
+/// The line `fit` prints per fitted surface: how it ended (and what that means), its
+/// errors, size and time, and what was left out. Errors are in the input's unit.
+fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
+    let r = &out.report;
+    let number = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let status = match out.status {
+        FitStatus::Met => "met: every target holds".to_string(),
+        FitStatus::Stalled => {
+            "stalled: further steps stopped improving the fit before every target held \
+            (usual for scans, whose noise and rims keep the max error above the tolerance; \
+            judge it by the RMS, see the README)"
+                .to_string()
+        }
+        FitStatus::Capped => "capped: the step or time limit came first (raise --iterations or \
+            --max-time-ms)"
+            .to_string(),
+    };
+    let mut line = format!(
+        "{label}: {status}; RMS {:.3e}, max {:.3e} (tolerance {:.3e}); {} control points for {} data points; fitted in {:.2} s; -> {}",
+        number(&r["final"]["geometric_rms_error"]),
+        number(&r["final"]["geometric_max_error"]),
+        number(&r["tolerance"]),
+        r["control_points"],
+        r["data_points"],
+        number(&r["wall_ms"]) / 1e3,
+        dir.display(),
+    );
+    let dropped = &r["dropped"];
+    if dropped["pieces"].as_u64().is_some_and(|p| p > 0) {
+        line.push_str(&format!(
+            "; {} pieces not fitted ({} vertices, {:.1} %; --components all fits every sizeable piece)",
+            dropped["pieces"],
+            dropped["vertices"],
+            100.0 * number(&dropped["share"]),
+        ));
+    }
+    line
+}
+
 /// Where a fit's mesh came from, for its report.
 struct Source<'a> {
     label: &'a str,
@@ -268,11 +365,12 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let report = serde_json::to_vec_pretty(&out.report)?;
     let surface = serde_json::to_vec_pretty(&out.surface)?;
-    // As the daemon writes them: the three synced at once, surface.json renamed last.
+    // As the daemon writes them: all synced at once, surface.json renamed last.
     write_atomic_group(
         dir,
         &[
             ("surface.glb", &out.glb),
+            ("legend.svg", out.legend.as_bytes()),
             ("report.json", &report),
             ("surface.json", &surface),
         ],

@@ -4,6 +4,7 @@ use crate::io::{read_mesh_file, write_mesh_file, LoadOptions};
 use crate::mesh::inverse::{coarsen, InverseError, InverseMethod};
 use crate::mesh::loop_subdiv::subdivide;
 use crate::mesh::stats::mesh_stats;
+use crate::remesh::points::{triangulate_points, PointCloudOptions};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -11,7 +12,8 @@ use std::process::ExitCode;
 /// Arguments of `trispline inspect`.
 #[derive(clap::Args, Debug)]
 pub struct InspectArgs {
-    /// The mesh file to inspect.
+    /// The mesh or point cloud file to inspect (a point cloud also gets the triangulation
+    /// `fit` would use, or the reason it is refused).
     pub input: PathBuf,
     /// Deepest level of subdivision connectivity to look for.
     #[arg(long, default_value_t = 8)]
@@ -51,7 +53,15 @@ pub struct CoarsenArgs {
 /// Runs `inspect`: prints the mesh's counts and subdivision depth as JSON.
 pub fn inspect(args: &InspectArgs) -> anyhow::Result<ExitCode> {
     let loaded = read_mesh_file(&args.input, &LoadOptions::default())?;
-    let stats = mesh_stats(&loaded.mesh, args.max_depth);
+    let mut stats = serde_json::to_value(mesh_stats(&loaded.mesh, args.max_depth))?;
+    if loaded.is_point_cloud() {
+        // What `fit` would make of it: the triangulation it fits through, or why not.
+        stats["point_cloud"] =
+            match triangulate_points(&loaded.mesh.positions, &PointCloudOptions::default()) {
+                Ok(t) => serde_json::to_value(&t.stats)?,
+                Err(e) => serde_json::json!({"refused": e.to_string(), "kind": e.kind()}),
+            };
+    }
     println!("{}", serde_json::to_string_pretty(&stats)?);
     Ok(ExitCode::SUCCESS)
 }

@@ -6,3 +6,4 @@ pub mod fit;
 pub mod mesh_tools;
 pub mod progress;
 pub mod watch;
+pub mod worker;

@@ -1,15 +1,16 @@
-//! A one-line progress display on stderr for long fits. Drawn only when stderr is a
-//! terminal and the fit has run for half a second (short fits and pipes stay quiet),
-//! redrawn at most ten times a second, and erased when the fit ends so that the final
-//! messages are not interleaved with it.
+//! A one-line progress display on stderr for long fits, drawn by `indicatif` (which keeps it
+//! off when stderr is not a terminal, limits the redraw rate and erases it cleanly). It
+//! appears only once the fit has run for half a second, so short fits stay quiet, and is
+//! erased when the fit ends so that the final messages are not interleaved with it.
 
 use crate::fit::StepStats;
-use std::io::{IsTerminal, Write};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 const QUIET_FOR: Duration = Duration::from_millis(500);
-const REDRAW_EVERY: Duration = Duration::from_millis(100);
+const REDRAWS_PER_SECOND: u8 = 10;
 const BAR_WIDTH: usize = 24;
 
 /// The progress line of one fit; `on_step` may be called from any thread.
@@ -17,8 +18,8 @@ pub struct Progress {
     enabled: bool,
     start: Instant,
     max_iterations: usize,
-    /// When the line was last drawn; `None` while nothing is on screen.
-    drawn: Mutex<Option<Instant>>,
+    /// The bar once shown; `None` while nothing is on screen.
+    bar: Mutex<Option<ProgressBar>>,
 }
 
 impl Progress {
@@ -33,59 +34,57 @@ impl Progress {
             enabled,
             start: Instant::now(),
             max_iterations: max_iterations.max(1),
-            drawn: Mutex::new(None),
+            bar: Mutex::new(None),
         }
     }
 
-    /// Redraws the line for this step, unless it is too early or too soon after the last draw.
+    /// Updates the line for this step (indicatif redraws it at most ten times a second),
+    /// unless the fit is too young to show one.
     pub fn on_step(&self, s: &StepStats) {
         let elapsed = self.start.elapsed();
         if !self.enabled || elapsed < QUIET_FOR {
             return;
         }
-        let Ok(mut drawn) = self.drawn.lock() else {
+        let Ok(mut bar) = self.bar.lock() else {
             return;
         };
-        if drawn.is_some_and(|t| t.elapsed() < REDRAW_EVERY) {
-            return;
+        let bar = bar.get_or_insert_with(|| self.show(elapsed));
+        // Scans run their steps on through the correction rounds: the bar saturates.
+        bar.set_position(s.k.min(self.max_iterations) as u64);
+        bar.set_message(render(s, self.max_iterations));
+    }
+
+    fn show(&self, elapsed: Duration) -> ProgressBar {
+        let target = ProgressDrawTarget::stderr_with_hz(REDRAWS_PER_SECOND);
+        let bar = ProgressBar::with_draw_target(Some(self.max_iterations as u64), target)
+            .with_elapsed(elapsed);
+        let template = format!("fitting [{{bar:{BAR_WIDTH}}}] {{msg}}  {{elapsed}}");
+        if let Ok(style) = ProgressStyle::with_template(&template) {
+            bar.set_style(style.progress_chars("#>."));
         }
-        let line = render(s, self.max_iterations, elapsed);
-        let mut err = std::io::stderr().lock();
-        // Progress is best effort: a closed stderr must not fail the fit.
-        let _ = write!(err, "\r\x1b[2K{line}");
-        let _ = err.flush();
-        *drawn = Some(Instant::now());
+        bar
     }
 
     /// Erases the line if one was drawn.
     pub fn finish(&self) {
-        if let Ok(mut drawn) = self.drawn.lock() {
-            if drawn.take().is_some() {
-                let _ = write!(std::io::stderr().lock(), "\r\x1b[2K");
+        if let Ok(mut bar) = self.bar.lock() {
+            if let Some(b) = bar.take() {
+                b.finish_and_clear();
             }
         }
     }
 
     /// Whether a line is on screen now.
     pub fn has_drawn(&self) -> bool {
-        self.drawn.lock().map(|d| d.is_some()).unwrap_or(false)
+        self.bar.lock().map(|b| b.is_some()).unwrap_or(false)
     }
 }
 
-/// `fitting [#######.................] step 31/100  max 1.2e-3  rms 4.5e-5  1.3 s`; for
-/// scans the step count runs on through the correction rounds, so the bar saturates.
-pub fn render(s: &StepStats, max_iterations: usize, elapsed: Duration) -> String {
-    let frac = (s.k as f64 / max_iterations.max(1) as f64).clamp(0.0, 1.0);
-    let filled = (frac * BAR_WIDTH as f64).round() as usize;
+/// The line's text after the bar: `step 31/100  max 1.2e-3  rms 4.5e-5`.
+pub fn render(s: &StepStats, max_iterations: usize) -> String {
     format!(
-        "fitting [{}{}] step {}/{}  max {:.2e}  rms {:.2e}  {:.1} s",
-        "#".repeat(filled),
-        ".".repeat(BAR_WIDTH - filled),
-        s.k,
-        max_iterations,
-        s.max_error,
-        s.rms_error,
-        elapsed.as_secs_f64()
+        "step {}/{}  max {:.2e}  rms {:.2e}",
+        s.k, max_iterations, s.max_error, s.rms_error,
     )
 }
 
@@ -99,18 +98,14 @@ mod tests {
     }
 
     #[test]
-    fn the_line_shows_step_errors_and_a_bar_that_saturates() {
-        let line = render(&stats(25), 100, Duration::from_millis(1250));
+    fn the_line_shows_step_and_errors() {
+        let line = render(&stats(25), 100);
         assert!(line.contains("step 25/100"), "{line}");
         assert!(line.contains("max 3.00e-3"), "{line}");
-        assert!(line.contains("1.2 s") || line.contains("1.3 s"), "{line}");
-        assert_eq!(line.matches('#').count(), BAR_WIDTH / 4);
-        let over = render(&stats(250), 100, Duration::ZERO);
-        assert_eq!(over.matches('#').count(), BAR_WIDTH);
     }
 
     #[test]
-    fn quiet_when_not_a_terminal_or_short() {
+    fn quiet_when_not_a_terminal_or_short_and_erased_at_the_end() {
         let off = Progress::with_output(10, false);
         off.on_step(&stats(1));
         assert!(!off.has_drawn());
@@ -118,5 +113,20 @@ mod tests {
         let short = Progress::with_output(10, true);
         short.on_step(&stats(1));
         assert!(!short.has_drawn());
+        // Past the quiet time the bar exists (saturated beyond max) until finish.
+        let long = Progress {
+            start: Instant::now() - 2 * QUIET_FOR,
+            ..Progress::with_output(10, true)
+        };
+        long.on_step(&stats(25));
+        assert!(long.has_drawn());
+        let position = long
+            .bar
+            .lock()
+            .ok()
+            .and_then(|b| b.as_ref().map(ProgressBar::position));
+        assert_eq!(position, Some(10));
+        long.finish();
+        assert!(!long.has_drawn());
     }
 }

@@ -4,7 +4,7 @@ use crate::daemon::config::{DaemonConfig, LogFormat, DEFAULT_CONFIG};
 use crate::daemon::pipe::PipeSpec;
 use crate::daemon::{run, Control, DaemonOptions};
 use anyhow::Context;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 
@@ -40,34 +40,59 @@ pub struct WatchArgs {
     /// Log lines as JSON (overrides log.format).
     #[arg(long)]
     pub log_json: bool,
+    /// Files in subfolders are patches too: DIR/scans/ear.ply is patch `scans/ear`, with
+    /// outputs in OUT/scans/ear/ (sets daemon.recursive).
+    #[arg(long)]
+    pub recursive: bool,
+    /// Publish the jobs to this NATS JetStream server (`nats://HOST:PORT`, sets cluster.url)
+    /// for `trispline worker` processes to fit, instead of fitting them here. OUT must be
+    /// the workers' shared OUT.
+    #[arg(long)]
+    pub queue: Option<String>,
+}
+
+/// The daemon configuration from `path`, or the embedded default without one. An invalid
+/// configuration is printed and becomes exit code 2; an unreadable file is an error.
+pub(crate) fn load_config(path: Option<&Path>) -> anyhow::Result<Result<DaemonConfig, ExitCode>> {
+    let text = match path {
+        Some(p) => {
+            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?
+        }
+        None => DEFAULT_CONFIG.to_string(),
+    };
+    Ok(DaemonConfig::parse(&text, &config_name(path)).map_err(|e| {
+        eprintln!("{e}");
+        ExitCode::from(2)
+    }))
+}
+
+/// How messages name the configuration's source.
+fn config_name(path: Option<&Path>) -> String {
+    path.map_or_else(
+        || "embedded config/default.toml".to_string(),
+        |p| p.display().to_string(),
+    )
 }
 
 /// Runs `watch`: loads the configuration, then the daemon until it is stopped (or, with
 /// --once, until the folder's files are processed).
 pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
-    let (text, name) = match &args.config {
-        Some(p) => (
-            std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?,
-            p.display().to_string(),
-        ),
-        None => (
-            DEFAULT_CONFIG.to_string(),
-            "embedded config/default.toml".to_string(),
-        ),
-    };
-    let config = match DaemonConfig::parse(&text, &name) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(2));
+    let config = match load_config(args.config.as_deref())? {
+        Ok(mut c) => {
+            c.daemon.recursive |= args.recursive;
+            if args.queue.is_some() {
+                c.cluster.url.clone_from(&args.queue);
+            }
+            c
         }
+        Err(code) => return Ok(code),
     };
     if args.print_config {
         print!("{}", config.to_toml());
         return Ok(ExitCode::SUCCESS);
     }
     if args.check_config {
-        println!("{name}: ok");
+        println!("{}: ok", config_name(args.config.as_deref()));
         return Ok(ExitCode::SUCCESS);
     }
     let set_log_level = init_logging(&config, args.log_json);
@@ -88,6 +113,13 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
             PipeSpec::Fifo(p.clone())
         }
     });
+    let offload = match &config.cluster.url {
+        Some(url) => Some(
+            crate::cluster::offload(url, &config, &args.out)
+                .with_context(|| format!("queue {url}"))?,
+        ),
+        None => None,
+    };
     let opts = DaemonOptions {
         watch_dir: args.dir.clone(),
         out_dir: args.out.clone(),
@@ -99,6 +131,7 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         config,
         config_path: args.config.clone(),
         pipe,
+        offload,
     };
     let summary = run(opts, &ctl)?;
     eprintln!(
@@ -108,11 +141,11 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-type SetLevel = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
+pub(crate) type SetLevel = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
 
 /// Logs to stderr, human or JSON, with a filter that a config reload can replace. RUST_LOG,
 /// when set, wins at start-up; a reload applies `log.level`.
-fn init_logging(config: &DaemonConfig, force_json: bool) -> SetLevel {
+pub(crate) fn init_logging(config: &DaemonConfig, force_json: bool) -> SetLevel {
     use tracing_subscriber::layer::SubscriberExt;
     use tracing_subscriber::util::SubscriberInitExt;
     use tracing_subscriber::{fmt, reload, EnvFilter};

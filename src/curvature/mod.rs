@@ -10,6 +10,7 @@
 //! n has H < 0 and counts as convex.
 #![warn(missing_docs)]
 
+pub mod planar;
 pub mod regions;
 
 use crate::bspline::BSplineSurface;

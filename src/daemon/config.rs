@@ -1,5 +1,6 @@
 //! Daemon configuration: TOML with unknown keys refused and ranges checked.
 
+pub use super::cluster_config::ClusterSection;
 use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
@@ -21,6 +22,9 @@ pub struct DaemonConfig {
     /// `[log]`: filter and format of the log lines.
     #[serde(default)]
     pub log: LogSection,
+    /// `[cluster]`: the shared work queue and state store (`--queue`).
+    #[serde(default)]
+    pub cluster: ClusterSection,
 }
 
 /// The `[daemon]` table.
@@ -52,6 +56,25 @@ pub struct DaemonSection {
     /// the watch folder only.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub pipe_roots: Vec<PathBuf>,
+    /// What happens to a valid input the pipeline cannot fit (a topology it does not
+    /// support, too few points, over `max_vertices`). Broken files always go to quarantine.
+    #[serde(default)]
+    pub unsupported: UnsupportedPolicy,
+    /// Files in subfolders of the watch folder are patches too (`sub/name`); `--recursive`
+    /// sets it. Needs a restart to change.
+    #[serde(default)]
+    pub recursive: bool,
+}
+
+/// Where a valid but unsupported input goes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UnsupportedPolicy {
+    /// Left in the watch folder, rejected with an event that gives the reason.
+    #[default]
+    Keep,
+    /// Moved to quarantine like a broken file.
+    Quarantine,
 }
 
 fn default_stop_timeout_ms() -> u64 {
@@ -83,6 +106,17 @@ pub enum ProcessedPolicy {
     Move,
     /// Removed (only inputs under the watch folder or the pipe roots).
     Delete,
+}
+
+impl ProcessedPolicy {
+    /// The config spelling.
+    pub fn name(self) -> &'static str {
+        match self {
+            ProcessedPolicy::Leave => "leave",
+            ProcessedPolicy::Move => "move",
+            ProcessedPolicy::Delete => "delete",
+        }
+    }
 }
 
 /// The `[output]` table.
@@ -226,11 +260,26 @@ fn check(ok: bool, key: &'static str, value: impl ToString, rule: &'static str) 
 impl DaemonConfig {
     /// Parses and validates; `source_name` names the file in errors (toml reports the key,
     /// line and column of a bad entry).
+    ///
+    /// A file may give only the keys it changes: what it leaves out comes from the embedded
+    /// default (tables merged key by key). It is first read on its own, so that a bad key or
+    /// type is reported with its line and column; only a missing key sends it through the
+    /// merge (where an unknown key is still refused by name).
     pub fn parse(text: &str, source_name: &str) -> Result<DaemonConfig, ConfigError> {
-        let cfg: DaemonConfig = toml::from_str(text).map_err(|source| ConfigError::Parse {
+        let parse_err = |source| ConfigError::Parse {
             source_name: source_name.to_string(),
             source,
-        })?;
+        };
+        let cfg = match toml::from_str::<DaemonConfig>(text) {
+            Ok(cfg) => cfg,
+            Err(e) if e.message().starts_with("missing field") => {
+                let mine: toml::Table = toml::from_str(text).map_err(parse_err)?;
+                let mut merged: toml::Table = toml::from_str(DEFAULT_CONFIG).map_err(parse_err)?;
+                merge_tables(&mut merged, mine);
+                toml::Value::Table(merged).try_into().map_err(parse_err)?
+            }
+            Err(e) => return Err(parse_err(e)),
+        };
         cfg.validate(source_name)?;
         Ok(cfg)
     }
@@ -251,6 +300,7 @@ impl DaemonConfig {
     fn validate(&self, source_name: &str) -> Result<(), ConfigError> {
         let ranges = validate_fit(&self.fit)
             .and_then(|()| validate_daemon(&self.daemon))
+            .and_then(|()| super::cluster_config::validate_cluster(&self.cluster))
             .and_then(|()| {
                 let t = self.output.tessellation;
                 check(
@@ -302,16 +352,26 @@ impl DaemonConfig {
         }
     }
 
-    /// Hash of everything that shapes the outputs of a fit: an unchanged input is refitted
-    /// when this changes.
-    pub fn output_hash(&self) -> u64 {
-        let shaping = serde_json::json!({
-            "fit": self.fit,
-            "tessellation": self.output.tessellation,
-            "glb": self.output.glb,
-            "report": self.output.report,
-        });
+    /// Hash of what changes a fit (the `[fit]` tables): an unchanged input is refitted when
+    /// this changes. `[output]` and `[log]` are left out on purpose: a new tessellation
+    /// applies to the next version of each patch rather than refitting every patch at the
+    /// next start; outputs newly asked for (`glb`, `report` turned on) are produced by a
+    /// refit of the patches that lack them (`wanted_outputs`).
+    pub fn fit_hash(&self) -> u64 {
+        let shaping = serde_json::json!({ "fit": self.fit });
         super::state::content_hash(shaping.to_string().as_bytes())
+    }
+
+    /// The output files a fit writes under this config.
+    pub fn wanted_outputs(&self) -> Vec<String> {
+        let mut files = vec!["surface.json".to_string()];
+        if self.output.glb {
+            files.push("surface.glb".into());
+        }
+        if self.output.report {
+            files.push("report.json".into());
+        }
+        files
     }
 
     /// Keys whose change a reload cannot apply (threads, sockets and the watcher are set up
@@ -324,6 +384,9 @@ impl DaemonConfig {
         if self.daemon.watcher != new.daemon.watcher {
             keys.push("daemon.watcher");
         }
+        if self.daemon.recursive != new.daemon.recursive {
+            keys.push("daemon.recursive");
+        }
         if self.daemon.metrics_addr != new.daemon.metrics_addr {
             keys.push("daemon.metrics_addr");
         }
@@ -333,12 +396,28 @@ impl DaemonConfig {
         if self.output.quarantine_dir != new.output.quarantine_dir {
             keys.push("output.quarantine_dir");
         }
+        if self.cluster != new.cluster {
+            keys.push("cluster");
+        }
         keys
     }
 
     /// The configuration as TOML (`--print-config`).
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).unwrap_or_else(|e| format!("# cannot print config: {e}"))
+    }
+}
+
+/// `over`'s keys replace `base`'s, table by table (a sub-table given in part keeps the rest
+/// of the default's).
+fn merge_tables(base: &mut toml::Table, over: toml::Table) {
+    for (key, value) in over {
+        match (base.get_mut(&key), value) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge_tables(b, o),
+            (_, value) => {
+                base.insert(key, value);
+            }
+        }
     }
 }
 
@@ -381,8 +460,15 @@ fn validate_fit(f: &FitConfig) -> Check {
         let key = "fit.budget.within_tolerance_pct";
         check((0.0..=100.0).contains(&p), key, p, "must be 0..=100")?;
     }
+    check(
+        (0.0..180.0).contains(&f.crease_angle_deg),
+        "fit.crease_angle_deg",
+        f.crease_angle_deg,
+        "must be in [0, 180) (0: no creases)",
+    )?;
     validate_scan(&f.scan)?;
     validate_correction(&f.correction)?;
+    validate_planar(f)?;
     let c = &f.components;
     check(
         c.min_vertices >= 3,
@@ -431,6 +517,35 @@ fn validate_scan(s: &ScanConfig) -> Check {
         "fit.scan.hole_bridge_edges",
         s.hole_bridge_edges,
         "must be a positive number",
+    )
+}
+
+/// Ranges of `[fit.dms]` and `[fit.bpatch]`.
+fn validate_planar(f: &FitConfig) -> Check {
+    use crate::pipeline::scattered::{BPATCH_DEGREES, DMS_DEGREES};
+    check(
+        DMS_DEGREES.contains(&f.dms.degree),
+        "fit.dms.degree",
+        f.dms.degree,
+        "must be 2 or 3",
+    )?;
+    check(
+        f.dms.knot_spread > 0.0 && f.dms.knot_spread < 1.0,
+        "fit.dms.knot_spread",
+        f.dms.knot_spread,
+        "must be in (0, 1)",
+    )?;
+    check(
+        BPATCH_DEGREES.contains(&f.bpatch.degree),
+        "fit.bpatch.degree",
+        f.bpatch.degree,
+        "must be 1..=20",
+    )?;
+    check(
+        (0.0..=2.0).contains(&f.bpatch.knot_spread),
+        "fit.bpatch.knot_spread",
+        f.bpatch.knot_spread,
+        "must be in [0, 2]",
     )
 }
 
@@ -492,108 +607,5 @@ fn validate_daemon(d: &DaemonSection) -> Check {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::pipeline::worker::BudgetConfig;
-
-    #[test]
-    fn embedded_default_parses_and_round_trips() {
-        let cfg = DaemonConfig::embedded_default().expect("valid default");
-        let again = DaemonConfig::parse(&cfg.to_toml(), "printed").expect("printed config parses");
-        assert_eq!(again.to_toml(), cfg.to_toml());
-        assert_eq!(again.output_hash(), cfg.output_hash());
-    }
-
-    #[test]
-    fn unknown_key_is_named_with_line_and_column() {
-        let text = DEFAULT_CONFIG.replace("lattice = 16", "latice = 16");
-        let e = DaemonConfig::parse(&text, "my.toml")
-            .expect_err("refused")
-            .to_string();
-        assert!(
-            e.contains("my.toml") && e.contains("latice") && e.contains("line"),
-            "{e}"
-        );
-    }
-
-    #[test]
-    fn out_of_range_value_is_refused() {
-        let text = DEFAULT_CONFIG.replace("levels = 2", "levels = 9");
-        let e = DaemonConfig::parse(&text, "my.toml")
-            .expect_err("refused")
-            .to_string();
-        assert!(e.contains("fit.levels"), "{e}");
-    }
-
-    #[test]
-    fn metrics_address_must_be_loopback() {
-        let with = |addr: &str| {
-            DEFAULT_CONFIG.replace(
-                "# metrics_addr = \"127.0.0.1:9187\"",
-                &format!("metrics_addr = \"{addr}\""),
-            )
-        };
-        assert!(DaemonConfig::parse(&with("127.0.0.1:9187"), "m.toml").is_ok());
-        assert!(DaemonConfig::parse(&with("[::1]:9187"), "m.toml").is_ok());
-        let e = DaemonConfig::parse(&with("0.0.0.0:9187"), "m.toml")
-            .expect_err("refused")
-            .to_string();
-        assert!(
-            e.contains("daemon.metrics_addr") && e.contains("loopback"),
-            "{e}"
-        );
-        assert!(DaemonConfig::parse(&with("localhost"), "m.toml").is_err());
-    }
-
-    #[test]
-    fn new_keys_have_defaults_and_are_checked() {
-        let old = "[fit]\nsurface = \"bezier\"\nlevels = 1\nmethod = \"cg\"\ninverse = \"exact\"\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
-        let cfg = DaemonConfig::parse(old, "old.toml").expect("configs without the new keys");
-        assert_eq!(cfg.fit.budget, BudgetConfig::default());
-        assert_eq!(cfg.fit.scan, ScanConfig::default());
-        assert_eq!(cfg.output.tessellation, DEFAULT_TESSELLATION);
-        assert_eq!(cfg.daemon.watcher, WatcherKind::Native);
-        assert_eq!(cfg.output.processed, ProcessedPolicy::Leave);
-        assert!(cfg.output.glb && cfg.output.report);
-        let e = DaemonConfig::parse(&format!("{old}watcher = \"smoke\"\n"), "w.toml")
-            .expect_err("refused")
-            .to_string();
-        assert!(e.contains("watcher"), "{e}");
-        let e = DaemonConfig::parse(&format!("{old}[log]\nlevel = \"=[\"\n"), "l.toml")
-            .expect_err("refused")
-            .to_string();
-        assert!(e.contains("log.level"), "{e}");
-    }
-
-    #[test]
-    fn output_hash_follows_the_fit_section_only() {
-        let a = DaemonConfig::embedded_default().expect("default");
-        let mut b = a.clone();
-        b.daemon.settle_ms += 1;
-        assert_eq!(a.output_hash(), b.output_hash());
-        b.fit.budget.max_iterations += 1;
-        assert_ne!(a.output_hash(), b.output_hash());
-        let mut c = a.clone();
-        c.output.tessellation += 1;
-        assert_ne!(a.output_hash(), c.output_hash());
-    }
-
-    #[test]
-    fn keys_of_the_flat_fit_table_are_refused_with_their_name() {
-        let flat = "[fit]\nsurface = \"loop\"\nlevels = 2\nmethod = \"cg\"\ninverse = \"exact\"\nmax_iterations = 5\n[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\nmax_file_bytes = 100\nmax_vertices = 100\n";
-        let e = DaemonConfig::parse(flat, "flat.toml").expect_err("refused");
-        assert_eq!(e.kind(), "config_parse");
-        assert!(e.to_string().contains("max_iterations"), "{e}");
-    }
-
-    #[test]
-    fn sub_table_ranges_are_named_by_their_whole_key() {
-        let text = DEFAULT_CONFIG.replace("rounds = 8", "rounds = 101");
-        let e = DaemonConfig::parse(&text, "r.toml").expect_err("refused");
-        assert_eq!(e.kind(), "config_out_of_range");
-        assert!(e.to_string().contains("fit.correction.rounds"), "{e}");
-        let text = DEFAULT_CONFIG.replace("tessellation = 128", "tessellation = 0");
-        let e = DaemonConfig::parse(&text, "t.toml").expect_err("refused");
-        assert!(e.to_string().contains("output.tessellation"), "{e}");
-    }
-}
+#[path = "config_tests.rs"]
+mod tests;

@@ -13,9 +13,12 @@ pub(crate) struct Roots {
 /// Why a pipe path record was refused.
 #[derive(Debug, thiserror::Error)]
 pub(crate) enum Refusal {
-    #[error("{path}: {source}")]
+    #[error("{path}: {}{source}", missing.as_ref().map(|m| format!("{m} does not exist: ")).unwrap_or_default())]
     Unresolvable {
         path: String,
+        /// The first folder or file on the way that is not there (`bad` of `bad/../x`:
+        /// the kernel resolves `..` after `bad`, so `x` existing is not enough).
+        missing: Option<String>,
         #[source]
         source: std::io::Error,
     },
@@ -66,11 +69,14 @@ impl Roots {
         self.roots.iter().any(|r| canonical.starts_with(r))
     }
 
-    /// The canonical path of a regular file under a root, or why not.
-    pub(crate) fn confine(&self, raw: &Path) -> Result<PathBuf, Refusal> {
+    /// The canonical path of a regular file under a root, or why not. A relative path is
+    /// taken relative to `base` (the watch folder), not to the daemon's working folder.
+    pub(crate) fn confine(&self, raw: &Path, base: &Path) -> Result<PathBuf, Refusal> {
         let path = raw.display().to_string();
-        let resolved = std::fs::canonicalize(raw).map_err(|source| Refusal::Unresolvable {
+        let full = base.join(raw);
+        let resolved = std::fs::canonicalize(&full).map_err(|source| Refusal::Unresolvable {
             path: path.clone(),
+            missing: first_missing(&full),
             source,
         })?;
         if !self.inside(&resolved) {
@@ -89,7 +95,11 @@ impl Roots {
         match std::fs::metadata(&resolved) {
             Ok(m) if m.is_file() => Ok(resolved),
             Ok(_) => Err(Refusal::NotAFile { path }),
-            Err(source) => Err(Refusal::Unresolvable { path, source }),
+            Err(source) => Err(Refusal::Unresolvable {
+                path,
+                missing: None,
+                source,
+            }),
         }
     }
 
@@ -102,6 +112,19 @@ impl Roots {
         };
         std::fs::canonicalize(parent).is_ok_and(|p| self.inside(&p))
     }
+}
+
+/// The first prefix of `path` that does not exist, component by component as the kernel
+/// walks it.
+fn first_missing(path: &Path) -> Option<String> {
+    let mut walked = PathBuf::new();
+    for c in path.components() {
+        walked.push(c);
+        if std::fs::symlink_metadata(&walked).is_err() {
+            return Some(walked.display().to_string());
+        }
+    }
+    None
 }
 
 #[cfg(test)]
@@ -122,9 +145,24 @@ mod tests {
         std::os::unix::fs::symlink(&victim_dir, root.join("dirlink")).expect("symlink");
         let roots = Roots::new(&root, &[]);
         let inside = roots
-            .confine(&root.join("sub/../sub/ok.obj"))
+            .confine(&root.join("sub/../sub/ok.obj"), &root)
             .expect("inside");
         assert!(inside.ends_with("root/sub/ok.obj"));
+        let relative = roots
+            .confine(Path::new("sub/ok.obj"), &root)
+            .expect("relative to the watch folder");
+        assert_eq!(relative, inside);
+        // `bad` does not exist, so `bad/..` does not resolve even though `sub` does: the
+        // message names `bad`, not the file.
+        let e = roots
+            .confine(Path::new("bad/../sub/ok.obj"), &root)
+            .expect_err("bad is missing");
+        assert_eq!(e.kind(), "path_unreadable");
+        let text = e.to_string();
+        assert!(
+            text.starts_with("bad/../sub/ok.obj: ") && text.contains("root/bad does not exist"),
+            "{text}"
+        );
         for bad in [
             victim.clone(),
             root.join("../victim/passwd.obj"),
@@ -132,16 +170,19 @@ mod tests {
             root.join("link.obj"),
             root.join("dirlink/passwd.obj"),
         ] {
-            let e = roots.confine(&bad).expect_err("outside");
+            let e = roots.confine(&bad, &root).expect_err("outside");
             assert_eq!(e.kind(), "path_outside_roots", "{bad:?}: {e}");
         }
         assert_eq!(
-            roots.confine(&root.join("sub")).expect_err("dir").kind(),
+            roots
+                .confine(&root.join("sub"), &root)
+                .expect_err("dir")
+                .kind(),
             "path_not_a_file"
         );
         assert_eq!(
             roots
-                .confine(&root.join("none.obj"))
+                .confine(&root.join("none.obj"), &root)
                 .expect_err("none")
                 .kind(),
             "path_unreadable"
@@ -154,6 +195,6 @@ mod tests {
         assert!(!roots.holds_entry(&victim));
         // Configured roots replace the watch folder.
         let wider = Roots::new(&root, &[tmp.path().to_path_buf()]);
-        assert!(wider.confine(&victim).is_ok());
+        assert!(wider.confine(&victim, &root).is_ok());
     }
 }

@@ -28,6 +28,10 @@ pub(crate) struct Loop {
     pub(crate) wtx: Sender<WriterMsg>,
     pub(crate) job_tx: Sender<Job>,
     pub(crate) workers: usize,
+    /// Files that changed while they were read and did not parse, with when to read them
+    /// again (the settle time later).
+    pub(crate) retries: Vec<(Instant, Arrival)>,
+    pub(crate) watchdog: sdnotify::Watchdog,
 }
 
 /// The sources still open and whether stdin ended (which ends the daemon once idle).
@@ -52,6 +56,7 @@ impl Loop {
         let mut stop_by: Option<Instant> = None;
         let tick = Duration::from_millis(100);
         loop {
+            self.watchdog.tick();
             match inbox.recv_timeout(tick) {
                 Ok(m) => {
                     self.handle(m, stop_by.is_some(), sources);
@@ -72,17 +77,20 @@ impl Loop {
                 self.reload(reloader, ctl);
             }
             if stop_by.is_none() {
+                self.requeue_due();
                 self.dispatch();
             }
             self.metrics
                 .queue_depth
-                .store(self.sched.pending_len() as u64, Ordering::Relaxed);
-            self.metrics
-                .in_flight
-                .store(self.sched.busy_len() as u64, Ordering::Relaxed);
+                .set(self.sched.pending_len() as i64);
+            self.metrics.in_flight.set(self.sched.busy_len() as i64);
             let done = match stop_by {
                 Some(deadline) => self.stopped_by(deadline),
-                None => self.sched.idle() && ((once && sources.open == 0) || sources.stdin_done),
+                None => {
+                    self.sched.idle()
+                        && self.retries.is_empty()
+                        && ((once && sources.open == 0) || sources.stdin_done)
+                }
             };
             if done {
                 break;
@@ -92,7 +100,7 @@ impl Loop {
 
     /// Closes intake and spills what waits; returns when the stop's time bound runs out.
     fn begin_stop(&mut self, intake_stop: &AtomicBool) -> Instant {
-        sdnotify::notify("STOPPING=1");
+        sdnotify::notify(sdnotify::State::Stopping);
         self.metrics.stopping.store(true, Ordering::Relaxed);
         intake_stop.store(true, Ordering::Relaxed);
         let bound = Duration::from_millis(self.cell.get().daemon.stop_timeout_ms);
@@ -150,6 +158,10 @@ impl Loop {
             Msg::Fitted(done) => {
                 let done = *done;
                 self.in_flight = self.in_flight.saturating_sub(1);
+                if let Outcome::Incomplete { reason } = &done.outcome {
+                    self.retry_later(&done.arrival, reason);
+                    return;
+                }
                 let stale = match &done.outcome {
                     Outcome::Fitted { .. } => {
                         self.sched.has_newer(&done.arrival.id, &done.arrival.key)
@@ -173,6 +185,48 @@ impl Loop {
                 }
             }
             Msg::Written(id) => self.sched.finish(&id),
+            Msg::Queued(id) => {
+                self.in_flight = self.in_flight.saturating_sub(1);
+                self.sched.finish(&id);
+            }
+        }
+    }
+
+    /// A version read while its file still changed: the patch is free again, and the file
+    /// is read again after the settle time (the folder watcher also hands it on again once
+    /// it is complete; the scheduler keeps one of the two).
+    fn retry_later(&mut self, a: &Arrival, reason: &str) {
+        self.sched.finish(&a.id);
+        tracing::info!(patch = %a.id, version = %a.version, reason, "incomplete; will read it again");
+        let _ = self.wtx.send(WriterMsg::Event(json!({
+            "patch": a.id, "version": a.version, "input": a.label, "status": "incomplete", "reason": reason,
+        })));
+        let settle = Duration::from_millis(self.cell.get().daemon.settle_ms.max(50));
+        self.retries.push((Instant::now() + settle, a.clone()));
+    }
+
+    /// Queues the retries that are due, keyed by the file's mtime now.
+    fn requeue_due(&mut self) {
+        let now = Instant::now();
+        let (due, later): (Vec<_>, Vec<_>) = std::mem::take(&mut self.retries)
+            .into_iter()
+            .partition(|(at, _)| *at <= now);
+        self.retries = later;
+        for (_, mut a) in due {
+            let Input::File(path) = &a.input else {
+                continue;
+            };
+            let Some(mtime) = std::fs::metadata(path).and_then(|m| m.modified()).ok() else {
+                // Gone: nothing to read any more.
+                continue;
+            };
+            a.key.time = mtime;
+            if let Some(s) = self.sched.add(a) {
+                let _ = self.wtx.send(WriterMsg::Superseded {
+                    loser: s.loser,
+                    by: s.by,
+                });
+            }
         }
     }
 
@@ -210,7 +264,7 @@ impl Loop {
     }
 
     fn reload(&mut self, reloader: &mut Reloader, ctl: &Control) {
-        sdnotify::notify("RELOADING=1");
+        sdnotify::notify(sdnotify::State::Reloading);
         match reloader.reload(&self.cell) {
             Reloaded::Applied { restart_needed } => {
                 let cfg = self.cell.get();
@@ -219,7 +273,7 @@ impl Loop {
                         tracing::warn!(error = %e, "cannot apply log.level");
                     }
                 }
-                self.metrics.reloads.fetch_add(1, Ordering::Relaxed);
+                self.metrics.reloads.inc();
                 if restart_needed.is_empty() {
                     tracing::info!("config reloaded");
                 } else {
@@ -234,13 +288,13 @@ impl Loop {
             }
             Reloaded::Refused { reason } => {
                 tracing::error!(%reason, "config reload refused; the old config stays");
-                self.metrics.reload_failures.fetch_add(1, Ordering::Relaxed);
+                self.metrics.reload_failures.inc();
                 self.metrics.error("config_rejected");
                 let _ = self.wtx.send(WriterMsg::Event(json!({
                     "status": "config_rejected", "reason": reason,
                 })));
             }
         }
-        sdnotify::notify("READY=1");
+        sdnotify::notify(sdnotify::State::Ready);
     }
 }

@@ -8,9 +8,9 @@ use super::state::{content_hash, StateStore};
 use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
 use crate::pipeline::worker::{run_input, InputOutputs, WarmStart};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Instant, SystemTime};
 
-pub struct Job {
+pub(crate) struct Job {
     pub arrival: Arrival,
     pub cfg: Arc<DaemonConfig>,
     /// The warm start of a fit that was dropped as stale (a newer version was waiting): newer
@@ -18,7 +18,7 @@ pub struct Job {
     pub warm: Option<WarmStart>,
 }
 
-pub enum Outcome {
+pub(crate) enum Outcome {
     Fitted {
         outputs: Box<InputOutputs>,
         hash: u64,
@@ -29,11 +29,23 @@ pub enum Outcome {
         /// `kinds::rejection_kind` of the cause.
         kind: &'static str,
         reason: String,
+        /// The input was read as a valid mesh that the pipeline cannot fit (a topology it
+        /// does not support, too few points, over `max_vertices`): not broken, so it stays
+        /// where it is unless `daemon.unsupported = "quarantine"`.
+        unsupported: bool,
+        /// The content hash, when the bytes were read.
+        input_hash: Option<u64>,
     },
+    /// Content and fit config are those of a version rejected as unsupported and left in
+    /// place: not rejected (nor reported) again.
+    StillUnsupported,
+    /// The file changed while it was read and did not parse: a writer is still at it. Not
+    /// a rejection; it is read again once it settles.
+    Incomplete { reason: String },
 }
 
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
-pub struct Timings {
+pub(crate) struct Timings {
     /// Detection to a worker picking it up.
     pub queued_ms: f64,
     pub read_ms: f64,
@@ -42,7 +54,7 @@ pub struct Timings {
     pub fit_ms: f64,
 }
 
-pub struct JobDone {
+pub(crate) struct JobDone {
     pub arrival: Arrival,
     pub cfg: Arc<DaemonConfig>,
     pub outcome: Outcome,
@@ -53,11 +65,10 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-pub fn run_job(job: Job, store: &StateStore) -> JobDone {
+pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
     let span =
         tracing::info_span!("patch", patch = %job.arrival.id, version = %job.arrival.version);
     let _guard = span.enter();
-    tracing::debug!("fitting");
     let mut timings = Timings {
         queued_ms: ms(job.arrival.detected),
         ..Timings::default()
@@ -74,6 +85,8 @@ pub fn run_job(job: Job, store: &StateStore) -> JobDone {
         Outcome::Rejected {
             kind: rejection_kind(&Cause::Panic),
             reason: format!("the fitting worker panicked: {what}"),
+            unsupported: false,
+            input_hash: None,
         }
     });
     JobDone {
@@ -88,17 +101,20 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let a = &job.arrival;
     let limits = &job.cfg.daemon;
     let reject = |cause: Cause, reason: String| Outcome::Rejected {
+        unsupported: matches!(cause, Cause::Pipeline(_) | Cause::TooManyVertices),
         kind: rejection_kind(&cause),
         reason,
+        input_hash: None,
     };
     let start = Instant::now();
+    let mut read_stamp = None;
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
         Input::File(path) => {
             let Some(format) = Format::from_path(path) else {
                 return reject(
                     Cause::UnknownFormat,
-                    "unknown extension (obj, gltf, glb, ply, stl, off)".into(),
+                    format!("unknown extension ({})", Format::READABLE),
                 );
             };
             // Refuse before reading: the limit exists so that one file cannot exhaust memory.
@@ -113,7 +129,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
                         ),
                     )
                 }
-                Ok(_) => {}
+                Ok(m) => read_stamp = Some((m.len(), m.modified().ok())),
                 Err(e) => return reject(Cause::Read(&e), format!("cannot read: {e}")),
             }
             match std::fs::read(path) {
@@ -135,13 +151,32 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let hash = content_hash(&bytes);
     t.read_ms = ms(start);
     let previous = store.load(&a.id);
-    let config_hash = job.cfg.output_hash();
-    if previous
-        .as_ref()
-        .is_some_and(|p| p.input_hash == hash && p.config_hash == config_hash)
-    {
+    let config_hash = job.cfg.fit_hash();
+    let wanted = job.cfg.wanted_outputs();
+    if previous.as_ref().is_some_and(|p| {
+        p.input_hash == hash
+            && p.config_hash == config_hash
+            && wanted.iter().all(|w| p.outputs.contains(w))
+    }) {
         return Outcome::Unchanged { hash };
     }
+    if store.still_unsupported(&a.id, hash, config_hash) {
+        return Outcome::StillUnsupported;
+    }
+    let hashed = |o: Outcome| match o {
+        Outcome::Rejected {
+            kind,
+            reason,
+            unsupported,
+            ..
+        } => Outcome::Rejected {
+            kind,
+            reason,
+            unsupported,
+            input_hash: Some(hash),
+        },
+        other => other,
+    };
     let start = Instant::now();
     let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
     // A file's external glTF buffers lie beside it (the reader confines them to that
@@ -153,22 +188,40 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         },
         Input::Inline { .. } => read_mesh_bytes(&bytes, format, &a.label, &load),
     };
+    // A file that changed while it was read is a stale (often cut) copy, whether or not it
+    // parsed (a cut OBJ can end on a whole line): read it again once it settles.
+    if let (Input::File(path), Some(before)) = (&a.input, read_stamp) {
+        if still_changing(path, before, bytes.len()) {
+            let parsed = match &read {
+                Ok(_) => "it parsed, but may be cut".to_string(),
+                Err(e) => e.to_string(),
+            };
+            return Outcome::Incomplete {
+                reason: format!("changed while it was read ({parsed}); read again once it settles"),
+            };
+        }
+    }
     let mesh = match read {
         Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
-            return reject(
+            return hashed(reject(
                 Cause::TooManyVertices,
                 format!(
                     "{} vertices exceeds daemon.max_vertices = {}",
                     l.mesh.positions.len(),
                     limits.max_vertices
                 ),
-            )
+            ))
         }
         Ok(l) => l.mesh,
         Err(e) => return reject(Cause::Parse(&e), e.to_string()),
     };
     drop(bytes);
     t.parse_ms = ms(start);
+    tracing::info!(
+        vertices = mesh.positions.len(),
+        triangles = mesh.triangles.len(),
+        "fitting"
+    );
     let warm = job.warm.as_ref().or(previous.as_ref().map(|p| &p.warm));
     let start = Instant::now();
     let fitted = run_input(&mesh, warm, &job.cfg.worker_config());
@@ -178,6 +231,46 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             outputs: Box::new(outputs),
             hash,
         },
-        Err(e) => reject(Cause::Pipeline(&e), e.to_string()),
+        Err(e) => hashed(reject(Cause::Pipeline(&e), e.to_string())),
+    }
+}
+
+/// Whether the file is no longer what was read: another size or mtime than before the
+/// read, or another length than the bytes read.
+pub(crate) fn still_changing(
+    path: &std::path::Path,
+    before: (u64, Option<SystemTime>),
+    read: usize,
+) -> bool {
+    match std::fs::metadata(path) {
+        Ok(m) => m.len() != before.0 || m.modified().ok() != before.1 || read as u64 != m.len(),
+        // Gone or replaced mid-read: whatever was read is not the file any more.
+        Err(_) => true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_that_grew_or_went_since_the_read_is_still_changing() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let path = dir.path().join("p.ply");
+        std::fs::write(&path, b"ply\nformat ascii 1.0\n").expect("write");
+        let m = std::fs::metadata(&path).expect("stat");
+        let before = (m.len(), m.modified().ok());
+        let read = std::fs::read(&path).expect("read").len();
+        assert!(!still_changing(&path, before, read));
+        // Read short of what the stat said: the read raced a writer.
+        assert!(still_changing(&path, before, read - 1));
+        let mut f = std::fs::OpenOptions::new()
+            .append(true)
+            .open(&path)
+            .expect("open");
+        std::io::Write::write_all(&mut f, b"element vertex 3\n").expect("append");
+        assert!(still_changing(&path, before, read));
+        std::fs::remove_file(&path).expect("remove");
+        assert!(still_changing(&path, before, read));
     }
 }

@@ -3,20 +3,24 @@
 //! for the threads and their invariants.
 #![warn(missing_docs)]
 
+mod cluster_config;
 pub mod config;
 mod confine;
 mod coordinator;
-mod job;
-mod kinds;
-mod messages;
+pub(crate) mod job;
+pub(crate) mod kinds;
+pub(crate) mod layout;
+pub(crate) mod messages;
+pub(crate) mod offload;
+mod open_files;
 pub(crate) mod ops;
 pub(crate) mod pipe;
 mod publish;
-mod reload;
+pub(crate) mod reload;
 pub(crate) mod scheduler;
 pub mod state;
 mod watcher;
-mod writer;
+pub(crate) mod writer;
 
 use config::DaemonConfig;
 use coordinator::{Loop, Sources};
@@ -61,6 +65,15 @@ pub enum DaemonError {
         #[source]
         source: std::io::Error,
     },
+    /// `output.quarantine_dir` could coincide with a patch's folder (inside OUT, outside
+    /// `OUT/quarantine`) or is the watch folder.
+    #[error("output.quarantine_dir {}: {reason}", path.display())]
+    QuarantineDir {
+        /// The configured folder.
+        path: PathBuf,
+        /// Why it is refused.
+        reason: String,
+    },
     /// A thread could not be started (a process or memory limit).
     #[error("cannot start the {name} thread: {source}")]
     Spawn {
@@ -78,6 +91,7 @@ impl DaemonError {
         match self {
             DaemonError::Folder { .. } => "folder",
             DaemonError::Metrics { .. } => "metrics_bind",
+            DaemonError::QuarantineDir { .. } => "quarantine_dir",
             DaemonError::Spawn { .. } => "thread_spawn",
         }
     }
@@ -106,6 +120,8 @@ pub struct DaemonOptions {
     pub config_path: Option<PathBuf>,
     /// A pipe to read records from as well.
     pub pipe: Option<PipeSpec>,
+    /// Jobs go to this instead of local worker threads (the cluster queue of `--queue`).
+    pub(crate) offload: Option<offload::Offload>,
 }
 
 /// Temp files of writes cut short by a crash: never outputs, removed at start-up.
@@ -127,13 +143,16 @@ fn remove_stale_temps(dir: &Path) {
 /// Runs the daemon until a stop (or, with `once`, until the work is done).
 pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
     let opts = prepare_folders(opts)?;
-    let quarantine = opts
-        .config
-        .output
-        .quarantine_dir
-        .clone()
-        .unwrap_or_else(|| opts.out_dir.join("quarantine"));
-    let workers = opts.config.worker_threads();
+    let configured = opts.config.output.quarantine_dir.as_deref();
+    let quarantine = layout::quarantine_folder(configured, &opts.out_dir, &opts.watch_dir)
+        .map_err(|e| DaemonError::QuarantineDir {
+            path: configured.map(Path::to_path_buf).unwrap_or_default(),
+            reason: e.to_string(),
+        })?;
+    let workers = match &opts.offload {
+        Some(o) => o.capacity,
+        None => opts.config.worker_threads(),
+    };
     let metrics = Arc::new(Metrics::default());
     if let Some(addr) = &opts.config.daemon.metrics_addr {
         let local = ops::http::serve(addr, Arc::clone(&metrics)).map_err(|source| {
@@ -159,9 +178,22 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         summary: Summary::default(),
         cell: Arc::clone(&cell),
         seen: writer::SeenVersions::load(&opts.state_dir),
+        node: None,
     };
     let writer = spawn("writer", move || writer.run(wrx))?;
-    let job_tx = start_workers(workers, &store, &tx)?;
+    let job_tx = match opts.offload {
+        Some(o) => {
+            let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
+            (o.start)(job_rx, tx.clone(), Arc::clone(&metrics)).map_err(|source| {
+                DaemonError::Spawn {
+                    name: "queue publisher".into(),
+                    source,
+                }
+            })?;
+            job_tx
+        }
+        None => start_workers(workers, &store, &tx)?,
+    };
     let intake_stop = Arc::new(AtomicBool::new(false));
     let partial = Arc::new(Mutex::new(None));
     let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);
@@ -178,6 +210,11 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         writer: wtx.clone(),
         stop: Arc::clone(&intake_stop),
         ready: ready_tx,
+        recursive: opts.config.daemon.recursive,
+        exclude: [&opts.out_dir, &opts.state_dir, &quarantine]
+            .into_iter()
+            .filter_map(|d| std::fs::canonicalize(d).ok())
+            .collect(),
     };
     spawn("watcher", move || folder.run())?;
     if let Some(spec) = opts.pipe.clone() {
@@ -211,6 +248,8 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         wtx,
         job_tx,
         workers,
+        retries: Vec::new(),
+        watchdog: sdnotify::Watchdog::from_env(),
     };
     let mut reloader = Reloader::new(opts.config_path.clone());
     lp.drive(
@@ -283,7 +322,7 @@ fn announce_ready(ready: &Receiver<()>) {
     if ready.recv_timeout(Duration::from_secs(30)).is_err() {
         tracing::warn!("the folder watcher is slow to start");
     }
-    sdnotify::notify("READY=1");
+    sdnotify::notify(sdnotify::State::Ready);
 }
 
 /// A pipe record whose payload was still arriving when the daemon stopped: its bytes go

@@ -299,15 +299,16 @@ impl PipeSource {
             return;
         }
         let cfg = self.cell.get();
-        let path =
-            match Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots).confine(Path::new(path)) {
-                Ok(p) => p,
-                Err(refusal) => {
-                    let kind = rejection_kind(&Cause::Path(&refusal));
-                    self.reject(&h.id, label, Keep::Nothing, kind, refusal.to_string());
-                    return;
-                }
-            };
+        let path = match Roots::new(&self.watch_dir, &cfg.daemon.pipe_roots)
+            .confine(Path::new(path), &self.watch_dir)
+        {
+            Ok(p) => p,
+            Err(refusal) => {
+                let kind = rejection_kind(&Cause::Path(&refusal));
+                self.reject(&h.id, label, Keep::Nothing, kind, refusal.to_string());
+                return;
+            }
+        };
         let version = path
             .file_name()
             .map(|n| n.to_string_lossy().to_string())
@@ -337,21 +338,15 @@ impl PipeSource {
             return self.resync(r, text, &h, label, reason);
         };
         let ext = h.json["format"].as_str().unwrap_or("");
-        let format = match ext {
-            "ply" => Some(Format::Ply),
-            "glb" => Some(Format::Glb),
-            "obj" => Some(Format::Obj),
-            "stl" => Some(Format::Stl),
-            "off" => Some(Format::Off),
-            _ => None,
-        };
+        // A payload has no folder for a .gltf's external buffers: binary glTF instead.
+        let format = Format::from_extension(ext).filter(|f| *f != Format::Gltf);
         let max = self.cell.get().daemon.max_file_bytes;
         if h.problem.is_none() {
             h.problem = match (format, h.json.get("path")) {
                 (None, _) => Some((
                     record_kind(RecordFault::BadFormat),
                     format!(
-                        "\"format\" must be one of ply, glb, obj, stl, off; got {}",
+                        "\"format\" must be one of ply, glb, obj, stl, off, xyz, pts, pcd; got {}",
                         h.json["format"]
                     ),
                 )),

@@ -8,6 +8,12 @@
 //!
 //! The version folder the link pointed to before stays until the next commit, so that a
 //! reader that resolved it just before the switch can still open its files.
+//!
+//! Ids of files in subfolders (`scans/ear`, recursive watching) publish as
+//! `OUT/scans/ear`, a link in the real folder `OUT/scans`, to `OUT/.versions/scans%ear/<n>`:
+//! the version store is flat (`%` never survives id sanitising), so one id's versions never
+//! sit inside another's. A patch `scans` (from `scans.ply`) and the folder `scans/` cannot
+//! both have outputs: whichever comes second is refused as a collision.
 
 use crate::io::{write_atomic_group, IoError};
 use std::path::{Path, PathBuf};
@@ -38,6 +44,11 @@ pub(crate) enum PublishError {
     },
     #[error(transparent)]
     Write(#[from] IoError),
+    /// The id's folder is taken by another patch's outputs (`scans` and `scans/ear`).
+    #[error(
+        "{path} holds the outputs of another patch (a patch and a subfolder of the same name)"
+    )]
+    Collision { path: String },
     /// Only from tests: the checkpoint asked to stop here, as a kill would.
     #[error("stopped after {0:?}")]
     Stopped(Step),
@@ -64,7 +75,42 @@ fn versions(base: &Path) -> Vec<u64> {
 }
 
 fn link_temp(out: &Path, id: &str) -> PathBuf {
-    out.join(format!(".trispline-{id}.link.tmp"))
+    out.join(format!(".trispline-{}.link.tmp", flat(id)))
+}
+
+/// The version store's name of an id: one path component.
+pub(crate) fn flat(id: &str) -> String {
+    id.replace('/', "%")
+}
+
+/// Makes the real folders `OUT/<a>/<b>/..` that hold the link of a nested id; refuses when
+/// one of them is another patch's link or outputs.
+fn parent_folders(out: &Path, id: &str) -> Result<(), PublishError> {
+    let mut dir = out.to_path_buf();
+    let parts: Vec<&str> = id.split('/').collect();
+    for part in &parts[..parts.len() - 1] {
+        dir.push(part);
+        match std::fs::symlink_metadata(&dir) {
+            Ok(m) if m.is_dir() && !dir.join("surface.json").exists() => {}
+            Ok(_) => {
+                return Err(PublishError::Collision {
+                    path: dir.display().to_string(),
+                })
+            }
+            Err(_) => std::fs::create_dir(&dir).map_err(fs_err(&dir))?,
+        }
+    }
+    Ok(())
+}
+
+/// Whether a real folder at a patch's place holds other patches' outputs (links or
+/// folders) rather than this patch's own files of before the links.
+fn holds_other_patches(folder: &Path) -> bool {
+    std::fs::read_dir(folder).is_ok_and(|entries| {
+        entries
+            .flatten()
+            .any(|e| e.file_type().is_ok_and(|t| t.is_symlink() || t.is_dir()))
+    })
 }
 
 /// Writes `files` as the new version of `id` and switches `OUT/<id>` to it. `checkpoint`
@@ -82,7 +128,15 @@ pub(crate) fn publish(
             Err(PublishError::Stopped(s))
         }
     };
-    let base = out.join(VERSIONS).join(id);
+    let public = out.join(id);
+    parent_folders(out, id)?;
+    if std::fs::symlink_metadata(&public).is_ok_and(|m| m.is_dir()) && holds_other_patches(&public)
+    {
+        return Err(PublishError::Collision {
+            path: public.display().to_string(),
+        });
+    }
+    let base = out.join(VERSIONS).join(flat(id));
     std::fs::create_dir_all(&base).map_err(fs_err(&base))?;
     // Numbers only grow, and start from the clock (microseconds) so that a number is not
     // given out again after start-up repair removed a folder a kill left half-written: a
@@ -98,10 +152,11 @@ pub(crate) fn publish(
     step(Step::FilesWritten)?;
     let temp = link_temp(out, id);
     let _ = std::fs::remove_file(&temp);
-    let target = Path::new(VERSIONS).join(id).join(n.to_string());
+    // Relative to the folder the link ends up in.
+    let up: PathBuf = id.matches('/').map(|_| "..").collect();
+    let target = up.join(VERSIONS).join(flat(id)).join(n.to_string());
     std::os::unix::fs::symlink(&target, &temp).map_err(fs_err(&temp))?;
     step(Step::LinkMade)?;
-    let public = out.join(id);
     let before = std::fs::read_link(&public).ok();
     let is_folder = std::fs::symlink_metadata(&public).is_ok_and(|m| m.is_dir());
     if is_folder {
@@ -161,7 +216,7 @@ pub(crate) fn repair(out: &Path) {
         return;
     };
     for base in bases.flatten() {
-        let id = base.file_name();
+        let id = base.file_name().to_string_lossy().replace('%', "/");
         let public = out.join(&id);
         let aside = base.path().join(LEGACY);
         if std::fs::symlink_metadata(&public).is_err() && aside.is_dir() {

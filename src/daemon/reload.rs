@@ -97,6 +97,7 @@ impl Reloader {
         let restart_needed = old.restart_only_changes(&new);
         new.daemon.workers = old.daemon.workers;
         new.daemon.watcher = old.daemon.watcher;
+        new.daemon.recursive = old.daemon.recursive;
         new.daemon.metrics_addr = old.daemon.metrics_addr.clone();
         new.log.format = old.log.format;
         new.output.quarantine_dir = old.output.quarantine_dir.clone();

@@ -11,10 +11,14 @@ use std::sync::{Arc, Mutex};
 pub(crate) struct PatchState {
     pub(crate) version: String,
     pub(crate) input_hash: u64,
-    /// `DaemonConfig::output_hash` of the fit: a config change refits an unchanged input.
-    /// States written before it existed read as 0, which matches no config.
+    /// `DaemonConfig::fit_hash` of the fit: a change of the fit config refits an unchanged
+    /// input. States written before it existed read as 0, which matches no config.
     #[serde(default)]
     pub(crate) config_hash: u64,
+    /// The output files written (`DaemonConfig::wanted_outputs`): a config that asks for
+    /// one more refits the input to produce it.
+    #[serde(default)]
+    pub(crate) outputs: Vec<String>,
     pub(crate) warm: WarmStart,
 }
 
@@ -24,7 +28,14 @@ pub(crate) struct StateStore {
     /// predecessor's state from here instead of parsing the file again (a scan's state
     /// carries its data points, ~2 MB of JSON, ~8 ms to parse).
     recent: Mutex<Recent>,
+    /// Inputs rejected as unsupported and left in place: patch id -> (content hash, fit
+    /// config hash), in `.unsupported.json` (ids never start with a dot), so that the same file is not rejected and
+    /// reported again at every start.
+    unsupported: Mutex<HashMap<String, (u64, u64)>>,
 }
+
+/// The file of `StateStore::unsupported`.
+const UNSUPPORTED_FILE: &str = ".unsupported.json";
 
 /// States kept in memory at most; older ones are read from their files again.
 const RECENT_STATES: usize = 32;
@@ -50,14 +61,41 @@ impl Recent {
 
 impl StateStore {
     pub(crate) fn new(dir: PathBuf) -> Self {
+        // Unreadable or absent: the inputs are only looked at once more.
+        let unsupported = std::fs::read(dir.join(UNSUPPORTED_FILE))
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())
+            .unwrap_or_default();
         Self {
             dir,
             recent: Mutex::new(Recent::default()),
+            unsupported: Mutex::new(unsupported),
         }
     }
 
+    /// Whether this content, under this fit config, was rejected as unsupported and left
+    /// in place.
+    pub(crate) fn still_unsupported(&self, id: &str, input_hash: u64, fit_hash: u64) -> bool {
+        let known = self.unsupported.lock().unwrap_or_else(|e| e.into_inner());
+        known.get(id) == Some(&(input_hash, fit_hash))
+    }
+
+    /// Notes an input rejected as unsupported and left in place (writer thread only).
+    pub(crate) fn note_unsupported(
+        &self,
+        id: &str,
+        input_hash: u64,
+        fit_hash: u64,
+    ) -> Result<(), crate::io::IoError> {
+        let mut known = self.unsupported.lock().unwrap_or_else(|e| e.into_inner());
+        known.insert(id.to_string(), (input_hash, fit_hash));
+        let bytes = serde_json::to_vec(&*known).unwrap_or_default();
+        write_atomic(&self.dir.join(UNSUPPORTED_FILE), &bytes)
+    }
+
     fn path(&self, id: &str) -> PathBuf {
-        self.dir.join(format!("{id}.json"))
+        // Ids of files in subfolders hold `/`: one flat name per id.
+        self.dir.join(format!("{}.json", super::publish::flat(id)))
     }
 
     fn recent(&self) -> std::sync::MutexGuard<'_, Recent> {
@@ -82,6 +120,16 @@ impl StateStore {
         let state = Arc::new(state);
         self.recent().insert(id, Arc::clone(&state));
         state
+    }
+
+    /// Drops a patch's state from memory and its file: a cluster worker then holds only
+    /// what the shared store says (which may be nothing).
+    pub(crate) fn forget(&self, id: &str) {
+        let mut recent = self.recent();
+        recent.states.remove(id);
+        recent.order.retain(|k| k != id);
+        drop(recent);
+        let _ = std::fs::remove_file(self.path(id));
     }
 
     /// Writes a state to its file (atomically).
@@ -150,6 +198,7 @@ mod tests {
             version: version.into(),
             input_hash: 7,
             config_hash: 9,
+            outputs: vec!["surface.json".into()],
             warm: WarmStart {
                 surface: SurfaceKind::Loop,
                 controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],
@@ -160,6 +209,7 @@ mod tests {
                 feet: None,
                 parts: Vec::new(),
                 object: None,
+                scattered: None,
             },
         }
     }

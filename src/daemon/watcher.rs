@@ -1,13 +1,16 @@
 //! The folder source. Native: inotify through `notify`; a rename into the folder or a close
-//! after writing counts as arrival at once, anything else (a writer that keeps the file
-//! open) when size and mtime have been stable for the settle time. Poll: directory scans
-//! with the settle time only. Both rescan the whole folder at start-up; native also on
-//! overflow. Arrivals go to the scheduler over an unbounded channel: this thread never
-//! waits for fitting.
+//! after writing counts as arrival at once, and a file seen being written (created or
+//! modified under the watch) waits for its close, however long the writer pauses. The
+//! settle time (size and mtime stable) is only for files that predate the watch, files
+//! found by a rescan after an overflow, and polling mode, and even then a file some process
+//! still holds open for writing is not taken (`open_files`, where the OS can tell). Both
+//! modes rescan the whole folder at start-up; native also on overflow. Arrivals go to the
+//! scheduler over an unbounded channel: this thread never waits for fitting.
 
 use super::config::WatcherKind;
 use super::kinds::{rejection_kind, Cause};
-use super::messages::{ignored, patch_id, Msg, Source};
+use super::messages::{ignored, relative_patch_id, Msg, Source};
+use super::open_files::open_for_writing;
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
@@ -49,11 +52,29 @@ pub struct FolderWatcher {
     pub stop: Arc<AtomicBool>,
     /// Told once the watch is in place and the start-up scan is done (readiness).
     pub ready: Sender<()>,
+    /// Subfolders are watched too (`daemon.recursive`).
+    pub recursive: bool,
+    /// Canonical folders never descended into (OUT, the state folder, quarantine when they
+    /// lie inside the watch folder: their files are outputs, not inputs).
+    pub exclude: Vec<PathBuf>,
+}
+
+/// Subfolders deeper than this are not walked (a guard, not a limit anyone should meet).
+const MAX_DEPTH: usize = 32;
+
+/// A file seen but not yet complete.
+struct Waiting {
+    stamp: Stamp,
+    /// Since when `stamp` has been unchanged.
+    since: Instant,
+    /// Native mode saw it being written: it is complete on its close (or, if that event was
+    /// lost, once no process is seen holding it open for writing and the OS can tell).
+    written: bool,
 }
 
 struct Tracker {
-    /// Files seen but not yet complete: stamp and since when it has been unchanged.
-    settling: HashMap<PathBuf, (Stamp, Instant)>,
+    /// Files seen but not yet complete.
+    settling: HashMap<PathBuf, Waiting>,
     /// The stamp each file had when handed on, so that a rescan does not repeat it.
     emitted: HashMap<PathBuf, Stamp>,
     batch: Vec<Arrival>,
@@ -106,10 +127,15 @@ pub(crate) fn skip_reason(path: &Path) -> Option<Skip> {
     if name.starts_with('.') || name.ends_with(".tmp") || name.ends_with(".part") {
         return None;
     }
+    let link = std::fs::symlink_metadata(path).ok()?;
+    // A subfolder is reported whatever its name (without --recursive its files are not
+    // taken, and that should not pass in silence).
+    if link.is_dir() {
+        return Some(Skip::Directory);
+    }
     if ignored(path) {
         return Some(Skip::NotAMesh);
     }
-    let link = std::fs::symlink_metadata(path).ok()?;
     let meta = if link.file_type().is_symlink() {
         match std::fs::metadata(path) {
             Ok(m) => m,
@@ -150,7 +176,11 @@ impl FolderWatcher {
                 let mut w = notify::recommended_watcher(move |ev| {
                     let _ = ntx.send(ev);
                 })?;
-                w.watch(&self.dir, RecursiveMode::NonRecursive)?;
+                let mode = match self.recursive {
+                    true => RecursiveMode::Recursive,
+                    false => RecursiveMode::NonRecursive,
+                };
+                w.watch(&self.dir, mode)?;
                 Ok::<_, notify::Error>(w)
             })
             .and_then(|r| {
@@ -218,23 +248,65 @@ impl FolderWatcher {
             }
             EventKind::Modify(ModifyKind::Name(RenameMode::From)) | EventKind::Remove(_) => {
                 for p in &ev.paths {
-                    t.settling.remove(p);
-                    t.emitted.remove(p);
-                    t.skipped.remove(p);
+                    // A folder that went takes what was seen in it along.
+                    t.settling.retain(|q, _| !q.starts_with(p));
+                    t.emitted.retain(|q, _| !q.starts_with(p));
+                    t.skipped.retain(|q, _| !q.starts_with(p));
                 }
             }
-            EventKind::Create(_) | EventKind::Modify(_) => {
+            EventKind::Create(_) | EventKind::Modify(ModifyKind::Data(_) | ModifyKind::Any) => {
                 for p in &ev.paths {
-                    self.seen(t, p, Instant::now());
+                    if self.is_subfolder(p) {
+                        // Moved or copied in whole: its files raise no events of their own.
+                        self.scan_dir(t, p, Instant::now(), &mut Default::default(), 1);
+                    } else {
+                        self.seen(t, p, Instant::now(), true);
+                    }
+                }
+            }
+            EventKind::Modify(_) => {
+                for p in &ev.paths {
+                    self.seen(t, p, Instant::now(), false);
                 }
             }
             _ => {}
         }
     }
 
+    /// Whether `path` is an entry this watcher takes: in the watch folder, or with
+    /// `recursive` under it, outside the excluded folders and hidden ones.
+    fn within(&self, path: &Path) -> bool {
+        if !self.recursive {
+            return path.parent() == Some(self.dir.as_path());
+        }
+        let Ok(rel) = path.strip_prefix(&self.dir) else {
+            return false;
+        };
+        let hidden = rel
+            .parent()
+            .into_iter()
+            .flat_map(Path::components)
+            .any(|c| c.as_os_str().to_string_lossy().starts_with('.'));
+        !hidden && !rel.as_os_str().is_empty() && !self.exclude.iter().any(|x| path.starts_with(x))
+    }
+
+    /// A real (not symlinked) subfolder that recursive watching walks.
+    fn is_subfolder(&self, path: &Path) -> bool {
+        self.recursive
+            && self.within(path)
+            && !path
+                .file_name()
+                .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+            && std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir())
+    }
+
     /// A file that is known to be complete (renamed in, or closed after writing).
     fn complete(&self, t: &mut Tracker, path: &Path) {
-        if path.parent() != Some(self.dir.as_path()) || self.skips(t, path) || ignored(path) {
+        if self.is_subfolder(path) {
+            self.scan_dir(t, path, Instant::now(), &mut Default::default(), 1);
+            return;
+        }
+        if !self.within(path) || self.skips(t, path) || ignored(path) {
             return;
         }
         t.settling.remove(path);
@@ -243,9 +315,10 @@ impl FolderWatcher {
         }
     }
 
-    /// A file that may still be written: starts or restarts its settle clock.
-    fn seen(&self, t: &mut Tracker, path: &Path, now: Instant) {
-        if self.skips(t, path) || ignored(path) {
+    /// A file that may still be written: starts or restarts its settle clock; `written`
+    /// when the watch saw the write itself (then it waits for the close).
+    fn seen(&self, t: &mut Tracker, path: &Path, now: Instant, written: bool) {
+        if !self.within(path) || self.skips(t, path) || ignored(path) {
             t.settling.remove(path);
             return;
         }
@@ -253,40 +326,69 @@ impl FolderWatcher {
             t.settling.remove(path);
             return;
         };
-        if t.emitted.get(path) == Some(&s) {
+        if t.emitted.get(path) == Some(&s) && !written {
             return;
         }
         match t.settling.get_mut(path) {
-            Some((old, since)) if *old != s => {
-                *old = s;
-                *since = now;
+            Some(w) => {
+                w.written |= written;
+                if w.stamp != s {
+                    w.stamp = s;
+                    w.since = now;
+                }
             }
-            Some(_) => {}
             None => {
-                t.settling.insert(path.to_path_buf(), (s, now));
+                t.settling.insert(
+                    path.to_path_buf(),
+                    Waiting {
+                        stamp: s,
+                        since: now,
+                        written,
+                    },
+                );
             }
         }
     }
 
     fn scan(&self, t: &mut Tracker) {
-        let entries = match std::fs::read_dir(&self.dir) {
-            Ok(e) => e,
-            Err(e) => {
-                // The folder may be remounted or recreated; keep trying rather than exit.
-                tracing::error!(error = %e, dir = %self.dir.display(), "cannot list the watch folder");
-                return;
-            }
-        };
         let now = Instant::now();
         let mut present = std::collections::HashSet::new();
-        for entry in entries.flatten() {
-            let path = entry.path();
-            present.insert(path.clone());
-            self.seen(t, &path, now);
+        if !self.scan_dir(t, &self.dir, now, &mut present, 0) {
+            return;
         }
         t.emitted.retain(|p, _| present.contains(p));
         t.settling.retain(|p, _| present.contains(p));
         t.skipped.retain(|p, _| present.contains(p));
+    }
+
+    /// Looks at every entry of `dir` (and, recursive, of its subfolders); false when `dir`
+    /// cannot be listed.
+    fn scan_dir(
+        &self,
+        t: &mut Tracker,
+        dir: &Path,
+        now: Instant,
+        present: &mut std::collections::HashSet<PathBuf>,
+        depth: usize,
+    ) -> bool {
+        let entries = match std::fs::read_dir(dir) {
+            Ok(e) => e,
+            Err(e) => {
+                // The folder may be remounted or recreated; keep trying rather than exit.
+                tracing::error!(error = %e, dir = %dir.display(), "cannot list the watch folder");
+                return false;
+            }
+        };
+        for entry in entries.flatten() {
+            let path = entry.path();
+            if depth < MAX_DEPTH && self.is_subfolder(&path) {
+                self.scan_dir(t, &path, now, present, depth + 1);
+                continue;
+            }
+            present.insert(path.clone());
+            self.seen(t, &path, now, false);
+        }
+        true
     }
 
     /// Whether the entry is skipped; reports it the first time (per reason).
@@ -299,6 +401,16 @@ impl FolderWatcher {
             let input = path.display().to_string();
             if why == Skip::NotAMesh {
                 tracing::debug!(input, "not a mesh file name; skipped");
+            } else if why == Skip::Directory && !self.recursive {
+                tracing::warn!(
+                    input,
+                    kind = why.kind(),
+                    "a subfolder: skipped (watch --recursive takes its files)"
+                );
+                let _ = self.writer.send(WriterMsg::Event(serde_json::json!({
+                    "input": input, "status": "skipped", "kind": why.kind(),
+                    "reason": "a subfolder; daemon.recursive (watch --recursive) takes its files",
+                })));
             } else {
                 tracing::warn!(input, kind = why.kind(), "skipped");
                 let _ = self.writer.send(WriterMsg::Event(serde_json::json!({
@@ -309,27 +421,50 @@ impl FolderWatcher {
         true
     }
 
+    /// Hands on the files whose stamp stayed the same for the settle time, unless a process
+    /// is seen holding one open for writing (its clock then starts again). A file the watch
+    /// saw being written is only taken here when the OS can tell that nobody writes it any
+    /// more (its close event was lost); otherwise it waits for the close.
     fn settle(&self, t: &mut Tracker, settle: Duration) {
         let now = Instant::now();
-        let paths: Vec<PathBuf> = t.settling.keys().cloned().collect();
-        for path in paths {
-            match stamp(&path) {
-                None => {
-                    t.settling.remove(&path);
+        let mut due = Vec::new();
+        t.settling.retain(|path, w| match stamp(path) {
+            None => false,
+            Some(s) => {
+                if w.stamp != s {
+                    w.stamp = s;
+                    w.since = now;
+                } else if now.duration_since(w.since) >= settle {
+                    due.push(path.clone());
                 }
-                Some(s) => {
-                    let Some((old, since)) = t.settling.get_mut(&path) else {
-                        continue;
-                    };
-                    if *old != s {
-                        *old = s;
-                        *since = now;
-                    } else if now.duration_since(*since) >= settle {
-                        t.settling.remove(&path);
-                        self.emit(t, &path, s);
-                    }
-                }
+                true
             }
+        });
+        if due.is_empty() {
+            return;
+        }
+        let refs: Vec<&Path> = due.iter().map(PathBuf::as_path).collect();
+        let writers = open_for_writing(&refs);
+        for path in due {
+            let Some(w) = t.settling.get_mut(&path) else {
+                continue;
+            };
+            let take = match (writers.writing(&path), w.written) {
+                (Some(true), _) => false,
+                (Some(false), _) => true,
+                (None, written) => !written,
+            };
+            if !take {
+                tracing::debug!(input = %path.display(), "still open for writing; waiting");
+                w.since = now;
+                continue;
+            }
+            if w.written {
+                tracing::info!(input = %path.display(), "no close seen, but no process writes it any more; taken");
+            }
+            let s = w.stamp;
+            t.settling.remove(&path);
+            self.emit(t, &path, s);
         }
     }
 
@@ -338,7 +473,7 @@ impl FolderWatcher {
             return;
         }
         let label = path.display().to_string();
-        let Some(id) = patch_id(path) else {
+        let Some(id) = relative_patch_id(&self.dir, path) else {
             let _ = self.writer.send(WriterMsg::Reject {
                 id: String::new(),
                 label,

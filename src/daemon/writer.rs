@@ -3,10 +3,10 @@
 //! input is never moved while a worker reads it.
 
 use super::config::DaemonConfig;
-use super::config::ProcessedPolicy;
+use super::config::{ProcessedPolicy, UnsupportedPolicy};
 use super::confine::Roots;
 use super::job::{JobDone, Outcome, Timings};
-use super::messages::{Msg, Summary};
+use super::messages::{part_id, Msg, Summary};
 use super::ops::metrics::Metrics;
 use super::publish::publish;
 use super::reload::ConfigCell;
@@ -18,7 +18,6 @@ use crate::pipeline::worker::{InputOutputs, PatchOutputs};
 use crossbeam_channel::{Receiver, Sender};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::{Instant, SystemTime};
 
@@ -30,6 +29,8 @@ pub enum Keep {
     Bytes(Arc<Vec<u8>>, String),
     /// Already written into quarantine by the pipe reader (streamed, too large to hold).
     Already(PathBuf),
+    /// A valid input the pipeline cannot fit: left where it is (`daemon.unsupported`).
+    InPlace(PathBuf),
     Nothing,
 }
 
@@ -53,6 +54,9 @@ pub enum WriterMsg {
     Spill(Arrival),
     /// Everything sent before this is handled; the thread then returns.
     Shutdown,
+    /// Everything sent before this is handled: answered on the channel (a cluster worker
+    /// acknowledges a job only once its outputs and events are written).
+    Barrier(Sender<()>),
 }
 
 pub struct Writer {
@@ -66,6 +70,8 @@ pub struct Writer {
     /// For `daemon.pipe_roots`: inputs are moved or deleted only inside the roots.
     pub cell: Arc<ConfigCell>,
     pub seen: SeenVersions,
+    /// A cluster worker's name, added to its events (several processes share the log).
+    pub node: Option<String>,
 }
 
 /// Superseded file versions already in the event log, kept across starts in the state
@@ -122,6 +128,14 @@ impl SeenVersions {
         }
         true
     }
+}
+
+/// How a fit ended, spelled as in events (`met`, `capped`, `stalled`).
+fn status_name(status: crate::fit::FitStatus) -> String {
+    serde_json::to_value(status)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default()
 }
 
 fn secs(t: SystemTime) -> f64 {
@@ -213,7 +227,7 @@ impl Writer {
                 WriterMsg::Superseded { loser, by } => {
                     tracing::info!(patch = %loser.id, input = %loser.label, by = %by, "superseded");
                     self.summary.superseded += 1;
-                    self.metrics.superseded.fetch_add(1, Ordering::Relaxed);
+                    self.metrics.superseded.inc();
                     if !self.seen.first_time(&loser) {
                         // The same file lost to a newer one at an earlier start already.
                         continue;
@@ -230,6 +244,9 @@ impl Writer {
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
                 WriterMsg::Shutdown => break,
+                WriterMsg::Barrier(done) => {
+                    let _ = done.send(());
+                }
             }
         }
         self.summary
@@ -242,19 +259,50 @@ impl Writer {
         let span = tracing::info_span!("patch", patch = %a.id, version = %a.version);
         let _guard = span.enter();
         match done.outcome {
-            Outcome::Rejected { kind, reason } => {
+            Outcome::Rejected {
+                kind,
+                reason,
+                unsupported,
+                input_hash,
+            } => {
+                let in_place = unsupported
+                    && done.cfg.daemon.unsupported == UnsupportedPolicy::Keep
+                    && matches!(a.input, Input::File(_));
+                if let (true, Some(hash)) = (in_place, input_hash) {
+                    let noted = self
+                        .store
+                        .note_unsupported(&a.id, hash, done.cfg.fit_hash());
+                    if let Err(e) = noted {
+                        tracing::warn!(error = %e, "cannot note an unsupported input");
+                    }
+                }
                 let keep = match &a.input {
+                    Input::File(p) if in_place => Keep::InPlace(p.clone()),
                     Input::File(p) => Keep::Move(p.clone()),
                     Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
                 };
                 self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
             }
+            Outcome::StillUnsupported => {
+                tracing::info!(
+                    input = %a.label,
+                    "unchanged since it was rejected as unsupported; left in place"
+                );
+                self.summary.unchanged += 1;
+                self.metrics.unchanged.inc();
+                None
+            }
+            Outcome::Incomplete { reason } => {
+                // The scheduler loop retries these and never sends them here.
+                tracing::info!(reason, "incomplete");
+                None
+            }
             Outcome::Unchanged { hash } => {
                 let input_hash = format!("{hash:016x}");
                 tracing::info!(input_hash, "unchanged since the last fit; skipped");
                 self.summary.unchanged += 1;
-                self.metrics.unchanged.fetch_add(1, Ordering::Relaxed);
+                self.metrics.unchanged.inc();
                 // Its content was fitted, so the processed-file policy applies.
                 self.processed(a, done.cfg.output.processed);
                 None
@@ -268,7 +316,7 @@ impl Writer {
                 } = *outputs;
                 let mut written_all = true;
                 for part in parts {
-                    let id = format!("{}{}", a.id, part.suffix);
+                    let id = part_id(&a.id, &part.suffix);
                     written_all &= self.write_part(
                         a,
                         &done.cfg,
@@ -282,7 +330,7 @@ impl Writer {
                 for (suffix, reason) in failed {
                     // The input as a whole is fitted (some component is); this piece is
                     // reported, not quarantined, since the input stays in use.
-                    let id = format!("{}{suffix}", a.id);
+                    let id = part_id(&a.id, &suffix);
                     tracing::warn!(patch = %id, reason, "component not fitted");
                     self.metrics.error("component_failed");
                     self.event(json!({"patch": id, "version": a.version, "input": a.label, "status": "component_failed", "reason": reason}));
@@ -296,7 +344,8 @@ impl Writer {
                     PatchState {
                         version: a.version.clone(),
                         input_hash: hash,
-                        config_hash: done.cfg.output_hash(),
+                        config_hash: done.cfg.fit_hash(),
+                        outputs: done.cfg.wanted_outputs(),
                         warm,
                     },
                 );
@@ -334,12 +383,15 @@ impl Writer {
         let mut hashes = json!({"surface.json": format!("{:016x}", content_hash(&surface_bytes))});
         if out.glb {
             hashes["surface.glb"] = json!(format!("{:016x}", content_hash(&outputs.glb)));
+            hashes["legend.svg"] =
+                json!(format!("{:016x}", content_hash(outputs.legend.as_bytes())));
         }
         outputs.report["output_hashes"] = hashes;
         let report_bytes = out.report.then(|| to_json(&outputs.report));
-        let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(3);
+        let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(4);
         if out.glb {
             group.push(("surface.glb", &outputs.glb));
+            group.push(("legend.svg", outputs.legend.as_bytes()));
         }
         if let Some(r) = &report_bytes {
             group.push(("report.json", r));
@@ -357,13 +409,31 @@ impl Writer {
         }
         let write_ms = start.elapsed().as_secs_f64() * 1e3;
         self.summary.fitted += 1;
-        self.metrics.fitted.fetch_add(1, Ordering::Relaxed);
+        self.metrics.fitted.inc();
         self.metrics.observe_fit(timings.fit_ms / 1e3);
         let latency_ms = a.detected.elapsed().as_secs_f64() * 1e3;
-        tracing::info!(patch = id, status = ?outputs.status, fit_ms = timings.fit_ms, latency_ms, warm_start, "fitted");
+        let last = &outputs.report["final"];
+        let error = |geometric: &str, fallback: &str| {
+            last[geometric]
+                .as_f64()
+                .or_else(|| last[fallback].as_f64())
+                .unwrap_or(f64::NAN)
+        };
+        tracing::info!(
+            patch = id,
+            status = status_name(outputs.status),
+            rms = error("geometric_rms_error", "rms_error"),
+            max = error("geometric_max_error", "max_error"),
+            controls = outputs.report["control_points"].as_u64().unwrap_or(0),
+            fit_ms = timings.fit_ms,
+            latency_ms,
+            warm_start,
+            "fitted"
+        );
         let mut paths = json!({"surface": surface});
         if out.glb {
             paths["glb"] = json!(glb);
+            paths["legend"] = json!(dir.join("legend.svg"));
         }
         if out.report {
             paths["report"] = json!(report);
@@ -406,18 +476,29 @@ impl Writer {
             }
         };
         if let Err(e) = result {
-            tracing::warn!(error = %e, input = %path.display(), ?policy, "processed-file policy failed");
+            tracing::warn!(error = %e, input = %path.display(), policy = policy.name(), "processed-file policy failed");
         }
     }
 
     /// Moves or writes the bad input to quarantine with `<name>.error.json`, and records it.
     fn reject(&mut self, id: &str, label: &str, keep: Keep, kind: &'static str, reason: &str) {
-        tracing::warn!(patch = id, input = label, kind, reason, "rejected");
+        let in_place = match &keep {
+            Keep::InPlace(p) => Some(p.clone()),
+            _ => None,
+        };
+        tracing::warn!(
+            patch = id,
+            input = label,
+            kind,
+            reason,
+            kept_in_place = in_place.is_some(),
+            "rejected"
+        );
         self.summary.rejected += 1;
         self.metrics.rejected(kind);
         let q = &self.quarantine;
         let kept: Result<Option<PathBuf>, String> = match keep {
-            Keep::Nothing => Ok(None),
+            Keep::Nothing | Keep::InPlace(_) => Ok(None),
             Keep::Already(p) => Ok(Some(p)),
             Keep::Move(path) if !self.may_touch(&path) => Ok(None),
             Keep::Move(path) => {
@@ -452,7 +533,11 @@ impl Writer {
                 &serde_json::to_vec_pretty(&note).unwrap_or_default(),
             );
         }
-        self.event(json!({"patch": id, "input": label, "status": "rejected", "kind": kind, "reason": reason, "quarantined_as": kept}));
+        let mut line = json!({"patch": id, "input": label, "status": "rejected", "kind": kind, "reason": reason, "quarantined_as": kept});
+        if let Some(p) = in_place {
+            line["kept_in_place"] = json!(p);
+        }
+        self.event(line);
     }
 
     fn spill(&mut self, a: &Arrival) {
@@ -474,6 +559,9 @@ impl Writer {
     fn event(&self, mut line: serde_json::Value) {
         use std::io::Write;
         line["time"] = json!(secs(SystemTime::now()));
+        if let Some(node) = &self.node {
+            line["worker"] = json!(node);
+        }
         let path = self.event_log();
         let appended = std::fs::OpenOptions::new()
             .create(true)

@@ -474,6 +474,70 @@ pub fn umbrella_laplacian(control_count: usize, faces: &[[u32; 3]]) -> Csr {
     umbrella_laplacian_of_edges(control_count, edges)
 }
 
+/// The umbrella Laplacian of a control mesh with crease edges: a vertex on a crease (two
+/// crease edges) is compared with the mean of its two crease neighbours only, a crease
+/// corner (three or more) with nothing, any other vertex with all its neighbours. The
+/// fairness then straightens a crease along itself instead of pulling it towards the
+/// faces on either side, which would round it off.
+pub fn umbrella_laplacian_with_creases(
+    control_count: usize,
+    faces: &[[u32; 3]],
+    creases: &[[u32; 2]],
+) -> Csr {
+    if creases.is_empty() {
+        return umbrella_laplacian(control_count, faces);
+    }
+    let mut along: Vec<Vec<u32>> = vec![Vec::new(); control_count];
+    for &[a, b] in creases {
+        if a != b && (a as usize) < control_count && (b as usize) < control_count {
+            along[a as usize].push(b);
+            along[b as usize].push(a);
+        }
+    }
+    let mut nbrs: Vec<Vec<u32>> = vec![Vec::new(); control_count];
+    for t in faces {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            if (a as usize) < control_count && (b as usize) < control_count {
+                nbrs[a as usize].push(b);
+                nbrs[b as usize].push(a);
+            }
+        }
+    }
+    let rows: Vec<Vec<(u32, f64)>> = nbrs
+        .into_iter()
+        .zip(along)
+        .enumerate()
+        .map(|(i, (mut all, mut crease))| {
+            crease.sort_unstable();
+            crease.dedup();
+            let nb = match crease.len() {
+                0 | 1 => {
+                    all.sort_unstable();
+                    all.dedup();
+                    all
+                }
+                2 => crease,
+                _ => Vec::new(),
+            };
+            umbrella_row(i as u32, &nb)
+        })
+        .collect();
+    Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
+}
+
+/// Row `i` of an umbrella Laplacian: 1 at `i`, the mean over `neighbours` subtracted;
+/// empty (no fairing) for a vertex without neighbours.
+fn umbrella_row(i: u32, neighbours: &[u32]) -> Vec<(u32, f64)> {
+    if neighbours.is_empty() {
+        return Vec::new();
+    }
+    let w = 1.0 / neighbours.len() as f64;
+    std::iter::once((i, 1.0))
+        .chain(neighbours.iter().map(|&j| (j, -w)))
+        .collect()
+}
+
 /// The umbrella Laplacian of a net given by its edges (either direction, repeats allowed).
 pub fn umbrella_laplacian_of_edges(
     control_count: usize,
@@ -490,13 +554,7 @@ pub fn umbrella_laplacian_of_edges(
         .map(|(i, nb)| {
             nb.sort_unstable();
             nb.dedup();
-            if nb.is_empty() {
-                return Vec::new();
-            }
-            let w = 1.0 / nb.len() as f64;
-            std::iter::once((i as u32, 1.0))
-                .chain(nb.iter().map(|&j| (j, -w)))
-                .collect()
+            umbrella_row(i as u32, nb)
         })
         .collect();
     Csr::from_rows(control_count, rows.iter().map(|r| r.as_slice()))
@@ -505,6 +563,31 @@ pub fn umbrella_laplacian_of_edges(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn crease_vertices_are_faired_along_their_crease_only() {
+        // A fan of four faces around vertex 0; 1-0-3 is a crease, 2 and 4 are off it.
+        let faces = [[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1]];
+        let plain = umbrella_laplacian(5, &faces);
+        let creased = umbrella_laplacian_with_creases(5, &faces, &[[1, 0], [0, 3]]);
+        let row = |m: &Csr, i: usize| -> Vec<(u32, f64)> {
+            let span = m.row_ptr[i]..m.row_ptr[i + 1];
+            let mut r: Vec<(u32, f64)> = m.col_idx[span.clone()]
+                .iter()
+                .copied()
+                .zip(m.values[span].iter().copied())
+                .collect();
+            r.sort_by_key(|e| e.0);
+            r
+        };
+        assert_eq!(row(&plain, 0).len(), 5);
+        assert_eq!(row(&creased, 0), vec![(0, 1.0), (1, -0.5), (3, -0.5)]);
+        // Vertex 2 has no crease edge: all its neighbours.
+        assert_eq!(row(&creased, 2), row(&plain, 2));
+        // Three crease edges at 0: a corner, not faired.
+        let corner = umbrella_laplacian_with_creases(5, &faces, &[[1, 0], [0, 3], [0, 2]]);
+        assert!(row(&corner, 0).is_empty());
+    }
 
     #[test]
     fn method_names_parse_back_and_are_the_serde_names() {

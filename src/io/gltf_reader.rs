@@ -25,7 +25,7 @@ pub(crate) fn read_gltf(
 ) -> Result<TriMesh, IoError> {
     let e = |kind: IoErrorKind| IoError::new(file, None, kind);
     let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
-        let gltf = gltf::Gltf::from_slice(bytes).map_err(IoErrorKind::Gltf)?;
+        let gltf = parse_validated(bytes)?;
         for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
             if COMPRESSED.contains(&ext) {
                 return Err(IoErrorKind::unsupported(format!(
@@ -49,6 +49,67 @@ pub(crate) fn read_gltf(
             ))))
         }
     }
+}
+
+/// Parses and validates the document. The `gltf` crate's own validation indexes
+/// `accessors` with a primitive's POSITION index unchecked (gltf-json 1.4.1, mesh.rs:151),
+/// so attribute, index and morph-target accessor indices are bounds-checked first.
+fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
+    check_glb_header(bytes)?;
+    let unvalidated =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(IoErrorKind::Gltf)?;
+    let json = unvalidated.document.as_json();
+    let accessors = json.accessors.len();
+    for (m, mesh) in json.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let targets = primitive
+                .targets
+                .iter()
+                .flatten()
+                .flat_map(|t| [t.positions, t.normals, t.tangents].into_iter().flatten());
+            let referenced = primitive
+                .attributes
+                .values()
+                .copied()
+                .chain(primitive.indices)
+                .chain(targets);
+            for index in referenced {
+                if index.value() >= accessors {
+                    return Err(IoErrorKind::malformed(format!(
+                        "mesh {m} primitive {p} names accessor {} of {accessors}",
+                        index.value()
+                    )));
+                }
+            }
+        }
+    }
+    let document =
+        gltf::Document::from_json(unvalidated.document.into_json()).map_err(IoErrorKind::Gltf)?;
+    Ok(gltf::Gltf {
+        document,
+        blob: unvalidated.blob,
+    })
+}
+
+/// The `gltf` crate subtracts the 12-byte header from the GLB's declared total length
+/// unchecked (gltf 1.4.1, binary.rs:252): a declared length under 12 is refused here.
+fn check_glb_header(bytes: &[u8]) -> Result<(), IoErrorKind> {
+    const HEADER_BYTES: u32 = 12;
+    if !bytes.starts_with(b"glTF") {
+        return Ok(());
+    }
+    let Some(length) = bytes.get(8..12) else {
+        return Err(IoErrorKind::malformed(
+            "GLB header is shorter than 12 bytes",
+        ));
+    };
+    let declared = u32::from_le_bytes([length[0], length[1], length[2], length[3]]);
+    if declared < HEADER_BYTES {
+        return Err(IoErrorKind::malformed(format!(
+            "GLB header declares a total length of {declared} bytes, less than the header itself"
+        )));
+    }
+    Ok(())
 }
 
 /// The data of every buffer, external ones read from beside the file. The input and its
@@ -333,8 +394,10 @@ fn check_accessor(
     if view_end.is_none_or(|end| end > buffer_len) {
         return Err(bad("buffer view runs past its buffer".into()));
     }
+    // glTF requires count >= 1, and the `gltf` crate's readers compute `count - 1`
+    // unchecked (gltf 1.4.1, accessor/util.rs:384).
     if a.count() == 0 {
-        return Ok(());
+        return Err(bad("count 0 (glTF requires at least one element)".into()));
     }
     let end = (a.count() - 1)
         .checked_mul(stride)

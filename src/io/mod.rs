@@ -7,6 +7,7 @@ pub(crate) mod gltf_reader;
 pub mod iges;
 pub mod obj;
 pub mod off;
+mod pcd;
 pub mod ply;
 pub mod polylines;
 pub mod registration;
@@ -14,6 +15,7 @@ pub mod step;
 pub mod stl;
 pub mod surface_json;
 pub mod writers;
+mod xyz;
 
 pub use error::{IoError, IoErrorKind};
 
@@ -37,18 +39,34 @@ pub enum Format {
     Stl,
     /// Object File Format.
     Off,
+    /// ASCII point cloud: `x y z` per line, extra columns read past.
+    Xyz,
+    /// ASCII point cloud with a count line first (Leica and other scanners' export).
+    Pts,
+    /// The Point Cloud Library's format (ascii or binary).
+    Pcd,
 }
 
 impl Format {
+    /// Every extension read, as the refusals of unknown ones list them.
+    pub const READABLE: &'static str = "obj, gltf, glb, ply, stl, off, xyz, pts, pcd";
+
     pub(crate) fn from_path(path: &Path) -> Option<Format> {
-        let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-        Some(match ext.as_str() {
+        Self::from_extension(path.extension()?.to_str()?)
+    }
+
+    /// The format an extension (without its dot, any case) names.
+    pub fn from_extension(ext: &str) -> Option<Format> {
+        Some(match ext.to_ascii_lowercase().as_str() {
             "obj" => Format::Obj,
             "gltf" => Format::Gltf,
             "glb" => Format::Glb,
             "ply" => Format::Ply,
             "stl" => Format::Stl,
             "off" => Format::Off,
+            "xyz" => Format::Xyz,
+            "pts" => Format::Pts,
+            "pcd" => Format::Pcd,
             _ => return None,
         })
     }
@@ -164,12 +182,21 @@ pub struct RangeGrid {
 }
 
 #[derive(Clone, Debug)]
-/// A mesh as read, with the range image it came from, if any.
+/// A mesh or point cloud as read, with the range image it came from, if any.
 pub struct Loaded {
-    /// The triangles (range grids: triangulated from the image).
+    /// The triangles (range grids: triangulated from the image). A point cloud (`.xyz`,
+    /// `.pts`, `.pcd`, a PLY or OBJ with vertices only) is a mesh without triangles: the
+    /// worker triangulates it (`remesh::points`) and fits its points.
     pub mesh: TriMesh,
     /// The range image of a Stanford range-grid PLY.
     pub grid: Option<RangeGrid>,
+}
+
+impl Loaded {
+    /// True for a point cloud: vertices and no triangle.
+    pub fn is_point_cloud(&self) -> bool {
+        self.mesh.triangles.is_empty()
+    }
 }
 
 /// Reads any supported mesh file, choosing the format by extension.
@@ -179,7 +206,9 @@ pub fn read_mesh_file(path: &Path, opts: &LoadOptions) -> Result<Loaded, IoError
         IoError::new(
             &name,
             None,
-            IoErrorKind::UnknownExtension("unknown extension (obj, gltf, glb, ply, stl, off)"),
+            IoErrorKind::UnknownExtension(
+                "unknown extension (obj, gltf, glb, ply, stl, off, xyz, pts, pcd)",
+            ),
         )
     })?;
     let bytes = read_limited(path, opts.max_file_bytes, "the file")
@@ -255,6 +284,8 @@ fn read_with_base(
         Format::Off => plain(off::read_off(bytes, name, opts)?),
         Format::Stl => plain(stl::read_stl(bytes, name)?),
         Format::Gltf | Format::Glb => plain(gltf_reader::read_gltf(bytes, name, base, opts)?),
+        Format::Xyz | Format::Pts => plain(xyz::read_xyz(bytes, name, opts)?),
+        Format::Pcd => plain(pcd::read_pcd(bytes, name, opts)?),
     };
     if loaded.mesh.positions.is_empty() {
         return Err(IoError::new(name, None, IoErrorKind::NoVertices));
@@ -458,7 +489,7 @@ mod tests {
         assert_eq!(missing.kind(), "open");
         assert!(std::error::Error::source(&missing.kind).is_some());
         let unknown =
-            read_mesh_file(Path::new("x.xyz"), &LoadOptions::default()).expect_err("no reader");
+            read_mesh_file(Path::new("x.e57"), &LoadOptions::default()).expect_err("no reader");
         assert_eq!(unknown.kind(), "unknown_extension");
     }
 }

@@ -3,6 +3,12 @@
 //! `subdivide` promise to keep) and splits objects that share vertices. Here all groups
 //! and objects share the file's one position list, polygons are fan-triangulated, and only
 //! position indices are used, so UV or normal seams never split a vertex.
+//!
+//! Measured with tobj 4.0.5 (`single_index` + `triangulate`, `triangulate` alone, and the
+//! default `LoadOptions` all alike): on a 4-vertex file whose first face is `f 2 4 3`, 3 of
+//! 4 positions change index; `examples/patches/dome.obj` loses its 2 unused vertices (1256
+//! -> 1254) and 1252 move; `decimated-max.obj` 5270 of 5272 move; `semi_regular/subd0..2`
+//! every vertex moves (296, 1178, 4706). No option keeps the file's order.
 
 use super::{IoError, IoErrorKind, LoadOptions};
 use crate::mesh::TriMesh;

@@ -1,13 +1,17 @@
 //! The `surface.json` schema (`trispline.surface/1`): the B-spline kind written here, and
 //! a reader for every kind (`bezier`, `loop` with layout lattice, `grid` or `mesh`,
-//! `bspline`) for the tools that consume fitted surfaces (`trispline curvature`).
+//! `bspline`, `bpatch`, `dms`) for the tools that consume fitted surfaces (`trispline curvature`).
 
 use super::{IoError, IoErrorKind};
 use crate::bspline::BSplineSurface;
 use crate::surface::bezier::lattice_len;
+use crate::surface::bpatch::{BPatch, BPatchRecord};
+use crate::surface::dms::record::DmsRecord;
+use crate::surface::dms::DmsSpline;
 use crate::surface::grid_spline::GridSpline;
-use crate::surface::loop_limit::LoopLimitSurface;
+use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use glam::DVec3;
+use serde::Deserialize;
 use serde_json::{json, Value};
 
 pub(crate) const SCHEMA: &str = "trispline.surface/1";
@@ -60,6 +64,21 @@ pub enum SurfaceDescription {
     },
     /// A tensor-product B-spline surface.
     BSpline(BSplineSurface),
+    /// A B-patch (`kind: bpatch`): parameters barycentric in its domain triangle.
+    BPatch {
+        /// The checked patch (degree, domain triangle, knots).
+        patch: BPatch,
+        /// Control points in lattice order.
+        controls: Vec<DVec3>,
+    },
+    /// A DMS triangular B-spline (`kind: dms`): parameters are domain points.
+    Dms {
+        /// The checked spline (domain, knot clouds), shared: its compiled basis is not cheap
+        /// to rebuild.
+        spline: std::sync::Arc<DmsSpline>,
+        /// Control points, triangle by triangle.
+        controls: Vec<DVec3>,
+    },
 }
 
 /// `[[a, b, c], ...]` of integers as triples.
@@ -217,11 +236,13 @@ pub fn parse_surface_json(bytes: &[u8], name: &str) -> Result<SurfaceDescription
         ("loop", Some("mesh")) => loop_mesh(&v, name),
         ("loop", _) => loop_lattice(&v, name),
         ("bspline", _) => bspline_surface(&v, name),
+        ("bpatch", _) => bpatch_surface(&v, name),
+        ("dms", _) => dms_surface(&v, name),
         (other, _) => Err(IoError::at(
             name,
             "key kind",
             IoErrorKind::schema(format!(
-                "unknown surface kind {other:?} (bezier, loop, bspline)"
+                "unknown surface kind {other:?} (bezier, loop, bspline, bpatch, dms)"
             )),
         )),
     }
@@ -345,8 +366,23 @@ fn loop_mesh(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
             Ok(out)
         })
         .collect::<Result<Vec<_>, IoError>>()?;
-    let surface = LoopLimitSurface::new(controls.len(), &faces)
-        .map_err(|e| IoError::at(name, "key control_faces", IoErrorKind::LoopSurface(e)))?;
+    // Optional: files written before creases existed have none.
+    let creases = if v.get("crease_edges").is_some() {
+        int_rows::<2>(v, "crease_edges", name)?
+            .into_iter()
+            .map(|[a, b]| [a, b].map(|i| u32::try_from(i).unwrap_or(u32::MAX)))
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let surface =
+        LoopLimitSurface::with_creases(controls.len(), &faces, &creases).map_err(|e| {
+            let key = match &e {
+                LoopLimitError::UnknownCreaseEdge { .. } => "key crease_edges",
+                _ => "key control_faces",
+            };
+            IoError::at(name, key, IoErrorKind::LoopSurface(e))
+        })?;
     Ok(SurfaceDescription::LoopMesh {
         surface: std::sync::Arc::new(surface),
         controls,
@@ -405,6 +441,51 @@ fn bspline_surface(v: &Value, name: &str) -> Result<SurfaceDescription, IoError>
         .map_err(|e| IoError::new(name, None, IoErrorKind::BSpline(e)))
 }
 
+/// `kind: bpatch`: the record of `surface::bpatch`, checked (degree, corners, knot
+/// triangles, control count).
+fn bpatch_surface(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    // The control points first: their errors name the point, as for every other kind.
+    points(v, name)?;
+    let record = BPatchRecord::deserialize(v)
+        .map_err(|e| IoError::at(name, "kind bpatch", IoErrorKind::schema(e.to_string())))?;
+    let (patch, controls) = record
+        .surface()
+        .map_err(|e| IoError::at(name, "kind bpatch", IoErrorKind::schema(e.to_string())))?;
+    Ok(SurfaceDescription::BPatch { patch, controls })
+}
+
+/// Most DMS domain triangles read: each compiles a simplex-spline family (a few kB), so a
+/// small file must not ask for gigabytes.
+const MAX_DMS_TRIANGLES: usize = 1 << 20;
+
+/// `kind: dms`: the record of `surface::dms::record`, checked (domain, the DMS and boundary
+/// conditions of the knot clouds, control count).
+fn dms_surface(v: &Value, name: &str) -> Result<SurfaceDescription, IoError> {
+    points(v, name)?;
+    let triangles = v
+        .get("domain_triangles")
+        .and_then(Value::as_array)
+        .map_or(0, Vec::len);
+    if triangles > MAX_DMS_TRIANGLES {
+        return Err(IoError::at(
+            name,
+            "key domain_triangles",
+            IoErrorKind::too_large(format!(
+                "{triangles} triangles, at most {MAX_DMS_TRIANGLES}"
+            )),
+        ));
+    }
+    let record = DmsRecord::deserialize(v)
+        .map_err(|e| IoError::at(name, "kind dms", IoErrorKind::schema(e.to_string())))?;
+    let (spline, controls) = record
+        .surface()
+        .map_err(|e| IoError::at(name, "kind dms", IoErrorKind::schema(e.to_string())))?;
+    Ok(SurfaceDescription::Dms {
+        spline: std::sync::Arc::new(spline),
+        controls,
+    })
+}
+
 /// Reads a `surface.json` file.
 pub fn read_surface_json(path: &std::path::Path) -> Result<SurfaceDescription, IoError> {
     let name = path.display().to_string();
@@ -450,6 +531,7 @@ mod tests {
             "kind": "loop",
             "layout": "mesh",
             "control_faces": faces,
+            "crease_edges": [[2, 0]],
             "control_points": controls.iter().map(|c| [c.x, c.y, c.z]).collect::<Vec<_>>(),
         });
         let bytes = serde_json::to_vec(&text).expect("json");
@@ -460,6 +542,7 @@ mod tests {
             } => {
                 assert_eq!(c, controls);
                 assert_eq!(surface.faces(), &faces[..]);
+                assert_eq!(surface.crease_edges(), &[[0, 2]]);
             }
             other => panic!("wrong kind {other:?}"),
         }
@@ -498,6 +581,14 @@ mod tests {
             (
                 r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0]]}"#,
                 "key control_faces",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],"control_faces":[[0,1,2],[1,3,2]],"crease_edges":[[0,3]]}"#,
+                "crease_edges",
+            ),
+            (
+                r#"{"schema":"trispline.surface/1","kind":"loop","layout":"mesh","control_points":[[0,0,0],[1,0,0],[0,1,0],[1,1,0]],"control_faces":[[0,1,2],[1,3,2]],"crease_edges":[[1]]}"#,
+                "crease_edges",
             ),
             // Four faces on one edge: the LoopLimitError names the non-manifold net.
             (

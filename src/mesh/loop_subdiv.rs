@@ -1,4 +1,5 @@
-//! Forward Loop subdivision (spec 01): Loop's original beta, boundary rules, corners fixed.
+//! Forward Loop subdivision (spec 01): Loop's original beta, boundary rules, corners fixed;
+//! optionally crease edges with Hoppe et al.'s (1994) rules.
 
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
@@ -67,7 +68,46 @@ pub struct LoopStep {
 /// Fine connectivity and subdivision operator. Output vertices: the V input vertices in
 /// input order, then one odd vertex per edge in the order of `Topology::edges`.
 pub fn loop_step(topo: &Topology) -> LoopStep {
+    loop_step_with_creases(topo, &[]).0
+}
+
+/// Which rule moves a vertex, by its sharp (boundary or crease) edges (Hoppe et al. 1994).
+enum EvenRule {
+    Smooth,
+    /// Along its two sharp edges, to these neighbours.
+    Crease(u32, u32),
+    Corner,
+}
+
+fn even_rule(topo: &Topology, v: u32, is_crease: &impl Fn(u32, u32) -> bool) -> EvenRule {
+    let ring = topo.ring(v);
+    if topo.is_boundary(v) {
+        let inner = &ring[1..ring.len() - 1];
+        if topo.is_corner(v) || inner.iter().any(|&r| is_crease(v, r)) {
+            EvenRule::Corner
+        } else {
+            EvenRule::Crease(ring[0], ring[ring.len() - 1])
+        }
+    } else {
+        let sharp: Vec<u32> = ring.iter().copied().filter(|&r| is_crease(v, r)).collect();
+        match sharp.as_slice() {
+            [] | [_] => EvenRule::Smooth,
+            &[a, b] => EvenRule::Crease(a, b),
+            _ => EvenRule::Corner,
+        }
+    }
+}
+
+/// `loop_step` with crease edges (pairs of vertex indices, either order): a crease edge's
+/// odd point is its midpoint, a vertex with two sharp edges (crease or boundary) follows
+/// 3/4 v + 1/8 (a + b) along them, one with more (or a boundary vertex with a crease) is
+/// fixed, a dart (one crease edge) is smooth. Also returns the fine crease edges (the two
+/// halves of each interior crease edge).
+pub fn loop_step_with_creases(topo: &Topology, creases: &[[u32; 2]]) -> (LoopStep, Vec<[u32; 2]>) {
     let nv = topo.vertex_count;
+    let crease_set: std::collections::HashSet<(u32, u32)> =
+        creases.iter().map(|&[a, b]| (a.min(b), a.max(b))).collect();
+    let is_crease = |a: u32, b: u32| crease_set.contains(&(a.min(b), a.max(b)));
     let edges = topo.edges();
     let mut edge_of_halfedge = vec![NONE; topo.twin.len()];
     for (e, &(_, _, h)) in edges.iter().enumerate() {
@@ -86,23 +126,28 @@ pub fn loop_step(topo: &Topology) -> LoopStep {
         let ring = topo.ring(v);
         if ring.is_empty() {
             op.push_row([(v, 1.0)]);
-        } else if topo.is_boundary(v) {
-            if topo.is_corner(v) {
-                op.push_row([(v, 1.0)]);
-            } else {
-                let (a, b) = (ring[0], ring[ring.len() - 1]);
-                op.push_row([(v, 0.75), (a, 0.125), (b, 0.125)]);
+            continue;
+        }
+        match even_rule(topo, v, &is_crease) {
+            EvenRule::Corner => op.push_row([(v, 1.0)]),
+            EvenRule::Crease(a, b) => op.push_row([(v, 0.75), (a, 0.125), (b, 0.125)]),
+            EvenRule::Smooth => {
+                let beta = loop_beta(ring.len());
+                let alpha = 1.0 - ring.len() as f64 * beta;
+                op.push_row(std::iter::once((v, alpha)).chain(ring.iter().map(|&j| (j, beta))));
             }
-        } else {
-            let beta = loop_beta(ring.len());
-            let alpha = 1.0 - ring.len() as f64 * beta;
-            op.push_row(std::iter::once((v, alpha)).chain(ring.iter().map(|&j| (j, beta))));
         }
     }
-    for &(a, b, h) in &edges {
+    let mut fine_creases = Vec::new();
+    for (e, &(a, b, h)) in edges.iter().enumerate() {
         let t = topo.twin[h as usize];
-        if t == NONE {
+        if t == NONE || is_crease(a, b) {
             op.push_row([(a, 0.5), (b, 0.5)]);
+            if t != NONE {
+                let m = (nv + e) as u32;
+                fine_creases.push([a, m]);
+                fine_creases.push([m, b]);
+            }
         } else {
             let (c, d) = (topo.opposite(h), topo.opposite(t));
             op.push_row([(a, 0.375), (b, 0.375), (c, 0.125), (d, 0.125)]);
@@ -117,10 +162,13 @@ pub fn loop_step(topo: &Topology) -> LoopStep {
         triangles.push([t[2], m2, m1]);
         triangles.push([m0, m1, m2]);
     }
-    LoopStep {
-        triangles,
-        operator: op,
-    }
+    (
+        LoopStep {
+            triangles,
+            operator: op,
+        },
+        fine_creases,
+    )
 }
 
 /// Subdivides `levels` times.

@@ -4,6 +4,7 @@
 use glam::DVec3;
 
 pub mod clean;
+pub mod crease;
 pub mod detect;
 pub mod distance;
 pub mod inverse;

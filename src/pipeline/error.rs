@@ -11,6 +11,8 @@ use crate::mesh::detect::DetectError;
 use crate::mesh::inverse::InverseError;
 use crate::mesh::topology::TopologyError;
 use crate::pipeline::object::ObjectError;
+use crate::pipeline::scattered::ScatteredError;
+use crate::remesh::points::PointCloudError;
 use crate::remesh::RemeshError;
 use crate::surface::loop_limit::LoopLimitError;
 
@@ -117,9 +119,19 @@ pub enum PipelineError {
         #[source]
         source: ObjectError,
     },
+    /// A point cloud that cannot be triangulated over a plane (or was sent to a path that
+    /// needs a mesh).
+    #[error("point cloud: {0}")]
+    PointCloud(#[from] PointCloudError),
+    /// A point cloud with `fit.domain = "mesh"`: the object path simplifies a mesh.
+    #[error("fit.domain = \"mesh\" fits a control mesh simplified from a mesh, and a point cloud has no faces; point clouds are fitted through the scan path (fit.domain = \"auto\" or \"grid\", --domain auto); whole-object point clouds need surface reconstruction, which is not supported yet")]
+    PointCloudAsObject,
     /// The solver failed.
     #[error(transparent)]
     Fit(#[from] FitError),
+    /// A B-patch or DMS fit (`pipeline::scattered`) failed.
+    #[error(transparent)]
+    Scattered(#[from] ScatteredError),
 }
 
 fn describe_failures(failures: &[(String, PipelineError)]) -> String {
@@ -153,7 +165,10 @@ impl PipelineError {
                 ObjectError::Solve { .. } => "fit_failed",
                 _ => "object_failed",
             },
+            PipelineError::PointCloud(e) => e.kind(),
+            PipelineError::PointCloudAsObject => "unsupported",
             PipelineError::Fit(_) => "fit_failed",
+            PipelineError::Scattered(e) => e.kind(),
         }
     }
 
@@ -163,6 +178,7 @@ impl PipelineError {
         !matches!(
             self,
             PipelineError::Fit(_)
+                | PipelineError::Scattered(ScatteredError::Fit(_))
                 | PipelineError::Object {
                     source: ObjectError::Solve { .. }
                 }

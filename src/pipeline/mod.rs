@@ -14,6 +14,7 @@
 #![warn(missing_docs)]
 
 mod collocation;
+mod coverage;
 mod error;
 mod geometric;
 pub mod merge;
@@ -22,6 +23,7 @@ pub mod object;
 pub mod object_session;
 pub mod output;
 pub mod scan;
+pub mod scattered;
 pub mod subdivided;
 pub mod worker;
 
@@ -32,6 +34,8 @@ pub use names::UnknownName;
 use crate::fit::{Budget, FitOutcome, Method, StepHook};
 use crate::mesh::inverse::InverseMethod;
 use crate::surface::bezier::BezierTriangle;
+use crate::surface::bpatch::BPatch;
+use crate::surface::dms::DmsSpline;
 use crate::surface::grid_spline::GridSpline;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
@@ -46,11 +50,18 @@ pub enum SurfaceKind {
     Bezier,
     /// Loop: the limit surface of a control net (a grid's box splines on scans).
     Loop,
+    /// Seidel's B-patch: one polynomial over one domain triangle, knot sequences per corner.
+    Bpatch,
+    /// DMS triangular B-spline: simplex splines over a domain triangulation, a knot cloud
+    /// per domain vertex.
+    Dms,
 }
 
 names::named!(SurfaceKind {
     Bezier => "bezier",
     Loop => "loop",
+    Bpatch => "bpatch",
+    Dms => "dms",
 });
 
 /// What both paths share: the surface, the inverse subdivision and the solver's budget.
@@ -80,6 +91,10 @@ pub enum SurfaceModel {
     Grid(GridSpline),
     /// The exact Loop limit surface of an input's own coarse net (subdivided inputs).
     Mesh(Arc<LoopLimitSurface>),
+    /// A B-patch over one domain triangle of the plane (parameters barycentric in it).
+    BPatch(Arc<BPatch>),
+    /// A DMS spline over a triangulation of the plane (parameter faces: its triangles).
+    Dms(Arc<DmsSpline>),
 }
 
 impl SurfaceModel {
@@ -89,6 +104,8 @@ impl SurfaceModel {
             SurfaceModel::Bezier(b) => b,
             SurfaceModel::Grid(g) => g,
             SurfaceModel::Mesh(m) => m.as_ref(),
+            SurfaceModel::BPatch(b) => b.as_ref(),
+            SurfaceModel::Dms(d) => d.as_ref(),
         }
     }
 }

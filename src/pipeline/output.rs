@@ -1,14 +1,14 @@
 //! What a fit turns into: the surface.json value, the tessellation (trimmed to the scanned
 //! region) and its error colours. Bytes and values only; callers write them.
 
+pub use super::coverage::Coverage;
 use super::scan::ScanFit;
 use super::{PatchFit, SurfaceKind, SurfaceModel};
-use crate::io::glb::{glb_bytes, GlbAttributes};
-use crate::remesh::param::{ring_cells, Locator};
+use crate::io::glb::{glb_bytes_with_extras, GlbAttributes, ERROR_RAMP};
+use crate::remesh::param::ring_cells;
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::{Derivatives, SurfaceParam};
 use crate::TriMesh;
-use glam::DVec2;
 use glam::DVec3;
 use rayon::prelude::*;
 use serde_json::json;
@@ -76,9 +76,13 @@ pub fn surface_json(
             "kind": "loop",
             "layout": "mesh",
             "domain": "every control face is a domain triangle; a parameter is (face, u, v) with u and v the barycentric weights of the face's corners 0 and 1 (w = 1 - u - v of corner 2)",
-            "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; faces whose corners are all regular are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
+            "basis": "the Loop limit surface of the control mesh: Loop's original vertex weight beta(n) = (5/8 - (3/8 + cos(2 pi / n) / 4)^2) / n, boundary edges 1/2 1/2 and boundary vertices 3/4 1/8 1/8 (the boundary limit is the uniform cubic B-spline of the boundary polygon), boundary vertices with one face fixed; crease edges (Hoppe et al. 1994) are subdivided like boundary edges on both sides: a vertex with two sharp (crease or boundary) edges takes 3/4 1/8 1/8 along them, one with three or more (or a boundary vertex with a crease) is fixed, one with a single crease edge (a dart) keeps the smooth rule; faces whose corners are all regular on their side of every crease are quartic box-spline patches, the others are evaluated exactly by subdividing around them",
             "control_faces": m.faces(),
+            "crease_edges": m.crease_edges(),
         }),
+        SurfaceModel::BPatch(_) | SurfaceModel::Dms(_) => {
+            super::scattered::kinds::model_json(&f.model, &f.controls).unwrap_or_else(|| json!({}))
+        }
     };
     v["schema"] = json!("trispline.surface/1");
     v["control_points"] = json!(controls);
@@ -140,72 +144,10 @@ impl Tessellation {
     }
 }
 
-/// The scanned region in parameter space: the triangles of the mapped patch (data and
-/// hole fills) with the data vertices at their corrected parameters. A triangle that the
-/// correction stretched to more than `MAX_STRETCH` times its mapped size (a foot point that
-/// slid far, typically on a grazing wall) is left out rather than let it cover ground the
-/// data never saw. The tessellation shows where the surface was fitted, never where it
-/// only extrapolates.
-pub struct Coverage {
-    triangles: Vec<[u32; 3]>,
-    params: Vec<DVec2>,
-}
-
-const MAX_STRETCH: f64 = 3.0;
-
-impl Coverage {
-    /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
-    /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map;
-    /// `untrusted[v]`: a vertex of a folded triangle of the map, whose triangles are left out
-    /// (at a folded silhouette the map overlaps itself and the surface there is a guess).
-    pub fn new(
-        triangles: &[[u32; 3]],
-        corrected: &[SurfaceParam],
-        mapped: &[DVec2],
-        untrusted: &[bool],
-    ) -> Self {
-        let params: Vec<DVec2> = mapped
-            .iter()
-            .enumerate()
-            .map(|(v, m)| corrected.get(v).map_or(*m, |q| DVec2::new(q.u, q.v)))
-            .collect();
-        let triangles = triangles
-            .par_iter()
-            .copied()
-            .filter(|t| !t.iter().any(|&v| untrusted.get(v as usize) == Some(&true)))
-            .filter(|t| {
-                (0..3).all(|k| {
-                    let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
-                    (params[a] - params[b]).length()
-                        <= MAX_STRETCH * (mapped[a] - mapped[b]).length() + 1e-12
-                })
-            })
-            .collect();
-        Self { triangles, params }
-    }
-
-    /// The scanned region of a scan fit.
-    pub fn of(fit: &PatchFit, scan: &ScanFit) -> Self {
-        Self::new(
-            &scan.trims.plan.covered,
-            &fit.params,
-            &scan.mapping.mapped_params,
-            &scan.mapping.near_fold,
-        )
-    }
-
-    /// Returns a test for parameters: inside a kept triangle.
-    fn tester(&self) -> impl Fn(f64, f64) -> bool + Sync + '_ {
-        let locator = Locator::new(&self.triangles, &self.params);
-        move |u, v| !self.triangles.is_empty() && locator.contains(DVec2::new(u, v))
-    }
-}
-
 /// `segments`: per side of the Bezier triangle; for a grid, the total budget spread over
 /// the cells, at least 4 per cell side (a quartic cell flattened into 4 x 4 keeps the
 /// chordal error far below scan noise at scan-like curvatures). With a coverage, only
-/// triangles whose three corners lie on the scanned region are kept: the surface is shown
-/// where it was fitted and never where it only extrapolates.
+/// the triangles it shows are kept (see [`Coverage`]).
 pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) -> Tessellation {
     // The coverage's point locator and the surface's samples need nothing of each other:
     // built side by side (each about a third of a 40k-point scan's tessellation).
@@ -213,14 +155,20 @@ pub fn tessellate(f: &PatchFit, segments: usize, coverage: Option<&Coverage>) ->
         || coverage.map(Coverage::tester),
         || sample_surface(f, segments),
     );
-    let inside: Vec<bool> = match &covers {
-        Some(c) => params.par_iter().map(|p| c(p.u, p.v)).collect(),
-        None => vec![true; params.len()],
+    let (mut params, mut evals) = (params, evals);
+    let triangles = match (coverage, covers) {
+        (Some(c), Some(mapped)) => {
+            let evaluate = f.model.as_surface().evaluator(&f.controls);
+            c.shown(
+                mapped,
+                &mut params,
+                &mut evals,
+                triangles,
+                evaluate.as_ref(),
+            )
+        }
+        _ => triangles,
     };
-    let triangles: Vec<[u32; 3]> = triangles
-        .into_iter()
-        .filter(|t| t.iter().all(|&v| inside[v as usize]))
-        .collect();
     Tessellation::from_evaluations(&evals, params, triangles)
 }
 
@@ -230,7 +178,7 @@ fn sample_surface(
     segments: usize,
 ) -> (Vec<SurfaceParam>, Vec<[u32; 3]>, Vec<Derivatives>) {
     let (params, triangles) = match &f.model {
-        SurfaceModel::Bezier(_) => {
+        SurfaceModel::Bezier(_) | SurfaceModel::BPatch(_) => {
             let n = segments.max(1);
             let params = lattice_points(n)
                 .into_iter()
@@ -246,10 +194,11 @@ fn sample_surface(
             let per_cell = segments as f64 / (g.cells().len().max(1) as f64).sqrt();
             g.sample_lattice((per_cell.ceil() as usize).clamp(4, 32))
         }
-        SurfaceModel::Mesh(m) => {
-            let per_face = segments as f64 / (m.faces().len().max(1) as f64).sqrt();
+        SurfaceModel::Mesh(_) | SurfaceModel::Dms(_) => {
+            let faces = f.model.as_surface().domain_face_count();
+            let per_face = segments as f64 / (faces.max(1) as f64).sqrt();
             let n = (per_face.ceil() as usize).clamp(4, 32);
-            face_lattices(0..m.faces().len(), n)
+            face_lattices(0..faces, n)
         }
     };
     let evaluate = f.model.as_surface().evaluator(&f.controls);
@@ -322,7 +271,8 @@ pub fn chord_errors(f: &PatchFit, per_face: usize, max_faces: usize) -> Vec<f64>
 }
 
 /// The GLB of a tessellation, each vertex coloured by the geometric error of the data point
-/// whose parameter is nearest (blue exact .. red twice the tolerance).
+/// whose parameter is nearest (`ERROR_RAMP`: blue exact .. red twice the tolerance), the
+/// ramp and its scale in the mesh's `extras`.
 pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec<u8> {
     // Parameters are (u, v) within a face: the nearest data point is searched among those
     // of the same face (one face for Bezier and grid surfaces).
@@ -370,47 +320,42 @@ pub fn tessellated_glb(f: &PatchFit, tess: &Tessellation, tolerance: f64) -> Vec
                 .get(&p.face)
                 .and_then(|(n, ids)| n.nearest(p.u, p.v).map(|k| ids[k]))
                 .map_or(0.0, |k| f.geometric_errors[k]);
-            error_colour(e, tolerance)
+            ERROR_RAMP.colour(e, tolerance)
         })
         .collect();
     let mesh = TriMesh::new(positions, triangles);
-    glb_bytes(
+    glb_bytes_with_extras(
         &mesh,
         &GlbAttributes {
             normals: Some(&normals),
             colors: Some(&cols),
             polylines: &[],
         },
+        Some(error_ramp(tolerance)),
     )
 }
 
-/// A blue-green-yellow-red ramp over `error / tolerance` in [0, 2]: blue is exact, green
-/// half the tolerance, yellow the tolerance, red twice it or more.
-fn error_colour(error: f64, tolerance: f64) -> [f32; 4] {
-    let t = if tolerance > 0.0 {
-        (error / tolerance).clamp(0.0, 2.0) / 2.0
-    } else {
-        0.0
-    } as f32;
-    let stops: [[f32; 3]; 5] = [
-        [0.10, 0.25, 0.90],
-        [0.10, 0.75, 0.30],
-        [0.95, 0.90, 0.10],
-        [0.95, 0.50, 0.10],
-        [0.85, 0.10, 0.10],
-    ];
-    let x = t * 4.0;
-    let i = (x.floor() as usize).min(3);
-    let f = x - i as f32;
-    let a = stops[i];
-    let b = stops[i + 1];
-    [
-        a[0] + (b[0] - a[0]) * f,
-        a[1] + (b[1] - a[1]) * f,
-        a[2] + (b[2] - a[2]) * f,
-        1.0,
-    ]
+/// What the heatmap's colours mean, for the GLB's `extras` and report.json: the ramp's
+/// stops at this tolerance, in the input's length unit (the unit of every error the
+/// reports give).
+pub fn error_ramp(tolerance: f64) -> serde_json::Value {
+    ERROR_RAMP.extras(tolerance, ERROR_UNIT, ERROR_QUANTITY)
 }
+
+/// The heatmap's legend as an SVG image (written as legend.svg beside the GLB).
+pub fn error_legend(tolerance: f64) -> String {
+    ERROR_RAMP.legend_svg(
+        tolerance,
+        ERROR_UNIT,
+        "surface.glb colours: distance from each data point to the fitted surface",
+    )
+}
+
+/// The errors' unit: the input's own (no unit is declared by the formats read).
+const ERROR_UNIT: &str = "input length unit";
+
+const ERROR_QUANTITY: &str =
+    "geometric error: distance from the data point whose parameter is nearest to the vertex";
 
 /// Nearest data parameter through a uniform bucket grid over the parameters' bounding box.
 struct NearestParam<'a> {

@@ -1,12 +1,14 @@
 //! From an arbitrary disk-like scan component to a planar map: boundary loops, hole filling
 //! (virtual faces, never data), the least-fold projection (`planar`) and its bijective
-//! fallback, Floater's mean-value map onto a disk (`param`), and point location in the map.
+//! fallback, Floater's mean-value map onto a disk (`param`), point location in the map, and
+//! the triangulation of point clouds (`points`).
 #![warn(missing_docs)]
 
 mod band;
 pub mod param;
 pub mod planar;
 mod plane2d;
+pub mod points;
 pub(crate) mod warp;
 
 use crate::mesh::topology::{Topology, TopologyError, NONE};

@@ -380,6 +380,11 @@ fn io_fuzz_corpus_and_crash_inputs_never_panic() {
         for t in targets::TARGETS {
             let r = std::panic::catch_unwind(|| targets::run(t, input));
             assert!(r.is_ok(), "input {k} panicked in the {t} reader");
+            assert_ne!(
+                r.ok().and_then(Result::err).as_deref(),
+                Some(targets::READER_PANICKED),
+                "input {k}: the {t} reader needed its panic net"
+            );
         }
     }
 }

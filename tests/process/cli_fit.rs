@@ -79,6 +79,20 @@ fn fits_a_lattice_patch_and_writes_all_outputs() {
         .and_then(|m| m.primitives().next())
         .expect("primitive");
     assert!(prim.get(&gltf::Semantic::Colors(0)).is_some());
+    // What the colours mean, beside them and in the report.
+    let legend = std::fs::read_to_string(out.join("legend.svg")).expect("legend");
+    assert!(legend.starts_with("<svg") && legend.contains("tolerance"));
+    let stops = report["error_ramp"]["stops"]
+        .as_array()
+        .expect("ramp stops");
+    assert_eq!(stops[2]["error"].as_f64(), Some(tol));
+    // One line on success: status, errors, size and time.
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(stdout.lines().count(), 1, "{stdout}");
+    assert!(
+        stdout.contains(": met") && stdout.contains("RMS") && stdout.contains("45 control points"),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -184,6 +184,81 @@ fn the_daemon_writes_suffixed_patches_and_keeps_one_state_per_input() {
     assert_eq!(events(&s.out).into_iter().filter(is_fitted).count(), 2);
 }
 
+/// A patch named like a component (`scan.c0`), fitted whole under `largest`, then the
+/// policy turned to `all` with a split input `scan` beside it: component 0 of `scan` used to
+/// take the patch's folder (`OUT/scan.c0` fitted from two inputs). Now every id is fitted
+/// from one input only: the patch is marked `~<hash>`, component 0 keeps `scan.c0`.
+#[test]
+fn a_patch_named_like_a_component_gets_a_folder_of_its_own() {
+    let largest = config(0, "native", "");
+    let all = largest.replace("mode = \"largest\"", "mode = \"all\"\nmin_vertices = 100");
+    let s = setup(&largest);
+    let tmp = tempfile::tempdir().expect("tmp");
+    let pieces = tmp.path().join("pieces.obj");
+    trispline::io::write_mesh_file(&pieces, &three_pieces(0.0)).expect("write");
+    let mut lone = TriMesh::default();
+    add_sheet(&mut lone, 20, DVec3::new(0.0, 0.0, 5.0), 1.0);
+    let single = tmp.path().join("single.obj");
+    trispline::io::write_mesh_file(&single, &lone).expect("write");
+    drop_file(
+        &s.inbox,
+        "scan.c0.obj",
+        &std::fs::read(&single).expect("read"),
+    );
+    let run = s.once();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    std::fs::write(&s.cfg, &all).expect("config");
+    drop_file(&s.inbox, "scan.obj", &std::fs::read(&pieces).expect("read"));
+    let run = s.once();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let fitted: Vec<(String, String)> = events(&s.out)
+        .into_iter()
+        .filter(is_fitted)
+        .map(|e| {
+            let input = e["input"].as_str().unwrap_or("");
+            let name = input.rsplit('/').next().unwrap_or("").to_string();
+            (e["patch"].as_str().unwrap_or("").to_string(), name)
+        })
+        .collect();
+    let mut input_of = std::collections::HashMap::new();
+    for (patch, input) in &fitted {
+        let first = input_of.entry(patch.as_str()).or_insert(input.as_str());
+        assert_eq!(
+            *first,
+            input.as_str(),
+            "{patch} fitted from two inputs: {fitted:?}"
+        );
+    }
+    assert_eq!(input_of.get("scan.c0"), Some(&"scan.obj"), "{fitted:?}");
+    assert_eq!(input_of.get("scan.c1"), Some(&"scan.obj"), "{fitted:?}");
+    let own: Vec<&&str> = input_of
+        .iter()
+        .filter(|(_, i)| **i == "scan.c0.obj")
+        .map(|(p, _)| p)
+        .collect();
+    assert_eq!(own.len(), 2, "whole, then as its one component: {fitted:?}");
+    for patch in own {
+        assert!(patch.starts_with("scan.c0~"), "{patch}");
+        assert_eq!(
+            read_json(&s.out.join(patch).join("report.json"))["patch"],
+            **patch
+        );
+    }
+    assert_eq!(
+        read_json(&s.out.join("scan.c0/report.json"))["component"]["vertices"],
+        900,
+        "component 0 of scan is its 30^2 sheet"
+    );
+}
+
 /// bun045 has 12 pieces: the policy keeps those over the thresholds and fits each.
 #[test]
 fn stanford_scan_all_components() {

@@ -53,6 +53,13 @@ fn check_outputs(dir: &Path, hashes: &HashSet<String>, round: usize) {
                 let declared = u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize;
                 assert_eq!(declared, b.len(), "round {round}: complete glb");
             }
+            "legend.svg" => {
+                let svg = std::fs::read_to_string(&path).expect("read legend");
+                assert!(
+                    svg.starts_with("<svg") && svg.ends_with("</svg>\n"),
+                    "round {round}: complete legend"
+                );
+            }
             n if n.starts_with(".trispline-") && n.ends_with(".tmp") => {}
             n => panic!("round {round}: unexpected file {n} in the output folder"),
         }
@@ -67,7 +74,7 @@ fn assert_one_version(dir: &Path, round: usize) {
         return;
     };
     let report: serde_json::Value = serde_json::from_slice(&bytes).expect("report json");
-    for name in ["surface.json", "surface.glb"] {
+    for name in ["surface.json", "surface.glb", "legend.svg"] {
         let file = std::fs::read(dir.join(name)).expect("the set is complete");
         assert_eq!(
             report["output_hashes"][name],

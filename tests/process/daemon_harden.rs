@@ -2,7 +2,7 @@
 //! files; pipe path records cannot reach outside their roots; odd entries are reported once
 //! and odd names get distinct, safe folders; superseded versions are recorded once across
 //! starts; a record half-received at a stop is reported; a `.gltf` takes its external
-//! buffer from beside it.
+//! buffer from beside it; a quarantine folder where a patch folder could live is refused.
 
 use crate::daemon_support::*;
 use std::io::Write;
@@ -279,4 +279,43 @@ fn a_gltf_with_an_external_buffer_beside_it_is_fitted() {
     assert_eq!(rejected["kind"], "unsupported", "{rejected}");
     assert!(outside.exists(), "the file outside the folder stays");
     assert!(stop(child).is_some_and(|st| st.success()));
+}
+
+/// `output.quarantine_dir` inside OUT under a patch's name used to be published over (or
+/// filled with that patch's versions). Now the daemon refuses to start with the reason,
+/// before it fits anything; under `OUT/quarantine` the folder is taken and a broken input
+/// lands there.
+#[test]
+fn a_quarantine_dir_where_a_patch_folder_could_be_is_refused() {
+    let s = setup("");
+    let with_quarantine = |q: &std::path::Path| {
+        let line = format!("[output]\nquarantine_dir = {:?}\n", q.display().to_string());
+        let text = config(0, "poll", "").replace("[output]\n", &line);
+        std::fs::write(&s.cfg, text).expect("config");
+    };
+    std::fs::write(s.inbox.join("bad.obj"), patch_obj(10, 1)).expect("patch");
+    std::fs::write(
+        s.inbox.join("broken.ply"),
+        b"ply\nformat ascii 1.0\nelement vertex 99\n",
+    )
+    .expect("broken");
+    for refused in [s.out.join("bad"), s.out.clone(), s.inbox.clone()] {
+        with_quarantine(&refused);
+        let run = s.once();
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{}: {stderr}", refused.display());
+        assert!(stderr.contains("output.quarantine_dir"), "{stderr}");
+        assert!(events(&s.out).is_empty(), "nothing fitted or quarantined");
+        assert!(!s.out.join("bad").exists());
+    }
+    let held = s.out.join("quarantine/held");
+    with_quarantine(&held);
+    let run = s.once();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(s.out.join("bad/surface.json").exists());
+    assert!(held.join("broken.ply").exists() && held.join("broken.ply.error.json").exists());
 }

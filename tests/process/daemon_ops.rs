@@ -207,7 +207,8 @@ fn systemd_notifications_follow_ready_reload_and_stop() {
     let next = || {
         let mut buf = [0u8; 256];
         let n = sock.recv(&mut buf).expect("a notification");
-        String::from_utf8_lossy(&buf[..n]).to_string()
+        // sd-notify ends each state with a newline, as systemd accepts.
+        String::from_utf8_lossy(&buf[..n]).trim_end().to_string()
     };
     assert_eq!(next(), "READY=1");
     // Without --config a reload re-applies the embedded default: the SIGHUP path alone.

@@ -57,7 +57,7 @@ fn stdin_records_of_both_kinds_with_malformed_ones_between() {
     inline(
         &mut w,
         "weird",
-        "xyz",
+        "e57",
         b"{\"patch\": \"fake\", \"path\": \"/nonexistent\"}\n",
     );
     // Over the size limit: refused without holding it, streamed to quarantine.

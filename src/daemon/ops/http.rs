@@ -2,6 +2,12 @@
 //! answered and closed, each connection on a thread of its own (at most `MAX_CONNECTIONS`
 //! at once) so that a slow client cannot hold `/healthz` from a supervisor. Loopback only
 //! (checked in config validation), no authentication.
+//!
+//! Kept rather than `tiny_http`: what this endpoint must guarantee is a bound on a slow or
+//! silent client (issue 22), and tiny_http's is a per-read timeout that every trickled byte
+//! resets (tiny-http PR #20), with no deadline for the whole request and no cap on
+//! connections or the threads serving them; two GET routes need nothing else it offers.
+//! The exposition format itself comes from `prometheus-client` (`metrics.rs`).
 
 use super::metrics::Metrics;
 use std::io::{Read, Write};
@@ -90,13 +96,22 @@ fn answer(mut stream: TcpStream, metrics: &Metrics) -> std::io::Result<()> {
     let (method, target) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
     let path = target.split('?').next().unwrap_or("");
     let (status, ctype, body) = match (method, path) {
-        ("GET" | "HEAD", "/metrics") => (
-            "200 OK",
-            "text/plain; version=0.0.4; charset=utf-8",
-            metrics.render(),
-        ),
+        ("GET" | "HEAD", "/metrics") => ("200 OK", super::metrics::CONTENT_TYPE, metrics.render()),
         ("GET" | "HEAD", "/healthz") if metrics.stopping.load(Ordering::Relaxed) => {
             ("503 Service Unavailable", "text/plain", "stopping\n".into())
+        }
+        ("GET" | "HEAD", "/healthz")
+            if metrics.queue_configured.load(Ordering::Relaxed)
+                && metrics.queue_reachable.get() == 0 =>
+        {
+            (
+                "503 Service Unavailable",
+                "text/plain",
+                "queue unreachable\n".into(),
+            )
+        }
+        ("GET" | "HEAD", "/healthz") if metrics.queue_configured.load(Ordering::Relaxed) => {
+            ("200 OK", "text/plain", "ok, queue reachable\n".into())
         }
         ("GET" | "HEAD", "/healthz") => ("200 OK", "text/plain", "ok\n".into()),
         ("GET" | "HEAD", _) => ("404 Not Found", "text/plain", "not found\n".into()),
@@ -129,7 +144,7 @@ mod tests {
     #[test]
     fn answers_metrics_health_and_unknown_paths() {
         let m = Arc::new(Metrics::default());
-        m.fitted.fetch_add(3, Ordering::Relaxed);
+        m.fitted.inc_by(3);
         let addr = serve("127.0.0.1:0", Arc::clone(&m)).expect("binds");
         let r = get(addr, "GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 200 OK"), "{r}");
@@ -140,6 +155,19 @@ mod tests {
         assert!(r.starts_with("HTTP/1.1 404"), "{r}");
         let r = get(addr, "POST /metrics HTTP/1.1\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 405"), "{r}");
+        // With a cluster queue, health follows its connection.
+        m.queue_configured.store(true, Ordering::Relaxed);
+        let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
+        assert!(
+            r.starts_with("HTTP/1.1 503") && r.ends_with("queue unreachable\n"),
+            "{r}"
+        );
+        m.queue_reachable.set(1);
+        let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
+        assert!(
+            r.starts_with("HTTP/1.1 200") && r.ends_with("queue reachable\n"),
+            "{r}"
+        );
         m.stopping.store(true, Ordering::Relaxed);
         let r = get(addr, "GET /healthz HTTP/1.1\r\n\r\n");
         assert!(r.starts_with("HTTP/1.1 503"), "{r}");

@@ -1,7 +1,13 @@
-//! Counters and the fit-duration histogram, rendered as Prometheus text.
+//! Counters, gauges and the fit-duration histogram, kept and rendered (OpenMetrics text,
+//! which Prometheus scrapes) by `prometheus-client`.
 
-use std::fmt::Write;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
+use prometheus_client::metrics::histogram::Histogram;
+use prometheus_client::registry::Registry;
+use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::Mutex;
 use std::time::SystemTime;
 
@@ -11,30 +17,40 @@ const BUCKETS: [f64; 11] = [
     0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
 ];
 
-#[derive(Default)]
-struct Histogram {
-    counts: [u64; BUCKETS.len()],
-    count: u64,
-    sum: f64,
+/// The `Content-Type` of `render`'s text.
+pub const CONTENT_TYPE: &str = "application/openmetrics-text; version=1.0.0; charset=utf-8";
+
+/// The only label: a kind from a fixed set of snake_case names (`kinds::rejection_kind`,
+/// `write_failed`, ...), never a file name or a reason, which would make one series per
+/// input.
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct KindLabel {
+    kind: &'static str,
 }
 
-#[derive(Default)]
+/// The daemon's metrics; shared by the threads that count and the endpoint that renders.
 pub struct Metrics {
-    pub fitted: AtomicU64,
-    pub rejected: AtomicU64,
-    pub superseded: AtomicU64,
-    pub unchanged: AtomicU64,
-    pub queue_depth: AtomicU64,
-    pub in_flight: AtomicU64,
-    pub reloads: AtomicU64,
-    pub reload_failures: AtomicU64,
+    pub fitted: Counter,
+    pub rejected: Counter,
+    pub superseded: Counter,
+    pub unchanged: Counter,
+    pub queue_depth: Gauge,
+    pub in_flight: Gauge,
+    pub reloads: Counter,
+    pub reload_failures: Counter,
     pub stopping: AtomicBool,
-    fit: Mutex<Histogram>,
-    /// When and of which kind the last error was.
-    last_error: Mutex<Option<(f64, &'static str)>>,
-    /// Rejections per kind: a fixed, small set of label values (never a file name or a
-    /// reason, which would make one series per input).
-    rejections: Mutex<std::collections::BTreeMap<&'static str, u64>>,
+    /// Set when jobs go through a cluster queue: `/healthz` then reports whether it is
+    /// reachable.
+    pub queue_configured: AtomicBool,
+    /// 1 while the cluster queue's server is connected.
+    pub queue_reachable: Gauge,
+    fit: Histogram,
+    /// When the last error happened, labelled with its kind: one series at a time.
+    last_error: Family<KindLabel, Gauge<f64, AtomicU64>>,
+    /// Serialises the clear-and-set of `last_error`.
+    last_error_lock: Mutex<()>,
+    rejections: Family<KindLabel, Counter>,
+    registry: Registry,
 }
 
 fn now_secs() -> f64 {
@@ -43,137 +59,120 @@ fn now_secs() -> f64 {
         .map_or(0.0, |d| d.as_secs_f64())
 }
 
-/// Prometheus label values escape backslash, quote and newline.
-fn label(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars().take(300) {
-        match c {
-            '\\' => out.push_str("\\\\"),
-            '"' => out.push_str("\\\""),
-            '\n' => out.push_str("\\n"),
-            c => out.push(c),
+impl Default for Metrics {
+    fn default() -> Self {
+        let mut registry = Registry::default();
+        let mut counter = |name: &str, help: &str| {
+            let c = Counter::default();
+            registry.register(name, help, c.clone());
+            c
+        };
+        let fitted = counter("trispline_patches_fitted", "Versions fitted and written.");
+        let rejected = counter(
+            "trispline_patches_rejected",
+            "Inputs or records rejected (quarantined or left in place).",
+        );
+        let superseded = counter(
+            "trispline_patches_superseded",
+            "Versions skipped for a newer one.",
+        );
+        let unchanged = counter(
+            "trispline_patches_unchanged",
+            "Inputs skipped as identical to the last fit.",
+        );
+        let reloads = counter("trispline_config_reloads", "Config reloads applied.");
+        let reload_failures = counter(
+            "trispline_config_reload_failures",
+            "Config reloads refused.",
+        );
+        let queue_depth = Gauge::default();
+        registry.register(
+            "trispline_queue_depth",
+            "Patches waiting for a worker.",
+            queue_depth.clone(),
+        );
+        let in_flight = Gauge::default();
+        registry.register(
+            "trispline_in_flight",
+            "Patches being fitted or written.",
+            in_flight.clone(),
+        );
+        let queue_reachable = Gauge::default();
+        registry.register(
+            "trispline_queue_reachable",
+            "1 while the cluster queue's server is connected (0 without a queue).",
+            queue_reachable.clone(),
+        );
+        let fit = Histogram::new(BUCKETS);
+        registry.register(
+            "trispline_fit_duration_seconds",
+            "Time inside the fitting worker per version.",
+            fit.clone(),
+        );
+        let last_error = Family::default();
+        registry.register(
+            "trispline_last_error_timestamp_seconds",
+            "When the last error happened; its kind is the label (the reason is in events.ndjson).",
+            last_error.clone(),
+        );
+        let rejections = Family::default();
+        registry.register(
+            "trispline_rejections",
+            "Inputs or records rejected, by kind.",
+            rejections.clone(),
+        );
+        Self {
+            fitted,
+            rejected,
+            superseded,
+            unchanged,
+            queue_depth,
+            in_flight,
+            reloads,
+            reload_failures,
+            stopping: AtomicBool::new(false),
+            queue_configured: AtomicBool::new(false),
+            queue_reachable,
+            fit,
+            last_error,
+            last_error_lock: Mutex::new(()),
+            rejections,
+            registry,
         }
     }
-    out
 }
 
 impl Metrics {
     pub fn observe_fit(&self, seconds: f64) {
-        // A poisoned lock only means another thread panicked mid-update of plain numbers.
-        let mut h = self.fit.lock().unwrap_or_else(|p| p.into_inner());
-        for (k, le) in BUCKETS.iter().enumerate() {
-            if seconds <= *le {
-                h.counts[k] += 1;
-            }
-        }
-        h.count += 1;
-        h.sum += seconds;
+        self.fit.observe(seconds);
     }
 
     /// An error of this kind (a `kinds::rejection_kind`, or `write_failed`,
     /// `component_failed`, `config_rejected`) happened now.
     pub(crate) fn error(&self, kind: &'static str) {
-        *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some((now_secs(), kind));
+        // A poisoned lock only means another thread panicked mid-update of plain numbers.
+        let _one_at_a_time = self
+            .last_error_lock
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        self.last_error.clear();
+        self.last_error
+            .get_or_create(&KindLabel { kind })
+            .set(now_secs());
     }
 
     /// A rejection of this kind (also counted as the last error).
     pub(crate) fn rejected(&self, kind: &'static str) {
-        self.rejected.fetch_add(1, Ordering::Relaxed);
-        *self
-            .rejections
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .entry(kind)
-            .or_default() += 1;
+        self.rejected.inc();
+        self.rejections.get_or_create(&KindLabel { kind }).inc();
         self.error(kind);
     }
 
+    /// The OpenMetrics text of every metric.
     pub fn render(&self) -> String {
         let mut s = String::new();
-        let counter = |s: &mut String, name: &str, help: &str, v: u64| {
-            let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} counter\n{name} {v}");
-        };
-        let gauge = |s: &mut String, name: &str, help: &str, v: u64| {
-            let _ = writeln!(s, "# HELP {name} {help}\n# TYPE {name} gauge\n{name} {v}");
-        };
-        let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        counter(
-            &mut s,
-            "trispline_patches_fitted_total",
-            "Versions fitted and written.",
-            get(&self.fitted),
-        );
-        counter(
-            &mut s,
-            "trispline_patches_rejected_total",
-            "Inputs or records rejected (quarantined).",
-            get(&self.rejected),
-        );
-        counter(
-            &mut s,
-            "trispline_patches_superseded_total",
-            "Versions skipped for a newer one.",
-            get(&self.superseded),
-        );
-        counter(
-            &mut s,
-            "trispline_patches_unchanged_total",
-            "Inputs skipped as identical to the last fit.",
-            get(&self.unchanged),
-        );
-        counter(
-            &mut s,
-            "trispline_config_reloads_total",
-            "Config reloads applied.",
-            get(&self.reloads),
-        );
-        counter(
-            &mut s,
-            "trispline_config_reload_failures_total",
-            "Config reloads refused.",
-            get(&self.reload_failures),
-        );
-        gauge(
-            &mut s,
-            "trispline_queue_depth",
-            "Patches waiting for a worker.",
-            get(&self.queue_depth),
-        );
-        gauge(
-            &mut s,
-            "trispline_in_flight",
-            "Patches being fitted or written.",
-            get(&self.in_flight),
-        );
-        {
-            let h = self.fit.lock().unwrap_or_else(|p| p.into_inner());
-            let name = "trispline_fit_duration_seconds";
-            let _ = writeln!(s, "# HELP {name} Time inside the fitting worker per version.\n# TYPE {name} histogram");
-            for (k, le) in BUCKETS.iter().enumerate() {
-                let _ = writeln!(s, "{name}_bucket{{le=\"{le}\"}} {}", h.counts[k]);
-            }
-            let _ = writeln!(s, "{name}_bucket{{le=\"+Inf\"}} {}", h.count);
-            let _ = writeln!(s, "{name}_sum {}\n{name}_count {}", h.sum, h.count);
-        }
-        let last = *self.last_error.lock().unwrap_or_else(|p| p.into_inner());
-        let name = "trispline_last_error_timestamp_seconds";
-        let _ = writeln!(s, "# HELP {name} When the last error happened; its kind is the label (the reason is in events.ndjson).\n# TYPE {name} gauge");
-        match last {
-            Some((t, kind)) => {
-                let _ = writeln!(s, "{name}{{kind=\"{}\"}} {t}", label(kind));
-            }
-            None => {
-                let _ = writeln!(s, "{name}{{kind=\"\"}} 0");
-            }
-        }
-        let name = "trispline_rejections_total";
-        let _ = writeln!(
-            s,
-            "# HELP {name} Inputs or records rejected, by kind.\n# TYPE {name} counter"
-        );
-        let by_kind = self.rejections.lock().unwrap_or_else(|p| p.into_inner());
-        for (kind, n) in by_kind.iter() {
-            let _ = writeln!(s, "{name}{{kind=\"{}\"}} {n}", label(kind));
+        if let Err(e) = prometheus_client::encoding::text::encode(&mut s, &self.registry) {
+            tracing::warn!(error = %e, "cannot render the metrics");
         }
         s
     }
@@ -184,26 +183,32 @@ mod tests {
     use super::*;
 
     #[test]
-    fn histogram_is_cumulative_and_labels_are_escaped() {
+    fn histogram_is_cumulative_and_labels_are_kinds() {
         let m = Metrics::default();
         m.observe_fit(0.003);
         m.observe_fit(0.2);
-        m.fitted.fetch_add(2, Ordering::Relaxed);
+        m.fitted.inc_by(2);
         m.rejected("parse_failed");
         m.rejected("parse_failed");
         m.rejected("too_large");
         let text = m.render();
-        assert!(text.contains("trispline_patches_fitted_total 2"));
-        assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"0.005\"} 1"));
+        assert!(text.contains("trispline_patches_fitted_total 2"), "{text}");
+        assert!(
+            text.contains("trispline_fit_duration_seconds_bucket{le=\"0.005\"} 1"),
+            "{text}"
+        );
         assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"0.25\"} 2"));
         assert!(text.contains("trispline_fit_duration_seconds_bucket{le=\"+Inf\"} 2"));
+        assert!(text.contains("trispline_fit_duration_seconds_count 2"));
         assert!(text.contains("trispline_rejections_total{kind=\"parse_failed\"} 2"));
         assert!(text.contains("trispline_rejections_total{kind=\"too_large\"} 1"));
         assert!(text.contains("trispline_patches_rejected_total 3"));
+        // One last-error series: the latest kind replaces the one before.
         assert!(
             text.contains("trispline_last_error_timestamp_seconds{kind=\"too_large\"}"),
             "{text}"
         );
-        assert_eq!(label("a\"b\\c\nd"), "a\\\"b\\\\c\\nd");
+        assert!(!text.contains("trispline_last_error_timestamp_seconds{kind=\"parse_failed\"}"));
+        assert!(text.ends_with("# EOF\n"), "{text}");
     }
 }

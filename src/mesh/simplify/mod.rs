@@ -8,7 +8,8 @@
 //! face turning by more than `max_normal_turn_deg`, no face worse than both
 //! `min_quality` and the worst face it replaces. Boundary edges carry constraint planes
 //! (perpendicular to their face through the edge) so holes keep their shape, and boundary
-//! vertices where the boundary turns sharply are locked.
+//! vertices where the boundary turns sharply are locked. Crease edges, when given, are
+//! kept the same way (see `crease`): the control mesh then carries them.
 //!
 //! Every input vertex is carried along: it starts on one of its own faces, and each
 //! collapse re-projects the points of the faces it changes onto the new fan around the
@@ -19,12 +20,14 @@
 //! The order is deterministic: costs tie-break on the vertex indices, stale queue entries
 //! are recognised by per-vertex versions (lazy invalidation).
 
+mod crease;
 mod quadric;
 mod summary;
 
 use super::distance::closest_on_triangle;
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
+use crease::Creases;
 use glam::DVec3;
 use quadric::Quadric;
 use rayon::prelude::*;
@@ -97,8 +100,10 @@ pub struct Simplified {
     pub landing: Vec<Landing>,
     /// Edge collapses performed (input vertices minus output vertices).
     pub collapses: usize,
-    /// Boundary vertices locked as corners.
+    /// Boundary vertices and crease corners locked in place.
     pub locked_corners: usize,
+    /// The crease edges kept, in `mesh`'s numbering (low index first, sorted).
+    pub crease_edges: Vec<[u32; 2]>,
 }
 
 /// Why [`simplify`] refused a mesh.
@@ -122,6 +127,17 @@ pub enum SimplifyError {
 /// Simplifies `mesh` (manifold, consistently oriented: `mesh::clean`'s output) to
 /// `opts.target_vertices` vertices or as close as the guards allow.
 pub fn simplify(mesh: &TriMesh, opts: &SimplifyOptions) -> Result<Simplified, SimplifyError> {
+    simplify_with_creases(mesh, opts, &[])
+}
+
+/// `simplify` keeping crease edges (pairs of vertex indices; pairs that are no interior
+/// edge are ignored): collapses run along crease chains only and crease corners stay, so
+/// every chain survives as a chain of control edges (`Simplified::crease_edges`).
+pub fn simplify_with_creases(
+    mesh: &TriMesh,
+    opts: &SimplifyOptions,
+    crease_edges: &[[u32; 2]],
+) -> Result<Simplified, SimplifyError> {
     if mesh.triangles.is_empty() {
         return Err(SimplifyError::NoFaces);
     }
@@ -129,7 +145,7 @@ pub fn simplify(mesh: &TriMesh, opts: &SimplifyOptions) -> Result<Simplified, Si
     if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
-    let mut state = State::new(mesh, &topo, opts);
+    let mut state = State::new(mesh, &topo, opts, Creases::new(&topo, crease_edges));
     let target = opts.target_vertices.max(4);
     // Edges refused in one pass may be allowed after their neighbourhood changed.
     for _ in 0..4 {
@@ -163,6 +179,7 @@ struct State<'a> {
     vfaces: Vec<Vec<u32>>,
     boundary: Vec<bool>,
     locked: Vec<bool>,
+    creases: Creases,
     alive: Vec<bool>,
     alive_vertices: usize,
     version: Vec<u32>,
@@ -187,7 +204,12 @@ fn quality(p: [DVec3; 3]) -> f64 {
 }
 
 impl<'a> State<'a> {
-    fn new(mesh: &'a TriMesh, topo: &Topology, opts: &'a SimplifyOptions) -> Self {
+    fn new(
+        mesh: &'a TriMesh,
+        topo: &Topology,
+        opts: &'a SimplifyOptions,
+        creases: Creases,
+    ) -> Self {
         let nv = mesh.positions.len();
         let nf = mesh.triangles.len();
         let pos = mesh.positions.clone();
@@ -214,7 +236,12 @@ impl<'a> State<'a> {
                 }
             }
         }
-        let locked = Self::corners(mesh, topo, opts.corner_turn_deg);
+        creases.add_planes(&mesh.positions, topo, opts.boundary_weight, &mut quadric);
+        let mut locked = Self::corners(mesh, topo, opts.corner_turn_deg);
+        let crease_corners = creases.corners(&mesh.positions, topo, opts.corner_turn_deg);
+        for (l, c) in locked.iter_mut().zip(crease_corners) {
+            *l |= c;
+        }
         let mut land_face = vec![0u32; nv];
         let mut land_bary = vec![[0.0; 3]; nv];
         let mut face_points = vec![Vec::new(); nf];
@@ -239,6 +266,7 @@ impl<'a> State<'a> {
             vfaces,
             boundary: topo.boundary.clone(),
             locked,
+            creases,
             alive: vec![true; nv],
             alive_vertices: nv,
             version: vec![0; nv],
@@ -378,6 +406,12 @@ impl<'a> State<'a> {
             Some((a, b))
         } else if self.locked[bi] || (self.boundary[bi] && !self.boundary[ai]) {
             Some((b, a))
+        } else if self.creases.count(a) > 0 && !self.creases.is_crease(a, b) {
+            // Off a chain only a crease vertex with a smooth neighbour may be collapsed
+            // (`Creases::allows`): the crease vertex stays.
+            Some((a, b))
+        } else if self.creases.count(b) > 0 && !self.creases.is_crease(a, b) {
+            Some((b, a))
         } else {
             None
         };
@@ -417,6 +451,9 @@ impl<'a> State<'a> {
             _ => return false,
         };
         if self.boundary[ki] && self.boundary[ri] && !on_boundary {
+            return false;
+        }
+        if !self.creases.allows(k, r, &self.boundary) {
             return false;
         }
         let mut opposite: Vec<u32> = shared
@@ -552,6 +589,7 @@ impl<'a> State<'a> {
         self.pos[ki] = c.position;
         self.quadric[ki] = c.quadric;
         self.boundary[ki] |= self.boundary[ri];
+        self.creases.merge(k, r);
         self.alive[ri] = false;
         self.alive_vertices -= 1;
         self.version[ki] += 1;
@@ -612,12 +650,14 @@ impl<'a> State<'a> {
             })
             .collect();
         let locked_corners = self.locked.iter().filter(|&&l| l).count();
+        let crease_edges = self.creases.edges(&control_of);
         Simplified {
             mesh: TriMesh::new(positions, triangles),
             control_of,
             landing,
             collapses: self.collapses,
             locked_corners,
+            crease_edges,
         }
     }
 }

@@ -9,15 +9,18 @@
 //! parameters with a small umbrella fairness term; then rounds of foot points (Newton on
 //! the limit surface, crossing faces) and squared-distance minimisation (point-to-plane
 //! with a small tangential share) until a round gains less than `min_gain` of the RMS.
+//! Sharp edges of the data (`mesh::crease`) are kept through the simplification and
+//! become crease edges of the limit surface.
 
 mod component;
 mod solve;
 
-use crate::fit::engine::umbrella_laplacian;
+use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
+use crate::mesh::crease::{detect_creases, CreaseOptions};
 use crate::mesh::simplify::{
-    simplify, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
+    simplify_with_creases, Simplified, SimplifyError, SimplifyOptions, SurfaceTopology,
 };
 use crate::mesh::topology::{Topology, TopologyError};
 use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
@@ -43,6 +46,8 @@ pub struct ObjectOptions {
     pub clean: CleanOptions,
     /// Guards of the simplification; its `target_vertices` is set from the targets above.
     pub simplify: SimplifyOptions,
+    /// Which data edges become crease edges of the control mesh (`angle_deg` 0: none).
+    pub crease: CreaseOptions,
     /// Fairness weight relative to the data: s = smoothing * data points / control points.
     pub smoothing: f64,
     /// Foot-point rounds after the first fit (at most).
@@ -70,6 +75,7 @@ impl Default for ObjectOptions {
             target_controls_pct: 5.0,
             target_controls: None,
             clean: CleanOptions::default(),
+            crease: CreaseOptions::default(),
             simplify: SimplifyOptions {
                 isotropy: 1e-3,
                 ..Default::default()
@@ -201,12 +207,18 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         target_vertices: target,
         ..opts.simplify.clone()
     };
-    let simplified = simplify(&component, &simplify_opts).map_err(ObjectError::Simplify)?;
+    let data_creases = match Topology::from_mesh(&component) {
+        Ok(topo) => detect_creases(&component, &topo, &opts.crease),
+        Err(_) => Vec::new(),
+    };
+    let simplified = simplify_with_creases(&component, &simplify_opts, &data_creases)
+        .map_err(ObjectError::Simplify)?;
     times.simplify_ms = ms_since(t);
 
     let Simplified {
         mesh: control_mesh,
         landing,
+        crease_edges,
         ..
     } = simplified;
     let params: Vec<SurfaceParam> = landing
@@ -217,7 +229,8 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
             v: l.v,
         })
         .collect();
-    let mut fit = fit_on_control_mesh(component, control_mesh, params, opts)?;
+    let mut fit =
+        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, opts)?;
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
     fit.times.total_ms = ms_since(start);
@@ -234,6 +247,18 @@ pub fn fit_on_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
+    fit_on_creased_control_mesh(component, control_mesh, &[], params, opts)
+}
+
+/// [`fit_on_control_mesh`] with crease edges (pairs of control indices) on the limit
+/// surface.
+pub fn fit_on_creased_control_mesh(
+    component: TriMesh,
+    control_mesh: TriMesh,
+    crease_edges: &[[u32; 2]],
+    params: Vec<SurfaceParam>,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let t = Instant::now();
@@ -246,10 +271,18 @@ pub fn fit_on_control_mesh(
     }
     let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
     let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let surface = LoopLimitSurface::new(control_mesh.positions.len(), &control_mesh.triangles)
-        .map_err(ObjectError::Surface)?;
+    let surface = LoopLimitSurface::with_creases(
+        control_mesh.positions.len(),
+        &control_mesh.triangles,
+        crease_edges,
+    )
+    .map_err(ObjectError::Surface)?;
     let m = control_mesh.positions.len();
-    let fairness = Collocation::new(umbrella_laplacian(m, &control_mesh.triangles));
+    let fairness = Collocation::new(umbrella_laplacian_with_creases(
+        m,
+        &control_mesh.triangles,
+        surface.crease_edges(),
+    ));
     let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
     times.surface_ms = ms_since(t);
 

@@ -15,7 +15,7 @@ mod edge_band;
 mod feet;
 mod grid_inverse;
 pub mod holes;
-mod prepare;
+pub(crate) mod prepare;
 mod resample;
 mod rounds;
 mod seed;
@@ -134,6 +134,8 @@ pub(crate) fn fit_scan(
     let degree = match &model {
         SurfaceModel::Bezier(b) => b.degree,
         SurfaceModel::Grid(_) if opts.surface == SurfaceKind::Bezier => 4,
+        SurfaceModel::BPatch(b) => b.degree(),
+        SurfaceModel::Dms(d) => d.degree(),
         SurfaceModel::Grid(_) | SurfaceModel::Mesh(_) => 0,
     };
     let outcome = corrected.outcome;

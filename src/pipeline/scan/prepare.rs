@@ -12,26 +12,26 @@ use crate::remesh::{fill_holes, FilledPatch};
 use crate::TriMesh;
 
 /// The patch ready for a domain: the component fitted, its holes filled and its map.
-pub(super) struct Prepared {
+pub(crate) struct Prepared {
     /// The largest component of the cleaned input: its vertices are the data.
-    pub(super) part: TriMesh,
+    pub(crate) part: TriMesh,
     /// Components of the cleaned input.
-    pub(super) components: usize,
+    pub(crate) components: usize,
     /// The components left out.
-    pub(super) dropped: Dropped,
+    pub(crate) dropped: Dropped,
     /// `part` with its holes closed by virtual fans.
-    pub(super) patch: FilledPatch,
+    pub(crate) patch: FilledPatch,
     /// The plane of the map.
-    pub(super) frame: PlaneFrame,
+    pub(crate) frame: PlaneFrame,
     /// The filled patch in the plane.
-    pub(super) map: PlanarMap,
+    pub(crate) map: PlanarMap,
     /// The data's sample spacing: the unit in which hole widths are judged.
-    pub(super) edge_length: f64,
+    pub(crate) edge_length: f64,
     /// Why the previous version given was not used (the later stages then start cold).
-    pub(super) cold_start: Option<ColdStart>,
+    pub(crate) cold_start: Option<ColdStart>,
 }
 
-pub(super) fn prepare(
+pub(crate) fn prepare(
     mesh: &TriMesh,
     scan: &ScanOptions,
     warm: Option<&ScanWarm>,

@@ -102,7 +102,10 @@ pub fn fit_subdivided(
 
 /// The input's subdivision hierarchy `levels` deep, or why it has none. The cheap tests
 /// (face count, one irregular face) run before a topology of the whole mesh is built.
-fn hierarchy_of(mesh: &TriMesh, levels: usize) -> Result<(Topology, Hierarchy), PipelineError> {
+pub(crate) fn hierarchy_of(
+    mesh: &TriMesh,
+    levels: usize,
+) -> Result<(Topology, Hierarchy), PipelineError> {
     // L levels of Loop subdivision multiply the face count by 4^L: most scans fail this
     // count before a topology of all their faces is built.
     let faces = mesh.triangles.len();
@@ -169,6 +172,13 @@ fn model_on_net(
                 to_control: identity,
                 degree: 0,
             }
+        }
+        // The worker fits these in `pipeline::scattered` (over the coarse net, or over the
+        // planar map without subdivision connectivity) before it comes here.
+        kind @ (SurfaceKind::Bpatch | SurfaceKind::Dms) => {
+            return Err(
+                crate::pipeline::scattered::ScatteredError::NotPlanarKind(kind.name()).into(),
+            )
         }
         SurfaceKind::Bezier => {
             let (n, index) =

@@ -1,5 +1,6 @@
 //! What the worker is told. `FitConfig` mirrors the daemon's `[fit]` table and its
-//! sub-tables (`[fit.budget]`, `[fit.scan]`, `[fit.correction]`, `[fit.components]`); the
+//! sub-tables (`[fit.budget]`, `[fit.scan]`, `[fit.correction]`, `[fit.components]`,
+//! `[fit.dms]`, `[fit.bpatch]`); the
 //! CLI's flags map onto the same structs. Sections are grouped by what they shape: the
 //! solver's stopping rule, the scan's layout, the rounds after the first fit, and which
 //! pieces of an input get a surface.
@@ -8,6 +9,7 @@ use crate::fit::{Budget, Method};
 use crate::mesh::inverse::InverseMethod;
 use crate::pipeline::scan::components::ComponentMode;
 use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
+use crate::pipeline::scattered::{BPatchConfig, DmsConfig};
 use crate::pipeline::SurfaceKind;
 use crate::TriMesh;
 
@@ -84,10 +86,28 @@ pub struct FitConfig {
     /// `[fit.components]`: which pieces of a scan get a surface.
     #[serde(default)]
     pub components: ComponentsConfig,
+    /// `[fit.dms]`: `surface = "dms"`: degree and knot clouds.
+    #[serde(default)]
+    pub dms: DmsConfig,
+    /// `[fit.bpatch]`: `surface = "bpatch"`: degree and knots.
+    #[serde(default)]
+    pub bpatch: BPatchConfig,
+    /// Whole objects: data edges whose faces meet at more than this angle (degrees between
+    /// their normals) become crease edges of the surface; 0 turns creases off.
+    #[serde(default = "default_crease_angle_deg")]
+    pub crease_angle_deg: f64,
 }
 
 fn default_min_levels() -> usize {
     1
+}
+
+/// Machined edges are 90 degrees or more; on smooth scans noise tilts neighbouring faces by
+/// up to about 50 degrees in places (see `mesh::crease` for the measurements), so 60.
+pub const DEFAULT_CREASE_ANGLE_DEG: f64 = 60.0;
+
+fn default_crease_angle_deg() -> f64 {
+    DEFAULT_CREASE_ANGLE_DEG
 }
 
 impl Default for FitConfig {
@@ -103,6 +123,9 @@ impl Default for FitConfig {
             scan: ScanConfig::default(),
             correction: CorrectionConfig::default(),
             components: ComponentsConfig::default(),
+            dms: DmsConfig::default(),
+            bpatch: BPatchConfig::default(),
+            crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
         }
     }
 }

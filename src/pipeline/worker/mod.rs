@@ -4,23 +4,28 @@
 //! scan path for disk-like scans and the object path for the rest, see `Domain`) and
 //! applies the component policy.
 
+mod cloud;
 mod config;
 mod object;
 mod report;
 
 pub use config::{
-    BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_TESSELLATION,
+    BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_CREASE_ANGLE_DEG,
+    DEFAULT_TESSELLATION,
 };
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
 
-use super::output::{tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
+use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
 use super::scan::{fit_scan, ScanFit, ScanOptions, ScanWarm};
+use super::scattered::{
+    add_outputs, fit_planar, fit_planar_subdivided, tessellate_planar, ScatteredInfo,
+};
 use super::subdivided::fit_subdivided;
-use super::{FitOptions, PatchFit, PipelineError};
+use super::{FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, StepHook};
 use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::RemeshError;
@@ -37,6 +42,8 @@ pub struct PatchOutputs {
     pub report: serde_json::Value,
     /// surface.glb.
     pub glb: Vec<u8>,
+    /// legend.svg: what surface.glb's colours mean.
+    pub legend: String,
     /// What the next version of the patch starts from; callers store it opaquely.
     pub warm: WarmStart,
     /// How the fit ended.
@@ -57,6 +64,8 @@ pub struct FittedPatch {
     pub refinement: Vec<Refinement>,
     /// Whole objects: the object fit and why that path was taken.
     pub object: Option<ObjectInfo>,
+    /// B-patch and DMS fits: the planar map, coverage and trims.
+    pub scattered: Option<ScatteredInfo>,
 }
 
 /// The fit alone: with `domain = "mesh"` the object path; else subdivision connectivity
@@ -77,6 +86,8 @@ pub(crate) fn fit_patch_with(
     cfg: &WorkerConfig,
     on_step: Option<StepHook>,
 ) -> Result<FittedPatch, PipelineError> {
+    let input = cloud::with_faces(mesh, cfg)?;
+    let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
     let fit_cfg = &cfg.fit;
     let budget = fit_cfg.budget.resolve(mesh);
     let opts = FitOptions {
@@ -87,6 +98,30 @@ pub(crate) fn fit_patch_with(
         budget: budget.clone(),
         on_step,
     };
+    if matches!(fit_cfg.surface, SurfaceKind::Bpatch | SurfaceKind::Dms) {
+        // Subdivision connectivity: over the coarse net, as the other kinds.
+        if let Some(fit) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
+            return Ok(FittedPatch {
+                fit,
+                scan: None,
+                budget,
+                levels: fit_cfg.levels,
+                refinement: Vec::new(),
+                object: None,
+                scattered: None,
+            });
+        }
+        let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
+        return Ok(FittedPatch {
+            fit,
+            scan: None,
+            budget,
+            levels: 0,
+            refinement: Vec::new(),
+            object: None,
+            scattered: Some(info),
+        });
+    }
     if fit_cfg.domain == Domain::Mesh {
         return object_patch(mesh, previous, cfg, budget, "fit.domain = \"mesh\"".into());
     }
@@ -121,6 +156,7 @@ pub(crate) fn fit_patch_with(
                 levels,
                 refinement,
                 object: None,
+                scattered: None,
             })
         }
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
@@ -172,6 +208,7 @@ pub(crate) fn fit_patch_with(
         levels: fit_cfg.levels,
         refinement,
         object: None,
+        scattered: None,
     })
 }
 
@@ -199,6 +236,7 @@ fn object_patch(
         levels: 0,
         refinement: Vec::new(),
         object: Some(info),
+        scattered: None,
     })
 }
 
@@ -219,8 +257,14 @@ pub(crate) fn run_patch_with(
     on_step: Option<StepHook>,
 ) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
+    let input = cloud::with_faces(mesh, cfg)?;
+    let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
     let fitted = fit_patch_with(mesh, previous, cfg, on_step)?;
-    Ok(outputs_of(fitted, cfg, wall))
+    let mut outputs = outputs_of(fitted, cfg, wall);
+    if let Some(cloud) = input.report() {
+        outputs.report["point_cloud"] = cloud;
+    }
+    Ok(outputs)
 }
 
 /// The outputs of a fit (`fit_patch`'s result): surface.json, report.json, the GLB and the
@@ -233,20 +277,24 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         levels,
         refinement,
         object: object_info,
+        scattered: planar_info,
     } = fitted;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
         || {
             if object_info.is_some() {
+                let t = Instant::now();
                 let check = object::object_tessellation(&fitted, object_start(&fitted, cfg));
                 let tess = tessellate_mesh_faces(&fitted, check.per_face);
-                return (
-                    tessellated_glb(&fitted, &tess, budget.tolerance),
-                    Some(check),
-                );
+                let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
+                let shown_ms = t.elapsed().as_secs_f64() * 1e3;
+                return (glb, Some((check, shown_ms)));
             }
-            let tess = tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref());
+            let tess = match &planar_info {
+                Some(info) => tessellate_planar(&fitted, info, cfg.tessellation.max(1)),
+                None => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
+            };
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)
         },
         || {
@@ -262,12 +310,20 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         },
     );
     let (glb, check) = glb_and_check;
+    let mut surface = surface;
+    if let Some(info) = &planar_info {
+        add_outputs(&fitted, info, &mut report, &mut surface, &mut warm);
+    }
     if let Some(info) = &object_info {
         let object_report = object::object_report(&fitted, info);
         report["path"] = json!("object");
         report["topology"] = object_report["topology"].clone();
         report["object"] = object_report;
-        report["tessellation"] = json!(check);
+        if let Some((check, shown_ms)) = check {
+            report["tessellation"] = json!(check);
+            // The tessellation and its GLB (beside the report, in parallel with it).
+            report["object"]["stages"]["shown_ms"] = json!(shown_ms);
+        }
         warm.object = object::object_warm(&fitted, info);
     }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
@@ -275,6 +331,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         surface,
         report,
         glb,
+        legend: error_legend(budget.tolerance),
         warm,
         status: fitted.outcome.status,
     }
@@ -328,6 +385,23 @@ pub fn run_input(
 
 /// `run_input` reporting every fitting step (of every component) to `on_step`.
 pub(crate) fn run_input_with(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+) -> Result<InputOutputs, PipelineError> {
+    let input = cloud::with_faces(mesh, cfg)?;
+    let mut fitted = run_components(&input.mesh, previous, &input.cfg, on_step)?;
+    if let Some(cloud) = input.report() {
+        for part in &mut fitted.parts {
+            part.outputs.report["point_cloud"] = cloud.clone();
+        }
+    }
+    Ok(fitted)
+}
+
+/// `run_input_with` on a mesh with triangles.
+fn run_components(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
@@ -414,6 +488,7 @@ pub(crate) fn run_input_with(
             feet: None,
             parts: warm_parts,
             object: None,
+            scattered: None,
         },
     })
 }

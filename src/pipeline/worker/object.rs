@@ -7,10 +7,11 @@
 use super::config::WorkerConfig;
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
 use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
+use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_control_mesh, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
+    fit_object, fit_on_creased_control_mesh, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -133,6 +134,9 @@ pub struct ObjectWarm {
     pub boundary_loops: usize,
     /// The data's bounding box (min, max).
     pub bounds: [DVec3; 2],
+    /// The control mesh's crease edges.
+    #[serde(default)]
+    pub crease_edges: Vec<[u32; 2]>,
 }
 
 /// A new version starts from the previous control mesh only when its vertex count is
@@ -171,6 +175,10 @@ pub enum WarmDecision {
 fn options(cfg: &WorkerConfig) -> ObjectOptions {
     ObjectOptions {
         target_controls_pct: cfg.fit.scan.target_controls_pct,
+        crease: CreaseOptions {
+            angle_deg: cfg.fit.crease_angle_deg,
+            ..CreaseOptions::default()
+        },
         smoothing: cfg.fit.scan.smoothing,
         rounds: cfg.fit.correction.rounds,
         ..ObjectOptions::default()
@@ -188,9 +196,11 @@ pub(super) fn fit_as_object(
 ) -> Result<(PatchFit, ObjectInfo), PipelineError> {
     let opts = options(cfg);
     let object = |source| PipelineError::Object { source };
+    let creases = previous.map(|w| w.crease_edges.as_slice()).unwrap_or(&[]);
     let (fit, warm) = match previous.map(|w| warm_start(mesh, w, previous_controls)) {
         Some(Ok((component, control_mesh, params))) => (
-            fit_on_control_mesh(component, control_mesh, params, &opts).map_err(object)?,
+            fit_on_creased_control_mesh(component, control_mesh, creases, params, &opts)
+                .map_err(object)?,
             WarmDecision::Used,
         ),
         Some(Err(why)) => (
@@ -444,6 +454,7 @@ pub(super) fn object_warm(fit: &PatchFit, info: &ObjectInfo) -> Option<ObjectWar
         euler: info.data_topology.euler,
         boundary_loops: info.data_topology.boundary_loops,
         bounds: bounds_of(&fit.data),
+        crease_edges: surface.crease_edges().to_vec(),
     })
 }
 
@@ -457,9 +468,9 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
             "components": t.components,
         })
     };
-    let faces = match &fit.model {
-        SurfaceModel::Mesh(m) => m.faces().len(),
-        _ => 0,
+    let (faces, creases) = match &fit.model {
+        SurfaceModel::Mesh(m) => (m.faces().len(), m.crease_edges().len()),
+        _ => (0, 0),
     };
     let warm = match &info.warm {
         WarmDecision::None => serde_json::json!({"used": false}),
@@ -471,6 +482,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "data_points": fit.data.len(),
         "control_points": fit.controls.len(),
         "control_faces": faces,
+        "crease_edges": creases,
         "initial_positions": "simplification",
         "topology": {"data": topology(&info.data_topology), "control": topology(&info.control_topology)},
         "rounds": info.rounds,

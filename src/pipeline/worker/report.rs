@@ -3,7 +3,7 @@
 
 use super::config::WorkerConfig;
 use crate::fit::{Budget, FitStatus, StepStats};
-use crate::pipeline::output::surface_json;
+use crate::pipeline::output::{error_ramp, surface_json};
 use crate::pipeline::scan::{warm_feet, ScanFit};
 use crate::pipeline::{PatchFit, SurfaceKind, SurfaceModel};
 use crate::remesh::planar::PlaneFrame;
@@ -59,6 +59,10 @@ pub struct WarmStart {
     /// control positions are `controls`).
     #[serde(default)]
     pub object: Option<super::object::ObjectWarm>,
+    /// B-patch and DMS fits: the domain, knots and controls (the plane frame, warp and data
+    /// feet are in the fields above).
+    #[serde(default)]
+    pub scattered: Option<crate::pipeline::scattered::ScatteredWarm>,
 }
 
 /// A component's warm start and where the component was, so that the pieces of the next
@@ -104,11 +108,12 @@ pub(super) fn describe(
         domain: scan_info.map(|s| s.domain.clone()),
         coords: match &fitted.model {
             SurfaceModel::Grid(g) => g.control_coords().to_vec(),
-            SurfaceModel::Bezier(_) | SurfaceModel::Mesh(_) => Vec::new(),
+            _ => Vec::new(),
         },
         feet: scan_info.and_then(warm_feet),
         parts: Vec::new(),
         object: None,
+        scattered: None,
     };
     (report, surface, warm)
 }
@@ -174,5 +179,7 @@ fn report_json(
         "wall_ms": wall_ms,
         "iterations": f.outcome.steps,
         "final": fin,
+        // What surface.glb's colours mean (legend.svg draws the same).
+        "error_ramp": error_ramp(budget.tolerance)["error_ramp"],
     })
 }

@@ -11,7 +11,10 @@
 //! point (I, b) reproducing it is p's blossom at (t_{a,0..b0-1}, t_{b,0..b1-1}, t_{c,0..b2-1}).
 //!
 //! Knot-only data is computed once: per domain triangle one `SimplexFamily` (its
-//! (n+1)(n+2)/2 basis functions share one recurrence DAG over the triangle's 3(n+1) knots)
+//! (n+1)(n+2)/2 basis functions share one recurrence DAG over the triangle's 3(n+1) knots;
+//! at degree <= 2 each cell of the knot-line arrangement a point meets is converted once to
+//! polynomials and kept, so later points in the cell cost a sign key and a polynomial per
+//! function; degree 3 walks the recurrence)
 //! and a grid that lists, per cell, the triangles whose knot clouds' bounding box may cover
 //! it (the support of every N^I lies in the hull of I's clouds).
 //!
@@ -197,6 +200,11 @@ impl DmsSpline {
         self.families.iter().map(SimplexFamily::node_count).sum()
     }
 
+    /// Polynomial pieces (knot-line cells) converted and kept so far over all triangles.
+    pub fn piece_count(&self) -> usize {
+        self.families.iter().map(SimplexFamily::piece_count).sum()
+    }
+
     fn corners(&self, face: usize) -> [DVec2; 3] {
         self.triangles[face].map(|v| self.vertices[v as usize])
     }
@@ -214,7 +222,7 @@ impl DmsSpline {
                 if !family.may_touch(x) {
                     continue;
                 }
-                family.evaluate::<DERIV>(x, dir, scratch, values);
+                family.evaluate_cached::<DERIV>(x, dir, scratch, values);
                 for (b, jet) in values.iter().enumerate() {
                     if jet[0] != 0.0 || (DERIV && jet.iter().any(|&v| v != 0.0)) {
                         out.push((t * per + b as u32, *jet));

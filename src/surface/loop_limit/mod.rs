@@ -21,18 +21,30 @@
 //! (derivatives there: see `IrregularPatch::vertex_rows`), and a descent that is still
 //! irregular at the depth cap interpolates the exact limit positions of the node corners.
 //!
+//! Crease edges (Hoppe et al. 1994) are sharp like boundary edges: their odd points take
+//! 1/2 (a + b), a vertex with two sharp edges 3/4 v + 1/8 (a + b) along them, one with
+//! three or more is fixed, and a dart (one crease edge) keeps the smooth rule. Face by
+//! face this is the boundary surface of the mesh cut open along its creases, so a face
+//! whose corners are regular on its side of a crease is again a ghost-point box spline;
+//! the local subdivision carries crease flags like boundary flags. A dart's limit mask is
+//! not Loop's (its crease spoke takes the crease rule): it is found by iterating its
+//! 1-ring's subdivision matrix.
+//!
 //! Derivatives follow the chain rule through each child's affine map (the middle child is
 //! flipped). Node weights are kept as a base row plus differences, so derivatives near an
 //! irregular vertex keep their relative precision although the map scales by 2^depth.
 
 mod cached;
+mod error;
 mod net;
 mod patch;
 
+pub use error::LoopLimitError;
+
 use super::{BasisDerivRows, Derivatives, SurfaceParam, TriSurface};
-use crate::mesh::topology::{Topology, TopologyError, NONE};
+use crate::mesh::topology::{Topology, NONE};
 use glam::DVec3;
-use net::{Net, Term, VertexKind};
+use net::{Net, Term, VertexRule};
 use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
 use std::sync::OnceLock;
 
@@ -45,60 +57,6 @@ const MEMO_DEPTH: usize = 40;
 /// faces the normal settles slowly (at 7 faces, 7e-3 rad between the two ends of the fan
 /// at 1e-10); the descent keeps full relative precision at this depth (see `Net`).
 const VERTEX_NUDGE: f64 = 1.0 / (1u64 << 40) as f64;
-
-/// Why a control mesh cannot carry a Loop limit surface.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[non_exhaustive]
-pub enum LoopLimitError {
-    /// No faces, so no surface.
-    #[error("the control mesh has no faces")]
-    NoFaces,
-    /// More control points than 32-bit indices address.
-    #[error("{count} control points do not fit 32-bit indices")]
-    TooManyControls {
-        /// Control points given.
-        count: usize,
-    },
-    /// A face refers to a control point that does not exist.
-    #[error("face {face} uses control index {index}, but there are only {count} control points")]
-    IndexOutOfRange {
-        /// The face.
-        face: usize,
-        /// The index it uses.
-        index: u32,
-        /// Control points there are.
-        count: usize,
-    },
-    /// A face with a repeated corner.
-    #[error("face {face} repeats a control point")]
-    DegenerateFace {
-        /// The face.
-        face: usize,
-    },
-    /// A control point no face uses.
-    #[error("control point {vertex} belongs to no face, so it has no place on the limit surface")]
-    IsolatedVertex {
-        /// The control point.
-        vertex: usize,
-    },
-    /// The faces do not form a manifold mesh.
-    #[error("the control mesh is not a manifold: {0}")]
-    NonManifold(#[source] TopologyError),
-}
-
-impl LoopLimitError {
-    /// A stable snake_case name of the variant, for machine-readable reports.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            Self::NoFaces => "no_faces",
-            Self::TooManyControls { .. } => "too_many_controls",
-            Self::IndexOutOfRange { .. } => "index_out_of_range",
-            Self::DegenerateFace { .. } => "degenerate_face",
-            Self::IsolatedVertex { .. } => "isolated_vertex",
-            Self::NonManifold(_) => "non_manifold",
-        }
-    }
-}
 
 struct Node {
     net: Net,
@@ -145,6 +103,8 @@ enum FacePatch {
 pub struct LoopLimitSurface {
     control_count: usize,
     topo: Topology,
+    /// Crease edges as (low, high) control indices, sorted, each once.
+    creases: Vec<[u32; 2]>,
     patches: Vec<FacePatch>,
 }
 
@@ -154,6 +114,7 @@ impl std::fmt::Debug for LoopLimitSurface {
             .field("control_count", &self.control_count)
             .field("faces", &self.patches.len())
             .field("irregular_faces", &self.irregular_face_count())
+            .field("crease_edges", &self.creases.len())
             .finish()
     }
 }
@@ -161,6 +122,20 @@ impl std::fmt::Debug for LoopLimitSurface {
 impl LoopLimitSurface {
     /// Builds the surface of a manifold control mesh of `control_count` points.
     pub fn new(control_count: usize, faces: &[[u32; 3]]) -> Result<Self, LoopLimitError> {
+        Self::with_creases(control_count, faces, &[])
+    }
+
+    /// Builds the surface with sharp edges: each crease edge (a pair of control indices, in
+    /// either order; repeats and boundary edges, sharp anyway, are harmless) is subdivided
+    /// with the boundary rules on both sides (Hoppe et al. 1994). A vertex with two sharp
+    /// (crease or boundary) edges follows the cubic B-spline along them, one with more (or
+    /// a boundary vertex with a crease) is a fixed corner, and one crease edge ending at a
+    /// vertex (a dart) leaves it smooth.
+    pub fn with_creases(
+        control_count: usize,
+        faces: &[[u32; 3]],
+        crease_edges: &[[u32; 2]],
+    ) -> Result<Self, LoopLimitError> {
         if faces.is_empty() {
             return Err(LoopLimitError::NoFaces);
         }
@@ -185,14 +160,59 @@ impl LoopLimitSurface {
         if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
             return Err(LoopLimitError::IsolatedVertex { vertex });
         }
+        let (creases, crease_half) = Self::crease_halfedges(&topo, crease_edges)?;
         let patches = (0..faces.len())
-            .map(|f| Self::face_patch(&topo, f))
+            .map(|f| Self::face_patch(&topo, &crease_half, f))
             .collect();
         Ok(Self {
             control_count,
             topo,
+            creases,
             patches,
         })
+    }
+
+    /// The interior crease edges (sorted, low index first) and a flag per half-edge.
+    fn crease_halfedges(
+        topo: &Topology,
+        crease_edges: &[[u32; 2]],
+    ) -> Result<(Vec<[u32; 2]>, Vec<bool>), LoopLimitError> {
+        let mut half = vec![false; topo.twin.len()];
+        let mut kept = Vec::with_capacity(crease_edges.len());
+        for &[a, b] in crease_edges {
+            let unknown = LoopLimitError::UnknownCreaseEdge { a, b };
+            if a as usize >= topo.vertex_count || b as usize >= topo.vertex_count {
+                return Err(unknown);
+            }
+            let h = topo
+                .ring_halfedges(a)
+                .iter()
+                .copied()
+                .find(|&h| {
+                    h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == b
+                })
+                .or_else(|| {
+                    topo.ring_halfedges(b).iter().copied().find(|&h| {
+                        h != NONE && topo.triangles[(h / 3) as usize][((h + 1) % 3) as usize] == a
+                    })
+                })
+                .ok_or(unknown)?;
+            let t = topo.twin[h as usize];
+            if t == NONE {
+                continue;
+            }
+            half[h as usize] = true;
+            half[t as usize] = true;
+            kept.push([a.min(b), a.max(b)]);
+        }
+        kept.sort_unstable();
+        kept.dedup();
+        Ok((kept, half))
+    }
+
+    /// The crease edges of the surface: interior edges, low control index first, sorted.
+    pub fn crease_edges(&self) -> &[[u32; 2]] {
+        &self.creases
     }
 
     /// The control faces (the domain faces), as given.
@@ -214,7 +234,7 @@ impl LoopLimitSurface {
             .count()
     }
 
-    fn face_patch(topo: &Topology, f: usize) -> FacePatch {
+    fn face_patch(topo: &Topology, crease_half: &[bool], f: usize) -> FacePatch {
         let corners = topo.triangles[f];
         let mut support: Vec<u32> = corners.to_vec();
         let mut faces = vec![f];
@@ -227,6 +247,7 @@ impl LoopLimitSurface {
         }
         let mut tris = Vec::with_capacity(faces.len());
         let mut bnd = Vec::with_capacity(faces.len());
+        let mut crease = Vec::with_capacity(faces.len());
         for &g in &faces {
             let mut t = [0u32; 3];
             for (k, &v) in topo.triangles[g].iter().enumerate() {
@@ -240,6 +261,7 @@ impl LoopLimitSurface {
             }
             tris.push(t);
             bnd.push([0, 1, 2].map(|k| topo.twin[3 * g + k] == NONE));
+            crease.push([0, 1, 2].map(|k| crease_half[3 * g + k]));
         }
         let n = support.len();
         let mut base = vec![0.0; n];
@@ -255,6 +277,7 @@ impl LoopLimitSurface {
             nsup: n,
             tris,
             bnd,
+            crease,
             faces_total: support
                 .iter()
                 .map(|&v| topo.face_valence[v as usize])
@@ -270,13 +293,14 @@ impl LoopLimitSurface {
         // cross-boundary rate is not derived here, so those take the full 80 as margin
         // (the cap costs nothing unless a parameter is within 2^-cap of the vertex).
         let cap = (0..3u32)
-            .filter_map(|v| net.vertex_kind(v))
+            .filter_map(|v| net.vertex_rule(v))
             .map(|k| match k {
-                VertexKind::Interior(r) => {
-                    let lambda = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / r.len() as f64).cos();
+                VertexRule::Smooth { ring, dart: false } => {
+                    let lambda =
+                        0.375 + 0.25 * (2.0 * std::f64::consts::PI / ring.len() as f64).cos();
                     (-38.0 / lambda.ln()).ceil() as usize
                 }
-                VertexKind::Boundary(_) => 80,
+                _ => 80,
             })
             .max()
             .unwrap_or(80)
@@ -298,10 +322,13 @@ impl IrregularPatch {
             (0.0, 0.0) => Some(2),
             _ => None,
         };
-        let kind = corner.and_then(|c| self.root.net.vertex_kind(c).map(|k| (c, k)));
-        match kind {
-            Some((c, k)) if !k.is_regular() => self.vertex_rows(c, &k, u, v, acc),
-            _ => self.descend(u, v, acc),
+        let net = &self.root.net;
+        let irregular = corner
+            .filter(|&c| !net.corner_is_regular(c))
+            .and_then(|c| net.vertex_rule(c).map(|k| (c, k)));
+        match irregular {
+            Some((c, k)) => self.vertex_rows(c, &k, u, v, acc),
+            None => self.descend(u, v, acc),
         }
     }
 
@@ -309,11 +336,12 @@ impl IrregularPatch {
     /// vertex of valence n the parametric derivatives tend to 0 (n < 6) or grow without
     /// bound (n > 6); what is returned instead is the derivative along each face edge as
     /// Loop's tangent mask `2/n sum_m cos(2 pi (m - j) / n) r_m` (exact tangent plane, the
-    /// box spline's values at n = 6), and zero second derivatives. At a boundary vertex or
-    /// corner the derivatives are those at a parameter 2^-40 towards the face centre.
-    fn vertex_rows(&self, c: u32, kind: &VertexKind, u: f64, v: f64, acc: &mut [[f64; 6]]) {
+    /// box spline's values at n = 6), and zero second derivatives. At a boundary, crease or
+    /// corner vertex, or a dart, the derivatives are those at a parameter 2^-40 towards the
+    /// face centre.
+    fn vertex_rows(&self, c: u32, kind: &VertexRule, u: f64, v: f64, acc: &mut [[f64; 6]]) {
         match kind {
-            VertexKind::Interior(ring) => {
+            VertexRule::Smooth { ring, dart: false } => {
                 let n = ring.len();
                 // Derivative along the edge from c to its ring neighbour x.
                 let along = |x: u32| -> Vec<Term> {
@@ -344,7 +372,7 @@ impl IrregularPatch {
                     add_column(&self.root.net, terms, col, acc);
                 }
             }
-            VertexKind::Boundary(_) => {
+            _ => {
                 let d = VERTEX_NUDGE;
                 self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, acc);
                 for a in acc.iter_mut() {
@@ -355,7 +383,7 @@ impl IrregularPatch {
                 }
             }
         }
-        add_column(&self.root.net, &kind.limit_mask(c), 0, acc);
+        add_column(&self.root.net, &kind.limit_mask(c, &self.root.net), 0, acc);
     }
 
     /// The memoised regular quadtree node holding face parameter (u, v), with the local

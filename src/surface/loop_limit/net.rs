@@ -26,6 +26,8 @@ pub(super) struct Net {
     pub tris: Vec<[u32; 3]>,
     /// Edge k of a triangle (corner k to corner k + 1) lies on the mesh boundary.
     pub bnd: Vec<[bool; 3]>,
+    /// Edge k of a triangle is a crease edge (both triangles of the edge say so).
+    pub crease: Vec<[bool; 3]>,
     /// Faces around each vertex in the whole mesh at this level (the net may hold fewer).
     pub faces_total: Vec<u32>,
 }
@@ -39,37 +41,86 @@ pub(super) enum VertexKind {
     Boundary(Vec<u32>),
 }
 
-impl VertexKind {
-    /// Interior of valence 6 or boundary with 3 faces: the box spline (with ghost points)
-    /// is exact around such a vertex.
-    pub(crate) fn is_regular(&self) -> bool {
-        match self {
-            VertexKind::Interior(r) => r.len() == 6,
-            VertexKind::Boundary(r) => r.len() == 4,
-        }
-    }
+/// Which of the subdivision rules (Hoppe et al. 1994) moves a vertex, by the number of
+/// sharp (boundary or crease) edges at it.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) enum VertexRule {
+    /// No sharp edge, or one crease edge ending here (a dart): Loop's rule over the closed
+    /// counter-clockwise ring.
+    Smooth {
+        /// The ring.
+        ring: Vec<u32>,
+        /// Whether one crease edge ends here.
+        dart: bool,
+    },
+    /// Exactly two sharp edges, to these neighbours: the cubic B-spline rules along them.
+    Crease(u32, u32),
+    /// Three or more sharp edges, or a boundary vertex with one face: fixed.
+    Corner,
+}
 
-    /// Loop's limit-position mask.
-    pub(crate) fn limit_mask(&self, v: u32) -> Vec<Term> {
+impl VertexRule {
+    /// Loop's limit-position mask. A dart's differs from the smooth mask (the odd point of
+    /// its crease edge takes the crease rule), so it is the fixed point of the 1-ring's
+    /// subdivision matrix, found by iterating it.
+    pub(crate) fn limit_mask(&self, v: u32, net: &Net) -> Vec<Term> {
         match self {
-            VertexKind::Interior(r) => {
-                let n = r.len();
+            VertexRule::Smooth { ring, dart: false } => {
+                let n = ring.len();
                 let beta = loop_beta(n);
                 let chi = 1.0 / (3.0 / (8.0 * beta) + n as f64);
                 std::iter::once((v, 1.0 - n as f64 * chi))
-                    .chain(r.iter().map(|&j| (j, chi)))
+                    .chain(ring.iter().map(|&j| (j, chi)))
                     .collect()
             }
-            VertexKind::Boundary(r) if r.len() == 2 => vec![(v, 1.0)],
-            VertexKind::Boundary(r) => {
-                vec![
-                    (v, 2.0 / 3.0),
-                    (r[0], 1.0 / 6.0),
-                    (r[r.len() - 1], 1.0 / 6.0),
-                ]
+            VertexRule::Smooth { ring, dart: true } => {
+                let sharp: Vec<bool> = ring.iter().map(|&r| net.edge_is_crease(v, r)).collect();
+                let w = dart_limit_weights(&sharp);
+                std::iter::once(v)
+                    .chain(ring.iter().copied())
+                    .zip(w)
+                    .collect()
             }
+            VertexRule::Crease(a, b) => vec![(v, 2.0 / 3.0), (*a, 1.0 / 6.0), (*b, 1.0 / 6.0)],
+            VertexRule::Corner => vec![(v, 1.0)],
         }
     }
+}
+
+/// The limit-position weights (centre first, then the ring) of a closed 1-ring whose
+/// edges `sharp` take the crease rule: the row of the centre in S^k as k grows, S being
+/// the 1-ring's subdivision matrix (Loop's even rule at the centre, odd rules on the
+/// spokes). The subdominant eigenvalue of a dart is at most about 0.7, so 200 steps leave
+/// nothing of it in f64.
+pub(crate) fn dart_limit_weights(sharp: &[bool]) -> Vec<f64> {
+    let n = sharp.len();
+    let beta = loop_beta(n);
+    let mut row = vec![0.0; n + 1];
+    row[0] = 1.0;
+    let mut next = vec![0.0; n + 1];
+    for _ in 0..200 {
+        // next = row * S: the centre's new weight spreads over the coarse vertices by the
+        // even rule, each spoke's by its odd rule.
+        next.iter_mut().for_each(|x| *x = 0.0);
+        next[0] += row[0] * (1.0 - n as f64 * beta);
+        for x in next[1..].iter_mut() {
+            *x += row[0] * beta;
+        }
+        for (j, &s) in sharp.iter().enumerate() {
+            let r = row[1 + j];
+            if s {
+                next[0] += 0.5 * r;
+                next[1 + j] += 0.5 * r;
+            } else {
+                next[0] += 0.375 * r;
+                next[1 + j] += 0.375 * r;
+                next[1 + (j + 1) % n] += 0.125 * r;
+                next[1 + (j + n - 1) % n] += 0.125 * r;
+            }
+        }
+        std::mem::swap(&mut row, &mut next);
+    }
+    row
 }
 
 /// A vertex of the subdivided net: an even copy of a vertex, or the odd point of an edge.
@@ -161,27 +212,112 @@ impl Net {
         })
     }
 
+    /// Whether edge (a, b) is a crease edge.
+    pub(crate) fn edge_is_crease(&self, a: u32, b: u32) -> bool {
+        self.tris.iter().zip(&self.crease).any(|(t, f)| {
+            (0..3).any(|k| {
+                let (x, y) = (t[k], t[(k + 1) % 3]);
+                f[k] && ((x == a && y == b) || (x == b && y == a))
+            })
+        })
+    }
+
+    /// The rule of a vertex whose faces are all in the net (`None` otherwise).
+    pub(crate) fn vertex_rule(&self, v: u32) -> Option<VertexRule> {
+        Some(match self.vertex_kind(v)? {
+            VertexKind::Interior(ring) => {
+                let creases = ring.iter().filter(|&&r| self.edge_is_crease(v, r)).count();
+                match creases {
+                    0 | 1 => VertexRule::Smooth {
+                        dart: creases == 1,
+                        ring,
+                    },
+                    2 => {
+                        let mut ends = ring.iter().filter(|&&r| self.edge_is_crease(v, r));
+                        let (a, b) = (*ends.next()?, *ends.next()?);
+                        VertexRule::Crease(a, b)
+                    }
+                    _ => VertexRule::Corner,
+                }
+            }
+            VertexKind::Boundary(ring) => {
+                let inner = &ring[1..ring.len() - 1];
+                if ring.len() == 2 || inner.iter().any(|&r| self.edge_is_crease(v, r)) {
+                    VertexRule::Corner
+                } else {
+                    VertexRule::Crease(ring[0], ring[ring.len() - 1])
+                }
+            }
+        })
+    }
+
+    /// The ring of corner `v` of the node face within its sector: counter-clockwise from
+    /// one sharp edge to the next, through the node face (the whole ring of a boundary
+    /// vertex without creases). `None` unless `v` has two sharp edges.
+    fn sector(&self, v: u32) -> Option<Vec<u32>> {
+        let t = self.tris[0];
+        let k = t.iter().position(|&x| x == v)?;
+        let (next, prev) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+        let ring = match self.vertex_kind(v)? {
+            VertexKind::Interior(r) | VertexKind::Boundary(r) => r,
+        };
+        let n = ring.len();
+        let sharp = |r: u32| self.edge_is_crease(v, r) || self.edge_is_boundary(v, r);
+        let i = ring.iter().position(|&r| r == next)?;
+        if ring[(i + 1) % n] != prev {
+            return None;
+        }
+        let mut from = i;
+        let mut steps = 0;
+        while !sharp(ring[from]) {
+            from = (from + n - 1) % n;
+            steps += 1;
+            if steps > n {
+                return None;
+            }
+        }
+        let mut out = vec![ring[from]];
+        let mut at = from;
+        loop {
+            at = (at + 1) % n;
+            out.push(ring[at]);
+            if sharp(ring[at]) || out.len() > n {
+                break;
+            }
+        }
+        Some(out)
+    }
+
+    /// Whether corner `v` of the node face is regular for it: smooth of valence 6 with no
+    /// crease, or a crease vertex with 3 faces on the node face's side (where the box
+    /// spline with ghost points is exact, as at a regular boundary).
+    pub(crate) fn corner_is_regular(&self, v: u32) -> bool {
+        match self.vertex_rule(v) {
+            Some(VertexRule::Smooth { ring, dart }) => !dart && ring.len() == 6,
+            Some(VertexRule::Crease(..)) => self.sector(v).is_some_and(|s| s.len() == 4),
+            _ => false,
+        }
+    }
+
     /// The subdivision rule producing a fine vertex, as terms over this net.
     fn rule(&self, f: Fine) -> Vec<Term> {
         match f {
             Fine::Even(v) => match self
-                .vertex_kind(v)
+                .vertex_rule(v)
                 .expect("even points are only needed at node corners, whose rings are complete")
             {
-                VertexKind::Interior(r) => {
-                    let beta = loop_beta(r.len());
-                    std::iter::once((v, 1.0 - r.len() as f64 * beta))
-                        .chain(r.iter().map(|&j| (j, beta)))
+                VertexRule::Smooth { ring, .. } => {
+                    let beta = loop_beta(ring.len());
+                    std::iter::once((v, 1.0 - ring.len() as f64 * beta))
+                        .chain(ring.iter().map(|&j| (j, beta)))
                         .collect()
                 }
-                VertexKind::Boundary(r) if r.len() == 2 => vec![(v, 1.0)],
-                VertexKind::Boundary(r) => {
-                    vec![(v, 0.75), (r[0], 0.125), (r[r.len() - 1], 0.125)]
-                }
+                VertexRule::Crease(a, b) => vec![(v, 0.75), (a, 0.125), (b, 0.125)],
+                VertexRule::Corner => vec![(v, 1.0)],
             },
             Fine::Odd(a, b) => {
                 let (faces, n) = self.edge_faces(a, b);
-                if n == 2 {
+                if n == 2 && !self.edge_is_crease(a, b) {
                     vec![
                         (a, 0.375),
                         (b, 0.375),
@@ -190,7 +326,7 @@ impl Net {
                     ]
                 } else {
                     debug_assert!(
-                        self.edge_is_boundary(a, b),
+                        n == 2 || self.edge_is_boundary(a, b),
                         "odd points are only needed on edges at node corners, whose faces are all present"
                     );
                     vec![(a, 0.5), (b, 0.5)]
@@ -202,20 +338,30 @@ impl Net {
     /// The net of child `c` of the node face (0..3 at corners 0, 1, 2; 3 in the middle,
     /// corners (m01, m12, m20)).
     pub fn child(&self, c: usize) -> Net {
-        let children = |t: &[u32; 3], b: &[bool; 3]| -> [([Fine; 3], [bool; 3]); 4] {
+        // A child's edge lies on a parent edge (and is sharp like it) or inside the face.
+        let halves = |b: &[bool; 3]| -> [[bool; 3]; 4] {
+            [
+                [b[0], false, b[2]],
+                [b[1], false, b[0]],
+                [b[2], false, b[1]],
+                [false; 3],
+            ]
+        };
+        let children = |t: &[u32; 3]| -> [[Fine; 3]; 4] {
             let (m0, m1, m2) = (odd(t[0], t[1]), odd(t[1], t[2]), odd(t[2], t[0]));
             let e = Fine::Even;
             [
-                ([e(t[0]), m0, m2], [b[0], false, b[2]]),
-                ([e(t[1]), m1, m0], [b[1], false, b[0]]),
-                ([e(t[2]), m2, m1], [b[2], false, b[1]]),
-                ([m0, m1, m2], [false; 3]),
+                [e(t[0]), m0, m2],
+                [e(t[1]), m1, m0],
+                [e(t[2]), m2, m1],
+                [m0, m1, m2],
             ]
         };
-        let target = children(&self.tris[0], &self.bnd[0])[c];
-        let mut verts: Vec<Fine> = target.0.to_vec();
+        let target = children(&self.tris[0])[c];
+        let mut verts: Vec<Fine> = target.to_vec();
         let mut tris = vec![[0u32, 1, 2]];
-        let mut bnd = vec![target.1];
+        let mut bnd = vec![halves(&self.bnd[0])[c]];
+        let mut crease = vec![halves(&self.crease[0])[c]];
         let id = |f: Fine, verts: &mut Vec<Fine>| -> u32 {
             match verts.iter().position(|&x| x == f) {
                 Some(i) => i as u32,
@@ -225,9 +371,9 @@ impl Net {
                 }
             }
         };
-        for (t, b) in self.tris.iter().zip(&self.bnd) {
-            for (ft, fb) in children(t, b) {
-                if ft == target.0 || !ft.iter().any(|x| target.0.contains(x)) {
+        for ((t, b), cr) in self.tris.iter().zip(&self.bnd).zip(&self.crease) {
+            for ((ft, fb), fc) in children(t).into_iter().zip(halves(b)).zip(halves(cr)) {
+                if ft == target || !ft.iter().any(|x| target.contains(x)) {
                     continue;
                 }
                 let tri = [
@@ -237,6 +383,7 @@ impl Net {
                 ];
                 tris.push(tri);
                 bnd.push(fb);
+                crease.push(fc);
             }
         }
         let nsup = self.nsup;
@@ -266,40 +413,47 @@ impl Net {
             nsup,
             tris,
             bnd,
+            crease,
             faces_total,
         }
     }
 
     /// The 12 box-spline stencil points of the node face, if the face is regular: every
-    /// corner an interior vertex of valence 6 or a boundary vertex with 3 faces, and two
-    /// boundary corners joined by a boundary edge. Points beyond the boundary are ghosts
-    /// `v + a - b` continuing the lattice (a boundary vertex's missing ring slots are the
-    /// reflections of its inner neighbours); a dyadic test checks this is exact.
+    /// corner regular for it (`corner_is_regular`), and two crease or boundary corners
+    /// joined by a sharp edge. Points beyond a sharp edge are ghosts `v + a - b`
+    /// continuing the lattice (a crease or boundary vertex's missing ring slots are the
+    /// reflections of its inner neighbours); a dyadic test checks this is exact. Across a
+    /// crease this is the boundary patch of the mesh cut open along it, which subdivides
+    /// by the same rules on the node face's side.
     pub(crate) fn regular_stencil(&self) -> Option<Vec<Vec<Term>>> {
-        let kinds: Vec<VertexKind> = (0..3u32)
-            .map(|v| self.vertex_kind(v))
-            .collect::<Option<_>>()?;
-        if !kinds.iter().all(VertexKind::is_regular) {
-            return None;
-        }
-        for k in 0..3 {
-            let both = matches!(kinds[k], VertexKind::Boundary(_))
-                && matches!(kinds[(k + 1) % 3], VertexKind::Boundary(_));
-            if both && !self.bnd[0][k] {
+        let mut rings: Vec<Vec<Vec<Term>>> = Vec::with_capacity(3);
+        let mut sided = [false; 3];
+        for v in 0..3u32 {
+            if !self.corner_is_regular(v) {
                 return None;
             }
-        }
-        // Six ring slots of each corner, counter-clockwise from a given neighbour.
-        let ring6 = |v: u32, start: u32| -> Option<Vec<Vec<Term>>> {
-            let full: Vec<Vec<Term>> = match &kinds[v as usize] {
-                VertexKind::Interior(r) => r.iter().map(|&x| vec![(x, 1.0)]).collect(),
-                VertexKind::Boundary(r) => {
+            let full: Vec<Vec<Term>> = match self.vertex_rule(v)? {
+                VertexRule::Smooth { ring, .. } => ring.iter().map(|&x| vec![(x, 1.0)]).collect(),
+                _ => {
+                    let r = self.sector(v)?;
+                    sided[v as usize] = true;
                     let mut s: Vec<Vec<Term>> = r.iter().map(|&x| vec![(x, 1.0)]).collect();
                     s.push(vec![(v, 1.0), (r[3], 1.0), (r[2], -1.0)]);
                     s.push(vec![(v, 1.0), (r[0], 1.0), (r[1], -1.0)]);
                     s
                 }
             };
+            rings.push(full);
+        }
+        for k in 0..3 {
+            let sharp = self.bnd[0][k] || self.crease[0][k];
+            if sided[k] && sided[(k + 1) % 3] && !sharp {
+                return None;
+            }
+        }
+        // Six ring slots of each corner, counter-clockwise from a given neighbour.
+        let ring6 = |v: u32, start: u32| -> Option<Vec<Vec<Term>>> {
+            let full = &rings[v as usize];
             let at = full.iter().position(|s| s.as_slice() == [(start, 1.0)])?;
             Some((0..6).map(|i| full[(at + i) % 6].clone()).collect())
         };

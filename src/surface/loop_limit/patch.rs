@@ -276,9 +276,9 @@ pub(super) fn cap_rows(net: &Net, a: f64, b: f64, jac: &Jac, acc: &mut [[f64; 6]
     for (c, wc) in w.iter().enumerate() {
         let t = jac.apply(wc);
         let mask = net
-            .vertex_kind(c as u32)
+            .vertex_rule(c as u32)
             .expect("node corners have complete rings")
-            .limit_mask(c as u32);
+            .limit_mask(c as u32, net);
         diff.iter_mut().for_each(|x| *x = 0.0);
         net.add_diff(&mask, 1.0, &mut diff);
         for (slot, r) in acc.iter_mut().zip(&diff) {

@@ -22,165 +22,27 @@
 //! on which side of every knot line x lies: the recurrence then holds at x exactly as it
 //! does off the lines, and the splines (continuous from degree 1) take their values there.
 //!
+//! Evaluation in piece form (`pieces`): the splines are polynomials on the cells of the
+//! knot-line arrangement; `evaluate_cached` converts each cell met once (the recurrence run
+//! on polynomials) and then evaluates the kept polynomials. `evaluate` walks the recurrence
+//! at the point: the reference the pieces are tested against.
+//!
 //! Derivatives: the recurrence is differentiated by the product rule (the barycentric
 //! coordinates are affine, the indicators piecewise constant), which off the knot lines is
 //! the simplex-spline derivative formula written as a recurrence; on a knot line it gives
 //! the derivative of the piece the symbolic point lies in.
 
+mod node;
+mod pieces;
+mod predicates;
+
+pub use node::Jet;
+pub use predicates::{barycentric_affine, det2, orient_sign, perturbed_side};
+
 use glam::DVec2;
+use node::{CompiledNode, Node};
+use pieces::Pieces;
 use std::collections::HashMap;
-
-/// Value, d/dx, d/dy, d2/dx2, d2/dxdy, d2/dy2.
-pub type Jet = [f64; 6];
-
-/// (a, b) -> (s, e) with s + e == a + b exactly (Knuth's two-sum).
-#[inline]
-fn two_sum(a: f64, b: f64) -> (f64, f64) {
-    let s = a + b;
-    let bb = s - a;
-    (s, (a - (s - bb)) + (b - bb))
-}
-
-/// Exact sign of `sum a_i b_i` for finite inputs without overflow: every product becomes
-/// two floats (the fused multiply-add gives the rounding error exactly) and the sum is
-/// accumulated as a non-overlapping expansion, whose sign is that of its largest part.
-fn exact_sign_of_products(terms: &[(f64, f64)]) -> i8 {
-    let mut expansion = [0.0f64; 32];
-    let mut len = 0usize;
-    let mut grow = |b: f64| {
-        let mut q = b;
-        let mut out = 0usize;
-        for i in 0..len {
-            let (s, e) = two_sum(q, expansion[i]);
-            if e != 0.0 {
-                expansion[out] = e;
-                out += 1;
-            }
-            q = s;
-        }
-        if q != 0.0 {
-            expansion[out] = q;
-            out += 1;
-        }
-        len = out;
-    };
-    for &(a, b) in terms {
-        let hi = a * b;
-        grow(hi);
-        grow(a.mul_add(b, -hi));
-    }
-    match len {
-        0 => 0,
-        _ if expansion[len - 1] > 0.0 => 1,
-        _ => -1,
-    }
-}
-
-/// Sign of the orientation of (p, q, r): +1 counter-clockwise, -1 clockwise, 0 collinear,
-/// exact (a float filter first, the exact expansion only near zero).
-pub fn orient_sign(p: DVec2, q: DVec2, r: DVec2) -> i8 {
-    let left = (q.x - p.x) * (r.y - p.y);
-    let right = (q.y - p.y) * (r.x - p.x);
-    let det = left - right;
-    let bound = 1e-15 * (left.abs() + right.abs());
-    if det > bound {
-        return 1;
-    }
-    if -det > bound {
-        return -1;
-    }
-    exact_sign_of_products(&[
-        (q.x, r.y),
-        (-q.x, p.y),
-        (-p.x, r.y),
-        (-q.y, r.x),
-        (q.y, p.x),
-        (p.y, r.x),
-    ])
-}
-
-/// Exact sign of `(q - p) x d`.
-fn cross_sign(p: DVec2, q: DVec2, d: DVec2) -> i8 {
-    let left = (q.x - p.x) * d.y;
-    let right = (q.y - p.y) * d.x;
-    let det = left - right;
-    let bound = 1e-15 * (left.abs() + right.abs());
-    if det > bound {
-        return 1;
-    }
-    if -det > bound {
-        return -1;
-    }
-    exact_sign_of_products(&[(q.x, d.y), (-p.x, d.y), (-q.y, d.x), (p.y, d.x)])
-}
-
-/// The side of line p -> q that the symbolic point `x + eps d + eps^2 (1,0) + eps^3 (0,1)`
-/// lies on: +1 left, -1 right; never 0 for p != q.
-pub fn perturbed_side(p: DVec2, q: DVec2, x: DVec2, d: DVec2) -> i8 {
-    let s = orient_sign(p, q, x);
-    if s != 0 {
-        return s;
-    }
-    let s = cross_sign(p, q, d);
-    if s != 0 {
-        return s;
-    }
-    // (q - p) x (1, 0) = -(q.y - p.y); (q - p) x (0, 1) = q.x - p.x: signs of exact
-    // differences are comparisons.
-    match q.y.partial_cmp(&p.y) {
-        Some(std::cmp::Ordering::Greater) => -1,
-        Some(std::cmp::Ordering::Less) => 1,
-        _ => {
-            if q.x > p.x {
-                1
-            } else {
-                -1
-            }
-        }
-    }
-}
-
-/// Twice the signed area of (p, q, r) in floats.
-#[inline]
-pub fn det2(p: DVec2, q: DVec2, r: DVec2) -> f64 {
-    (q - p).perp_dot(r - p)
-}
-
-/// Affine barycentric coordinates of a triangle: `lambda_j(x) = c[j][0] + c[j][1] x + c[j][2] y`.
-pub fn barycentric_affine(w: [DVec2; 3]) -> [[f64; 3]; 3] {
-    let d = det2(w[0], w[1], w[2]);
-    let mut c = [[0.0; 3]; 3];
-    for (j, cj) in c.iter_mut().enumerate() {
-        let (p, q) = (w[(j + 1) % 3], w[(j + 2) % 3]);
-        // orient(x, p, q) = p x q + x x (p - q), linear in x.
-        *cj = [p.perp_dot(q) / d, (p.y - q.y) / d, -(p.x - q.x) / d];
-    }
-    c
-}
-
-#[derive(Clone, Debug)]
-enum Node {
-    /// A knot set with all knots collinear: a line measure, zero as a function (its
-    /// parent's barycentric factor vanishes on that line).
-    Zero,
-    Leaf {
-        /// Counter-clockwise.
-        tri: [DVec2; 3],
-        inv_abs_det: f64,
-    },
-    Inner {
-        lambda: [[f64; 3]; 3],
-        children: [u32; 3],
-    },
-}
-
-#[derive(Clone, Debug)]
-struct CompiledNode {
-    node: Node,
-    /// Bounding box of the subset's knots: the spline vanishes outside it.
-    min: DVec2,
-    max: DVec2,
-}
 
 /// A knot pool and the simplex splines of some of its subsets, ready to evaluate.
 #[derive(Clone, Debug)]
@@ -190,6 +52,9 @@ pub struct SimplexFamily {
     roots: Vec<(u32, f64)>,
     min: DVec2,
     max: DVec2,
+    /// The polynomial pieces met so far (`None` above `pieces::PIECE_DEGREE`: `evaluate`
+    /// serves).
+    pieces: Option<Pieces>,
 }
 
 /// Knot masks address at most this many knots.
@@ -248,10 +113,12 @@ impl Compiler<'_> {
         );
         let node = if pts.len() == 3 {
             let (a, b, c) = (pts[0].1, pts[1].1, pts[2].1);
+            let ids = [pts[0].0, pts[1].0, pts[2].0].map(|i| i as u8);
             match orient_sign(a, b, c) {
                 0 => Node::Zero,
                 s => Node::Leaf {
                     tri: if s > 0 { [a, b, c] } else { [a, c, b] },
+                    knots: if s > 0 { ids } else { [ids[0], ids[2], ids[1]] },
                     inv_abs_det: 1.0 / det2(a, b, c).abs(),
                 },
             }
@@ -288,28 +155,37 @@ impl SimplexFamily {
             memo: HashMap::new(),
         };
         let mut compiled_roots = Vec::with_capacity(roots.len());
+        let mut root_degree = 0;
         for (r, &(mask, factor)) in roots.iter().enumerate() {
             let count = mask.count_ones();
             if count < 3 {
                 return Err(SimplexError::TooFewKnots(r, count));
             }
+            root_degree = root_degree.max(count as usize - 3);
             compiled_roots.push((compiler.node(mask), factor));
         }
         let (min, max) = knots.iter().fold(
             (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
             |(lo, hi), p| (lo.min(*p), hi.max(*p)),
         );
+        let pieces = Pieces::new(knots, &compiler.nodes, root_degree, min, max);
         Ok(Self {
             nodes: compiler.nodes,
             roots: compiled_roots,
             min,
             max,
+            pieces,
         })
     }
 
     /// Nodes in the shared recurrence DAG (a measure of evaluation cost).
     pub fn node_count(&self) -> usize {
         self.nodes.len()
+    }
+
+    /// Polynomial pieces converted and kept so far (a size figure for reports).
+    pub fn piece_count(&self) -> usize {
+        self.pieces.as_ref().map_or(0, Pieces::cell_count)
     }
 
     /// Root splines compiled, in the order of `compile`'s `roots`.
@@ -321,6 +197,22 @@ impl SimplexFamily {
     #[inline]
     pub fn may_touch(&self, x: DVec2) -> bool {
         x.cmpge(self.min).all() && x.cmple(self.max).all()
+    }
+
+    /// What `evaluate` gives, from the polynomial of x's knot-line cell (converted on the
+    /// first visit and kept; module docs), equal up to rounding. Families above degree 2
+    /// walk the recurrence (`scratch` serves only then).
+    pub fn evaluate_cached<const DERIV: bool>(
+        &self,
+        x: DVec2,
+        dir: DVec2,
+        scratch: &mut Vec<Jet>,
+        out: &mut Vec<Jet>,
+    ) {
+        match &self.pieces {
+            Some(pieces) => pieces.evaluate::<DERIV>(x, dir, &self.nodes, &self.roots, out),
+            None => self.evaluate::<DERIV>(x, dir, scratch, out),
+        }
     }
 
     /// Root values (and, with `DERIV`, x/y derivatives up to second order) at x, the
@@ -340,7 +232,9 @@ impl SimplexFamily {
             }
             let jet = match &cn.node {
                 Node::Zero => [0.0; 6],
-                Node::Leaf { tri, inv_abs_det } => {
+                Node::Leaf {
+                    tri, inv_abs_det, ..
+                } => {
                     let inside =
                         (0..3).all(|k| perturbed_side(tri[k], tri[(k + 1) % 3], x, dir) > 0);
                     if inside {
@@ -386,32 +280,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn exact_orientation_is_consistent_where_floats_are_not() {
-        let p = DVec2::new(0.1, 0.1);
-        let q = DVec2::new(0.3, 0.3);
-        let r = DVec2::new(0.7, 0.7);
-        assert_eq!(orient_sign(p, q, r), 0);
-        let above = DVec2::new(0.7, f64::from_bits(0.7f64.to_bits() + 1));
-        assert_eq!(orient_sign(p, q, above), 1);
-        assert_eq!(orient_sign(q, p, above), -1);
-        // Points rounded onto a line: an exact sign is the same for every order of the
-        // three points (up to the permutation's parity); float determinants disagree.
-        let (a, b) = (DVec2::new(0.13, 0.71), DVec2::new(12.3, -4.1));
-        for k in 1..200 {
-            let c = a + (b - a) * (k as f64 * 0.0173);
-            let s = orient_sign(a, b, c);
-            assert_eq!(orient_sign(b, c, a), s);
-            assert_eq!(orient_sign(c, a, b), s);
-            assert_eq!(orient_sign(b, a, c), -s);
-            assert_eq!(orient_sign(a, c, b), -s);
-        }
-        // A point on the line is put on the side the perturbation points to, antisymmetrically.
-        let d = DVec2::new(-1.0, 1.0);
-        assert_eq!(perturbed_side(p, q, r, d), 1);
-        assert_eq!(perturbed_side(q, p, r, d), -1);
-    }
-
-    #[test]
     fn coincident_knots_give_bernstein_polynomials() {
         let (a, b, c) = (
             DVec2::new(0.0, 0.0),
@@ -428,5 +296,86 @@ mod tests {
         // The coincident knots make every proper 3-subset a thin (zero) triangle except
         // [a, b, c], so the recurrence reduces to de Casteljau on the Bernstein weights.
         assert!((out[0][0] - 2.0 * 0.3 * 0.5).abs() < 1e-12, "{}", out[0][0]);
+    }
+
+    /// xorshift in [0, 1): the tests' knots and points, reproducible.
+    fn uniform(seed: &mut u64) -> f64 {
+        *seed ^= *seed << 13;
+        *seed ^= *seed >> 7;
+        *seed ^= *seed << 17;
+        (*seed >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn pieces_equal_the_recurrence_off_and_on_knot_lines_whatever_the_order() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        for degree in 0..=pieces::PIECE_DEGREE {
+            for _ in 0..12 {
+                let size = degree + 3;
+                let pool: Vec<DVec2> = (0..size + 2)
+                    .map(|_| DVec2::new(uniform(&mut seed), uniform(&mut seed)))
+                    .collect();
+                let all = (1u16 << (size + 2)) - 1;
+                let roots = [
+                    ((1u16 << size) - 1, 1.0),
+                    (all & !0b11, 2.0),
+                    (all & !0b101, 0.5),
+                ];
+                let family = SimplexFamily::compile(&pool, &roots).expect("compiles");
+                let mut points: Vec<(DVec2, DVec2)> = (0..300)
+                    .map(|_| {
+                        let x = DVec2::new(uniform(&mut seed), uniform(&mut seed)) * 1.2 - 0.1;
+                        (
+                            x,
+                            DVec2::new(uniform(&mut seed) - 0.5, uniform(&mut seed) - 0.5),
+                        )
+                    })
+                    .collect();
+                // Points on knot lines, resolved by their direction.
+                for a in 0..pool.len() {
+                    for b in a + 1..pool.len() {
+                        let t = uniform(&mut seed);
+                        let dir = DVec2::new(uniform(&mut seed) - 0.5, uniform(&mut seed) - 0.5);
+                        points.push((pool[a] + (pool[b] - pool[a]) * t, dir));
+                    }
+                }
+                let (mut scratch, mut want, mut got) = (Vec::new(), Vec::new(), Vec::new());
+                let mut reference = Vec::new();
+                let mut scale = [0.0f64; 6];
+                for &(x, dir) in &points {
+                    family.evaluate::<true>(x, dir, &mut scratch, &mut want);
+                    for jet in &want {
+                        for (s, v) in scale.iter_mut().zip(jet) {
+                            *s = s.max(v.abs());
+                        }
+                    }
+                    reference.push(want.clone());
+                }
+                let mut cached = Vec::new();
+                for (&(x, dir), want) in points.iter().zip(&reference) {
+                    family.evaluate_cached::<true>(x, dir, &mut scratch, &mut got);
+                    for (w, g) in want.iter().zip(&got) {
+                        for k in 0..6 {
+                            assert!(
+                                (w[k] - g[k]).abs() <= 1e-8 * (1.0 + scale[k]),
+                                "degree {degree}, x {x}, component {k}: {} vs {}",
+                                w[k],
+                                g[k]
+                            );
+                        }
+                    }
+                    cached.push(got.clone());
+                }
+                assert!(family.piece_count() > 0, "cells were kept");
+                // A fresh copy visiting the points backwards converts its cells from other
+                // points first: the pieces depend on the cell alone.
+                let fresh = family.clone();
+                assert_eq!(fresh.piece_count(), 0);
+                for (&(x, dir), first) in points.iter().zip(&cached).rev() {
+                    fresh.evaluate_cached::<true>(x, dir, &mut scratch, &mut got);
+                    assert_eq!(&got, first, "degree {degree}, x {x}");
+                }
+            }
+        }
     }
 }

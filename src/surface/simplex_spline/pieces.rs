@@ -1,0 +1,412 @@
+//! The polynomial pieces of a `SimplexFamily`, converted once per cell and kept.
+//!
+//! A simplex spline of degree m is one polynomial of degree m on each cell of the
+//! arrangement of the lines through pairs of its knots: the recurrence's leaves are
+//! indicators of knot triangles (constant off those lines) and its factors are affine. So
+//! the side of every knot line a point lies on (its cell's sign key) fixes every leaf, and
+//! running the recurrence on polynomials instead of numbers gives each root's polynomial on
+//! that cell. A key's polynomials depend on the key alone (not on the point that first
+//! reached the cell), so evaluations are reproducible whatever the order points come in.
+//!
+//! Why not per domain triangle (one Bezier patch each)? With knot clouds spread around the
+//! vertices, knot lines cross the domain triangles: the splines are polynomial only on the
+//! finer cells of the knot-line arrangement.
+//!
+//! Signs are those of the family's own recurrence: the same float filter as
+//! `orient_sign`, and the exact symbolic test (`perturbed_side`) where it cannot decide, so a
+//! point on a knot line gets the piece its perturbation direction points into.
+//!
+//! An evaluation is then the sign key (a float test per knot line), one hash look-up and a
+//! polynomial per root: several times cheaper than walking the recurrence per point, which
+//! visits every node (hundreds for a degree-2 family) with exact orientation tests at the
+//! leaves.
+
+use super::node::{CompiledNode, Jet, Node};
+use super::predicates::{orient_sign, perturbed_side};
+use glam::DVec2;
+use rustc_hash::FxHashMap;
+use std::sync::{PoisonError, RwLock};
+
+/// Polynomials up to this degree are representable (the monomials of degree <= 3: 10
+/// coefficients).
+const MAX_PIECE_DEGREE: usize = 3;
+
+/// Families up to this degree are kept in piece form. Degree 3 is not: in monomials about
+/// the pool's centre its cells' coefficients cancel too much (a DMS partition of unity on
+/// random clouds came out 4e-9 off at a domain-edge point, the recurrence 1e-15), so
+/// cubic families walk the recurrence.
+pub(super) const PIECE_DEGREE: usize = 2;
+const MONOMIALS: usize = 10;
+
+/// A family keeps at most this many cells; past it pieces are converted on each call
+/// (a bound on memory for points sprayed over a large domain: every cell still evaluates
+/// exactly).
+const MAX_PIECES: usize = 1 << 13;
+
+/// The knot lines: more than 128 would not fit a key (a 16-knot pool has 120 pairs).
+const MAX_LINES: usize = 128;
+
+/// Index of monomial X^a Y^b (by total degree, then by b).
+#[inline]
+const fn mono(a: usize, b: usize) -> usize {
+    (a + b) * (a + b + 1) / 2 + b
+}
+
+type Poly = [f64; MONOMIALS];
+
+/// One cell's polynomials, root after root (`coefficients` each), in local coordinates.
+#[derive(Debug)]
+struct Piece {
+    zero: bool,
+    coefficients: Box<[f64]>,
+}
+
+/// A family's knot lines, its local frame and the cells met so far.
+pub(super) struct Pieces {
+    /// Per knot line (knot i < knot j): knot i (`px`, `py`) and knot j - knot i (`dx`,
+    /// `dy`), apart so that the sign loop runs without branches.
+    px: Vec<f64>,
+    py: Vec<f64>,
+    dx: Vec<f64>,
+    dy: Vec<f64>,
+    ends: Vec<(DVec2, DVec2)>,
+    /// The pool's convex hull, counter-clockwise: every spline vanishes outside it.
+    hull: Vec<DVec2>,
+    /// Per node that is a leaf: its three edges as (line, true when the ccw edge runs from
+    /// the line's higher knot to its lower one).
+    leaf_edges: Vec<[(u8, bool); 3]>,
+    centre: DVec2,
+    inv_scale: f64,
+    /// Monomials per root polynomial: (m + 1)(m + 2) / 2 for the highest root degree m.
+    per_root: usize,
+    cells: RwLock<FxHashMap<u128, Piece>>,
+}
+
+impl Clone for Pieces {
+    /// A copy starts with no cells (they are a cache: refilled on use).
+    fn clone(&self) -> Self {
+        Self {
+            px: self.px.clone(),
+            py: self.py.clone(),
+            dx: self.dx.clone(),
+            dy: self.dy.clone(),
+            ends: self.ends.clone(),
+            hull: self.hull.clone(),
+            leaf_edges: self.leaf_edges.clone(),
+            centre: self.centre,
+            inv_scale: self.inv_scale,
+            per_root: self.per_root,
+            cells: RwLock::new(FxHashMap::default()),
+        }
+    }
+}
+
+impl std::fmt::Debug for Pieces {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pieces")
+            .field("lines", &self.ends.len())
+            .field("cells", &self.cell_count())
+            .finish()
+    }
+}
+
+impl Pieces {
+    /// The piece form of a compiled family whose roots have degree <= `MAX_PIECE_DEGREE`;
+    /// `None` when it has more knot lines than a key holds.
+    pub(super) fn new(
+        knots: &[DVec2],
+        nodes: &[CompiledNode],
+        root_degree: usize,
+        min: DVec2,
+        max: DVec2,
+    ) -> Option<Self> {
+        if root_degree > PIECE_DEGREE {
+            return None;
+        }
+        let mut line_of: FxHashMap<(u8, u8), u8> = FxHashMap::default();
+        let mut ends: Vec<(DVec2, DVec2)> = Vec::new();
+        let mut leaf_edges = Vec::new();
+        for cn in nodes {
+            let Node::Leaf { knots: ids, .. } = &cn.node else {
+                continue;
+            };
+            let mut edges = [(0u8, false); 3];
+            for (k, edge) in edges.iter_mut().enumerate() {
+                let (u, v) = (ids[k], ids[(k + 1) % 3]);
+                let key = (u.min(v), u.max(v));
+                let line = match line_of.get(&key) {
+                    Some(&l) => l,
+                    None => {
+                        if ends.len() >= MAX_LINES {
+                            return None;
+                        }
+                        ends.push((knots[key.0 as usize], knots[key.1 as usize]));
+                        let l = (ends.len() - 1) as u8;
+                        line_of.insert(key, l);
+                        l
+                    }
+                };
+                *edge = (line, u > v);
+            }
+            leaf_edges.push(edges);
+        }
+        let extent = (max - min).max_element();
+        Some(Self {
+            px: ends.iter().map(|e| e.0.x).collect(),
+            py: ends.iter().map(|e| e.0.y).collect(),
+            dx: ends.iter().map(|e| e.1.x - e.0.x).collect(),
+            dy: ends.iter().map(|e| e.1.y - e.0.y).collect(),
+            ends,
+            hull: convex_hull(knots),
+            leaf_edges,
+            centre: (min + max) * 0.5,
+            inv_scale: if extent > 0.0 { 1.0 / extent } else { 1.0 },
+            per_root: (root_degree + 1) * (root_degree + 2) / 2,
+            cells: RwLock::new(FxHashMap::default()),
+        })
+    }
+
+    /// Cells converted so far.
+    pub(super) fn cell_count(&self) -> usize {
+        self.cells
+            .read()
+            .unwrap_or_else(PoisonError::into_inner)
+            .len()
+    }
+
+    /// Bit l set when x (perturbed along `dir`) lies left of knot line l.
+    fn key(&self, x: DVec2, dir: DVec2) -> u128 {
+        let (mut key, mut unsure) = (0u128, 0u128);
+        let lines = self.ends.len();
+        for start in (0..lines).step_by(64) {
+            let end = (start + 64).min(lines);
+            let (mut k, mut u) = (0u64, 0u64);
+            for (i, l) in (start..end).enumerate() {
+                // `orient_sign`'s filter, term for term, so that a decided sign is its sign.
+                let left = self.dx[l] * (x.y - self.py[l]);
+                let right = self.dy[l] * (x.x - self.px[l]);
+                let det = left - right;
+                let bound = 1e-15 * (left.abs() + right.abs());
+                k |= ((det > 0.0) as u64) << i;
+                u |= ((det.abs() <= bound) as u64) << i;
+            }
+            key |= (k as u128) << start;
+            unsure |= (u as u128) << start;
+        }
+        // Where the filter cannot tell (on or next to a line): the exact symbolic side.
+        while unsure != 0 {
+            let l = unsure.trailing_zeros() as usize;
+            unsure &= unsure - 1;
+            let (a, b) = self.ends[l];
+            let left = (perturbed_side(a, b, x, dir) > 0) as u128;
+            key = (key & !(1u128 << l)) | (left << l);
+        }
+        key
+    }
+
+    /// True when x lies strictly outside the pool's hull (exactly so: the float filter of
+    /// `orient_sign` must decide it), where every spline of the family is zero.
+    fn outside(&self, x: DVec2) -> bool {
+        let n = self.hull.len();
+        (0..n).any(|k| {
+            let (p, q) = (self.hull[k], self.hull[(k + 1) % n]);
+            let left = (q.x - p.x) * (x.y - p.y);
+            let right = (q.y - p.y) * (x.x - p.x);
+            let det = left - right;
+            -det > 1e-15 * (left.abs() + right.abs())
+        })
+    }
+
+    /// Every root's polynomial on the cell of `key`: the recurrence run on polynomials.
+    fn convert(&self, key: u128, nodes: &[CompiledNode], roots: &[(u32, f64)]) -> Piece {
+        let mut polys: Vec<Option<Poly>> = Vec::with_capacity(nodes.len());
+        let mut leaf = 0usize;
+        let (c, s) = (self.centre, 1.0 / self.inv_scale);
+        for cn in nodes {
+            let poly = match &cn.node {
+                Node::Zero => None,
+                Node::Leaf { inv_abs_det, .. } => {
+                    let edges = &self.leaf_edges[leaf];
+                    leaf += 1;
+                    let inside = edges
+                        .iter()
+                        .all(|&(l, flipped)| ((key >> l) & 1 == 1) != flipped);
+                    inside.then(|| {
+                        let mut p = [0.0; MONOMIALS];
+                        p[0] = *inv_abs_det;
+                        p
+                    })
+                }
+                Node::Inner { lambda, children } => {
+                    let mut acc: Option<Poly> = None;
+                    for (l, &child) in lambda.iter().zip(children) {
+                        let Some(m) = &polys[child as usize] else {
+                            continue;
+                        };
+                        // lambda(x) with x = c + s X: affine in the local X, Y.
+                        let (l0, l1, l2) = (l[0] + l[1] * c.x + l[2] * c.y, l[1] * s, l[2] * s);
+                        let out = acc.get_or_insert([0.0; MONOMIALS]);
+                        multiply_affine(m, [l0, l1, l2], out);
+                    }
+                    acc
+                }
+            };
+            polys.push(poly);
+        }
+        let mut coefficients = vec![0.0; roots.len() * self.per_root].into_boxed_slice();
+        let mut zero = true;
+        for (r, &(id, factor)) in roots.iter().enumerate() {
+            if let Some(p) = &polys[id as usize] {
+                zero = false;
+                for (dst, src) in coefficients[r * self.per_root..(r + 1) * self.per_root]
+                    .iter_mut()
+                    .zip(p)
+                {
+                    *dst = src * factor;
+                }
+            }
+        }
+        Piece { zero, coefficients }
+    }
+
+    /// Root jets at x (perturbed along `dir`), converting and keeping its cell if new.
+    pub(super) fn evaluate<const DERIV: bool>(
+        &self,
+        x: DVec2,
+        dir: DVec2,
+        nodes: &[CompiledNode],
+        roots: &[(u32, f64)],
+        out: &mut Vec<Jet>,
+    ) {
+        if self.outside(x) {
+            out.clear();
+            out.resize(roots.len(), [0.0; 6]);
+            return;
+        }
+        let key = self.key(x, dir);
+        {
+            let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
+            if let Some(piece) = cells.get(&key) {
+                self.jets::<DERIV>(piece, roots.len(), x, out);
+                return;
+            }
+        }
+        let piece = self.convert(key, nodes, roots);
+        self.jets::<DERIV>(&piece, roots.len(), x, out);
+        let mut cells = self.cells.write().unwrap_or_else(PoisonError::into_inner);
+        if cells.len() < MAX_PIECES {
+            cells.entry(key).or_insert(piece);
+        }
+    }
+
+    fn jets<const DERIV: bool>(&self, piece: &Piece, roots: usize, x: DVec2, out: &mut Vec<Jet>) {
+        out.clear();
+        if piece.zero {
+            out.resize(roots, [0.0; 6]);
+            return;
+        }
+        let basis = monomial_jets::<DERIV>((x - self.centre) * self.inv_scale, self.inv_scale);
+        let n = self.per_root;
+        out.extend(piece.coefficients.chunks_exact(n).map(|coef| {
+            let mut jet = [0.0; 6];
+            for (c, b) in coef.iter().zip(&basis[..n]) {
+                if *c == 0.0 {
+                    continue;
+                }
+                jet[0] += c * b[0];
+                if DERIV {
+                    for k in 1..6 {
+                        jet[k] += c * b[k];
+                    }
+                }
+            }
+            jet
+        }));
+    }
+}
+
+/// out += m * (l0 + l1 X + l2 Y). Only polynomials of degree <= 2 are ever multiplied
+/// (a child has one knot less than its parent, and no node has degree above the roots'
+/// <= 3), so m's degree-3 terms are zero and the product fits.
+fn multiply_affine(m: &Poly, [l0, l1, l2]: [f64; 3], out: &mut Poly) {
+    for d in 0..MAX_PIECE_DEGREE {
+        for b in 0..=d {
+            let a = d - b;
+            let v = m[mono(a, b)];
+            if v == 0.0 {
+                continue;
+            }
+            out[mono(a, b)] += l0 * v;
+            out[mono(a + 1, b)] += l1 * v;
+            out[mono(a, b + 1)] += l2 * v;
+        }
+    }
+}
+
+/// Per monomial X^a Y^b at X: value and x/y derivatives up to second order, in the
+/// caller's coordinates (X = (x - centre) * inv_scale).
+fn monomial_jets<const DERIV: bool>(p: DVec2, inv_scale: f64) -> [Jet; MONOMIALS] {
+    let px = [1.0, p.x, p.x * p.x, p.x * p.x * p.x];
+    let py = [1.0, p.y, p.y * p.y, p.y * p.y * p.y];
+    let (s1, s2) = (inv_scale, inv_scale * inv_scale);
+    let mut out = [[0.0; 6]; MONOMIALS];
+    for d in 0..=MAX_PIECE_DEGREE {
+        for b in 0..=d {
+            let a = d - b;
+            let jet = &mut out[mono(a, b)];
+            jet[0] = px[a] * py[b];
+            if DERIV {
+                let (fa, fb) = (a as f64, b as f64);
+                if a > 0 {
+                    jet[1] = fa * px[a - 1] * py[b] * s1;
+                }
+                if b > 0 {
+                    jet[2] = fb * px[a] * py[b - 1] * s1;
+                }
+                if a > 1 {
+                    jet[3] = fa * (fa - 1.0) * px[a - 2] * py[b] * s2;
+                }
+                if a > 0 && b > 0 {
+                    jet[4] = fa * fb * px[a - 1] * py[b - 1] * s2;
+                }
+                if b > 1 {
+                    jet[5] = fb * (fb - 1.0) * px[a] * py[b - 2] * s2;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Convex hull of `points`, counter-clockwise, without collinear points (Andrew's monotone
+/// chain; fewer than three distinct points give no hull, and `outside` is then never true).
+fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
+    let mut sorted = points.to_vec();
+    sorted.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    sorted.dedup();
+    if sorted.len() < 3 {
+        return Vec::new();
+    }
+    let mut hull: Vec<DVec2> = Vec::with_capacity(2 * sorted.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &DVec2>> = if pass == 0 {
+            Box::new(sorted.iter())
+        } else {
+            Box::new(sorted.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && orient_sign(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop();
+    }
+    if hull.len() < 3 {
+        return Vec::new();
+    }
+    hull
+}
