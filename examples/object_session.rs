@@ -135,16 +135,16 @@ fn run(scans: &[Scan], opts: SessionOptions, label: &str) -> trispline::pipeline
         match session.add_scan(id, mesh, *t) {
             Ok(u) => {
                 let rms = u.fit.geometric_rms();
-                let warm = u.outputs.report["object"]["warm"]["used"]
-                    .as_bool()
-                    .unwrap_or(u.fit.warm_start);
+                let session = &u.outputs.report["session"];
                 println!(
-                    "+{id:7} {:7.0} ms (merge {:5.0}, fit {:6.0}, outputs {:5.0})  path {:6}  warm {warm:5}  controls {:5}  merged {:6}  rms {:5.1} um  changed +{} -{} ~{} ={}",
+                    "+{id:7} {:7.0} ms (merge {:5.0}, fit {:6.0}, outputs {:5.0})  path {:6}  views {:3.0} deg  warm {:5}  controls {:5}  merged {:6}  rms {:5.1} um  changed +{} -{} ~{} ={}",
                     u.times.total_ms,
                     u.times.merge_ms,
                     u.times.fit_ms,
                     u.times.outputs_ms,
                     u.path,
+                    session["view_spread_deg"].as_f64().unwrap_or(f64::NAN),
+                    u.fit.warm_start,
                     u.fit.controls.len(),
                     u.merged_vertices,
                     um(rms),
@@ -160,6 +160,9 @@ fn run(scans: &[Scan], opts: SessionOptions, label: &str) -> trispline::pipeline
                 std::process::exit(1);
             }
         }
+    }
+    if let Some(cell) = session.cell() {
+        println!("merge cell {:.3} mm", cell * 1e3);
     }
     match last {
         Some(f) => f,

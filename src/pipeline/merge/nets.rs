@@ -160,8 +160,9 @@ fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
 }
 
 /// The vertex of a crossed cell: the mean of its edges' zero crossings, projected onto
-/// the zero set along the function's normal; `None` when the cell is not crossed or the
-/// projection ends further than `keep` from every sample.
+/// the zero set along the function's normal; `None` when the cell is not crossed, too few
+/// samples hold the local quadric, or the projection ends further than `keep` from every
+/// sample.
 fn cell_vertex(
     implicit: &Implicit,
     corners: &FxHashMap<CellKey, f64>,
@@ -200,11 +201,12 @@ fn cell_vertex(
         x -= last.value * last.normal;
         last = implicit.at(x)?;
     }
-    // The plane fits above bring x near the surface; the quadric takes it onto it.
-    if let Some(on) = implicit.refine(x, last.normal) {
-        x = on;
-        last = implicit.at(x)?;
-    }
+    // The plane fits above bring x near the surface, but stand off a curved one by about
+    // sigma^2 times the curvature / 2; the quadric takes x onto it. Where too few samples
+    // hold a quadric (a corner of the data's rim) the vertex would keep that offset (tens
+    // of micrometres at a scan's spacing): it is dropped, the surface stops there.
+    x = implicit.refine(x, last.normal)?;
+    last = implicit.at(x)?;
     let inside = last.centroid_shift <= RIM_SHIFT_OF_SIGMA * implicit.sigma;
     (last.nearest <= keep && inside && x.is_finite()).then_some((x, last.normal))
 }

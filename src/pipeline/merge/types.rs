@@ -70,6 +70,7 @@ pub struct Merged {
     pub cell: f64,
     /// Grid corners at which the implicit function was evaluated.
     pub corners_evaluated: usize,
-    /// Crossed cells whose vertex was dropped (no sample within `keep_cells`).
+    /// Crossed cells whose vertex was dropped past the data's rim (no sample within
+    /// `keep_cells`, the samples' centroid off to one side, or too few for the quadric).
     pub dropped_vertices: usize,
 }

@@ -4,11 +4,17 @@
 //! State: the scans (id, transform, samples in the object frame), the merge grid's cell
 //! size (fixed by the first scan so that cells mean the same place in every update), the
 //! last merged mesh (to say which region changed) and the worker's warm start. Each update
-//! merges every scan (`pipeline::merge`) and hands the merged mesh to the worker, whose
-//! `auto` dispatch chooses the path: a grid over the planar map while the merged data is
-//! disk-like, the whole-object control mesh once it closes or wraps around. A new version
-//! of the object starts from the previous control mesh when the worker's warm guard
-//! accepts it (same topology, size and place), else cold.
+//! merges every scan (`pipeline::merge`) and hands the merged mesh to the worker. The path:
+//! while the views look from about one direction (their samples' mean normals within
+//! `VIEW_SPREAD_DEG`), the worker's `auto` dispatch chooses (a grid over the planar map for
+//! disk-like data, the control mesh once it closes); views from further apart wrap around
+//! the object, and a union that wraps around folds on every plane even while it is a disk,
+//! so the control mesh takes it. The previous surface is offered as the start only when
+//! the merged data covers the same ground (`WARM_MAX_COVERAGE_CHANGE`): a control mesh
+//! fitted before a view arrived has no faces where that view's new ground is, and the
+//! worker's guards (topology, size, bounding box) do not see a view filling in the side of
+//! an object whose box it does not widen. So a change of coverage refits cold, and the
+//! surface of a set of scans does not depend on the order they arrived in.
 
 mod measure;
 
@@ -23,12 +29,23 @@ use crate::pipeline::worker::{
 };
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
+use glam::DVec3;
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
 
 /// Merged vertices that move less than this share of a cell count as unchanged.
 const UNCHANGED_SHARE_OF_CELL: f64 = 1e-3;
+
+/// Views whose directions lie further apart than this (degrees) wrap around the object.
+/// A range scan sees the surface facing it, at most about 70 degrees off its axis; two
+/// such views 30 degrees apart already hold surface turned 100 degrees from the axis of
+/// the other, which no plane projection of the union keeps unfolded.
+const VIEW_SPREAD_DEG: f64 = 30.0;
+
+/// The previous surface is the start of the next fit only when at most this share of the
+/// merged cells appeared or went (a new version of a scan over the same ground).
+const WARM_MAX_COVERAGE_CHANGE: f64 = 0.05;
 
 /// How a session merges and fits.
 #[derive(Clone, Debug, Default)]
@@ -87,6 +104,9 @@ pub struct SessionScan {
     pub samples: ScanSamples,
     /// Vertices of the scan as given.
     pub vertices: usize,
+    /// Its viewing direction in the object frame (the weighted mean of its samples'
+    /// normals); `None` when they cancel out (a closed scan looks from everywhere).
+    pub direction: Option<DVec3>,
 }
 
 /// Stage times of one update, in milliseconds.
@@ -191,10 +211,12 @@ impl ObjectSession {
             }
         };
         let samples_ms = ms_since(start);
+        let direction = view_direction(&samples);
         let scan = SessionScan {
             transform,
             samples,
             vertices: mesh.positions.len(),
+            direction,
         };
         let previous = self.scans.insert(id.into(), scan);
         match self.update(cell, start, samples_ms) {
@@ -245,8 +267,26 @@ impl ObjectSession {
         let all: Vec<&ScanSamples> = self.scans.values().map(|s| &s.samples).collect();
         let merged = merge(&all, cell, &self.opts.merge);
         times.merge_ms = ms_since(t);
+        let empty = Merged::default();
+        let change = MergeChange::between(
+            self.merged.as_ref().unwrap_or(&empty),
+            &merged,
+            UNCHANGED_SHARE_OF_CELL * cell,
+        );
+        let coverage_change =
+            (change.added + change.removed) as f64 / merged.mesh.positions.len().max(1) as f64;
+        let warm = self
+            .warm
+            .as_ref()
+            .filter(|_| coverage_change <= WARM_MAX_COVERAGE_CHANGE);
+        let spread = view_spread_deg(self.scans.values());
+        let mut worker = self.opts.worker.clone();
+        let wraps = worker.fit.domain == Domain::Auto && spread > VIEW_SPREAD_DEG;
+        if wraps {
+            worker.fit.domain = Domain::Mesh;
+        }
         let t = Instant::now();
-        let fitted = match fit_patch(&merged.mesh, self.warm.as_ref(), &self.opts.worker) {
+        let fitted = match fit_patch(&merged.mesh, warm, &worker) {
             Ok(f) => f,
             // Views that wrap around without closing can pass the worker's disk test and
             // still fold on any plane: the merged data is no disk, the control mesh takes it.
@@ -254,10 +294,9 @@ impl ObjectSession {
                 PipelineError::ScanFailed { .. }
                 | PipelineError::MapFailed { .. }
                 | PipelineError::NotDiskLike { .. },
-            ) if self.opts.worker.fit.domain == Domain::Auto => {
-                let mut whole = self.opts.worker.clone();
-                whole.fit.domain = Domain::Mesh;
-                fit_patch(&merged.mesh, self.warm.as_ref(), &whole).map_err(SessionError::Fit)?
+            ) if worker.fit.domain == Domain::Auto => {
+                worker.fit.domain = Domain::Mesh;
+                fit_patch(&merged.mesh, warm, &worker).map_err(SessionError::Fit)?
             }
             Err(e) => return Err(SessionError::Fit(e)),
         };
@@ -269,7 +308,7 @@ impl ObjectSession {
         };
         let fit = fitted.fit.clone();
         let t = Instant::now();
-        let mut outputs = outputs_of(fitted, &self.opts.worker, t);
+        let mut outputs = outputs_of(fitted, &worker, t);
         times.outputs_ms = ms_since(t);
         let t = Instant::now();
         let scans = if self.opts.measure_scans {
@@ -285,12 +324,6 @@ impl ObjectSession {
             Vec::new()
         };
         times.measure_ms = ms_since(t);
-        let empty = Merged::default();
-        let change = MergeChange::between(
-            self.merged.as_ref().unwrap_or(&empty),
-            &merged,
-            UNCHANGED_SHARE_OF_CELL * cell,
-        );
         times.total_ms = ms_since(start);
         outputs.report["session"] = json!({
             "scans": self.scans.iter().map(|(id, s)| json!({
@@ -307,6 +340,10 @@ impl ObjectSession {
                 "dropped_vertices": merged.dropped_vertices,
             },
             "path": path,
+            "view_spread_deg": spread,
+            "views_wrap_around": wraps,
+            "warm_offered": warm.is_some(),
+            "coverage_change": coverage_change,
             "updated_region": change,
             "scan_distances": scans,
             "stages": times,
@@ -325,6 +362,41 @@ impl ObjectSession {
         self.merged = Some(merged);
         Ok(update)
     }
+}
+
+/// The weighted mean of a scan's sample normals, unit length (`None` if they cancel out).
+fn view_direction(samples: &ScanSamples) -> Option<DVec3> {
+    let sum: DVec3 = samples
+        .normals
+        .iter()
+        .zip(&samples.weights)
+        .map(|(n, w)| *n * *w)
+        .sum();
+    let total: f64 = samples.weights.iter().sum();
+    // Normals that mostly cancel (a closed or wrapped scan) give no direction.
+    (sum.length() > 0.2 * total)
+        .then(|| sum.normalize())
+        .filter(|d| d.is_finite())
+}
+
+/// The largest angle (degrees) between two scans' viewing directions; 180 when a scan has
+/// none.
+fn view_spread_deg<'a>(scans: impl Iterator<Item = &'a SessionScan>) -> f64 {
+    let directions: Vec<Option<DVec3>> = scans.map(|s| s.direction).collect();
+    let mut widest = 0.0f64;
+    for (k, a) in directions.iter().enumerate() {
+        for b in &directions[k + 1..] {
+            let angle = match (a, b) {
+                (Some(a), Some(b)) => a.dot(*b).clamp(-1.0, 1.0).acos().to_degrees(),
+                _ => 180.0,
+            };
+            widest = widest.max(angle);
+        }
+    }
+    if directions.iter().any(Option::is_none) {
+        widest = 180.0;
+    }
+    widest
 }
 
 fn ms_since(t: Instant) -> f64 {
