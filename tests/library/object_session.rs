@@ -259,12 +259,15 @@ fn two_arrival_orders_end_at_the_same_surface() {
             let update = session
                 .add_scan(&format!("v{k}"), &views[k], turn)
                 .expect("update");
+            let report = &update.outputs.report;
             eprintln!(
-                "v{k}: {} controls {} rms {:.2e} session {}",
+                "v{k}: {} controls {} rms {:.2e} merge {} topology {} rounds {}",
                 update.path,
                 update.fit.controls.len(),
                 update.fit.geometric_rms(),
-                update.outputs.report["session"]
+                report["session"]["merge"],
+                report["topology"],
+                report["object"]["rounds"]
             );
             last = Some(update);
         }

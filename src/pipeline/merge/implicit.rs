@@ -77,7 +77,12 @@ pub(super) struct Implicit<'a> {
 }
 
 /// Fewest samples a local quadric is fitted to (it has six coefficients).
-const MIN_QUADRIC_SAMPLES: usize = 12;
+const MIN_QUADRIC_SAMPLES: usize = 6;
+/// Least spread of the samples across their narrowest tangent direction (variance in
+/// Gaussian widths squared; a full disk has 0.5, a half disk at a straight rim 0.18): a
+/// row of samples holds no quadric across it. A spread, not a count, so that two views of
+/// the same ground (twice the samples, the same spread) decide alike.
+const MIN_TANGENTIAL_SPREAD: f64 = 0.02;
 /// Ridge on the quadric's coefficients (relative to the total weight): keeps the fit
 /// defined where the samples lie along a line (a scan's rim), leaving the offset free.
 const QUADRIC_RIDGE: f64 = 1e-6;
@@ -114,7 +119,10 @@ impl Implicit<'_> {
             count += 1;
             total += w;
         });
-        if count < MIN_QUADRIC_SAMPLES || total <= 0.0 {
+        if count < MIN_QUADRIC_SAMPLES
+            || total <= 0.0
+            || narrowest_spread(&normal_matrix) < MIN_TANGENTIAL_SPREAD
+        {
             return None;
         }
         for k in 1..6 {
@@ -124,7 +132,8 @@ impl Implicit<'_> {
         c[0].is_finite().then(|| x + c[0] * normal)
     }
 
-    /// `None` where no sample lies within the radius (or their weights vanish).
+    /// The function at `x`; `None` where no sample lies within the radius (or their weights
+    /// vanish).
     pub(super) fn at(&self, x: DVec3) -> Option<Sample> {
         let r2 = self.radius * self.radius;
         let mut near: Vec<(f64, u32, u32)> = Vec::with_capacity(64);
@@ -165,4 +174,16 @@ impl Implicit<'_> {
             }
         })
     }
+}
+
+/// The smallest eigenvalue of the weighted covariance of the samples' tangent coordinates,
+/// read off the quadric's normal matrix (row 0 holds the weight and first moments, the
+/// (u, v) block the second moments).
+fn narrowest_spread(m: &Matrix6<f64>) -> f64 {
+    let w = m[(0, 0)];
+    let (mu, mv) = (m[(0, 1)] / w, m[(0, 2)] / w);
+    let a = m[(1, 1)] / w - mu * mu;
+    let b = m[(1, 2)] / w - mu * mv;
+    let c = m[(2, 2)] / w - mv * mv;
+    0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()
 }

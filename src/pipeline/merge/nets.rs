@@ -10,11 +10,6 @@ use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::{FxHashMap, FxHashSet};
 
-/// A corner is defined where the nearest sample is within this many cells: a cell's
-/// corners lie up to 0.87 cells from a surface through it, the rest is margin for a
-/// sparse row.
-const DEFINED_CELLS: f64 = 1.5;
-
 /// A vertex whose samples' centroid lies further than this share of the Gaussian width
 /// across the normal stands past the data's rim (inside the data the centroid is close;
 /// at a straight rim it is about 0.56 sigma in): there the quadric extrapolates, so the
@@ -86,16 +81,10 @@ pub(super) fn surface_nets(
         .collect();
     corner_keys.sort_unstable();
     corner_keys.dedup();
-    let defined = DEFINED_CELLS * cell;
     let values: Vec<Option<f64>> = corner_keys
         .par_iter()
         .with_min_len(512)
-        .map(|c| {
-            implicit
-                .at(corner_position(*c, cell))
-                .filter(|s| s.nearest <= defined)
-                .map(|s| s.value)
-        })
+        .map(|c| implicit.at(corner_position(*c, cell)).map(|s| s.value))
         .collect();
     let corners: FxHashMap<CellKey, f64> = corner_keys
         .iter()

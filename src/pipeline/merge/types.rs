@@ -14,7 +14,10 @@ pub struct MergeOptions {
     /// Cell size of the merge grid in median edge lengths of the first scan (about one
     /// merged vertex per `cell_edges^2` scan points of one view).
     pub cell_edges: f64,
-    /// Radius of the samples averaged at a point, in cells.
+    /// Radius of the samples averaged at a point, in cells. The function is defined where
+    /// a sample lies within it, and every corner of a cell the surface crosses must be: a
+    /// corner lies up to sqrt(3) cells from the surface, plus the gap to the nearest sample
+    /// (half the scan's spacing), so it is well over 1.73.
     pub radius_cells: f64,
     /// Gaussian width of their weights, in cells.
     pub sigma_cells: f64,
@@ -34,7 +37,7 @@ impl Default for MergeOptions {
     fn default() -> Self {
         Self {
             cell_edges: 1.5,
-            radius_cells: 2.0,
+            radius_cells: 2.5,
             sigma_cells: 1.0,
             ramp_rings: 6,
             rim_weight: 0.05,
