@@ -67,7 +67,7 @@ enum Ending {
     /// Handed to the writer: the state it made is stored.
     Fitted,
     /// Dropped for a newer version: its warm start may still seed that version.
-    Stale(WarmStart),
+    Stale(Box<WarmStart>),
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -113,7 +113,7 @@ pub(super) fn fit(
             None => false,
         },
         Ending::Stale(warm) => {
-            states::store(ctx, &h.id, seq, &states::stale_warm(&loaded, warm), &loaded);
+            states::store(ctx, &h.id, seq, &states::stale_warm(&loaded, *warm), &loaded);
             false
         }
     };
@@ -215,7 +215,7 @@ fn run(
         (Some(by), Outcome::Fitted { outputs, .. }) => {
             let loser = done.arrival;
             let superseded = WriterMsg::Superseded { loser, by };
-            (vec![superseded], Ending::Stale(outputs.warm), loaded)
+            (vec![superseded], Ending::Stale(Box::new(outputs.warm)), loaded)
         }
         (_, outcome) => {
             let ending = match &outcome {

@@ -3,6 +3,7 @@
 //! rejection events) can match on while people read the message.
 
 use crate::bspline::BSplineError;
+use crate::mesh::rigid::RigidError;
 use crate::surface::loop_limit::LoopLimitError;
 
 /// A reader or writer failure, always naming the file and, where known, where in it.
@@ -163,6 +164,9 @@ pub enum IoErrorKind {
     /// The B-spline described is not a valid one.
     #[error("{0}")]
     BSpline(#[source] BSplineError),
+    /// A registration (`.xf`, `.conf` line, pipe `transform`) that is no rigid motion.
+    #[error("not a rigid transform: {0}")]
+    NotRigid(#[source] RigidError),
 }
 
 impl IoErrorKind {
@@ -190,6 +194,7 @@ impl IoErrorKind {
             Self::Schema { .. } => "schema",
             Self::LoopSurface(_) => "loop_surface",
             Self::BSpline(_) => "bspline",
+            Self::NotRigid(_) => "not_rigid",
         }
     }
 

@@ -10,6 +10,7 @@ pub mod off;
 mod pcd;
 pub mod ply;
 pub mod polylines;
+pub mod registration;
 pub mod step;
 pub mod stl;
 pub mod surface_json;

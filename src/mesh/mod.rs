@@ -9,6 +9,7 @@ pub mod detect;
 pub mod distance;
 pub mod inverse;
 pub mod loop_subdiv;
+pub mod rigid;
 pub mod simplify;
 pub mod stats;
 pub mod topology;

@@ -21,6 +21,7 @@ mod mesh_roundtrip;
 mod object_crease;
 mod object_fit;
 mod object_pipeline;
+mod object_session;
 mod planar_product;
 mod planar_subdivided;
 mod point_clouds;

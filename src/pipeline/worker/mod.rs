@@ -266,6 +266,17 @@ pub(crate) fn run_patch_with(
     let wall = Instant::now();
     let input = cloud::with_faces(mesh, cfg)?;
     let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
+    let fitted = fit_patch_with(mesh, previous, cfg, on_step)?;
+    let mut outputs = outputs_of(fitted, cfg, wall);
+    if let Some(cloud) = input.report() {
+        outputs.report["point_cloud"] = cloud;
+    }
+    Ok(outputs)
+}
+
+/// The outputs of a fit (`fit_patch`'s result): surface.json, report.json, the GLB and the
+/// warm start; `wall` is when the work on the input began (report.json's `wall_ms`).
+pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> PatchOutputs {
     let FittedPatch {
         fit: fitted,
         scan: scan_info,
@@ -275,7 +286,7 @@ pub(crate) fn run_patch_with(
         object: object_info,
         scattered: planar_info,
         planar_shown,
-    } = fit_patch_with(mesh, previous, cfg, on_step)?;
+    } = fitted;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
@@ -324,18 +335,15 @@ pub(crate) fn run_patch_with(
         }
         warm.object = object::object_warm(&fitted, info);
     }
-    if let Some(cloud) = input.report() {
-        report["point_cloud"] = cloud;
-    }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
-    Ok(PatchOutputs {
+    PatchOutputs {
         surface,
         report,
         glb,
         legend: error_legend(budget.tolerance),
         warm,
         status: fitted.outcome.status,
-    })
+    }
 }
 
 /// One fitted surface of an input: the whole patch (`suffix` empty) or one component

@@ -1,0 +1,189 @@
+//! The merged scans' implicit function: a bucket grid over every scan's samples and the
+//! weighted signed distance along the samples' normals (see the module docs of `merge`).
+
+use super::types::ScanSamples;
+use glam::DVec3;
+use nalgebra::{Matrix6, Vector6};
+use rustc_hash::FxHashMap;
+
+/// Samples of the sheet nearest a query count only if their normal is within this cosine
+/// of the nearest sample's (about 70 degrees): the far side of a thin part faces away.
+const SAME_SHEET_COS: f64 = 0.35;
+
+/// A bucket grid over the samples of several scans; a bucket holds (scan, sample) pairs.
+pub(super) struct PointIndex {
+    cell: f64,
+    buckets: FxHashMap<[i32; 3], Vec<(u32, u32)>>,
+}
+
+impl PointIndex {
+    /// Buckets of size `cell` (the largest query radius, so a query reads 27 buckets).
+    pub(super) fn build(scans: &[&ScanSamples], cell: f64) -> Self {
+        let mut buckets: FxHashMap<[i32; 3], Vec<(u32, u32)>> = FxHashMap::default();
+        for (s, scan) in scans.iter().enumerate() {
+            for (i, p) in scan.points.iter().enumerate() {
+                buckets
+                    .entry(key(*p, cell))
+                    .or_default()
+                    .push((s as u32, i as u32));
+            }
+        }
+        Self { cell, buckets }
+    }
+
+    /// Calls `visit` with every sample in the 27 buckets around `x`.
+    fn around(&self, x: DVec3, mut visit: impl FnMut(u32, u32)) {
+        let [a, b, c] = key(x, self.cell);
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(bucket) = self.buckets.get(&[a + dx, b + dy, c + dz]) {
+                        for &(s, i) in bucket {
+                            visit(s, i);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The bucket of `p` on a grid of size `cell` (saturating far outside the i32 range).
+pub(super) fn key(p: DVec3, cell: f64) -> [i32; 3] {
+    let q = (p / cell).floor();
+    [q.x as i32, q.y as i32, q.z as i32]
+}
+
+/// The implicit function at a point.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Sample {
+    /// Signed distance to the merged surface (positive where the normals point).
+    pub value: f64,
+    /// Unit normal (the weighted mean of the samples' normals).
+    pub normal: DVec3,
+    /// Distance to the nearest sample.
+    pub nearest: f64,
+    /// Distance, across the normal, from the point to the weighted centroid of the samples:
+    /// small inside the data, about half the Gaussian width on a scan's outer rim.
+    pub centroid_shift: f64,
+}
+
+/// The weighted signed distance of the samples within `radius`.
+pub(super) struct Implicit<'a> {
+    pub index: &'a PointIndex,
+    pub scans: &'a [&'a ScanSamples],
+    pub radius: f64,
+    pub sigma: f64,
+}
+
+/// Fewest samples a local quadric is fitted to (it has six coefficients).
+const MIN_QUADRIC_SAMPLES: usize = 6;
+/// Least spread of the samples across their narrowest tangent direction (variance in
+/// Gaussian widths squared; a full disk has 0.5, a half disk at a straight rim 0.18): a
+/// row of samples holds no quadric across it. A spread, not a count, so that two views of
+/// the same ground (twice the samples, the same spread) decide alike.
+const MIN_TANGENTIAL_SPREAD: f64 = 0.02;
+/// Ridge on the quadric's coefficients (relative to the total weight): keeps the fit
+/// defined where the samples lie along a line (a scan's rim), leaving the offset free.
+const QUADRIC_RIDGE: f64 = 1e-6;
+
+impl Implicit<'_> {
+    /// The point of the merged surface under `x` along `normal`: a weighted least-squares
+    /// quadric height field over the tangent plane at `x` (same weights and sheet rule as
+    /// `at`), evaluated at `x`. A plane fit (what `at` is) stands off a curved surface by
+    /// about sigma^2 times the curvature / 2 (35 um at a 2 mm sigma on a 5 cm sphere); a
+    /// quadric follows it. `None` with too few samples.
+    pub(super) fn refine(&self, x: DVec3, normal: DVec3) -> Option<DVec3> {
+        let e1 = normal.any_orthonormal_vector();
+        let e2 = normal.cross(e1);
+        let r2 = self.radius * self.radius;
+        let inv = 1.0 / (self.sigma * self.sigma);
+        let scale = 1.0 / self.sigma;
+        let mut normal_matrix = Matrix6::<f64>::zeros();
+        let mut rhs = Vector6::<f64>::zeros();
+        let mut count = 0;
+        let mut total = 0.0;
+        self.index.around(x, |s, i| {
+            let scan = self.scans[s as usize];
+            let p = scan.points[i as usize];
+            let d = p - x;
+            let d2 = d.length_squared();
+            if d2 > r2 || scan.normals[i as usize].dot(normal) < SAME_SHEET_COS {
+                return;
+            }
+            let w = scan.weights[i as usize] * (-d2 * inv).exp();
+            let (u, v) = (d.dot(e1) * scale, d.dot(e2) * scale);
+            let basis = Vector6::new(1.0, u, v, u * u, u * v, v * v);
+            normal_matrix += w * basis * basis.transpose();
+            rhs += w * d.dot(normal) * basis;
+            count += 1;
+            total += w;
+        });
+        if count < MIN_QUADRIC_SAMPLES
+            || total <= 0.0
+            || narrowest_spread(&normal_matrix) < MIN_TANGENTIAL_SPREAD
+        {
+            return None;
+        }
+        for k in 1..6 {
+            normal_matrix[(k, k)] += QUADRIC_RIDGE * total;
+        }
+        let c = normal_matrix.cholesky()?.solve(&rhs);
+        c[0].is_finite().then(|| x + c[0] * normal)
+    }
+
+    /// The function at `x`; `None` where no sample lies within the radius (or their weights
+    /// vanish).
+    pub(super) fn at(&self, x: DVec3) -> Option<Sample> {
+        let r2 = self.radius * self.radius;
+        let mut near: Vec<(f64, u32, u32)> = Vec::with_capacity(64);
+        let mut best = (f64::MAX, 0usize);
+        self.index.around(x, |s, i| {
+            let d2 = self.scans[s as usize].points[i as usize].distance_squared(x);
+            if d2 <= r2 {
+                if d2 < best.0 {
+                    best = (d2, near.len());
+                }
+                near.push((d2, s, i));
+            }
+        });
+        let &(_, bs, bi) = near.get(best.1)?;
+        let sheet = self.scans[bs as usize].normals[bi as usize];
+        let inv = 1.0 / (self.sigma * self.sigma);
+        let (mut sum_w, mut sum_f, mut sum_n, mut sum_p) = (0.0, 0.0, DVec3::ZERO, DVec3::ZERO);
+        for &(d2, s, i) in &near {
+            let scan = self.scans[s as usize];
+            let n = scan.normals[i as usize];
+            if n.dot(sheet) < SAME_SHEET_COS {
+                continue;
+            }
+            let w = scan.weights[i as usize] * (-d2 * inv).exp();
+            sum_w += w;
+            sum_f += w * n.dot(x - scan.points[i as usize]);
+            sum_n += w * n;
+            sum_p += w * (scan.points[i as usize] - x);
+        }
+        let normal = sum_n.try_normalize()?;
+        (sum_w > 0.0).then(|| {
+            let shift = sum_p / sum_w;
+            Sample {
+                value: sum_f / sum_w,
+                normal,
+                nearest: best.0.sqrt(),
+                centroid_shift: (shift - shift.dot(normal) * normal).length(),
+            }
+        })
+    }
+}
+
+/// The smallest eigenvalue of the weighted covariance of the samples' tangent coordinates,
+/// read off the quadric's normal matrix (row 0 holds the weight and first moments, the
+/// (u, v) block the second moments).
+fn narrowest_spread(m: &Matrix6<f64>) -> f64 {
+    let w = m[(0, 0)];
+    let (mu, mv) = (m[(0, 1)] / w, m[(0, 2)] / w);
+    let a = m[(1, 1)] / w - mu * mu;
+    let b = m[(1, 2)] / w - mu * mv;
+    let c = m[(2, 2)] / w - mv * mv;
+    0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()
+}

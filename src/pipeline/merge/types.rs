@@ -1,0 +1,79 @@
+//! What the merge's stages share: its options, a scan's samples, the merged mesh.
+
+use crate::TriMesh;
+use glam::DVec3;
+
+/// A cell of the merge grid: cell (i, j, k) spans [i, i+1] x [j, j+1] x [k, k+1] cells;
+/// corner (i, j, k) sits at (i, j, k) cells from the origin.
+pub type CellKey = [i32; 3];
+
+/// How scans are merged.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MergeOptions {
+    /// Cell size of the merge grid in median edge lengths of the first scan (about one
+    /// merged vertex per `cell_edges^2` scan points of one view).
+    pub cell_edges: f64,
+    /// Radius of the samples averaged at a point, in cells. The function is defined where
+    /// a sample lies within it, and every corner of a cell the surface crosses must be: a
+    /// corner lies up to sqrt(3) cells from the surface, plus the gap to the nearest sample
+    /// (half the scan's spacing), so it is well over 1.73.
+    pub radius_cells: f64,
+    /// Gaussian width of their weights, in cells.
+    pub sigma_cells: f64,
+    /// Vertex rings over which a scan's weight ramps up from its rim.
+    pub ramp_rings: usize,
+    /// The weight of a scan's rim vertices (the ramp's start): where a view alone covers
+    /// the object its rim still counts.
+    pub rim_weight: f64,
+    /// Projections of each vertex onto the zero set.
+    pub projections: usize,
+    /// A merged vertex is kept only within this many cells of a sample: the surface stops
+    /// where the data stops.
+    pub keep_cells: f64,
+}
+
+impl Default for MergeOptions {
+    fn default() -> Self {
+        Self {
+            cell_edges: 1.5,
+            radius_cells: 2.5,
+            sigma_cells: 1.0,
+            ramp_rings: 6,
+            rim_weight: 0.05,
+            projections: 2,
+            keep_cells: 0.75,
+        }
+    }
+}
+
+/// One scan's oriented samples in the object frame.
+#[derive(Clone, Debug, Default)]
+pub struct ScanSamples {
+    /// The points (the scan's vertices that some triangle uses).
+    pub points: Vec<DVec3>,
+    /// Their unit normals (area-weighted face normals; the scan's orientation).
+    pub normals: Vec<DVec3>,
+    /// Their weights in (0, 1]: `rim_weight` on the rim, 1 from `ramp_rings` rings in.
+    pub weights: Vec<f64>,
+}
+
+/// The merged data: one vertex per crossed grid cell, triangulated by surface nets.
+#[derive(Clone, Debug, Default)]
+pub struct Merged {
+    /// The vertices and triangles (oriented as the scans' normals; a few non-manifold
+    /// configurations of surface nets are left for cleaning).
+    pub mesh: TriMesh,
+    /// Each vertex's unit normal (of the implicit function).
+    pub normals: Vec<DVec3>,
+    /// Each vertex's grid cell: vertices of two merges with the same cell are the same
+    /// place of the object.
+    pub cells: Vec<CellKey>,
+    /// The cell size used.
+    pub cell: f64,
+    /// Grid corners at which the implicit function was evaluated.
+    pub corners_evaluated: usize,
+    /// Crossed cells whose vertex was dropped past the data's rim (no sample within
+    /// `keep_cells`, the samples' centroid off to one side, or too few for the quadric).
+    pub dropped_vertices: usize,
+}

@@ -1,0 +1,70 @@
+//! How far points lie from a surface: a fine tessellation of the fit and point-to-mesh
+//! distances (the tessellation's own chord error is a small share of scan noise).
+
+use crate::mesh::distance::MeshDistance;
+use crate::pipeline::output::{tessellate, tessellate_mesh_faces};
+use crate::pipeline::{PatchFit, SurfaceModel};
+use crate::TriMesh;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Segments per control-face side of a control-mesh surface's measuring tessellation.
+const MEASURE_PER_FACE: usize = 8;
+/// Segments in all of a grid or Bezier surface's measuring tessellation.
+const MEASURE_SEGMENTS: usize = 2048;
+
+/// Statistics of the distances of a point set to a mesh.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct DistanceStats {
+    /// Points measured.
+    pub points: usize,
+    /// Root mean square distance.
+    pub rms: f64,
+    /// Median distance.
+    pub median: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// Largest distance.
+    pub max: f64,
+}
+
+/// The fitted surface as a fine triangle mesh (untrimmed).
+pub fn surface_mesh(fit: &PatchFit) -> TriMesh {
+    let tess = match &fit.model {
+        SurfaceModel::Mesh(_) => tessellate_mesh_faces(fit, MEASURE_PER_FACE),
+        _ => tessellate(fit, MEASURE_SEGMENTS, None),
+    };
+    TriMesh::new(tess.positions, tess.triangles)
+}
+
+/// The fitted surface at every data point's parameter: where the surface was fitted,
+/// never where it only extrapolates (a grid's untrimmed cells).
+pub fn surface_points_at_data(fit: &PatchFit) -> Vec<DVec3> {
+    let evaluate = fit.model.as_surface().evaluator(&fit.controls);
+    fit.params
+        .par_iter()
+        .map(|p| evaluate(*p).position)
+        .collect()
+}
+
+/// Distances of `points` to `mesh` (points with no distance, e.g. non-finite, are left out).
+pub fn distance_stats(points: &[DVec3], mesh: &TriMesh) -> DistanceStats {
+    let query = MeshDistance::new(mesh);
+    let mut d: Vec<f64> = points
+        .par_iter()
+        .with_min_len(256)
+        .filter_map(|p| query.distance(*p))
+        .collect();
+    if d.is_empty() {
+        return DistanceStats::default();
+    }
+    d.sort_unstable_by(f64::total_cmp);
+    let at = |q: f64| d[((d.len() - 1) as f64 * q).round() as usize];
+    DistanceStats {
+        points: d.len(),
+        rms: (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt(),
+        median: at(0.5),
+        p95: at(0.95),
+        max: d[d.len() - 1],
+    }
+}

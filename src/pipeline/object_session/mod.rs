@@ -1,0 +1,404 @@
+//! One object scanned view by view: registered scans are added, replaced and removed, and
+//! after each change the object has one surface fitted to the merge of all its scans.
+//!
+//! State: the scans (id, transform, samples in the object frame), the merge grid's cell
+//! size (fixed by the first scan so that cells mean the same place in every update), the
+//! last merged mesh (to say which region changed) and the worker's warm start. Each update
+//! merges every scan (`pipeline::merge`) and hands the merged mesh to the worker. The path:
+//! while the views look from about one direction (their samples' mean normals within
+//! `VIEW_SPREAD_DEG`), the worker's `auto` dispatch chooses (a grid over the planar map for
+//! disk-like data, the control mesh once it closes); views from further apart wrap around
+//! the object, and a union that wraps around folds on every plane even while it is a disk,
+//! so the control mesh takes it. The previous surface is offered as the start only when
+//! the merged data covers the same ground (`WARM_MAX_COVERAGE_CHANGE`): a control mesh
+//! fitted before a view arrived has no faces where that view's new ground is, and the
+//! worker's guards (topology, size, bounding box) do not see a view filling in the side of
+//! an object whose box it does not widen. So a change of coverage refits cold, and the
+//! surface of a set of scans does not depend on the order they arrived in.
+
+mod measure;
+
+pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
+
+use crate::mesh::rigid::RigidTransform;
+use crate::pipeline::merge::{
+    median_edge, merge, scan_samples, MergeChange, MergeOptions, Merged, ScanSamples,
+};
+use crate::pipeline::worker::{
+    fit_patch, outputs_of, Domain, PatchOutputs, WarmStart, WorkerConfig,
+};
+use crate::pipeline::{PatchFit, PipelineError};
+use crate::TriMesh;
+use glam::DVec3;
+use serde_json::json;
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Merged vertices that move less than this share of a cell count as unchanged.
+const UNCHANGED_SHARE_OF_CELL: f64 = 1e-3;
+
+/// Views whose directions lie further apart than this (degrees) wrap around the object.
+/// A range scan sees the surface facing it, at most about 70 degrees off its axis; two
+/// such views 30 degrees apart already hold surface turned 100 degrees from the axis of
+/// the other, which no plane projection of the union keeps unfolded.
+const VIEW_SPREAD_DEG: f64 = 30.0;
+
+/// The previous surface is the start of the next fit only when at most this share of the
+/// merged cells appeared or went (a new version of a scan over the same ground).
+const WARM_MAX_COVERAGE_CHANGE: f64 = 0.05;
+
+/// How a session merges and fits.
+#[derive(Clone, Debug, Default)]
+pub struct SessionOptions {
+    /// The merge of the scans.
+    pub merge: MergeOptions,
+    /// The worker's configuration (the fit of the merged data).
+    pub worker: WorkerConfig,
+    /// Measure every scan's distance to the new surface after each update (costs a
+    /// tessellation and a point-to-mesh query per scan point).
+    pub measure_scans: bool,
+}
+
+/// Why an update failed (the session keeps its previous state).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SessionError {
+    /// The scan has no triangle with area: nothing to merge.
+    #[error("scan '{id}' has no usable triangles")]
+    EmptyScan {
+        /// The scan.
+        id: String,
+    },
+    /// The last scan was removed: there is no object left to fit.
+    #[error("the object has no scans left")]
+    NoScans,
+    /// No scan of that id.
+    #[error("no scan '{id}' in the object")]
+    UnknownScan {
+        /// The id asked for.
+        id: String,
+    },
+    /// The fit of the merged data failed.
+    #[error("fitting the merged scans failed")]
+    Fit(#[source] PipelineError),
+}
+
+impl SessionError {
+    /// A stable snake_case name of the variant.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Self::EmptyScan { .. } => "empty_scan",
+            Self::NoScans => "no_scans",
+            Self::UnknownScan { .. } => "unknown_scan",
+            Self::Fit(e) => e.kind(),
+        }
+    }
+}
+
+/// One scan of the object.
+#[derive(Clone, Debug)]
+pub struct SessionScan {
+    /// Its transform into the object frame.
+    pub transform: RigidTransform,
+    /// Its samples in the object frame.
+    pub samples: ScanSamples,
+    /// Vertices of the scan as given.
+    pub vertices: usize,
+    /// Its viewing direction in the object frame (the weighted mean of its samples'
+    /// normals); `None` when they cancel out (a closed scan looks from everywhere).
+    pub direction: Option<DVec3>,
+}
+
+/// Stage times of one update, in milliseconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct UpdateTimes {
+    /// The new scan's samples (normals, rim weights, transform).
+    pub samples_ms: f64,
+    /// Merging every scan into one mesh.
+    pub merge_ms: f64,
+    /// The worker's fit of the merged mesh.
+    pub fit_ms: f64,
+    /// surface.json, report.json and the GLB.
+    pub outputs_ms: f64,
+    /// Measuring the scans against the surface (when asked).
+    pub measure_ms: f64,
+    /// The whole update.
+    pub total_ms: f64,
+}
+
+/// A scan's distance to the object's surface.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScanDistance {
+    /// The scan.
+    pub id: String,
+    /// Its distances' statistics.
+    #[serde(flatten)]
+    pub stats: DistanceStats,
+}
+
+/// What one update produced.
+pub struct SessionUpdate {
+    /// The object's outputs (report.json carries a `session` key with what is below).
+    pub outputs: PatchOutputs,
+    /// The fit (the merged data, the surface, the controls).
+    pub fit: PatchFit,
+    /// `"object"` (control mesh) or `"scan"` (grid over a planar map).
+    pub path: &'static str,
+    /// Merged vertices and triangles fitted.
+    pub merged_vertices: usize,
+    /// Triangles of the merged mesh.
+    pub merged_triangles: usize,
+    /// Where the merged data changed since the previous update.
+    pub change: MergeChange,
+    /// Stage times.
+    pub times: UpdateTimes,
+    /// Every scan's distance to the surface (empty unless `measure_scans`).
+    pub scans: Vec<ScanDistance>,
+}
+
+/// An object and its scans (see the module docs).
+pub struct ObjectSession {
+    opts: SessionOptions,
+    cell: Option<f64>,
+    scans: BTreeMap<String, SessionScan>,
+    merged: Option<Merged>,
+    warm: Option<WarmStart>,
+}
+
+impl ObjectSession {
+    /// An object with no scans yet.
+    pub fn new(opts: SessionOptions) -> Self {
+        Self {
+            opts,
+            cell: None,
+            scans: BTreeMap::new(),
+            merged: None,
+            warm: None,
+        }
+    }
+
+    /// The scans, by id.
+    pub fn scans(&self) -> &BTreeMap<String, SessionScan> {
+        &self.scans
+    }
+
+    /// The merge grid's cell size (set by the first scan).
+    pub fn cell(&self) -> Option<f64> {
+        self.cell
+    }
+
+    /// Adds the scan `id` (its mesh in its own frame, and its transform into the object's),
+    /// or replaces the scan of that id, and refits.
+    pub fn add_scan(
+        &mut self,
+        id: &str,
+        mesh: &TriMesh,
+        transform: RigidTransform,
+    ) -> Result<SessionUpdate, SessionError> {
+        let start = Instant::now();
+        let samples = scan_samples(mesh, &transform, &self.opts.merge);
+        if samples.points.is_empty() {
+            return Err(SessionError::EmptyScan { id: id.into() });
+        }
+        let cell = match self.cell {
+            Some(c) => c,
+            None => {
+                let edge = median_edge(mesh);
+                if edge <= 0.0 {
+                    return Err(SessionError::EmptyScan { id: id.into() });
+                }
+                self.opts.merge.cell_edges * edge
+            }
+        };
+        let samples_ms = ms_since(start);
+        let direction = view_direction(&samples);
+        let scan = SessionScan {
+            transform,
+            samples,
+            vertices: mesh.positions.len(),
+            direction,
+        };
+        let previous = self.scans.insert(id.into(), scan);
+        match self.update(cell, start, samples_ms) {
+            Ok(u) => {
+                self.cell = Some(cell);
+                Ok(u)
+            }
+            Err(e) => {
+                match previous {
+                    Some(p) => self.scans.insert(id.into(), p),
+                    None => self.scans.remove(id),
+                };
+                Err(e)
+            }
+        }
+    }
+
+    /// Removes the scan `id` and refits the rest.
+    pub fn remove_scan(&mut self, id: &str) -> Result<SessionUpdate, SessionError> {
+        let start = Instant::now();
+        let cell = self.cell.ok_or(SessionError::NoScans)?;
+        let removed = self
+            .scans
+            .remove(id)
+            .ok_or_else(|| SessionError::UnknownScan { id: id.into() })?;
+        if self.scans.is_empty() {
+            self.merged = None;
+            self.warm = None;
+            return Err(SessionError::NoScans);
+        }
+        self.update(cell, start, 0.0).inspect_err(|_| {
+            self.scans.insert(id.into(), removed);
+        })
+    }
+
+    /// Merges every scan, fits the merged mesh from the previous warm start and measures.
+    fn update(
+        &mut self,
+        cell: f64,
+        start: Instant,
+        samples_ms: f64,
+    ) -> Result<SessionUpdate, SessionError> {
+        let mut times = UpdateTimes {
+            samples_ms,
+            ..Default::default()
+        };
+        let t = Instant::now();
+        let all: Vec<&ScanSamples> = self.scans.values().map(|s| &s.samples).collect();
+        let merged = merge(&all, cell, &self.opts.merge);
+        times.merge_ms = ms_since(t);
+        let empty = Merged::default();
+        let change = MergeChange::between(
+            self.merged.as_ref().unwrap_or(&empty),
+            &merged,
+            UNCHANGED_SHARE_OF_CELL * cell,
+        );
+        let coverage_change =
+            (change.added + change.removed) as f64 / merged.mesh.positions.len().max(1) as f64;
+        let warm = self
+            .warm
+            .as_ref()
+            .filter(|_| coverage_change <= WARM_MAX_COVERAGE_CHANGE);
+        let spread = view_spread_deg(self.scans.values());
+        let mut worker = self.opts.worker.clone();
+        let wraps = worker.fit.domain == Domain::Auto && spread > VIEW_SPREAD_DEG;
+        if wraps {
+            worker.fit.domain = Domain::Mesh;
+        }
+        let t = Instant::now();
+        let fitted = match fit_patch(&merged.mesh, warm, &worker) {
+            Ok(f) => f,
+            // Views that wrap around without closing can pass the worker's disk test and
+            // still fold on any plane: the merged data is no disk, the control mesh takes it.
+            Err(
+                PipelineError::ScanFailed { .. }
+                | PipelineError::MapFailed { .. }
+                | PipelineError::NotDiskLike { .. },
+            ) if worker.fit.domain == Domain::Auto => {
+                worker.fit.domain = Domain::Mesh;
+                fit_patch(&merged.mesh, warm, &worker).map_err(SessionError::Fit)?
+            }
+            Err(e) => return Err(SessionError::Fit(e)),
+        };
+        times.fit_ms = ms_since(t);
+        let path = if fitted.object.is_some() {
+            "object"
+        } else {
+            "scan"
+        };
+        let fit = fitted.fit.clone();
+        let t = Instant::now();
+        let mut outputs = outputs_of(fitted, &worker, t);
+        times.outputs_ms = ms_since(t);
+        let t = Instant::now();
+        let scans = if self.opts.measure_scans {
+            let surface = surface_mesh(&fit);
+            self.scans
+                .iter()
+                .map(|(id, s)| ScanDistance {
+                    id: id.clone(),
+                    stats: distance_stats(&s.samples.points, &surface),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        times.measure_ms = ms_since(t);
+        times.total_ms = ms_since(start);
+        outputs.report["session"] = json!({
+            "scans": self.scans.iter().map(|(id, s)| json!({
+                "id": id,
+                "vertices": s.vertices,
+                "samples": s.samples.points.len(),
+                "transform": s.transform.to_row_major(),
+            })).collect::<Vec<_>>(),
+            "merge": {
+                "cell": cell,
+                "vertices": merged.mesh.positions.len(),
+                "triangles": merged.mesh.triangles.len(),
+                "corners_evaluated": merged.corners_evaluated,
+                "dropped_vertices": merged.dropped_vertices,
+            },
+            "path": path,
+            "view_spread_deg": spread,
+            "views_wrap_around": wraps,
+            "warm_offered": warm.is_some(),
+            "coverage_change": coverage_change,
+            "updated_region": change,
+            "scan_distances": scans,
+            "stages": times,
+        });
+        self.warm = Some(outputs.warm.clone());
+        let update = SessionUpdate {
+            outputs,
+            fit,
+            path,
+            merged_vertices: merged.mesh.positions.len(),
+            merged_triangles: merged.mesh.triangles.len(),
+            change,
+            times,
+            scans,
+        };
+        self.merged = Some(merged);
+        Ok(update)
+    }
+}
+
+/// The weighted mean of a scan's sample normals, unit length (`None` if they cancel out).
+fn view_direction(samples: &ScanSamples) -> Option<DVec3> {
+    let sum: DVec3 = samples
+        .normals
+        .iter()
+        .zip(&samples.weights)
+        .map(|(n, w)| *n * *w)
+        .sum();
+    let total: f64 = samples.weights.iter().sum();
+    // Normals that mostly cancel (a closed or wrapped scan) give no direction.
+    (sum.length() > 0.2 * total)
+        .then(|| sum.normalize())
+        .filter(|d| d.is_finite())
+}
+
+/// The largest angle (degrees) between two scans' viewing directions; 180 when a scan has
+/// none.
+fn view_spread_deg<'a>(scans: impl Iterator<Item = &'a SessionScan>) -> f64 {
+    let directions: Vec<Option<DVec3>> = scans.map(|s| s.direction).collect();
+    let mut widest = 0.0f64;
+    for (k, a) in directions.iter().enumerate() {
+        for b in &directions[k + 1..] {
+            let angle = match (a, b) {
+                (Some(a), Some(b)) => a.dot(*b).clamp(-1.0, 1.0).acos().to_degrees(),
+                _ => 180.0,
+            };
+            widest = widest.max(angle);
+        }
+    }
+    if directions.iter().any(Option::is_none) {
+        widest = 180.0;
+    }
+    widest
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
