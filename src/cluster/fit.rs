@@ -113,7 +113,13 @@ pub(super) fn fit(
             None => false,
         },
         Ending::Stale(warm) => {
-            states::store(ctx, &h.id, seq, &states::stale_warm(&loaded, *warm), &loaded);
+            states::store(
+                ctx,
+                &h.id,
+                seq,
+                &states::stale_warm(&loaded, *warm),
+                &loaded,
+            );
             false
         }
     };
@@ -215,7 +221,11 @@ fn run(
         (Some(by), Outcome::Fitted { outputs, .. }) => {
             let loser = done.arrival;
             let superseded = WriterMsg::Superseded { loser, by };
-            (vec![superseded], Ending::Stale(Box::new(outputs.warm)), loaded)
+            (
+                vec![superseded],
+                Ending::Stale(Box::new(outputs.warm)),
+                loaded,
+            )
         }
         (_, outcome) => {
             let ending = match &outcome {
