@@ -15,6 +15,7 @@ mod io_shared_data;
 mod loop_crease;
 mod loop_fit;
 mod loop_limit;
+mod loop_limit_irregular;
 mod mesh_clean;
 mod mesh_elephant;
 mod mesh_roundtrip;
