@@ -25,7 +25,7 @@ mod crease;
 mod quadric;
 mod summary;
 
-use super::distance::closest_on_triangle;
+use super::distance::project_onto_triangle;
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
 use crease::Creases;
@@ -617,7 +617,7 @@ impl<'a> State<'a> {
             let mut best = (f64::INFINITY, fan[0], [1.0, 0.0, 0.0]);
             for &f in fan {
                 let tri = self.faces[f as usize].map(|v| self.pos[v as usize]);
-                let (d2, bary) = project(q, tri);
+                let (d2, bary) = project_onto_triangle(q, tri);
                 if d2 < best.0 {
                     best = (d2, f, bary);
                 }
@@ -666,24 +666,6 @@ impl<'a> State<'a> {
             crease_edges,
         }
     }
-}
-
-/// Squared distance from `p` to triangle `tri` and the barycentric weights of the
-/// closest point.
-fn project(p: DVec3, tri: [DVec3; 3]) -> (f64, [f64; 3]) {
-    let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
-    let (e0, e1, e2) = (tri[1] - tri[0], tri[2] - tri[0], q - tri[0]);
-    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
-    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
-    let denom = d00 * d11 - d01 * d01;
-    let bary = if denom > 0.0 {
-        let b1 = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
-        let b2 = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - b1);
-        [1.0 - b1 - b2, b1, b2]
-    } else {
-        [1.0, 0.0, 0.0]
-    };
-    ((q - p).length_squared(), bary)
 }
 
 #[cfg(test)]

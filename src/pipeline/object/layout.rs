@@ -15,7 +15,7 @@
 //! edge), their vertices never relaxed (a tangential slide on the data would pull the
 //! vertex off the edge), and a split crease edge leaves two crease edges.
 
-use crate::mesh::distance::closest_on_triangle;
+use crate::mesh::distance::{closest_on_triangle, project_onto_triangle};
 use crate::mesh::topology::Topology;
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
@@ -402,7 +402,7 @@ impl<'a> Net<'a> {
     fn nearest_face(&self, q: DVec3, faces: &[u32]) -> (u32, [f64; 3]) {
         let mut best = (f64::INFINITY, faces[0], [1.0, 0.0, 0.0]);
         for &f in faces {
-            let (d2, bary) = project(q, self.corners(f));
+            let (d2, bary) = project_onto_triangle(q, self.corners(f));
             if d2 < best.0 {
                 best = (d2, f, bary);
             }
@@ -536,24 +536,6 @@ pub(super) fn quality(p: [DVec3; 3]) -> f64 {
         return 0.0;
     }
     2.0 * 3f64.sqrt() * normal(p).length() / edges
-}
-
-/// Squared distance from `q` to the triangle and the barycentric weights of its closest
-/// point.
-fn project(q: DVec3, tri: [DVec3; 3]) -> (f64, [f64; 3]) {
-    let x = closest_on_triangle(q, tri[0], tri[1], tri[2]);
-    let (e0, e1, e2) = (tri[1] - tri[0], tri[2] - tri[0], x - tri[0]);
-    let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
-    let (d20, d21) = (e2.dot(e0), e2.dot(e1));
-    let denom = d00 * d11 - d01 * d01;
-    let bary = if denom > 0.0 {
-        let b1 = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
-        let b2 = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - b1);
-        [1.0 - b1 - b2, b1, b2]
-    } else {
-        [1.0, 0.0, 0.0]
-    };
-    (x.distance_squared(q), bary)
 }
 
 #[cfg(test)]
