@@ -286,13 +286,7 @@ fn a_dms_fit_of_a_range_scan_is_shown_where_it_was_fitted() {
     let shown = read_mesh_bytes(&out.glb, Format::Glb, "dms.glb", &LoadOptions::default())
         .expect("the GLB reads back")
         .mesh;
-    let md = MeshDistance::new(&shown);
-    let within = fitted
-        .positions
-        .iter()
-        .filter(|p| md.distance(**p).is_some_and(|d| d <= 1e-3))
-        .count() as f64
-        / fitted.positions.len() as f64;
+    let within = super::shown_surface::share_within(&shown, &fitted.positions, 1e-3);
     let data = MeshDistance::new(&mesh);
     let farthest = shown
         .positions

@@ -12,7 +12,7 @@ use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
 
 /// Share of `points` within `near` of `shown`.
-fn share_within(shown: &TriMesh, points: &[DVec3], near: f64) -> f64 {
+pub(crate) fn share_within(shown: &TriMesh, points: &[DVec3], near: f64) -> f64 {
     let md = MeshDistance::new(shown);
     let within = points
         .iter()

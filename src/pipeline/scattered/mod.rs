@@ -38,7 +38,6 @@ use super::scan::{Preparation, ScanOptions, ScanWarm};
 use super::worker::{WarmStart, WorkerConfig};
 use super::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::fit::Budget;
-use crate::scattered_fit::ScatteredOptions;
 use crate::surface::dms::PlanarSurface;
 use crate::surface::SurfaceParam;
 use glam::DVec2;
@@ -93,19 +92,11 @@ pub(crate) fn fit_planar(
     }
     let surface = planar_surface(&built.model).ok_or(ScatteredError::NotPlanarKind(kind.name()))?;
     let params = locate_all(surface, plane)?;
-    let smoothing =
-        fit_cfg.scan.smoothing * data.len() as f64 / surface.control_count().max(1) as f64;
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
 
     let t1 = Instant::now();
-    let options = ScatteredOptions {
-        method: fit_cfg.method,
-        budget: budget.clone(),
-        smoothing,
-        correction_rounds: 0,
-        newton_steps: rounds::NEWTON_STEPS,
-        initial: rounds::start_net(surface, &params, data, built.controls.clone()),
-    };
+    let initial = rounds::start_net(surface, &params, data, built.controls.clone());
+    let options = rounds::first_fit_options(fit_cfg, budget, surface, data.len(), initial);
     let rounds = rounds::fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;
 

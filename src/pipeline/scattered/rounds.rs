@@ -11,8 +11,10 @@
 
 use super::error::ScatteredError;
 use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
+use crate::fit::Budget;
 use crate::fit::{Collocation, FitOutcome};
 use crate::pipeline::scan::{Correction, CorrectionConfig};
+use crate::pipeline::worker::FitConfig;
 use crate::pipeline::PipelineError;
 use crate::scattered_fit::{
     collocation_matrix, fairness_operator, feet_with_derivatives, fit_scattered, initial_net,
@@ -24,6 +26,26 @@ use glam::DVec3;
 
 /// Newton steps per foot point and round.
 pub(super) const NEWTON_STEPS: usize = 6;
+
+/// The first fit's options, the same for scans and subdivided inputs: the scan path's
+/// smoothing scaled by data points per control, so the fairness term weighs alike at any
+/// control count; the engine runs no correction rounds, `fit_rounds` does them.
+pub(super) fn first_fit_options(
+    fit: &FitConfig,
+    budget: &Budget,
+    surface: &dyn PlanarSurface,
+    points: usize,
+    initial: InitialNet,
+) -> ScatteredOptions {
+    ScatteredOptions {
+        method: fit.method,
+        budget: budget.clone(),
+        smoothing: fit.scan.smoothing * points as f64 / surface.control_count().max(1) as f64,
+        correction_rounds: 0,
+        newton_steps: NEWTON_STEPS,
+        initial,
+    }
+}
 
 /// Preconditioned CG steps and relative residual of a distance round when the direct
 /// solve is refused (the scan path's values).

@@ -22,7 +22,7 @@
 //! (`shown_region`): where the fine mesh has triangles, so the input's holes stay open.
 
 use super::error::ScatteredError;
-use super::rounds::{fit_rounds, start_net, NEWTON_STEPS};
+use super::rounds::{first_fit_options, fit_rounds, start_net};
 use crate::fit::Budget;
 use crate::mesh::inverse::coarsen;
 use crate::pipeline::coverage::Coverage;
@@ -33,7 +33,7 @@ use crate::pipeline::worker::{WarmStart, WorkerConfig};
 use crate::pipeline::{NoSubdivision, PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::fill_holes;
 use crate::remesh::param::mean_value_disk;
-use crate::scattered_fit::{InitialNet, ScatteredOptions};
+use crate::scattered_fit::InitialNet;
 use crate::surface::bezier::lattice_points;
 use crate::surface::bpatch::BPatch;
 use crate::surface::dms::{DmsSpline, KnotRule, PlanarSurface};
@@ -99,18 +99,9 @@ pub(crate) fn fit_planar_subdivided(
         Some(controls) => InitialNet::Given(controls),
         None => start_net(surface, &params, data, Some(start)),
     };
-    let smoothing =
-        fit_cfg.scan.smoothing * data.len() as f64 / surface.control_count().max(1) as f64;
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
     let t1 = Instant::now();
-    let options = ScatteredOptions {
-        method: fit_cfg.method,
-        budget: budget.clone(),
-        smoothing,
-        correction_rounds: 0,
-        newton_steps: NEWTON_STEPS,
-        initial,
-    };
+    let options = first_fit_options(fit_cfg, budget, surface, data.len(), initial);
     let mapped: Vec<DVec2> = params.iter().map(|p| surface.domain_point(*p)).collect();
     let rounds = fit_rounds(surface, params, data, options, &fit_cfg.correction)?;
     let fit_ms = t1.elapsed().as_secs_f64() * 1e3;

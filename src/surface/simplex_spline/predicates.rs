@@ -50,13 +50,8 @@ fn exact_sign_of_products(terms: &[(f64, f64)]) -> i8 {
 pub fn orient_sign(p: DVec2, q: DVec2, r: DVec2) -> i8 {
     let left = (q.x - p.x) * (r.y - p.y);
     let right = (q.y - p.y) * (r.x - p.x);
-    let det = left - right;
-    let bound = 1e-15 * (left.abs() + right.abs());
-    if det > bound {
-        return 1;
-    }
-    if -det > bound {
-        return -1;
+    if let Some(sign) = float_filtered_sign(left, right) {
+        return sign;
     }
     exact_sign_of_products(&[
         (q.x, r.y),
@@ -68,17 +63,26 @@ pub fn orient_sign(p: DVec2, q: DVec2, r: DVec2) -> i8 {
     ])
 }
 
+/// The sign of `left - right` when floating point decides it (the difference clears the
+/// rounding bound of the two products); `None` near zero, where only exact arithmetic can.
+fn float_filtered_sign(left: f64, right: f64) -> Option<i8> {
+    let det = left - right;
+    let bound = 1e-15 * (left.abs() + right.abs());
+    if det > bound {
+        Some(1)
+    } else if -det > bound {
+        Some(-1)
+    } else {
+        None
+    }
+}
+
 /// Exact sign of `(q - p) x d`.
 fn cross_sign(p: DVec2, q: DVec2, d: DVec2) -> i8 {
     let left = (q.x - p.x) * d.y;
     let right = (q.y - p.y) * d.x;
-    let det = left - right;
-    let bound = 1e-15 * (left.abs() + right.abs());
-    if det > bound {
-        return 1;
-    }
-    if -det > bound {
-        return -1;
+    if let Some(sign) = float_filtered_sign(left, right) {
+        return sign;
     }
     exact_sign_of_products(&[(q.x, d.y), (-p.x, d.y), (-q.y, d.x), (p.y, d.x)])
 }
