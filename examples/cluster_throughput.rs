@@ -235,11 +235,15 @@ fn show_costs(what: &str, costs: &[serde_json::Value]) {
         ("state_load_ms", "state load"),
         ("stale_check_ms", "stale check"),
         ("state_save_ms", "state store"),
-        ("commit_ms", "record commit"),
-        ("ack_ms", "ack"),
+        ("commit_ms", "heartbeat end"),
+        ("ack_ms", "commit + ack"),
         ("completion_ms", "completion"),
         ("queue_ms", "TOTAL queue work"),
         ("wait_ms", "publish->receive"),
+        // Not queue work: the writer's outputs, which the single daemon writes too, and
+        // the state's encoding and shared file, done at the same time beside them.
+        ("write_ms", "writer (outputs)"),
+        ("state_prepare_ms", "state encoding"),
     ];
     for (key, name) in keys {
         let v = costs.iter().filter_map(|c| c[key].as_f64()).collect();

@@ -1,5 +1,6 @@
 //! One claimed job: fit with the warm start from the bucket (the claim kept alive meanwhile),
-//! write through the daemon's writer, store the new state, commit the patch's record,
+//! write through the daemon's writer while the new state is encoded beside it, store that
+//! state, commit the patch's record,
 //! acknowledge, and tell a path job's source that its input is finished. The work the queue
 //! adds around the fit is timed per job and logged as one `queue cost` line.
 
@@ -10,6 +11,7 @@ use super::wire::{Completion, JobHeader, PatchRecord};
 use crate::daemon::config::DaemonConfig;
 use crate::daemon::job::{run_job, Job, JobDone, Outcome};
 use crate::daemon::kinds::{rejection_kind, Cause};
+use crate::daemon::state::PatchState;
 use crate::daemon::writer::{Keep, WriterMsg};
 use crate::io::Format;
 use crate::pipeline::worker::WarmStart;
@@ -30,9 +32,12 @@ pub(super) struct Cost {
     pub(super) state_load_ms: f64,
     /// The look for a newer version after the fit.
     pub(super) stale_check_ms: f64,
+    /// The wait for the state's encoding and shared file beyond the writer's own time
+    /// (both run at once), and the bucket's compare-and-set.
     pub(super) state_save_ms: f64,
-    /// The record's compare-and-set and the heartbeat's end.
+    /// The heartbeat's end.
     pub(super) commit_ms: f64,
+    /// The record's compare-and-set and the acknowledgement, sent together.
     pub(super) ack_ms: f64,
     pub(super) completion_ms: f64,
 }
@@ -64,8 +69,8 @@ enum Ending {
     Rejected,
     /// The content was fitted before: nothing to store, the input is finished.
     Unchanged,
-    /// Handed to the writer: the state it made is stored.
-    Fitted,
+    /// Handed to the writer: this state is stored once the writer has written the outputs.
+    Fitted(Box<PatchState>),
     /// Dropped for a newer version: its warm start may still seed that version.
     Stale(Box<WarmStart>),
 }
@@ -75,7 +80,7 @@ pub(super) fn fit(
     ctx: &Ctx,
     msg: Message,
     h: JobHeader,
-    body: Arc<Vec<u8>>,
+    (body, state): (Arc<Vec<u8>>, states::Fetch),
     seq: u64,
     claim: PatchRecord,
     rev: u64,
@@ -86,16 +91,43 @@ pub(super) fn fit(
     let msg = Arc::new(msg);
     let beat = heartbeat(ctx, &msg, &key, &claim, rev);
     let mut t = Instant::now();
-    let (to_writer, ending, loaded) = run(ctx, &h, body, &cfg, &msg.subject, seq, &mut cost);
+    let (to_writer, ending, loaded) =
+        run(ctx, &h, (body, state), &cfg, (&msg.subject, seq), &mut cost);
     if beat.lost.load(Ordering::SeqCst) {
         tracing::warn!(patch = %h.id, version = %h.version, "the claim was taken over by another worker; result dropped");
         let _ = beat.end(&ctx.queue);
         return;
     }
-    write(ctx, to_writer);
-    let write_ms = lap(&mut t);
+    let limit = cfg.cluster.payload_limit;
+    // The state is encoded (and a large one written to shared storage) while the writer
+    // writes the outputs: the single daemon's writer does that work too, so only what
+    // outlasts the writer counts as the queue's.
+    let (prepared, write_ms, prepare_ms) = std::thread::scope(|scope| {
+        let preparing = match &ending {
+            Ending::Fitted(state) => Some(scope.spawn(|| {
+                let start = Instant::now();
+                let prepared = states::prepare(&ctx.out_dir, limit, &h.id, seq, state);
+                (prepared, start.elapsed().as_secs_f64() * 1e3)
+            })),
+            _ => None,
+        };
+        write(ctx, to_writer);
+        let write_ms = lap(&mut t);
+        let joined = preparing.map(|p| {
+            p.join()
+                .unwrap_or_else(|_| (Err("the state encoder panicked".into()), f64::NAN))
+        });
+        cost.state_save_ms = lap(&mut t);
+        match joined {
+            Some((prepared, ms)) => (Some(prepared), write_ms, ms),
+            None => (None, write_ms, 0.0),
+        }
+    });
     let Some(rev) = beat.end(&ctx.queue) else {
         tracing::warn!(patch = %h.id, version = %h.version, "the claim was taken over while writing");
+        if let Some(Ok(p)) = prepared {
+            states::discard(p);
+        }
         return;
     };
     cost.commit_ms = lap(&mut t);
@@ -104,14 +136,24 @@ pub(super) fn fit(
     let finished = match ending {
         Ending::Rejected => false,
         Ending::Unchanged => true,
-        Ending::Fitted => match ctx.store.load(&h.id).filter(|s| s.version == h.version) {
-            Some(state) => {
-                states::store(ctx, &h.id, seq, &state, &loaded);
-                true
+        Ending::Fitted(_) => {
+            let outputs_written = ctx
+                .store
+                .load(&h.id)
+                .is_some_and(|s| s.version == h.version);
+            match (outputs_written, prepared) {
+                (true, Some(Ok(p))) => {
+                    states::commit(ctx, &h.id, p, &loaded);
+                }
+                (true, Some(Err(e))) => {
+                    tracing::warn!(patch = %h.id, error = %e, "cannot save the warm-start state");
+                }
+                // The writer could not write the outputs: the old state stays.
+                (false, Some(Ok(p))) => states::discard(p),
+                _ => {}
             }
-            // The writer could not write the outputs: the old state stays.
-            None => false,
-        },
+            outputs_written
+        }
         Ending::Stale(warm) => {
             states::store(
                 ctx,
@@ -123,7 +165,7 @@ pub(super) fn fit(
             false
         }
     };
-    cost.state_save_ms = lap(&mut t);
+    cost.state_save_ms += lap(&mut t);
     let committed = match written {
         true => PatchRecord {
             holder: None,
@@ -137,12 +179,16 @@ pub(super) fn fit(
         },
     };
     let bytes = bytes::Bytes::from(serde_json::to_vec(&committed).unwrap_or_default());
-    if let Err(e) = ctx.queue.block_on(ctx.queue.kv.update(&key, bytes, rev)) {
-        tracing::warn!(patch = %h.id, error = %e, "cannot commit the patch's record");
-    }
-    cost.commit_ms += lap(&mut t);
+    // Sent together: in either order a crash between the two is safe (a redelivery after the
+    // commit is acknowledged as done; an acknowledged job whose claim was not released
+    // holds the patch until the claim runs out), so the job waits for one round trip.
     ctx.queue.block_on(async {
-        if let Err(e) = msg.double_ack().await {
+        let (committed, acked) =
+            tokio::join!(ctx.queue.kv.update(&key, bytes, rev), msg.double_ack());
+        if let Err(e) = committed {
+            tracing::warn!(patch = %h.id, error = %e, "cannot commit the patch's record");
+        }
+        if let Err(e) = acked {
             tracing::warn!(error = %e, "cannot acknowledge a job");
         }
     });
@@ -161,7 +207,7 @@ pub(super) fn fit(
         wait_ms = cost.wait_ms, claim_ms = cost.claim_ms, state_load_ms = cost.state_load_ms,
         stale_check_ms = cost.stale_check_ms, state_save_ms = cost.state_save_ms,
         commit_ms = cost.commit_ms, ack_ms = cost.ack_ms, completion_ms = cost.completion_ms,
-        queue_ms = cost.work_ms(), write_ms,
+        queue_ms = cost.work_ms(), write_ms, state_prepare_ms = prepare_ms,
         "queue cost"
     );
 }
@@ -170,10 +216,9 @@ pub(super) fn fit(
 fn run(
     ctx: &Ctx,
     h: &JobHeader,
-    body: Arc<Vec<u8>>,
+    (body, state): (Arc<Vec<u8>>, states::Fetch),
     cfg: &Arc<DaemonConfig>,
-    subject: &str,
-    seq: u64,
+    (subject, seq): (&str, u64),
     cost: &mut Cost,
 ) -> (Vec<WriterMsg>, Ending, Loaded) {
     let data = match (h.format, payload(h, body, cfg.daemon.max_file_bytes)) {
@@ -193,12 +238,13 @@ fn run(
                 kind,
                 reason,
             };
+            state.abort();
             return (vec![reject], Ending::Rejected, Loaded::default());
         }
     };
     let mut t = Instant::now();
     ctx.store.forget(&h.id);
-    let loaded = states::load(ctx, &h.id);
+    let loaded = states::load(ctx, &h.id, state);
     if let Some(state) = &loaded.state {
         ctx.store.remember(&h.id, state.clone());
     }
@@ -229,7 +275,9 @@ fn run(
         }
         (_, outcome) => {
             let ending = match &outcome {
-                Outcome::Fitted { .. } => Ending::Fitted,
+                Outcome::Fitted { outputs, hash } => Ending::Fitted(Box::new(
+                    PatchState::after_fit(&h.version, *hash, cfg, outputs.warm.clone()),
+                )),
                 Outcome::Unchanged { .. } => Ending::Unchanged,
                 _ => Ending::Rejected,
             };

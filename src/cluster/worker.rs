@@ -7,6 +7,7 @@
 use super::context::{arrival, newer, payload, record_key, write, Ctx};
 use super::fit::{fit, lap, Cost};
 use super::queue::{now_ms, now_us, ClusterError, Queue};
+use super::states;
 use super::wire::{self, decide, Decision, PatchRecord};
 use crate::daemon::config::DaemonConfig;
 use crate::daemon::coordinator::reload_config;
@@ -86,7 +87,7 @@ pub fn run_worker(opts: WorkerOptions, ctl: &Control) -> Result<WorkerSummary, C
         .clone()
         .unwrap_or_else(|| opts.out_dir.join("quarantine"));
     let cell = Arc::new(ConfigCell::new(opts.config.clone()));
-    let store = Arc::new(StateStore::new(scratch.path().to_path_buf()));
+    let store = Arc::new(StateStore::in_memory(scratch.path().to_path_buf()));
     // Nobody listens: the scheduler that needs "written" lives in the source.
     let (acks, _) = crossbeam_channel::unbounded();
     let (wtx, wrx) = crossbeam_channel::unbounded();
@@ -265,6 +266,7 @@ fn handle(ctx: &Ctx, msg: Message) {
             ctx.queue.block_on(ack(&msg, AckKind::Ack));
         }
         Decision::Claim(claim) => {
+            let state = states::fetch(ctx, &header.id);
             let bytes = bytes::Bytes::from(serde_json::to_vec(&claim).unwrap_or_default());
             let taken = ctx.queue.block_on(async {
                 match rev {
@@ -284,8 +286,9 @@ fn handle(ctx: &Ctx, msg: Message) {
             });
             cost.claim_ms = lap(&mut t);
             match taken {
-                Ok(r) => fit(ctx, msg, header, body, seq, claim, r, cost),
+                Ok(r) => fit(ctx, msg, header, (body, state), seq, claim, r, cost),
                 Err(e) => {
+                    state.abort();
                     tracing::debug!(error = %e, "another worker claimed the patch first");
                     ctx.queue
                         .block_on(ack(&msg, AckKind::Nak(Some(BUSY_RETRY))));

@@ -22,8 +22,29 @@ pub(crate) struct PatchState {
     pub(crate) warm: WarmStart,
 }
 
+impl PatchState {
+    /// The state a fit leaves once its outputs are written.
+    pub(crate) fn after_fit(
+        version: &str,
+        input_hash: u64,
+        cfg: &crate::daemon::config::DaemonConfig,
+        warm: WarmStart,
+    ) -> Self {
+        Self {
+            version: version.to_string(),
+            input_hash,
+            config_hash: cfg.fit_hash(),
+            outputs: cfg.wanted_outputs(),
+            warm,
+        }
+    }
+}
+
 pub(crate) struct StateStore {
     dir: PathBuf,
+    /// False for a cluster worker, whose states live in the shared store: writing each one
+    /// to a local file as well would cost a second encode and fsync per job for nothing.
+    files: bool,
     /// The states of the most recently fitted patches: a new version's job reads its
     /// predecessor's state from here instead of parsing the file again (a scan's state
     /// carries its data points, ~2 MB of JSON, ~8 ms to parse).
@@ -68,8 +89,18 @@ impl StateStore {
             .unwrap_or_default();
         Self {
             dir,
+            files: true,
             recent: Mutex::new(Recent::default()),
             unsupported: Mutex::new(unsupported),
+        }
+    }
+
+    /// A store whose states stay in memory (`persist` writes nothing); `dir` still keeps
+    /// the notes of unsupported inputs.
+    pub(crate) fn in_memory(dir: PathBuf) -> Self {
+        Self {
+            files: false,
+            ..Self::new(dir)
         }
     }
 
@@ -134,6 +165,9 @@ impl StateStore {
 
     /// Writes a state to its file (atomically).
     pub(crate) fn persist(&self, id: &str, state: &PatchState) -> Result<(), crate::io::IoError> {
+        if !self.files {
+            return Ok(());
+        }
         let bytes = serde_json::to_vec(state).unwrap_or_default();
         write_atomic(&self.path(id), &bytes)
     }

@@ -345,13 +345,7 @@ impl Writer {
                 }
                 let state = self.store.remember(
                     &a.id,
-                    PatchState {
-                        version: a.version.clone(),
-                        input_hash: hash,
-                        config_hash: done.cfg.fit_hash(),
-                        outputs: done.cfg.wanted_outputs(),
-                        warm,
-                    },
+                    PatchState::after_fit(&a.version, hash, &done.cfg, warm),
                 );
                 self.processed(a, done.cfg.output.processed);
                 Some(state)
