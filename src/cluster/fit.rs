@@ -171,6 +171,7 @@ pub(super) fn fit(
             holder: None,
             done_seq: seq,
             done_version: h.version.clone(),
+            done_finished: finished,
             ..claim
         },
         false => PatchRecord {
@@ -289,7 +290,7 @@ fn run(
 
 /// Tells the source of a path job that its input is finished (plain NATS, best effort: a
 /// source that does not hear it leaves the file in place, never moves it early).
-fn complete(queue: &Queue, h: &JobHeader, out_dir: &std::path::Path) {
+pub(super) fn complete(queue: &Queue, h: &JobHeader, out_dir: &std::path::Path) {
     let Some(path) = h
         .path
         .as_ref()

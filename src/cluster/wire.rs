@@ -109,6 +109,11 @@ pub(crate) struct PatchRecord {
     /// The newest job whose result is written (0: none).
     pub(crate) done_seq: u64,
     pub(crate) done_version: String,
+    /// Whether the input of `done_seq` is finished (fitted or unchanged, not rejected): a
+    /// redelivery of that job between its commit and its acknowledgement tells the source
+    /// again, so a path job's file does not wait for the source's restart.
+    #[serde(default)]
+    pub(crate) done_finished: bool,
 }
 
 /// What a worker does with job `seq` given the patch's record.

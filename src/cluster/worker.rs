@@ -5,7 +5,7 @@
 //! wait, and the claim (renewed while the fit runs) has run out by then.
 
 use super::context::{arrival, newer, payload, record_key, write, Ctx};
-use super::fit::{fit, lap, Cost};
+use super::fit::{complete, fit, lap, Cost};
 use super::queue::{now_ms, now_us, ClusterError, Queue};
 use super::states;
 use super::wire::{self, decide, Decision, PatchRecord};
@@ -238,7 +238,12 @@ fn handle(ctx: &Ctx, msg: Message) {
         cluster.max_deliveries,
     );
     match decision {
-        Decision::AlreadyDone => ctx.queue.block_on(ack(&msg, AckKind::Ack)),
+        Decision::AlreadyDone => {
+            if rec.done_finished {
+                complete(&ctx.queue, &header, &ctx.out_dir);
+            }
+            ctx.queue.block_on(ack(&msg, AckKind::Ack));
+        }
         Decision::Superseded(by) => {
             let loser = arrival(&header, body);
             write(ctx, vec![WriterMsg::Superseded { loser, by }]);
