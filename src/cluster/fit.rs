@@ -277,7 +277,7 @@ fn run(
         (_, outcome) => {
             let ending = match &outcome {
                 Outcome::Fitted { outputs, hash } => Ending::Fitted(Box::new(
-                    PatchState::after_fit(&h.version, *hash, cfg, outputs.warm.clone()),
+                    PatchState::after_fit(&h.version, *hash, cfg.state_fit(), outputs.warm.clone()),
                 )),
                 Outcome::Unchanged { .. } => Ending::Unchanged,
                 _ => Ending::Rejected,

@@ -217,8 +217,9 @@ mod tests {
         let state = PatchState::after_fit(
             "p@2",
             42,
-            &crate::daemon::config::DaemonConfig::embedded_default()
-                .expect("the embedded config parses"),
+            crate::daemon::config::DaemonConfig::embedded_default()
+                .expect("the embedded config parses")
+                .state_fit(),
             WarmStart {
                 surface: crate::pipeline::SurfaceKind::Loop,
                 controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],

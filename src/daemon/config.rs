@@ -362,6 +362,11 @@ impl DaemonConfig {
         super::state::content_hash(shaping.to_string().as_bytes())
     }
 
+    /// What a patch's warm-start state records of this config: `(fit_hash, wanted_outputs)`.
+    pub(crate) fn state_fit(&self) -> (u64, Vec<String>) {
+        (self.fit_hash(), self.wanted_outputs())
+    }
+
     /// The output files a fit writes under this config.
     pub fn wanted_outputs(&self) -> Vec<String> {
         let mut files = vec!["surface.json".to_string()];

@@ -23,18 +23,19 @@ pub(crate) struct PatchState {
 }
 
 impl PatchState {
-    /// The state a fit leaves once its outputs are written.
+    /// The state a fit leaves once its outputs are written; `fit` gives the config's
+    /// `(fit_hash, wanted_outputs)`.
     pub(crate) fn after_fit(
         version: &str,
         input_hash: u64,
-        cfg: &crate::daemon::config::DaemonConfig,
+        (config_hash, outputs): (u64, Vec<String>),
         warm: WarmStart,
     ) -> Self {
         Self {
             version: version.to_string(),
             input_hash,
-            config_hash: cfg.fit_hash(),
-            outputs: cfg.wanted_outputs(),
+            config_hash,
+            outputs,
             warm,
         }
     }

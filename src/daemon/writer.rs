@@ -345,7 +345,7 @@ impl Writer {
                 }
                 let state = self.store.remember(
                     &a.id,
-                    PatchState::after_fit(&a.version, hash, &done.cfg, warm),
+                    PatchState::after_fit(&a.version, hash, done.cfg.state_fit(), warm),
                 );
                 self.processed(a, done.cfg.output.processed);
                 Some(state)
