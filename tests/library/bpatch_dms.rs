@@ -10,15 +10,15 @@ use trispline::surface::dms::{DmsError, DmsSpline, KnotRule, PlanarSurface};
 use trispline::surface::{SurfaceParam, TriSurface};
 
 /// xorshift64*: deterministic pseudo-random numbers in [0, 1).
-struct Rng(u64);
+pub(crate) struct Rng(pub(crate) u64);
 impl Rng {
-    fn next(&mut self) -> f64 {
+    pub(crate) fn next(&mut self) -> f64 {
         self.0 ^= self.0 >> 12;
         self.0 ^= self.0 << 25;
         self.0 ^= self.0 >> 27;
         (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
     }
-    fn param(&mut self, faces: usize) -> SurfaceParam {
+    pub(crate) fn param(&mut self, faces: usize) -> SurfaceParam {
         let face = ((self.next() * faces as f64) as u32).min(faces as u32 - 1);
         let (mut u, mut v) = (self.next(), self.next());
         if u + v > 1.0 {
@@ -189,7 +189,7 @@ fn l_domain() -> (Vec<DVec2>, Vec<[u32; 3]>) {
 
 /// Random clouds (radius up to a quarter of the unit edge), redrawn per vertex until the
 /// spline accepts them.
-fn random_dms(degree: usize, seed: u64) -> DmsSpline {
+pub(crate) fn random_dms(degree: usize, seed: u64) -> DmsSpline {
     let (vertices, triangles) = l_domain();
     let mut rng = Rng(seed);
     let draw = |rng: &mut Rng, v: DVec2| -> Vec<DVec2> {
@@ -219,7 +219,7 @@ fn random_dms(degree: usize, seed: u64) -> DmsSpline {
 }
 
 /// Parameters at random, plus every face's corners, edge midpoints and an edge point.
-fn test_params(faces: usize, rng: &mut Rng, count: usize) -> Vec<SurfaceParam> {
+pub(crate) fn test_params(faces: usize, rng: &mut Rng, count: usize) -> Vec<SurfaceParam> {
     let mut params: Vec<SurfaceParam> = (0..count).map(|_| rng.param(faces)).collect();
     for face in 0..faces as u32 {
         for (u, v) in [

@@ -5,6 +5,7 @@ mod bpatch_dms;
 mod bspline;
 mod curvature;
 mod dayone;
+mod dms_pieces;
 mod fit_engine;
 mod fit_operator;
 mod iges;

@@ -25,7 +25,7 @@ mod warm;
 pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
 pub use error::ScatteredError;
 use info::planar_surface;
-pub use info::ScatteredInfo;
+pub use info::{PlanarStages, ScatteredInfo, StageTime};
 pub(crate) use output::add_outputs;
 pub use output::tessellate_planar;
 pub(crate) use subdivided::fit_planar_subdivided;
@@ -221,6 +221,7 @@ fn planar_info(
         outer,
         holes,
         correction_rms: rounds.rms.clone(),
+        stages: rounds.stages,
         spacing,
         reused_controls,
         cold_start,

@@ -12,9 +12,9 @@
 //!
 //! Knot-only data is computed once: per domain triangle one `SimplexFamily` (its
 //! (n+1)(n+2)/2 basis functions share one recurrence DAG over the triangle's 3(n+1) knots;
-//! at degree <= 2 each cell of the knot-line arrangement a point meets is converted once to
-//! polynomials and kept, so later points in the cell cost a sign key and a polynomial per
-//! function; degree 3 walks the recurrence)
+//! each cell of the knot-line arrangement a point meets is converted once to polynomials
+//! (expanded about the cell's centre) and kept, so later points in the cell cost a sign key
+//! and a polynomial per function)
 //! and a grid that lists, per cell, the triangles whose knot clouds' bounding box may cover
 //! it (the support of every N^I lies in the hull of I's clouds).
 //!
@@ -200,6 +200,12 @@ impl DmsSpline {
         self.families.iter().map(SimplexFamily::node_count).sum()
     }
 
+    /// The compiled basis of domain triangle `triangle` (its roots in lattice order): for
+    /// checking the kept pieces against the recurrence.
+    pub fn family(&self, triangle: usize) -> Option<&SimplexFamily> {
+        self.families.get(triangle)
+    }
+
     /// Polynomial pieces (knot-line cells) converted and kept so far over all triangles.
     pub fn piece_count(&self) -> usize {
         self.families.iter().map(SimplexFamily::piece_count).sum()
@@ -357,7 +363,7 @@ impl TriSurface for DmsSpline {
     /// Per domain triangle, its share of the surface of `controls` frozen on the cells
     /// kept so far (`SimplexFamily::freeze`): a foot-point search evaluates one surface at
     /// every Newton step, and a frozen cell costs one polynomial in place of one per basis
-    /// function. Degree 3 (no cells) evaluates as `evaluate`.
+    /// function.
     fn evaluator<'a>(
         &'a self,
         controls: &'a [DVec3],

@@ -53,8 +53,8 @@ pub struct SimplexFamily {
     roots: Vec<(u32, f64)>,
     min: DVec2,
     max: DVec2,
-    /// The polynomial pieces met so far (`None` above `pieces::PIECE_DEGREE`: `evaluate`
-    /// serves).
+    /// The polynomial pieces met so far (`None` above `pieces::PIECE_DEGREE` or with more
+    /// knot lines than a key holds: `evaluate` serves).
     pieces: Option<Pieces>,
 }
 
@@ -201,7 +201,7 @@ impl SimplexFamily {
     }
 
     /// What `evaluate` gives, from the polynomial of x's knot-line cell (converted on the
-    /// first visit and kept; module docs), equal up to rounding. Families above degree 2
+    /// first visit and kept; module docs), equal up to rounding. Families without pieces
     /// walk the recurrence (`scratch` serves only then).
     pub fn evaluate_cached<const DERIV: bool>(
         &self,
@@ -218,7 +218,7 @@ impl SimplexFamily {
 
     /// The family's shares of the surface of `controls` (one per root, in root order) on
     /// the cells kept so far, for `surface_jet`; `None` when the family walks the
-    /// recurrence (degree 3) or `controls` does not match its roots.
+    /// recurrence or `controls` does not match its roots.
     pub fn freeze(&self, controls: &[DVec3]) -> Option<FrozenCells> {
         if controls.len() != self.roots.len() {
             return None;

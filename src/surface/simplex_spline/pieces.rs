@@ -12,6 +12,14 @@
 //! vertices, knot lines cross the domain triangles: the splines are polynomial only on the
 //! finer cells of the knot-line arrangement.
 //!
+//! Each cell's polynomials are expanded about the cell's own centre (the mean of the corners
+//! of the cell, clipped from the pool's hull by the key's half-planes: a function of the key
+//! alone). About a far point (the pool's centre, as first written) a cell's polynomial is
+//! an extrapolation whose coefficients cancel when evaluated in the cell: at degree 3 a DMS
+//! partition of unity came out 4e-9 off that way, while the recurrence at the point is
+//! 1e-15 off. About a point of the cell the coefficients are the cell's own value and
+//! derivatives, so the pieces are as exact as the recurrence, and degree 3 keeps pieces too.
+//!
 //! Signs are those of the family's own recurrence: the same float filter as
 //! `orient_sign`, and the exact symbolic test (`perturbed_side`) where it cannot decide, so a
 //! point on a knot line gets the piece its perturbation direction points into.
@@ -31,11 +39,8 @@ use std::sync::{PoisonError, RwLock};
 /// coefficients).
 const MAX_PIECE_DEGREE: usize = 3;
 
-/// Families up to this degree are kept in piece form. Degree 3 is not: in monomials about
-/// the pool's centre its cells' coefficients cancel too much (a DMS partition of unity on
-/// random clouds came out 4e-9 off at a domain-edge point, the recurrence 1e-15), so
-/// cubic families walk the recurrence.
-pub(super) const PIECE_DEGREE: usize = 2;
+/// Families up to this degree are kept in piece form (all the degrees DMS splines use).
+pub(super) const PIECE_DEGREE: usize = MAX_PIECE_DEGREE;
 const MONOMIALS: usize = 10;
 
 /// A family keeps at most this many cells; past it pieces are converted on each call
@@ -54,22 +59,24 @@ const fn mono(a: usize, b: usize) -> usize {
 
 type Poly = [f64; MONOMIALS];
 
-/// Monomials of a share of the surface (`Pieces::share`): those of degree <= 2.
-const SHARE_MONOMIALS: usize = 6;
-
-/// A family's share of one surface on a cell, per monomial of degree <= 2 (zero past the
-/// roots' degree).
-type SurfaceCell = [DVec3; SHARE_MONOMIALS];
-
 /// A family's shares of one surface on the cells kept when it was frozen
-/// (`SimplexFamily::freeze`).
+/// (`SimplexFamily::freeze`): per cell its centre and, per monomial about it, the sum over
+/// the roots of coefficient times control point. Kept apart from the index so that a
+/// look-up stays small whatever the degree.
 #[derive(Debug, Default)]
-pub struct FrozenCells(FxHashMap<u128, SurfaceCell>);
+pub struct FrozenCells {
+    index: FxHashMap<u128, u32>,
+    centres: Vec<DVec2>,
+    /// `per_root` per cell.
+    coefficients: Vec<DVec3>,
+}
 
-/// One cell's polynomials, root after root (`coefficients` each), in local coordinates.
+/// One cell's polynomials, root after root (`coefficients` each), in the local coordinates
+/// X = (x - centre) * inv_scale.
 #[derive(Debug)]
 struct Piece {
     zero: bool,
+    centre: DVec2,
     coefficients: Box<[f64]>,
 }
 
@@ -87,6 +94,7 @@ pub(super) struct Pieces {
     /// Per node that is a leaf: its three edges as (line, true when the ccw edge runs from
     /// the line's higher knot to its lower one).
     leaf_edges: Vec<[(u8, bool); 3]>,
+    /// Where a cell too thin to clip in floats is expanded (the pool's bounding-box centre).
     centre: DVec2,
     inv_scale: f64,
     /// Monomials per root polynomial: (m + 1)(m + 2) / 2 for the highest root degree m.
@@ -229,11 +237,49 @@ impl Pieces {
         })
     }
 
+    /// The centre of the cell of `key`: the mean of the corners of the hull clipped by every
+    /// knot line's half-plane (Sutherland-Hodgman); the pool's centre when rounding leaves
+    /// no polygon (a cell thinner than the rounding of its corners).
+    fn cell_centre(&self, key: u128) -> DVec2 {
+        let mut polygon = self.hull.clone();
+        let mut next = Vec::with_capacity(polygon.len() + 4);
+        for (l, &(a, b)) in self.ends.iter().enumerate() {
+            let sign = if (key >> l) & 1 == 1 { 1.0 } else { -1.0 };
+            let side = |p: DVec2| sign * (b - a).perp_dot(p - a);
+            next.clear();
+            for (k, &p) in polygon.iter().enumerate() {
+                let q = polygon[(k + 1) % polygon.len()];
+                let (sp, sq) = (side(p), side(q));
+                if sp >= 0.0 {
+                    next.push(p);
+                }
+                if (sp >= 0.0) != (sq >= 0.0) {
+                    next.push(p + (q - p) * (sp / (sp - sq)));
+                }
+            }
+            std::mem::swap(&mut polygon, &mut next);
+            if polygon.len() < 3 {
+                return self.centre;
+            }
+        }
+        let centre = polygon.iter().sum::<DVec2>() / polygon.len() as f64;
+        if centre.is_finite() {
+            centre
+        } else {
+            self.centre
+        }
+    }
+
     /// Every root's polynomial on the cell of `key`: the recurrence run on polynomials.
     fn convert(&self, key: u128, nodes: &[CompiledNode], roots: &[(u32, f64)]) -> Piece {
         let mut polys: Vec<Option<Poly>> = Vec::with_capacity(nodes.len());
         let mut leaf = 0usize;
-        let (c, s) = (self.centre, 1.0 / self.inv_scale);
+        let centre = if self.hull.is_empty() {
+            self.centre
+        } else {
+            self.cell_centre(key)
+        };
+        let (c, s) = (centre, 1.0 / self.inv_scale);
         for cn in nodes {
             let poly = match &cn.node {
                 Node::Zero => None,
@@ -278,7 +324,11 @@ impl Pieces {
                 }
             }
         }
-        Piece { zero, coefficients }
+        Piece {
+            zero,
+            centre,
+            coefficients,
+        }
     }
 
     /// Root jets at x (perturbed along `dir`), converting and keeping its cell if new.
@@ -325,34 +375,42 @@ impl Pieces {
     }
 
     /// The family's share of one surface on a cell: per monomial, the sum over the roots of
-    /// the root's coefficient times its control point (`controls`, in root order).
-    fn share(&self, piece: &Piece, controls: &[DVec3]) -> SurfaceCell {
-        let mut cell = [DVec3::ZERO; SHARE_MONOMIALS];
+    /// the root's coefficient times its control point (`controls`, in root order), into
+    /// `out` (`per_root` long).
+    fn share(&self, piece: &Piece, controls: &[DVec3], out: &mut [DVec3]) {
+        out.fill(DVec3::ZERO);
         if piece.zero {
-            return cell;
+            return;
         }
         for (coef, c) in piece.coefficients.chunks_exact(self.per_root).zip(controls) {
-            for (m, k) in cell.iter_mut().zip(coef) {
+            for (m, k) in out.iter_mut().zip(coef) {
                 *m += *c * *k;
             }
         }
-        cell
     }
 
     /// The family's shares of the surface of `controls` on every cell kept so far (a
     /// foot-point search evaluates one surface many times: a hit costs the sign key, a
-    /// look-up and one polynomial in place of one per root). `None` above degree 2.
+    /// look-up and one polynomial in place of one per root).
     pub(super) fn freeze(&self, controls: &[DVec3]) -> Option<FrozenCells> {
-        if self.per_root > SHARE_MONOMIALS {
-            return None;
-        }
         let cells = self.cells.read().unwrap_or_else(PoisonError::into_inner);
-        Some(FrozenCells(
-            cells
-                .iter()
-                .map(|(key, piece)| (*key, self.share(piece, controls)))
-                .collect(),
-        ))
+        let n = self.per_root;
+        let mut frozen = FrozenCells {
+            index: FxHashMap::default(),
+            centres: Vec::with_capacity(cells.len()),
+            coefficients: vec![DVec3::ZERO; cells.len() * n],
+        };
+        frozen.index.reserve(cells.len());
+        for (i, (key, piece)) in cells.iter().enumerate() {
+            frozen.index.insert(*key, i as u32);
+            frozen.centres.push(piece.centre);
+            self.share(
+                piece,
+                controls,
+                &mut frozen.coefficients[i * n..(i + 1) * n],
+            );
+        }
+        Some(frozen)
     }
 
     /// Value and x/y derivatives of the family's share of the surface of `controls` at x
@@ -371,14 +429,40 @@ impl Pieces {
             return [DVec3::ZERO; 6];
         }
         let key = self.key(x, dir);
-        let cell = match frozen.0.get(&key) {
-            Some(cell) => *cell,
-            None => self.with_piece(key, nodes, roots, |piece| self.share(piece, controls)),
-        };
-        // c0 + c1 X + c2 Y + c3 X^2 + c4 X Y + c5 Y^2, X = (x - centre) * s.
+        let n = self.per_root;
+        match frozen.index.get(&key) {
+            Some(&i) => {
+                let i = i as usize;
+                let cell = &frozen.coefficients[i * n..(i + 1) * n];
+                self.share_jet(frozen.centres[i], cell, x)
+            }
+            None => self.with_piece(key, nodes, roots, |piece| {
+                let mut cell = [DVec3::ZERO; MONOMIALS];
+                self.share(piece, controls, &mut cell[..n]);
+                self.share_jet(piece.centre, &cell[..n], x)
+            }),
+        }
+    }
+
+    /// Value and x/y derivatives at x of a share (`cell`: its coefficients about `centre`).
+    fn share_jet(&self, centre: DVec2, cell: &[DVec3], x: DVec2) -> [DVec3; 6] {
         let s = self.inv_scale;
-        let p = (x - self.centre) * s;
-        let [c0, c1, c2, c3, c4, c5] = cell;
+        let p = (x - centre) * s;
+        if cell.len() > 6 {
+            let basis = monomial_jets::<true>(p, s);
+            let mut jet = [DVec3::ZERO; 6];
+            for (c, b) in cell.iter().zip(&basis) {
+                for (j, v) in jet.iter_mut().zip(b) {
+                    *j += *c * *v;
+                }
+            }
+            return jet;
+        }
+        // c0 + c1 X + c2 Y + c3 X^2 + c4 X Y + c5 Y^2, X = (x - centre) * s: the quadratic
+        // case by hand (the foot points of degree-2 fits spend their time here).
+        let mut q = [DVec3::ZERO; 6];
+        q[..cell.len()].copy_from_slice(cell);
+        let [c0, c1, c2, c3, c4, c5] = q;
         [
             c0 + (c1 + c3 * p.x + c4 * p.y) * p.x + (c2 + c5 * p.y) * p.y,
             (c1 + c3 * (2.0 * p.x) + c4 * p.y) * s,
@@ -395,7 +479,7 @@ impl Pieces {
             out.resize(roots, [0.0; 6]);
             return;
         }
-        let basis = monomial_jets::<DERIV>((x - self.centre) * self.inv_scale, self.inv_scale);
+        let basis = monomial_jets::<DERIV>((x - piece.centre) * self.inv_scale, self.inv_scale);
         let n = self.per_root;
         out.extend(piece.coefficients.chunks_exact(n).map(|coef| {
             let mut jet = [0.0; 6];
