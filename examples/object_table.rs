@@ -383,6 +383,59 @@ fn interior_stray(fit: &ObjectFit, tess: &TriMesh) -> f64 {
     worst
 }
 
+/// The control faces whose patches stray farthest from the data, each with the foot
+/// points it holds and its valences: are they faces the data left (few feet), rim faces,
+/// or irregular ones?
+fn stray_faces(fit: &ObjectFit, tess: &TriMesh) {
+    let per_face = (TESS + 1) * (TESS + 2) / 2;
+    let md = MeshDistance::new(&fit.component);
+    let mut feet = vec![0usize; fit.surface.domain_face_count()];
+    for p in &fit.params {
+        feet[p.face as usize] += 1;
+    }
+    let control = fit.control_mesh();
+    let Ok(topo) = trispline::mesh::topology::Topology::from_mesh(&control) else {
+        return;
+    };
+    let mut worst: Vec<(f64, usize)> = (0..control.triangles.len())
+        .map(|f| {
+            let d = tess.positions[f * per_face..(f + 1) * per_face]
+                .iter()
+                .map(|p| md.distance(*p).unwrap_or(f64::INFINITY))
+                .fold(0.0, f64::max);
+            (d, f)
+        })
+        .collect();
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let diag = fit.component.bounds_diagonal();
+    let few = feet.iter().filter(|&&c| c < 4).count();
+    let over: usize = worst.iter().filter(|w| w.0 > 0.005 * diag).count();
+    let list: Vec<String> = worst
+        .iter()
+        .take(6)
+        .map(|&(d, f)| {
+            let t = control.triangles[f];
+            let val: Vec<String> = t
+                .iter()
+                .map(|&v| {
+                    let b = if topo.boundary[v as usize] { "b" } else { "" };
+                    format!("{}{b}", topo.valence(v))
+                })
+                .collect();
+            format!(
+                "{:.3}% f{f} feet {} val {}",
+                100.0 * d / diag,
+                feet[f],
+                val.join("/")
+            )
+        })
+        .collect();
+    println!(
+        "  stray: {over} faces over 0.5 %, {few} faces with < 4 feet; worst: {}",
+        list.join(", ")
+    );
+}
+
 /// RMS and max distance of `points` to `mesh`.
 fn rms_max(points: &[DVec3], mesh: &TriMesh) -> (f64, f64) {
     let md = MeshDistance::new(mesh);
@@ -451,6 +504,7 @@ fn diagnose(fit: &ObjectFit, tess_rms: f64) {
         fine_rms,
         fit.rms
     );
+    stray_faces(fit, &tessellation_at(fit, TESS));
     let rounds: Vec<String> = fit
         .rounds
         .iter()
@@ -480,11 +534,9 @@ fn diagnose(fit: &ObjectFit, tess_rms: f64) {
         let mut near = topo.boundary.clone();
         for _ in 0..3 {
             let prev = near.clone();
-            for v in 0..prev.len() {
-                if prev[v] {
-                    for &x in topo.ring(v as u32) {
-                        near[x as usize] = true;
-                    }
+            for (v, _) in prev.iter().enumerate().filter(|e| *e.1) {
+                for &x in topo.ring(v as u32) {
+                    near[x as usize] = true;
                 }
             }
         }
@@ -540,8 +592,8 @@ fn local_noise(mesh: &TriMesh, topo: &trispline::mesh::topology::Topology) -> (f
         }
     }
     let mut res = Vec::new();
-    for v in 0..mesh.positions.len() {
-        let Some(n) = normals[v].try_normalize() else {
+    for (v, normal) in normals.iter().enumerate() {
+        let Some(n) = normal.try_normalize() else {
             continue;
         };
         let mut ring: Vec<u32> = topo.ring(v as u32).to_vec();
@@ -599,8 +651,9 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
         b.swap(col, piv);
         for r in col + 1..6 {
             let f = a[r][col] / a[col][col];
-            for c in col..6 {
-                a[r][c] -= f * a[col][c];
+            let pivot_row = a[col];
+            for (x, p) in a[r].iter_mut().zip(pivot_row).skip(col) {
+                *x -= f * p;
             }
             b[r] -= f * b[col];
         }
