@@ -3,6 +3,7 @@
 
 use super::config::DaemonConfig;
 use super::kinds::{rejection_kind, Cause};
+use super::object_job::{fit_object, ScanRejection};
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
 use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
@@ -22,6 +23,8 @@ pub(crate) enum Outcome {
     Fitted {
         outputs: Box<InputOutputs>,
         hash: u64,
+        /// Scans of an object left out of its fit (each is rejected in place).
+        rejected_scans: Vec<ScanRejection>,
     },
     /// Same content and same output-shaping config as the last fit.
     Unchanged { hash: u64 },
@@ -110,6 +113,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let mut read_stamp = None;
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
+        Input::Object(folder) => return fit_object(job, folder, store, t),
         Input::File(path) => {
             let Some(format) = Format::from_path(path) else {
                 return reject(
@@ -186,7 +190,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             Some(folder) => read_mesh_bytes_in(&bytes, format, &a.label, &load, folder),
             None => read_mesh_bytes(&bytes, format, &a.label, &load),
         },
-        Input::Inline { .. } => read_mesh_bytes(&bytes, format, &a.label, &load),
+        Input::Inline { .. } | Input::Object(_) => read_mesh_bytes(&bytes, format, &a.label, &load),
     };
     // A file that changed while it was read is a stale (often cut) copy, whether or not it
     // parsed (a cut OBJ can end on a whole line): read it again once it settles.
@@ -230,6 +234,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         Ok(outputs) => Outcome::Fitted {
             outputs: Box::new(outputs),
             hash,
+            rejected_scans: Vec::new(),
         },
         Err(e) => hashed(reject(Cause::Pipeline(&e), e.to_string())),
     }

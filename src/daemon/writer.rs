@@ -284,6 +284,8 @@ impl Writer {
                     Input::File(p) if in_place => Keep::InPlace(p.clone()),
                     Input::File(p) => Keep::Move(p.clone()),
                     Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
+                    // The object's scans stay its scans: the folder is never moved.
+                    Input::Object(_) => Keep::Nothing,
                 };
                 self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
@@ -311,8 +313,17 @@ impl Writer {
                 self.processed(a, done.cfg.output.processed);
                 None
             }
-            Outcome::Fitted { outputs, hash } => {
+            Outcome::Fitted {
+                outputs,
+                hash,
+                rejected_scans,
+            } => {
                 let start = Instant::now();
+                for r in rejected_scans {
+                    // Left in place: moving a scan out of its folder would change the object.
+                    let label = r.file.display().to_string();
+                    self.reject(&a.id, &label, Keep::InPlace(r.file), r.kind, &r.reason);
+                }
                 let InputOutputs {
                     parts,
                     failed,
@@ -442,7 +453,7 @@ impl Writer {
         if out.report {
             paths["report"] = json!(report);
         }
-        self.event(json!({
+        let mut line = json!({
             "patch": id, "version": a.version, "input": a.label, "status": outputs.status,
             "errors": outputs.report["final"],
             "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
@@ -450,7 +461,13 @@ impl Writer {
             "timings": {"queued_ms": timings.queued_ms, "read_ms": timings.read_ms,
                 "parse_ms": timings.parse_ms, "fit_ms": timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
             "paths": paths,
-        }));
+        });
+        if let Some(scans) = outputs.report["session"]["scans"].as_array() {
+            // An object's update: which scans its surface is fitted to.
+            let ids: Vec<&serde_json::Value> = scans.iter().map(|s| &s["id"]).collect();
+            line["scans"] = json!(ids);
+        }
+        self.event(line);
         true
     }
 
