@@ -13,6 +13,7 @@ pub(crate) mod layout;
 pub(crate) mod messages;
 mod object_config;
 mod object_job;
+mod object_store;
 pub(crate) mod offload;
 mod open_files;
 pub(crate) mod ops;

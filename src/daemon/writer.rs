@@ -7,6 +7,7 @@ use super::config::{ProcessedPolicy, UnsupportedPolicy};
 use super::confine::Roots;
 use super::job::{JobDone, Outcome, Timings};
 use super::messages::{part_id, Msg, Summary};
+use super::object_store::{store_scan, ObjectScan};
 use super::ops::metrics::Metrics;
 use super::publish::publish;
 use super::reload::ConfigCell;
@@ -57,6 +58,9 @@ pub enum WriterMsg {
     /// Everything sent before this is handled: answered on the channel (a cluster worker
     /// acknowledges a job only once its outputs and events are written).
     Barrier(Sender<()>),
+    /// A scan for an object from a pipe record: stored with the object's scans, then the
+    /// object is refitted.
+    ObjectScan(Box<ObjectScan>),
     /// An input whose version was fitted elsewhere (`watch --queue`): the processed-file
     /// policy applies to it now, inside the same roots as a local fit's.
     Processed(PathBuf, ProcessedPolicy),
@@ -246,6 +250,26 @@ impl Writer {
                 } => self.reject(&id, &label, keep, kind, &reason),
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
+                WriterMsg::ObjectScan(s) => match store_scan(&self.store.objects_dir(), &s) {
+                    Ok(arrival) => {
+                        let _ = self.acks.send(Msg::Arrivals(vec![arrival]));
+                    }
+                    Err(reason) => {
+                        let keep = match &s.scan.input {
+                            Input::Inline { data, .. } => {
+                                Keep::Bytes(Arc::clone(data), s.scan.version.clone())
+                            }
+                            _ => Keep::Nothing,
+                        };
+                        self.reject(
+                            &s.object,
+                            &s.scan.label,
+                            keep,
+                            "object_store_failed",
+                            &reason,
+                        );
+                    }
+                },
                 WriterMsg::Shutdown => break,
                 WriterMsg::Barrier(done) => {
                     let _ = done.send(());
