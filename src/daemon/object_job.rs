@@ -16,9 +16,11 @@
 //! of the folder would change the object); the other scans are fitted.
 
 use super::config::DaemonConfig;
-use super::job::{still_changing, Job, Outcome, Timings};
+use super::ids::{ignored, patch_id};
 use super::kinds::{rejection_kind, Cause};
-use super::messages::{ignored, patch_id};
+use super::open_files::still_changing;
+use super::outcome::{Outcome, ScanRejection, Timings};
+use super::scheduler::Arrival;
 use super::state::{content_hash, StateStore};
 use crate::io::registration::{registration_for, Registration};
 use crate::io::{read_mesh_bytes_in, Format, LoadOptions};
@@ -30,16 +32,6 @@ use serde_json::json;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
-
-/// A scan of an object that was left out of its fit.
-#[derive(Clone, Debug)]
-pub(crate) struct ScanRejection {
-    /// The scan file.
-    pub file: PathBuf,
-    /// `kinds::rejection_kind` of the cause.
-    pub kind: &'static str,
-    pub reason: String,
-}
 
 /// A scan read, parsed and registered.
 struct ReadScan {
@@ -167,8 +159,13 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
 }
 
 /// Fits the object whose scans are the meshes of `folder` (see the module docs).
-pub(crate) fn fit_object(job: &Job, folder: &Path, store: &StateStore, t: &mut Timings) -> Outcome {
-    let a = &job.arrival;
+pub(crate) fn fit_object(
+    a: &Arrival,
+    cfg: &DaemonConfig,
+    folder: &Path,
+    store: &StateStore,
+    t: &mut Timings,
+) -> Outcome {
     let start = Instant::now();
     let listed = match newest_scans(folder) {
         Ok(l) => l,
@@ -186,7 +183,7 @@ pub(crate) fn fit_object(job: &Job, folder: &Path, store: &StateStore, t: &mut T
     // What the fit depends on, in scan-id order: each scan's bytes and transform.
     let mut key = String::new();
     for (id, file) in &listed {
-        match read_scan(id, file, &job.cfg) {
+        match read_scan(id, file, cfg) {
             ScanRead::Read(scan, hash) => {
                 let matrix = scan.registration.transform.to_row_major().map(f64::to_bits);
                 key.push_str(&format!("{id}\t{hash:016x}\t{matrix:?}\n"));
@@ -201,8 +198,8 @@ pub(crate) fn fit_object(job: &Job, folder: &Path, store: &StateStore, t: &mut T
     }
     let hash = content_hash(key.as_bytes());
     t.read_ms = start.elapsed().as_secs_f64() * 1e3;
-    let config_hash = job.cfg.fit_hash();
-    let wanted = job.cfg.wanted_outputs();
+    let config_hash = cfg.fit_hash();
+    let wanted = cfg.wanted_outputs();
     let previous = store.load(&a.id);
     if previous.as_ref().is_some_and(|p| {
         p.input_hash == hash
@@ -228,9 +225,9 @@ pub(crate) fn fit_object(job: &Job, folder: &Path, store: &StateStore, t: &mut T
         };
     }
     let mut session = ObjectSession::new(SessionOptions {
-        merge: job.cfg.object.merge.clone(),
-        worker: job.cfg.worker_config(),
-        measure_scans: job.cfg.object.measure_scans,
+        merge: cfg.object.merge.clone(),
+        worker: cfg.worker_config(),
+        measure_scans: cfg.object.measure_scans,
     });
     let staged: Vec<(&str, &TriMesh, RigidTransform)> = scans
         .iter()

@@ -51,7 +51,7 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
         .flatten()
         .map(|e| e.path())
         .filter(|p| {
-            super::messages::patch_id(p).as_deref() == Some(s.scan.id.as_str())
+            super::ids::patch_id(p).as_deref() == Some(s.scan.id.as_str())
                 && p.extension().is_some_and(|e| e != "xf")
         })
         .collect();
@@ -93,4 +93,62 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
         version,
         detected: Instant::now(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::Format;
+    use std::sync::Arc;
+
+    fn inline(id: &str, ext: &str, bytes: &[u8]) -> Arrival {
+        Arrival {
+            id: id.into(),
+            input: Input::Inline {
+                data: Arc::new(bytes.to_vec()),
+                format: Format::from_extension(ext).expect("format"),
+            },
+            key: VersionKey {
+                time: SystemTime::now(),
+                tie: String::new(),
+            },
+            version: format!("{id}@pipe-1.{ext}"),
+            label: "pipe:test#1".into(),
+            detected: Instant::now(),
+        }
+    }
+
+    #[test]
+    fn a_stored_scan_replaces_its_other_versions_and_its_transform() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let turn = [
+            0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+        ];
+        let first = ObjectScan {
+            object: "o".into(),
+            scan: inline("s", "obj", b"v 0 0 0\n"),
+            transform: Some(turn),
+        };
+        let a = store_scan(tmp.path(), &first).expect("stored");
+        let folder = tmp.path().join("o");
+        assert!(matches!(&a.input, Input::Object(f) if *f == folder));
+        assert_eq!(a.id, "o");
+        let xf = std::fs::read_to_string(folder.join("s.xf")).expect("xf");
+        let read = crate::io::registration::parse_xf(&xf, "s.xf").expect("rigid");
+        assert_eq!(read.to_row_major(), turn);
+        // A new version in another format without a transform: the old file and the .xf go.
+        let second = ObjectScan {
+            object: "o".into(),
+            scan: inline("s", "ply", b"ply\n"),
+            transform: None,
+        };
+        store_scan(tmp.path(), &second).expect("stored");
+        let mut names: Vec<String> = std::fs::read_dir(&folder)
+            .expect("list")
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().to_string())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["s.ply"]);
+    }
 }

@@ -90,9 +90,10 @@ fn registered_scans_dropped_one_by_one_and_a_restart_end_at_the_same_surface() {
     let Some(folder) = shared_data("range_scans/registered") else {
         return;
     };
-    // A merge cell of 3 median edges keeps each update to seconds (the library test and
-    // the example measure quality at the default).
-    let config = object_config("[object.merge]\ncell_edges = 3.0\n");
+    // Fewer controls and correction rounds than the defaults keep each update to seconds
+    // (the example measures quality at the defaults).
+    let config =
+        object_config("[fit.scan]\ntarget_controls_pct = 3.0\n[fit.correction]\nrounds = 4\n");
     // Uninterrupted: the scans one by one, an update after each.
     let s = setup(&config);
     let bunny = s.inbox.join("bunny");

@@ -434,3 +434,32 @@ fn view_spread_deg<'a>(scans: impl Iterator<Item = &'a SessionScan>) -> f64 {
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
+
+#[cfg(test)]
+mod tests {
+    use super::{object_cell, MergeOptions};
+
+    #[test]
+    fn the_merge_cell_follows_the_coarsest_scan_on_a_ladder_whatever_the_order() {
+        let opts = MergeOptions::default();
+        let a = object_cell([7.8e-4, 7.6e-4, 5.0e-4].into_iter(), &opts).expect("cell");
+        let b = object_cell([5.0e-4, 7.6e-4, 7.8e-4].into_iter(), &opts).expect("cell");
+        assert_eq!(a, b);
+        // On the ladder 2^(k/8), at or above 1.5 x the coarsest spacing, less than a rung up.
+        let rung = (a.log2() * 8.0).round();
+        assert!((a.log2() * 8.0 - rung).abs() < 1e-9, "{a}");
+        assert!(
+            a >= 1.5 * 7.8e-4 && a < 1.5 * 7.8e-4 * 2f64.powf(1.0 / 8.0),
+            "{a}"
+        );
+        // A new version sampling 1 % coarser keeps the cell.
+        let c = object_cell([7.7e-4, 7.6e-4, 5.0e-4].into_iter(), &opts).expect("cell");
+        assert_eq!(a, c);
+        let fixed = MergeOptions {
+            cell: 1e-3,
+            ..MergeOptions::default()
+        };
+        assert_eq!(object_cell([7.8e-4].into_iter(), &fixed), Some(1e-3));
+        assert_eq!(object_cell(std::iter::empty(), &opts), None);
+    }
+}
