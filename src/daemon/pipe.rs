@@ -28,6 +28,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant, SystemTime};
 
+/// A record's `"object"` (sanitised) and its `"transform"`, when it is a scan of one.
+type RecordObject = Option<(String, Option<[f64; 16]>)>;
+
 /// Longer header lines are not records (a writer that forgot the framing sent raw bytes).
 const MAX_LINE: usize = 64 * 1024;
 
@@ -85,7 +88,7 @@ struct Header {
     problem: Option<(&'static str, String)>,
     stamp: String,
     /// `"object"` (sanitised) and its `"transform"`, when the record is a scan of one.
-    object: Option<(String, Option<[f64; 16]>)>,
+    object: RecordObject,
 }
 
 enum Line {
@@ -523,7 +526,7 @@ impl PipeSource {
         r: &mut impl BufRead,
         n: u64,
         format: Format,
-        (id, object): (String, Option<(String, Option<[f64; 16]>)>),
+        (id, object): (String, RecordObject),
         label: &str,
         name: String,
         seq: u64,
@@ -598,7 +601,7 @@ impl PipeSource {
     /// A patch's version goes to the scheduler; an object's scan to the writer, which
     /// keeps it with the object's scans before the object is refitted (scans of one object
     /// are not versions of one another: none may replace another while it waits).
-    fn arrive_as(&self, a: Arrival, object: Option<(String, Option<[f64; 16]>)>) {
+    fn arrive_as(&self, a: Arrival, object: RecordObject) {
         match object {
             None => {
                 let _ = self.tx.send(Msg::Arrivals(vec![a]));
@@ -638,8 +641,7 @@ impl PipeSource {
 /// The record's `"object"` and `"transform"`: `Ok(None)` without an object; an error for
 /// an object that leaves no id, a transform without an object, or a transform that is not
 /// 16 numbers of a rigid motion (never taken as the identity).
-#[allow(clippy::type_complexity)]
-fn object_of(json: &serde_json::Value) -> Result<Option<(String, Option<[f64; 16]>)>, String> {
+fn object_of(json: &serde_json::Value) -> Result<RecordObject, String> {
     let transform = json.get("transform");
     let Some(raw) = json.get("object") else {
         return match transform {
