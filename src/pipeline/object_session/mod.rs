@@ -442,19 +442,24 @@ mod tests {
     #[test]
     fn the_merge_cell_follows_the_coarsest_scan_on_a_ladder_whatever_the_order() {
         let opts = MergeOptions::default();
-        let a = object_cell([7.8e-4, 7.6e-4, 5.0e-4].into_iter(), &opts).expect("cell");
-        let b = object_cell([5.0e-4, 7.6e-4, 7.8e-4].into_iter(), &opts).expect("cell");
+        // A coarsest spacing whose cell (1.5 spacings) sits in the middle of a rung.
+        let coarsest = 2f64.powf((-78.0 + 0.5) / 8.0) / 1.5;
+        let spacings = [coarsest, 0.9 * coarsest, 0.6 * coarsest];
+        let a = object_cell(spacings.into_iter(), &opts).expect("cell");
+        let b = object_cell(spacings.into_iter().rev(), &opts).expect("cell");
         assert_eq!(a, b);
         // On the ladder 2^(k/8), at or above 1.5 x the coarsest spacing, less than a rung up.
         let rung = (a.log2() * 8.0).round();
         assert!((a.log2() * 8.0 - rung).abs() < 1e-9, "{a}");
         assert!(
-            a >= 1.5 * 7.8e-4 && a < 1.5 * 7.8e-4 * 2f64.powf(1.0 / 8.0),
+            a >= 1.5 * coarsest && a < 1.5 * coarsest * 2f64.powf(1.0 / 8.0),
             "{a}"
         );
-        // A new version sampling 1 % coarser keeps the cell.
-        let c = object_cell([7.7e-4, 7.6e-4, 5.0e-4].into_iter(), &opts).expect("cell");
-        assert_eq!(a, c);
+        // A new version of the coarsest scan sampling 1 % coarser or finer keeps the cell.
+        for f in [0.99, 1.01] {
+            let c = object_cell([f * coarsest, 0.6 * coarsest].into_iter(), &opts);
+            assert_eq!(c, Some(a));
+        }
         let fixed = MergeOptions {
             cell: 1e-3,
             ..MergeOptions::default()
