@@ -87,6 +87,10 @@ pub fn run_watch(args: &WatchArgs) -> anyhow::Result<ExitCode> {
         }
         Err(code) => return Ok(code),
     };
+    if config.object.folders && config.cluster.url.is_some() {
+        // Each object's fit reads its whole folder, which a queue's workers do not see.
+        anyhow::bail!("object.folders cannot be used with a queue (cluster.url, --queue)");
+    }
     if args.print_config {
         print!("{}", config.to_toml());
         return Ok(ExitCode::SUCCESS);

@@ -231,6 +231,9 @@ fn message(
             }
             Ok((header.clone(), encode(&header, &[])))
         }
+        // Object folders are fitted by the daemon that watches them (`[object] folders`
+        // is refused together with a queue).
+        Input::Object(_) => Err("object folders are not fitted through the queue".into()),
         Input::File(path) => {
             header.format = Format::from_path(path);
             header.path = Some(path.clone());

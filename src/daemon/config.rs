@@ -1,6 +1,7 @@
 //! Daemon configuration: TOML with unknown keys refused and ranges checked.
 
 pub use super::cluster_config::ClusterSection;
+pub use super::object_config::ObjectSection;
 use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
@@ -25,6 +26,9 @@ pub struct DaemonConfig {
     /// `[cluster]`: the shared work queue and state store (`--queue`).
     #[serde(default)]
     pub cluster: ClusterSection,
+    /// `[object]`: subfolders as objects scanned view by view.
+    #[serde(default)]
+    pub object: ObjectSection,
 }
 
 /// The `[daemon]` table.
@@ -301,6 +305,7 @@ impl DaemonConfig {
         let ranges = validate_fit(&self.fit)
             .and_then(|()| validate_daemon(&self.daemon))
             .and_then(|()| super::cluster_config::validate_cluster(&self.cluster))
+            .and_then(|()| super::object_config::validate_object(&self.object))
             .and_then(|()| {
                 let t = self.output.tessellation;
                 check(
@@ -358,7 +363,12 @@ impl DaemonConfig {
     /// next start; outputs newly asked for (`glb`, `report` turned on) are produced by a
     /// refit of the patches that lack them (`wanted_outputs`).
     pub fn fit_hash(&self) -> u64 {
-        let shaping = serde_json::json!({ "fit": self.fit });
+        // `[object]` shapes only object fits; left out while off, so that turning it on
+        // (not merely upgrading) is what refits the other patches once.
+        let shaping = match self.object.folders {
+            true => serde_json::json!({ "fit": self.fit, "object": self.object }),
+            false => serde_json::json!({ "fit": self.fit }),
+        };
         super::state::content_hash(shaping.to_string().as_bytes())
     }
 
@@ -391,6 +401,9 @@ impl DaemonConfig {
         }
         if self.daemon.recursive != new.daemon.recursive {
             keys.push("daemon.recursive");
+        }
+        if self.object.folders != new.object.folders {
+            keys.push("object.folders");
         }
         if self.daemon.metrics_addr != new.daemon.metrics_addr {
             keys.push("daemon.metrics_addr");

@@ -213,14 +213,16 @@ impl Loop {
             .partition(|(at, _)| *at <= now);
         self.retries = later;
         for (_, mut a) in due {
-            let Input::File(path) = &a.input else {
-                continue;
+            a.key.time = match &a.input {
+                Input::File(path) => match std::fs::metadata(path).and_then(|m| m.modified()) {
+                    Ok(mtime) => mtime,
+                    // Gone: nothing to read any more.
+                    Err(_) => continue,
+                },
+                // The folder is read whole again: newer than anything before.
+                Input::Object(_) => std::time::SystemTime::now(),
+                Input::Inline { .. } => continue,
             };
-            let Some(mtime) = std::fs::metadata(path).and_then(|m| m.modified()).ok() else {
-                // Gone: nothing to read any more.
-                continue;
-            };
-            a.key.time = mtime;
             if let Some(s) = self.sched.add(a) {
                 let _ = self.wtx.send(WriterMsg::Superseded {
                     loser: s.loser,

@@ -3,12 +3,15 @@
 
 use super::config::DaemonConfig;
 use super::kinds::{rejection_kind, Cause};
+use super::object_job::fit_object;
+pub(crate) use super::open_files::still_changing;
+pub(crate) use super::outcome::{Outcome, Timings};
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
 use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
-use crate::pipeline::worker::{run_input, InputOutputs, WarmStart};
+use crate::pipeline::worker::{run_input, WarmStart};
 use std::sync::Arc;
-use std::time::{Instant, SystemTime};
+use std::time::Instant;
 
 pub(crate) struct Job {
     pub arrival: Arrival,
@@ -16,42 +19,6 @@ pub(crate) struct Job {
     /// The warm start of a fit that was dropped as stale (a newer version was waiting): newer
     /// than what the state store holds.
     pub warm: Option<WarmStart>,
-}
-
-pub(crate) enum Outcome {
-    Fitted {
-        outputs: Box<InputOutputs>,
-        hash: u64,
-    },
-    /// Same content and same output-shaping config as the last fit.
-    Unchanged { hash: u64 },
-    Rejected {
-        /// `kinds::rejection_kind` of the cause.
-        kind: &'static str,
-        reason: String,
-        /// The input was read as a valid mesh that the pipeline cannot fit (a topology it
-        /// does not support, too few points, over `max_vertices`): not broken, so it stays
-        /// where it is unless `daemon.unsupported = "quarantine"`.
-        unsupported: bool,
-        /// The content hash, when the bytes were read.
-        input_hash: Option<u64>,
-    },
-    /// Content and fit config are those of a version rejected as unsupported and left in
-    /// place: not rejected (nor reported) again.
-    StillUnsupported,
-    /// The file changed while it was read and did not parse: a writer is still at it. Not
-    /// a rejection; it is read again once it settles.
-    Incomplete { reason: String },
-}
-
-#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
-pub(crate) struct Timings {
-    /// Detection to a worker picking it up.
-    pub queued_ms: f64,
-    pub read_ms: f64,
-    pub parse_ms: f64,
-    /// Inside `run_input`.
-    pub fit_ms: f64,
 }
 
 pub(crate) struct JobDone {
@@ -110,6 +77,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let mut read_stamp = None;
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
+        Input::Object(folder) => return fit_object(&job.arrival, &job.cfg, folder, store, t),
         Input::File(path) => {
             let Some(format) = Format::from_path(path) else {
                 return reject(
@@ -186,7 +154,7 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             Some(folder) => read_mesh_bytes_in(&bytes, format, &a.label, &load, folder),
             None => read_mesh_bytes(&bytes, format, &a.label, &load),
         },
-        Input::Inline { .. } => read_mesh_bytes(&bytes, format, &a.label, &load),
+        Input::Inline { .. } | Input::Object(_) => read_mesh_bytes(&bytes, format, &a.label, &load),
     };
     // A file that changed while it was read is a stale (often cut) copy, whether or not it
     // parsed (a cut OBJ can end on a whole line): read it again once it settles.
@@ -230,22 +198,9 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         Ok(outputs) => Outcome::Fitted {
             outputs: Box::new(outputs),
             hash,
+            rejected_scans: Vec::new(),
         },
         Err(e) => hashed(reject(Cause::Pipeline(&e), e.to_string())),
-    }
-}
-
-/// Whether the file is no longer what was read: another size or mtime than before the
-/// read, or another length than the bytes read.
-pub(crate) fn still_changing(
-    path: &std::path::Path,
-    before: (u64, Option<SystemTime>),
-    read: usize,
-) -> bool {
-    match std::fs::metadata(path) {
-        Ok(m) => m.len() != before.0 || m.modified().ok() != before.1 || read as u64 != m.len(),
-        // Gone or replaced mid-read: whatever was read is not the file any more.
-        Err(_) => true,
     }
 }
 

@@ -45,6 +45,9 @@ pub(crate) enum RecordFault {
     NoPathNorBytes,
     /// The stream ended (or the daemon stopped) inside the payload.
     Truncated,
+    /// An "object" that leaves no id, or a "transform" that is not 16 numbers of a rigid
+    /// motion (or comes without an "object").
+    BadObject,
 }
 
 /// The `kind` string of a rejection.
@@ -73,6 +76,7 @@ pub(crate) fn rejection_kind(cause: &Cause<'_>) -> &'static str {
             RecordFault::PathAndBytes => "record_path_and_bytes",
             RecordFault::NoPathNorBytes => "record_no_path_nor_bytes",
             RecordFault::Truncated => "record_truncated",
+            RecordFault::BadObject => "record_bad_object",
         },
     }
 }

@@ -7,13 +7,18 @@ mod cluster_config;
 pub mod config;
 mod confine;
 pub(crate) mod coordinator;
+mod ids;
 pub(crate) mod job;
 pub(crate) mod kinds;
 pub(crate) mod layout;
 pub(crate) mod messages;
+mod object_config;
+mod object_job;
+mod object_store;
 pub(crate) mod offload;
 mod open_files;
 pub(crate) mod ops;
+mod outcome;
 pub(crate) mod pipe;
 mod publish;
 pub(crate) mod reload;
@@ -210,7 +215,8 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         writer: wtx.clone(),
         stop: Arc::clone(&intake_stop),
         ready: ready_tx,
-        recursive: opts.config.daemon.recursive,
+        recursive: opts.config.daemon.recursive || opts.config.object.folders,
+        objects: opts.config.object.folders,
         exclude: [&opts.out_dir, &opts.state_dir, &quarantine]
             .into_iter()
             .filter_map(|d| std::fs::canonicalize(d).ok())

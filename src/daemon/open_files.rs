@@ -11,6 +11,7 @@
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
+use std::time::SystemTime;
 
 /// The answer for a set of files.
 #[derive(Debug, Default)]
@@ -99,6 +100,20 @@ fn flags_write(fdinfo: &str) -> Option<bool> {
     let flags = u32::from_str_radix(line.trim(), 8).ok()?;
     let mode = flags & libc::O_ACCMODE as u32;
     Some(mode == libc::O_WRONLY as u32 || mode == libc::O_RDWR as u32)
+}
+
+/// Whether the file is no longer what was read: another size or mtime than before the
+/// read, or another length than the bytes read.
+pub(crate) fn still_changing(
+    path: &std::path::Path,
+    before: (u64, Option<SystemTime>),
+    read: usize,
+) -> bool {
+    match std::fs::metadata(path) {
+        Ok(m) => m.len() != before.0 || m.modified().ok() != before.1 || read as u64 != m.len(),
+        // Gone or replaced mid-read: whatever was read is not the file any more.
+        Err(_) => true,
+    }
 }
 
 #[cfg(test)]

@@ -1,6 +1,9 @@
 //! The pipe source: newline-delimited JSON records on stdin or a FIFO, each
 //! `{"patch": ID, "path": FILE}` or `{"patch": ID, "format": FMT, "bytes": N}` followed by
-//! exactly N raw bytes. A bad record is reported and skipped while keeping the framing when
+//! exactly N raw bytes. Either may add `"object": OBJ` (the record is scan PATCH of object
+//! OBJ, kept in the state folder's `objects/` and merged with the object's other scans) and
+//! then `"transform"`: 16 numbers, the scan's 4x4 rigid motion into the object's frame,
+//! row by row. A bad record is reported and skipped while keeping the framing when
 //! the header says how many bytes follow; bytes that came with a bad record are quarantined.
 //! A length that cannot be read loses the framing: everything up to the next line that is a
 //! record header goes, as one rejection, into one quarantine file.
@@ -12,6 +15,7 @@
 use super::confine::Roots;
 use super::kinds::{rejection_kind, Cause, RecordFault};
 use super::messages::{sanitize_id, Msg, Source};
+use super::object_store::ObjectScan;
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
@@ -23,6 +27,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant, SystemTime};
+
+/// A record's `"object"` (sanitised) and its `"transform"`, when it is a scan of one.
+type RecordObject = Option<(String, Option<[f64; 16]>)>;
 
 /// Longer header lines are not records (a writer that forgot the framing sent raw bytes).
 const MAX_LINE: usize = 64 * 1024;
@@ -80,6 +87,8 @@ struct Header {
     /// Kind and reason.
     problem: Option<(&'static str, String)>,
     stamp: String,
+    /// `"object"` (sanitised) and its `"transform"`, when the record is a scan of one.
+    object: RecordObject,
 }
 
 enum Line {
@@ -248,7 +257,12 @@ impl PipeSource {
             .as_object()
             .map(|o| {
                 o.keys()
-                    .filter(|k| !matches!(k.as_str(), "patch" | "path" | "format" | "bytes"))
+                    .filter(|k| {
+                        !matches!(
+                            k.as_str(),
+                            "patch" | "path" | "format" | "bytes" | "object" | "transform"
+                        )
+                    })
                     .collect()
             })
             .unwrap_or_default();
@@ -267,11 +281,16 @@ impl PipeSource {
             )),
             _ => None,
         };
+        let (object, object_problem) = match object_of(&json) {
+            Ok(o) => (o, None),
+            Err(reason) => (None, Some((record_kind(RecordFault::BadObject), reason))),
+        };
         Some(Header {
             id: id.unwrap_or_default(),
             json,
-            problem,
+            problem: problem.or(object_problem),
             stamp,
+            object,
         })
     }
 
@@ -313,14 +332,15 @@ impl PipeSource {
             .file_name()
             .map(|n| n.to_string_lossy().to_string())
             .unwrap_or_default();
-        self.arrive(Arrival {
+        let a = Arrival {
             id: h.id,
             input: Input::File(path.clone()),
             key: self.key(seq),
             version,
             label: format!("{label} ({})", path.display()),
             detected: Instant::now(),
-        });
+        };
+        self.arrive_as(a, h.object);
     }
 
     /// `{"patch", "format", "bytes": N}` and N raw bytes.
@@ -377,7 +397,8 @@ impl PipeSource {
         if !self.wait_for_budget(n, max) {
             return After::Ended;
         }
-        self.read_payload(r, n, format, h.id, label, name, seq)
+        let object = h.object.take();
+        self.read_payload(r, n, format, (h.id, object), label, name, seq)
     }
 
     /// The header is bad but says how long the payload is: streams it to quarantine without
@@ -505,7 +526,7 @@ impl PipeSource {
         r: &mut impl BufRead,
         n: u64,
         format: Format,
-        id: String,
+        (id, object): (String, RecordObject),
         label: &str,
         name: String,
         seq: u64,
@@ -545,14 +566,15 @@ impl PipeSource {
         if k as u64 == n {
             let data = Arc::new(data);
             self.held.borrow_mut().push(Arc::downgrade(&data));
-            self.arrive(Arrival {
+            let a = Arrival {
                 id,
                 input: Input::Inline { data, format },
                 key: self.key(seq),
                 version: name,
                 label: label.to_string(),
                 detected: Instant::now(),
-            });
+            };
+            self.arrive_as(a, object);
             return After::Next;
         }
         let reason = match failure {
@@ -576,8 +598,23 @@ impl PipeSource {
         }
     }
 
-    fn arrive(&self, a: Arrival) {
-        let _ = self.tx.send(Msg::Arrivals(vec![a]));
+    /// A patch's version goes to the scheduler; an object's scan to the writer, which
+    /// keeps it with the object's scans before the object is refitted (scans of one object
+    /// are not versions of one another: none may replace another while it waits).
+    fn arrive_as(&self, a: Arrival, object: RecordObject) {
+        match object {
+            None => {
+                let _ = self.tx.send(Msg::Arrivals(vec![a]));
+            }
+            Some((object, transform)) => {
+                let scan = ObjectScan {
+                    object,
+                    scan: a,
+                    transform,
+                };
+                let _ = self.writer.send(WriterMsg::ObjectScan(Box::new(scan)));
+            }
+        }
     }
 
     fn reject_record(&self, id: &str, label: &str, keep: Keep, fault: RecordFault, reason: String) {
@@ -599,6 +636,38 @@ impl PipeSource {
             reason,
         });
     }
+}
+
+/// The record's `"object"` and `"transform"`: `Ok(None)` without an object; an error for
+/// an object that leaves no id, a transform without an object, or a transform that is not
+/// 16 numbers of a rigid motion (never taken as the identity).
+fn object_of(json: &serde_json::Value) -> Result<RecordObject, String> {
+    let transform = json.get("transform");
+    let Some(raw) = json.get("object") else {
+        return match transform {
+            Some(_) => Err("\"transform\" without \"object\"".into()),
+            None => Ok(None),
+        };
+    };
+    let id = raw
+        .as_str()
+        .and_then(sanitize_id)
+        .ok_or_else(|| format!("\"object\" {raw} leaves no usable id"))?;
+    let Some(t) = transform else {
+        return Ok(Some((id, None)));
+    };
+    let numbers: Option<Vec<f64>> = t
+        .as_array()
+        .map(|a| a.iter().map(serde_json::Value::as_f64).collect())
+        .unwrap_or(None);
+    let numbers = numbers.filter(|v| v.len() == 16).ok_or_else(|| {
+        format!("\"transform\" must be 16 numbers (a 4x4 matrix row by row), got {t}")
+    })?;
+    crate::mesh::rigid::RigidTransform::from_row_major(&numbers)
+        .map_err(|e| format!("\"transform\" is no rigid motion: {e}"))?;
+    let mut m = [0.0; 16];
+    m.copy_from_slice(&numbers);
+    Ok(Some((id, Some(m))))
 }
 
 fn record_kind(fault: RecordFault) -> &'static str {

@@ -98,6 +98,7 @@ impl Reloader {
         new.daemon.workers = old.daemon.workers;
         new.daemon.watcher = old.daemon.watcher;
         new.daemon.recursive = old.daemon.recursive;
+        new.object.folders = old.object.folders;
         new.daemon.metrics_addr = old.daemon.metrics_addr.clone();
         new.log.format = old.log.format;
         new.output.quarantine_dir = old.output.quarantine_dir.clone();

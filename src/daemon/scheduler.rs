@@ -18,6 +18,8 @@ pub enum Input {
         data: Arc<Vec<u8>>,
         format: Format,
     },
+    /// An object folder (`[object] folders`): its scans as they are when it is fitted.
+    Object(PathBuf),
 }
 
 /// Which of two versions of a patch is newer: the file's mtime (or the arrival time of a
@@ -45,6 +47,9 @@ impl Arrival {
     fn same_source(&self, other: &Arrival) -> bool {
         match (&self.input, &other.input) {
             (Input::File(a), Input::File(b)) => a == b,
+            // A change of an object's folder: the fit reads the whole folder, so a newer
+            // change replaces a waiting one and never loses to a running one.
+            (Input::Object(a), Input::Object(b)) => a == b,
             _ => false,
         }
     }

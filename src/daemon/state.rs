@@ -125,6 +125,11 @@ impl StateStore {
         write_atomic(&self.dir.join(UNSUPPORTED_FILE), &bytes)
     }
 
+    /// Where the scans of objects fed through the pipe live (`object_store`).
+    pub(crate) fn objects_dir(&self) -> PathBuf {
+        self.dir.join("objects")
+    }
+
     fn path(&self, id: &str) -> PathBuf {
         // Ids of files in subfolders hold `/`: one flat name per id.
         self.dir.join(format!("{}.json", super::publish::flat(id)))

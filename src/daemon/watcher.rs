@@ -54,6 +54,9 @@ pub struct FolderWatcher {
     pub ready: Sender<()>,
     /// Subfolders are watched too (`daemon.recursive`).
     pub recursive: bool,
+    /// Subfolders are objects (`object.folders`): a file that arrives in one, or goes, is
+    /// a change of its object, and so are its registration files (`.xf`, `.conf`).
+    pub objects: bool,
     /// Canonical folders never descended into (OUT, the state folder, quarantine when they
     /// lie inside the watch folder: their files are outputs, not inputs).
     pub exclude: Vec<PathBuf>,
@@ -248,6 +251,13 @@ impl FolderWatcher {
             }
             EventKind::Modify(ModifyKind::Name(RenameMode::From)) | EventKind::Remove(_) => {
                 for p in &ev.paths {
+                    let went: Vec<PathBuf> = t
+                        .emitted
+                        .keys()
+                        .filter(|q| q.starts_with(p))
+                        .cloned()
+                        .collect();
+                    self.went(t, &went);
                     // A folder that went takes what was seen in it along.
                     t.settling.retain(|q, _| !q.starts_with(p));
                     t.emitted.retain(|q, _| !q.starts_with(p));
@@ -306,7 +316,7 @@ impl FolderWatcher {
             self.scan_dir(t, path, Instant::now(), &mut Default::default(), 1);
             return;
         }
-        if !self.within(path) || self.skips(t, path) || ignored(path) {
+        if !self.within(path) || self.skips(t, path) || !self.takes(path) {
             return;
         }
         t.settling.remove(path);
@@ -318,7 +328,7 @@ impl FolderWatcher {
     /// A file that may still be written: starts or restarts its settle clock; `written`
     /// when the watch saw the write itself (then it waits for the close).
     fn seen(&self, t: &mut Tracker, path: &Path, now: Instant, written: bool) {
-        if !self.within(path) || self.skips(t, path) || ignored(path) {
+        if !self.within(path) || self.skips(t, path) || !self.takes(path) {
             t.settling.remove(path);
             return;
         }
@@ -356,6 +366,13 @@ impl FolderWatcher {
         if !self.scan_dir(t, &self.dir, now, &mut present, 0) {
             return;
         }
+        let went: Vec<PathBuf> = t
+            .emitted
+            .keys()
+            .filter(|p| !present.contains(*p))
+            .cloned()
+            .collect();
+        self.went(t, &went);
         t.emitted.retain(|p, _| present.contains(p));
         t.settling.retain(|p, _| present.contains(p));
         t.skipped.retain(|p, _| present.contains(p));
@@ -393,7 +410,8 @@ impl FolderWatcher {
 
     /// Whether the entry is skipped; reports it the first time (per reason).
     fn skips(&self, t: &mut Tracker, path: &Path) -> bool {
-        let Some(why) = skip_reason(path) else {
+        let taken = |w: &Skip| *w == Skip::NotAMesh && self.takes(path);
+        let Some(why) = skip_reason(path).filter(|w| !taken(w)) else {
             t.skipped.remove(path);
             return false;
         };
@@ -472,6 +490,9 @@ impl FolderWatcher {
         if t.emitted.insert(path.to_path_buf(), s) == Some(s) {
             return;
         }
+        if let Some((id, folder)) = self.object_of(path) {
+            return self.object_changed(t, id, folder, path);
+        }
         let label = path.display().to_string();
         let Some(id) = relative_patch_id(&self.dir, path) else {
             let _ = self.writer.send(WriterMsg::Reject {
@@ -496,6 +517,59 @@ impl FolderWatcher {
             },
             version,
             label,
+            detected: Instant::now(),
+        });
+    }
+
+    /// The object (id and folder) a path in a subfolder belongs to, with `objects`: the
+    /// subfolder directly under the watch folder.
+    fn object_of(&self, path: &Path) -> Option<(String, PathBuf)> {
+        if !self.objects {
+            return None;
+        }
+        let rel = path.strip_prefix(&self.dir).ok()?;
+        let mut parts = rel.components();
+        let (Some(std::path::Component::Normal(first)), Some(_)) = (parts.next(), parts.next())
+        else {
+            return None;
+        };
+        let id = super::messages::sanitize_id(first.to_str()?)?;
+        Some((id, self.dir.join(first)))
+    }
+
+    /// Whether the watcher hands the file on: meshes, and registration files of objects.
+    fn takes(&self, path: &Path) -> bool {
+        let registration = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("xf") || e.eq_ignore_ascii_case("conf"));
+        !ignored(path) || (registration && self.object_of(path).is_some())
+    }
+
+    /// Files handed on before that are gone: a change of the objects they were in.
+    fn went(&self, t: &mut Tracker, paths: &[PathBuf]) {
+        for path in paths {
+            if let Some((id, folder)) = self.object_of(path) {
+                self.object_changed(t, id, folder, path);
+            }
+        }
+    }
+
+    /// Queues a fit of the object `id` from its folder as it is; `path` is what changed.
+    fn object_changed(&self, t: &mut Tracker, id: String, folder: PathBuf, path: &Path) {
+        let version = path
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        t.batch.push(Arrival {
+            id,
+            label: folder.display().to_string(),
+            input: Input::Object(folder),
+            // Each change is newer than the last: the fit reads the folder when it runs.
+            key: VersionKey {
+                time: SystemTime::now(),
+                tie: version.clone(),
+            },
+            version,
             detected: Instant::now(),
         });
     }

@@ -7,6 +7,7 @@ use super::config::{ProcessedPolicy, UnsupportedPolicy};
 use super::confine::Roots;
 use super::job::{JobDone, Outcome, Timings};
 use super::messages::{part_id, Msg, Summary};
+use super::object_store::{store_scan, ObjectScan};
 use super::ops::metrics::Metrics;
 use super::publish::publish;
 use super::reload::ConfigCell;
@@ -57,6 +58,9 @@ pub enum WriterMsg {
     /// Everything sent before this is handled: answered on the channel (a cluster worker
     /// acknowledges a job only once its outputs and events are written).
     Barrier(Sender<()>),
+    /// A scan for an object from a pipe record: stored with the object's scans, then the
+    /// object is refitted.
+    ObjectScan(Box<ObjectScan>),
     /// An input whose version was fitted elsewhere (`watch --queue`): the processed-file
     /// policy applies to it now, inside the same roots as a local fit's.
     Processed(PathBuf, ProcessedPolicy),
@@ -246,6 +250,26 @@ impl Writer {
                 } => self.reject(&id, &label, keep, kind, &reason),
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
+                WriterMsg::ObjectScan(s) => match store_scan(&self.store.objects_dir(), &s) {
+                    Ok(arrival) => {
+                        let _ = self.acks.send(Msg::Arrivals(vec![arrival]));
+                    }
+                    Err(reason) => {
+                        let keep = match &s.scan.input {
+                            Input::Inline { data, .. } => {
+                                Keep::Bytes(Arc::clone(data), s.scan.version.clone())
+                            }
+                            _ => Keep::Nothing,
+                        };
+                        self.reject(
+                            &s.object,
+                            &s.scan.label,
+                            keep,
+                            "object_store_failed",
+                            &reason,
+                        );
+                    }
+                },
                 WriterMsg::Shutdown => break,
                 WriterMsg::Barrier(done) => {
                     let _ = done.send(());
@@ -284,6 +308,8 @@ impl Writer {
                     Input::File(p) if in_place => Keep::InPlace(p.clone()),
                     Input::File(p) => Keep::Move(p.clone()),
                     Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
+                    // The object's scans stay its scans: the folder is never moved.
+                    Input::Object(_) => Keep::Nothing,
                 };
                 self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
@@ -311,8 +337,17 @@ impl Writer {
                 self.processed(a, done.cfg.output.processed);
                 None
             }
-            Outcome::Fitted { outputs, hash } => {
+            Outcome::Fitted {
+                outputs,
+                hash,
+                rejected_scans,
+            } => {
                 let start = Instant::now();
+                for r in rejected_scans {
+                    // Left in place: moving a scan out of its folder would change the object.
+                    let label = r.file.display().to_string();
+                    self.reject(&a.id, &label, Keep::InPlace(r.file), r.kind, &r.reason);
+                }
                 let InputOutputs {
                     parts,
                     failed,
@@ -436,7 +471,7 @@ impl Writer {
         if out.report {
             paths["report"] = json!(report);
         }
-        self.event(json!({
+        let mut line = json!({
             "patch": id, "version": a.version, "input": a.label, "status": outputs.status,
             "errors": outputs.report["final"],
             "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
@@ -444,7 +479,13 @@ impl Writer {
             "timings": {"queued_ms": timings.queued_ms, "read_ms": timings.read_ms,
                 "parse_ms": timings.parse_ms, "fit_ms": timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
             "paths": paths,
-        }));
+        });
+        if let Some(scans) = outputs.report["session"]["scans"].as_array() {
+            // An object's update: which scans its surface is fitted to.
+            let ids: Vec<&serde_json::Value> = scans.iter().map(|s| &s["id"]).collect();
+            line["scans"] = json!(ids);
+        }
+        self.event(line);
         true
     }
 

@@ -247,10 +247,12 @@ fn two_arrival_orders_end_at_the_same_surface() {
         translation: -(turn.rotation.transpose() * turn.translation),
     };
     // Each view given in a scanner frame of its own: its points moved by the inverse, its
-    // registration the motion back.
+    // registration the motion back. The views sample at two spacings, and the two orders
+    // start with views of different spacing: the merge cell must not follow the first.
     let views: Vec<TriMesh> = AXES
         .iter()
-        .map(|a| inverse.apply_mesh(&view(*a, 24, 0.0)))
+        .enumerate()
+        .map(|(k, a)| inverse.apply_mesh(&view(*a, if k % 2 == 0 { 24 } else { 28 }, 0.0)))
         .collect();
     let fit_in = |order: &[usize]| {
         let mut session = ObjectSession::new(SessionOptions::default());
@@ -271,13 +273,17 @@ fn two_arrival_orders_end_at_the_same_surface() {
             );
             last = Some(update);
         }
+        let cell = session.cell();
         let fit = last.expect("views").fit;
-        (surface_points_at_data(&fit), surface_mesh(&fit))
+        (surface_points_at_data(&fit), surface_mesh(&fit), cell)
     };
-    let (a, _) = fit_in(&[0, 1, 2, 3, 4, 5]);
-    let (_, b) = fit_in(&[5, 2, 4, 0, 3, 1]);
+    let (a, _, cell_a) = fit_in(&[0, 1, 2, 3, 4, 5]);
+    let (_, b, cell_b) = fit_in(&[5, 2, 4, 0, 3, 1]);
+    assert_eq!(cell_a, cell_b, "the merge cell follows the set of scans");
     let d = distance_stats(&a, &b);
     eprintln!("a to b {d:?}, a off the sphere {}", sphere_error(&a));
-    assert!(sphere_error(&a) < 1e-4);
+    // The merge cell follows the coarser views (24 steps), rounded onto its ladder: up to
+    // 4.4 % coarser than those views' own 1.5 edges, which the other tests' 1e-4 assumes.
+    assert!(sphere_error(&a) < 1.25e-4);
     assert!(d.rms < 5e-5, "{d:?}");
 }

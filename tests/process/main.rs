@@ -14,6 +14,7 @@ mod cluster_ops;
 mod components;
 mod daemon_crash;
 mod daemon_harden;
+mod daemon_objects;
 mod daemon_ops;
 mod daemon_pipe;
 mod daemon_process;

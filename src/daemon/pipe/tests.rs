@@ -134,3 +134,61 @@ fn the_reader_stops_while_the_payload_budget_is_full() {
     stop.store(true, Ordering::Relaxed);
     assert_eq!(reader.join().expect("reader"), 3);
 }
+
+#[test]
+fn an_object_record_needs_an_id_and_a_rigid_transform_of_16_numbers() {
+    let parse = |text: &str| object_of(&serde_json::from_str(text).expect("json"));
+    assert_eq!(parse(r#"{"patch": "a"}"#), Ok(None));
+    assert_eq!(
+        parse(r#"{"patch": "a", "object": "bunny"}"#),
+        Ok(Some(("bunny".to_string(), None)))
+    );
+    let turn = r#"[0, -1, 0, 0.5, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]"#;
+    let (id, m) = parse(&format!(
+        r#"{{"patch": "a", "object": "bunny", "transform": {turn}}}"#
+    ))
+    .expect("valid")
+    .expect("an object");
+    assert_eq!(id, "bunny");
+    assert_eq!(m.map(|m| m[3]), Some(0.5));
+    for bad in [
+        format!(r#"{{"patch": "a", "transform": {turn}}}"#),
+        r#"{"patch": "a", "object": ""}"#.to_string(),
+        r#"{"patch": "a", "object": 3}"#.to_string(),
+        r#"{"patch": "a", "object": "o", "transform": [1, 0, 0]}"#.to_string(),
+        r#"{"patch": "a", "object": "o", "transform": "identity"}"#.to_string(),
+        // A scaling, and a mirror: no rigid motions.
+        r#"{"patch": "a", "object": "o", "transform": [2,0,0,0, 0,2,0,0, 0,0,2,0, 0,0,0,1]}"#
+            .to_string(),
+        r#"{"patch": "a", "object": "o", "transform": [-1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}"#
+            .to_string(),
+    ] {
+        assert!(parse(&bad).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn an_object_record_goes_to_the_writer_not_the_scheduler() {
+    let rig = rig(1 << 20);
+    let ply = b"ply\nformat ascii 1.0\nelement vertex 0\nend_header\n";
+    let mut input = format!(
+        "{{\"object\": \"o\", \"patch\": \"s\", \"format\": \"ply\", \"bytes\": {}}}\n",
+        ply.len()
+    )
+    .into_bytes();
+    input.extend_from_slice(ply);
+    let mut record = 0;
+    rig.source
+        .records(&mut input.as_slice(), "test", &mut record);
+    assert!(
+        rig.arrivals.try_recv().is_err(),
+        "no arrival before the scan is stored"
+    );
+    match rig.writer.try_recv() {
+        Ok(WriterMsg::ObjectScan(s)) => {
+            assert_eq!((s.object.as_str(), s.scan.id.as_str()), ("o", "s"));
+            assert!(s.transform.is_none());
+        }
+        _ => panic!("the writer gets the scan"),
+    }
+}

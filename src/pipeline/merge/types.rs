@@ -11,8 +11,11 @@ pub type CellKey = [i32; 3];
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MergeOptions {
-    /// Cell size of the merge grid in median edge lengths of the first scan (about one
-    /// merged vertex per `cell_edges^2` scan points of one view).
+    /// The merge grid's cell size in metres, fixed for the object; 0: from the scans
+    /// (`cell_edges`).
+    pub cell: f64,
+    /// Cell size of the merge grid in median edge lengths of the object's coarsest scan
+    /// (about one merged vertex per `cell_edges^2` scan points of one view).
     pub cell_edges: f64,
     /// Radius of the samples averaged at a point, in cells. The function is defined where
     /// a sample lies within it, and every corner of a cell the surface crosses must be: a
@@ -36,6 +39,7 @@ pub struct MergeOptions {
 impl Default for MergeOptions {
     fn default() -> Self {
         Self {
+            cell: 0.0,
             cell_edges: 1.5,
             radius_cells: 2.5,
             sigma_cells: 1.0,

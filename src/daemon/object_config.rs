@@ -1,0 +1,114 @@
+//! The `[object]` table: subfolders of the watch folder as objects scanned view by view
+//! (`pipeline::object_session`), and how their scans are merged.
+
+use crate::pipeline::merge::MergeOptions;
+
+/// The `[object]` table.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObjectSection {
+    /// Each subfolder of the watch folder is one object: every mesh in it is a registered
+    /// scan of it, and the object gets one surface (`OUT/<folder>/`). Needs a restart.
+    #[serde(default)]
+    pub folders: bool,
+    /// Each scan's distance to the object's surface in report.json (a point-to-mesh query
+    /// per scan point).
+    #[serde(default = "yes")]
+    pub measure_scans: bool,
+    /// `[object.merge]`: the merge of the scans.
+    #[serde(default)]
+    pub merge: MergeOptions,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for ObjectSection {
+    fn default() -> Self {
+        Self {
+            folders: false,
+            measure_scans: true,
+            merge: MergeOptions::default(),
+        }
+    }
+}
+
+/// The key, the value and the rule of the first bad `[object]` value.
+pub(crate) fn validate_object(
+    o: &ObjectSection,
+) -> Result<(), (&'static str, String, &'static str)> {
+    let m = &o.merge;
+    let rules: [(bool, &'static str, f64, &'static str); 7] = [
+        (
+            m.cell.is_finite() && (0.0..=1.0).contains(&m.cell),
+            "object.merge.cell",
+            m.cell,
+            "metres, 0..=1 (0: from the scans' spacing)",
+        ),
+        (
+            (0.25..=16.0).contains(&m.cell_edges),
+            "object.merge.cell_edges",
+            m.cell_edges,
+            "must be 0.25..=16",
+        ),
+        (
+            (1.8..=8.0).contains(&m.radius_cells),
+            "object.merge.radius_cells",
+            m.radius_cells,
+            "must be 1.8..=8 (a cell's corners must reach a sample)",
+        ),
+        (
+            (0.1..=8.0).contains(&m.sigma_cells),
+            "object.merge.sigma_cells",
+            m.sigma_cells,
+            "must be 0.1..=8",
+        ),
+        (
+            m.rim_weight > 0.0 && m.rim_weight <= 1.0,
+            "object.merge.rim_weight",
+            m.rim_weight,
+            "must be in (0, 1]",
+        ),
+        (
+            (0.1..=8.0).contains(&m.keep_cells),
+            "object.merge.keep_cells",
+            m.keep_cells,
+            "must be 0.1..=8",
+        ),
+        (
+            m.ramp_rings <= 64 && m.projections <= 8,
+            "object.merge.ramp_rings / projections",
+            m.ramp_rings as f64,
+            "ramp_rings <= 64 and projections <= 8",
+        ),
+    ];
+    for (ok, key, value, rule) in rules {
+        if !ok {
+            return Err((key, value.to_string(), rule));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_defaults_pass_and_bad_merge_values_are_named() {
+        assert!(validate_object(&ObjectSection::default()).is_ok());
+        let mut o = ObjectSection::default();
+        o.merge.radius_cells = 1.0;
+        assert_eq!(
+            validate_object(&o).err().map(|e| e.0),
+            Some("object.merge.radius_cells")
+        );
+        let mut o = ObjectSection::default();
+        o.merge.cell = f64::NAN;
+        assert_eq!(
+            validate_object(&o).err().map(|e| e.0),
+            Some("object.merge.cell")
+        );
+    }
+}
