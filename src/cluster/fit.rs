@@ -276,7 +276,7 @@ fn run(
         }
         (_, outcome) => {
             let ending = match &outcome {
-                Outcome::Fitted { outputs, hash } => Ending::Fitted(Box::new(
+                Outcome::Fitted { outputs, hash, .. } => Ending::Fitted(Box::new(
                     PatchState::after_fit(&h.version, *hash, cfg.state_fit(), outputs.warm.clone()),
                 )),
                 Outcome::Unchanged { .. } => Ending::Unchanged,
