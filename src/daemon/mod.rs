@@ -186,6 +186,8 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         node: None,
     };
     let writer = spawn("writer", move || writer.run(wrx))?;
+    // Pipe objects are refused with a queue, and the stored ones wait for a daemon without.
+    let queued = opts.offload.is_some();
     let job_tx = match opts.offload {
         Some(o) => {
             let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
@@ -199,6 +201,13 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         }
         None => start_workers(workers, &store, &tx)?,
     };
+    // Before any source starts, so that they are in the inbox ahead of a source's end.
+    if !queued {
+        let stored = object_store::stored_objects(&store.objects_dir());
+        if !stored.is_empty() {
+            let _ = tx.send(Msg::Arrivals(stored));
+        }
+    }
     let intake_stop = Arc::new(AtomicBool::new(false));
     let partial = Arc::new(Mutex::new(None));
     let (ready_tx, ready_rx) = crossbeam_channel::bounded(1);

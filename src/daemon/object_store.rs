@@ -1,11 +1,11 @@
 //! Objects fed through the pipe (`{"object": OBJ, "patch": SCAN, ...}`): the daemon keeps
 //! their scans in a folder of its own, `STATE/objects/<object>/`, laid out as an object
 //! folder of the watch folder would be (`<scan>.<ext>`, and `<scan>.xf` when the record
-//! gave a transform), so that one fit (`object_job`) serves both and a restart finds the
-//! scans again. Only the writer thread calls this (it alone changes the state folder).
+//! gave a transform), so that one fit (`object_job`) serves both, and a start queues every
+//! stored object again (`stored_objects`). Only the writer thread calls this (it alone changes the state folder).
 
 use super::scheduler::{Arrival, Input, VersionKey};
-use crate::io::write_atomic;
+use crate::io::{write_atomic, Format};
 use std::path::{Path, PathBuf};
 use std::time::{Instant, SystemTime};
 
@@ -17,6 +17,8 @@ pub(crate) struct ObjectScan {
     pub scan: Arrival,
     /// Row-major 4x4 into the object's frame, checked to be rigid; `None`: the identity.
     pub transform: Option<[f64; 16]>,
+    /// `daemon.max_file_bytes`: a path record's file over it is refused unread.
+    pub max_bytes: u64,
 }
 
 /// The extension of the scan's format: the file's own, or the inline format's.
@@ -32,20 +34,27 @@ fn extension(a: &Arrival) -> Option<String> {
 }
 
 /// Writes the scan (and its `.xf`, or removes a stale one) into the object's folder under
-/// `objects` and returns the arrival that refits the object.
+/// `objects` and returns the arrival that refits the object. The mesh is written first and
+/// the scan's other versions removed last, so a failed write never loses the scan's
+/// previous bytes (for a pipe record, the only copy).
 pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, String> {
     let folder = objects.join(super::publish::flat(&s.object));
-    std::fs::create_dir_all(&folder)
-        .map_err(|e| format!("cannot create {}: {e}", folder.display()))?;
     let ext = extension(&s.scan).ok_or("the scan has no mesh extension")?;
+    if Format::from_extension(&ext).is_none() {
+        return Err(format!(
+            "\".{ext}\" is not a mesh format ({})",
+            Format::READABLE
+        ));
+    }
     let bytes = match &s.scan.input {
         Input::Inline { data, .. } => data.to_vec(),
-        Input::File(p) => {
-            std::fs::read(p).map_err(|e| format!("cannot read {}: {e}", p.display()))?
-        }
+        Input::File(p) => read_limited(p, s.max_bytes)?,
         Input::Object(_) => return Err("an object is no scan".into()),
     };
+    std::fs::create_dir_all(&folder)
+        .map_err(|e| format!("cannot create {}: {e}", folder.display()))?;
     // Other versions of the scan (another extension) would compete with this one.
+    let target = folder.join(format!("{}.{ext}", s.scan.id));
     let stale: Vec<PathBuf> = std::fs::read_dir(&folder)
         .map_err(|e| e.to_string())?
         .flatten()
@@ -53,8 +62,10 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
         .filter(|p| {
             super::ids::patch_id(p).as_deref() == Some(s.scan.id.as_str())
                 && p.extension().is_some_and(|e| e != "xf")
+                && *p != target
         })
         .collect();
+    write_atomic(&target, &bytes).map_err(|e| e.to_string())?;
     let xf = folder.join(format!("{}.xf", s.scan.id));
     match &s.transform {
         Some(m) => {
@@ -76,15 +87,39 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
             Err(e) => return Err(format!("cannot remove {}: {e}", xf.display())),
         },
     }
-    let target = folder.join(format!("{}.{ext}", s.scan.id));
-    for p in stale.iter().filter(|p| **p != target) {
+    for p in &stale {
         std::fs::remove_file(p).map_err(|e| format!("cannot remove {}: {e}", p.display()))?;
     }
-    write_atomic(&target, &bytes).map_err(|e| e.to_string())?;
     let version = format!("{}.{ext}", s.scan.id);
-    Ok(Arrival {
-        id: s.object.clone(),
-        label: format!("{} (object {})", s.scan.label, s.object),
+    let label = format!("{} (object {})", s.scan.label, s.object);
+    Ok(object_arrival(s.object.clone(), folder, version, label))
+}
+
+/// A path record's file, refused over `max_bytes` before it is read.
+fn read_limited(path: &Path, max_bytes: u64) -> Result<Vec<u8>, String> {
+    let size = std::fs::metadata(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?
+        .len();
+    if size > max_bytes {
+        return Err(format!(
+            "{} has {size} bytes, over daemon.max_file_bytes = {max_bytes}",
+            path.display()
+        ));
+    }
+    std::fs::read(path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+}
+
+/// A fit of object `id` from its folder as it is when the fit runs; `version` names what
+/// changed. Each is newer than the last: the scheduler keeps only the newest waiting one.
+pub(crate) fn object_arrival(
+    id: String,
+    folder: PathBuf,
+    version: String,
+    label: String,
+) -> Arrival {
+    Arrival {
+        id,
+        label,
         input: Input::Object(folder),
         key: VersionKey {
             time: SystemTime::now(),
@@ -92,7 +127,28 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
         },
         version,
         detected: Instant::now(),
-    })
+    }
+}
+
+/// A refit of every object kept under `objects`: a scan stored just before a stop may not
+/// have been fitted yet (the fit is queued after the store). An object whose scans did not
+/// change since its last fit is found unchanged by its content hash and not refitted.
+pub(crate) fn stored_objects(objects: &Path) -> Vec<Arrival> {
+    let Ok(entries) = std::fs::read_dir(objects) else {
+        return Vec::new();
+    };
+    entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().to_string();
+            // Only folders this store made: their names are sanitised ids.
+            (super::ids::sanitize_id(&name).as_deref() == Some(name.as_str())).then(|| {
+                let label = format!("{} (stored object)", e.path().display());
+                object_arrival(name, e.path(), "restart".into(), label)
+            })
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -128,6 +184,7 @@ mod tests {
             object: "o".into(),
             scan: inline("s", "obj", b"v 0 0 0\n"),
             transform: Some(turn),
+            max_bytes: u64::MAX,
         };
         let a = store_scan(tmp.path(), &first).expect("stored");
         let folder = tmp.path().join("o");
@@ -141,6 +198,7 @@ mod tests {
             object: "o".into(),
             scan: inline("s", "ply", b"ply\n"),
             transform: None,
+            max_bytes: u64::MAX,
         };
         store_scan(tmp.path(), &second).expect("stored");
         let mut names: Vec<String> = std::fs::read_dir(&folder)
@@ -150,5 +208,50 @@ mod tests {
             .collect();
         names.sort();
         assert_eq!(names, ["s.ply"]);
+    }
+
+    fn file(id: &str, path: &Path) -> Arrival {
+        Arrival {
+            input: Input::File(path.to_path_buf()),
+            ..inline(id, "ply", b"")
+        }
+    }
+
+    #[test]
+    fn a_path_record_that_is_no_mesh_or_too_big_leaves_the_stored_scan_alone() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let objects = tmp.path().join("objects");
+        let good = ObjectScan {
+            object: "o".into(),
+            scan: inline("s", "ply", b"ply\n"),
+            transform: None,
+            max_bytes: u64::MAX,
+        };
+        store_scan(&objects, &good).expect("stored");
+        let text = tmp.path().join("notes.txt");
+        std::fs::write(&text, b"not a mesh").expect("write");
+        let no_mesh = ObjectScan {
+            scan: file("s", &text),
+            ..good
+        };
+        let refused = store_scan(&objects, &no_mesh).expect_err("a .txt is no scan");
+        assert!(refused.contains("not a mesh format"), "{refused}");
+        let big = tmp.path().join("big.obj");
+        std::fs::write(&big, vec![b'#'; 100]).expect("write");
+        let too_big = ObjectScan {
+            scan: file("s", &big),
+            max_bytes: 99,
+            ..no_mesh
+        };
+        let refused = store_scan(&objects, &too_big).expect_err("over the limit");
+        assert!(refused.contains("max_file_bytes"), "{refused}");
+        let kept = std::fs::read(objects.join("o/s.ply")).expect("the stored scan stays");
+        assert_eq!(kept, b"ply\n");
+        // The store is found again at a start, under its sanitised name only.
+        std::fs::create_dir_all(objects.join("not clean")).expect("mkdir");
+        let resumed = stored_objects(&objects);
+        assert_eq!(resumed.len(), 1);
+        assert_eq!(resumed[0].id, "o");
+        assert!(matches!(&resumed[0].input, Input::Object(f) if *f == objects.join("o")));
     }
 }

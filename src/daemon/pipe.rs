@@ -607,10 +607,31 @@ impl PipeSource {
                 let _ = self.tx.send(Msg::Arrivals(vec![a]));
             }
             Some((object, transform)) => {
+                let cfg = self.cell.get();
+                if cfg.cluster.url.is_some() {
+                    // An object's fit reads all its scans, which a queue's workers do not
+                    // hold: refused once, never queued to fail again and again.
+                    let keep = match &a.input {
+                        Input::Inline { data, .. } => {
+                            Keep::Bytes(Arc::clone(data), a.version.clone())
+                        }
+                        _ => Keep::Nothing,
+                    };
+                    let reason = "objects are not fitted through a queue (cluster.url, --queue)";
+                    self.reject_record(
+                        &object,
+                        &a.label,
+                        keep,
+                        RecordFault::BadObject,
+                        reason.into(),
+                    );
+                    return;
+                }
                 let scan = ObjectScan {
                     object,
                     scan: a,
                     transform,
+                    max_bytes: cfg.daemon.max_file_bytes,
                 };
                 let _ = self.writer.send(WriterMsg::ObjectScan(Box::new(scan)));
             }

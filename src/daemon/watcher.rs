@@ -560,18 +560,10 @@ impl FolderWatcher {
             .file_name()
             .map(|n| n.to_string_lossy().to_string())
             .unwrap_or_default();
-        t.batch.push(Arrival {
-            id,
-            label: folder.display().to_string(),
-            input: Input::Object(folder),
-            // Each change is newer than the last: the fit reads the folder when it runs.
-            key: VersionKey {
-                time: SystemTime::now(),
-                tie: version.clone(),
-            },
-            version,
-            detected: Instant::now(),
-        });
+        let label = folder.display().to_string();
+        t.batch.push(super::object_store::object_arrival(
+            id, folder, version, label,
+        ));
     }
 
     /// Sends what one scan or one burst of events found as one message, so the scheduler

@@ -325,4 +325,25 @@ fn pipe_records_with_an_object_and_a_transform_are_scans_of_that_object() {
     drop(w);
     let status = crate::daemon_support::wait_exit(&mut child);
     assert!(status.is_some_and(|c| c.success()));
+    // A scan stored just before a stop, its fit not yet run: the next start fits it.
+    std::fs::write(s.out.join(".state/objects/ball/d.ply"), &cap).expect("store a scan");
+    let mut again = crate::daemon_support::bin()
+        .args(s.args())
+        .args(["--pipe", "-"])
+        .stdin(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawns");
+    let status = crate::daemon_support::wait_exit(&mut again);
+    assert!(status.is_some_and(|c| c.success()));
+    assert!(
+        fitted(&s.out, "ball")
+            .iter()
+            .any(|e| scans_of(e) == ["a", "b", "d"]),
+        "the stored scan was fitted at the restart: {:?}",
+        fitted(&s.out, "ball")
+            .iter()
+            .map(scans_of)
+            .collect::<Vec<_>>()
+    );
 }

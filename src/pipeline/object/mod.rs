@@ -108,7 +108,8 @@ impl Default for ObjectOptions {
             // The rounds were stopped while still gaining: on bun_zipper (5 % controls)
             // the last fit's rounds gained 2.9 % then 1.9 % and stopped at 63.8 um; run on
             // to a 0.2 % gain they reach 57.9 um (20 rounds), to 0.5 % 59.3 um (13 rounds,
-            // +20 % fit CPU).
+            // +20 % fit CPU). The daemon's worker caps the rounds at
+            // `fit.correction.rounds` instead of this library default.
             rounds: 16,
             min_gain: 0.005,
             tangential: 0.005,
