@@ -21,6 +21,41 @@ pub(crate) struct ObjectScan {
     pub max_bytes: u64,
 }
 
+/// A record's `"object"` (sanitised) and its `"transform"`, when it is a scan of one.
+pub(crate) type RecordObject = Option<(String, Option<[f64; 16]>)>;
+
+/// The record's `"object"` and `"transform"`: `Ok(None)` without an object; an error for
+/// an object that leaves no id, a transform without an object, or a transform that is not
+/// 16 numbers of a rigid motion (never taken as the identity).
+pub(crate) fn record_object(json: &serde_json::Value) -> Result<RecordObject, String> {
+    let transform = json.get("transform");
+    let Some(raw) = json.get("object") else {
+        return match transform {
+            Some(_) => Err("\"transform\" without \"object\"".into()),
+            None => Ok(None),
+        };
+    };
+    let id = raw
+        .as_str()
+        .and_then(super::ids::sanitize_id)
+        .ok_or_else(|| format!("\"object\" {raw} leaves no usable id"))?;
+    let Some(t) = transform else {
+        return Ok(Some((id, None)));
+    };
+    let numbers: Option<Vec<f64>> = t
+        .as_array()
+        .map(|a| a.iter().map(serde_json::Value::as_f64).collect())
+        .unwrap_or(None);
+    let numbers = numbers.filter(|v| v.len() == 16).ok_or_else(|| {
+        format!("\"transform\" must be 16 numbers (a 4x4 matrix row by row), got {t}")
+    })?;
+    crate::mesh::rigid::RigidTransform::from_row_major(&numbers)
+        .map_err(|e| format!("\"transform\" is no rigid motion: {e}"))?;
+    let mut m = [0.0; 16];
+    m.copy_from_slice(&numbers);
+    Ok(Some((id, Some(m))))
+}
+
 /// The extension of the scan's format: the file's own, or the inline format's.
 fn extension(a: &Arrival) -> Option<String> {
     match &a.input {

@@ -15,7 +15,7 @@
 use super::confine::Roots;
 use super::kinds::{rejection_kind, Cause, RecordFault};
 use super::messages::{sanitize_id, Msg, Source};
-use super::object_store::ObjectScan;
+use super::object_store::{record_object, ObjectScan, RecordObject};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input, VersionKey};
 use super::writer::{Keep, WriterMsg};
@@ -27,9 +27,6 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 use std::time::{Duration, Instant, SystemTime};
-
-/// A record's `"object"` (sanitised) and its `"transform"`, when it is a scan of one.
-type RecordObject = Option<(String, Option<[f64; 16]>)>;
 
 /// Longer header lines are not records (a writer that forgot the framing sent raw bytes).
 const MAX_LINE: usize = 64 * 1024;
@@ -281,7 +278,7 @@ impl PipeSource {
             )),
             _ => None,
         };
-        let (object, object_problem) = match object_of(&json) {
+        let (object, object_problem) = match record_object(&json) {
             Ok(o) => (o, None),
             Err(reason) => (None, Some((record_kind(RecordFault::BadObject), reason))),
         };
@@ -657,38 +654,6 @@ impl PipeSource {
             reason,
         });
     }
-}
-
-/// The record's `"object"` and `"transform"`: `Ok(None)` without an object; an error for
-/// an object that leaves no id, a transform without an object, or a transform that is not
-/// 16 numbers of a rigid motion (never taken as the identity).
-fn object_of(json: &serde_json::Value) -> Result<RecordObject, String> {
-    let transform = json.get("transform");
-    let Some(raw) = json.get("object") else {
-        return match transform {
-            Some(_) => Err("\"transform\" without \"object\"".into()),
-            None => Ok(None),
-        };
-    };
-    let id = raw
-        .as_str()
-        .and_then(sanitize_id)
-        .ok_or_else(|| format!("\"object\" {raw} leaves no usable id"))?;
-    let Some(t) = transform else {
-        return Ok(Some((id, None)));
-    };
-    let numbers: Option<Vec<f64>> = t
-        .as_array()
-        .map(|a| a.iter().map(serde_json::Value::as_f64).collect())
-        .unwrap_or(None);
-    let numbers = numbers.filter(|v| v.len() == 16).ok_or_else(|| {
-        format!("\"transform\" must be 16 numbers (a 4x4 matrix row by row), got {t}")
-    })?;
-    crate::mesh::rigid::RigidTransform::from_row_major(&numbers)
-        .map_err(|e| format!("\"transform\" is no rigid motion: {e}"))?;
-    let mut m = [0.0; 16];
-    m.copy_from_slice(&numbers);
-    Ok(Some((id, Some(m))))
 }
 
 fn record_kind(fault: RecordFault) -> &'static str {

@@ -137,7 +137,7 @@ fn the_reader_stops_while_the_payload_budget_is_full() {
 
 #[test]
 fn an_object_record_needs_an_id_and_a_rigid_transform_of_16_numbers() {
-    let parse = |text: &str| object_of(&serde_json::from_str(text).expect("json"));
+    let parse = |text: &str| record_object(&serde_json::from_str(text).expect("json"));
     assert_eq!(parse(r#"{"patch": "a"}"#), Ok(None));
     assert_eq!(
         parse(r#"{"patch": "a", "object": "bunny"}"#),
