@@ -9,24 +9,10 @@
 
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
-use trispline::pipeline::scattered::{PlanarStages, StageTime};
+use trispline::pipeline::scattered::{process_cpu_ms, PlanarStages, StageTime};
 use trispline::pipeline::worker::{fit_patch, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
 use trispline::testdata::shared_data;
-
-fn process_cpu_ms() -> f64 {
-    let mut t = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `t` is a valid, writable timespec; the call only writes it.
-    let ok = unsafe { libc::clock_gettime(libc::CLOCK_PROCESS_CPUTIME_ID, &mut t) } == 0;
-    if ok {
-        t.tv_sec as f64 * 1e3 + t.tv_nsec as f64 * 1e-6
-    } else {
-        f64::NAN
-    }
-}
 
 fn load_average() -> String {
     std::fs::read_to_string("/proc/loadavg")

@@ -214,32 +214,14 @@ mod tests {
 
     #[test]
     fn a_wrapped_state_reads_back_as_the_inline_record() {
-        let state = PatchState::after_fit(
-            "p@2",
-            42,
-            crate::daemon::config::DaemonConfig::embedded_default()
-                .expect("the embedded config parses")
-                .state_fit(),
-            WarmStart {
-                surface: crate::pipeline::SurfaceKind::Loop,
-                controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],
-                frame: None,
-                warp: None,
-                domain: None,
-                coords: Vec::new(),
-                feet: None,
-                parts: Vec::new(),
-                object: None,
-                scattered: None,
-            },
-        );
+        let state = crate::daemon::state::sample_state("p@2");
         let encoded = serde_json::to_vec(&state).expect("encodes");
         let record = inline_record(&encoded);
         assert_eq!(record.len(), encoded.len() + INLINE_WRAP.len());
         match serde_json::from_slice::<StateRecord>(&record).expect("decodes") {
             StateRecord::Inline(back) => {
                 assert_eq!(back.version, "p@2");
-                assert_eq!(back.input_hash, 42);
+                assert_eq!(back.input_hash, state.input_hash);
                 assert_eq!(back.outputs, state.outputs);
                 assert_eq!(back.warm.controls, state.warm.controls);
             }

@@ -207,6 +207,29 @@ pub fn content_hash(bytes: &[u8]) -> u64 {
     h
 }
 
+/// A small state for tests elsewhere in the crate.
+#[cfg(test)]
+pub(crate) fn sample_state(version: &str) -> PatchState {
+    PatchState {
+        version: version.into(),
+        input_hash: 7,
+        config_hash: 9,
+        outputs: vec!["surface.json".into()],
+        warm: WarmStart {
+            surface: crate::pipeline::SurfaceKind::Loop,
+            controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],
+            frame: None,
+            warp: None,
+            domain: None,
+            coords: Vec::new(),
+            feet: None,
+            parts: Vec::new(),
+            object: None,
+            scattered: None,
+        },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -231,27 +254,9 @@ mod tests {
         assert!(seen.insert(content_hash(&base[..999])));
         assert!(seen.insert(content_hash(&[])));
     }
-    use crate::pipeline::SurfaceKind;
 
     fn state(version: &str) -> PatchState {
-        PatchState {
-            version: version.into(),
-            input_hash: 7,
-            config_hash: 9,
-            outputs: vec!["surface.json".into()],
-            warm: WarmStart {
-                surface: SurfaceKind::Loop,
-                controls: vec![glam::DVec3::new(1.0, 2.0, 3.0)],
-                frame: None,
-                warp: None,
-                domain: None,
-                coords: Vec::new(),
-                feet: None,
-                parts: Vec::new(),
-                object: None,
-                scattered: None,
-            },
-        }
+        sample_state(version)
     }
 
     /// Saved states are served from memory, survive a restart through their files, and

@@ -76,8 +76,8 @@ pub struct PlanarStages {
     pub solves: StageTime,
 }
 
-/// CPU time of the process so far (0 where the clock is not available).
-fn process_cpu_ms() -> f64 {
+/// CPU time of the process so far, in ms (0 where the clock is not available).
+pub fn process_cpu_ms() -> f64 {
     let mut t = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,

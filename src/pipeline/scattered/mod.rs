@@ -25,7 +25,7 @@ mod warm;
 pub use config::{BPatchConfig, DmsConfig, BPATCH_DEGREES, DMS_DEGREES};
 pub use error::ScatteredError;
 use info::planar_surface;
-pub use info::{PlanarStages, ScatteredInfo, StageTime};
+pub use info::{process_cpu_ms, PlanarStages, ScatteredInfo, StageTime};
 pub(crate) use output::add_outputs;
 pub use output::tessellate_planar;
 pub(crate) use subdivided::fit_planar_subdivided;
