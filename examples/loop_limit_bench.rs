@@ -12,47 +12,8 @@ use trispline::surface::{BasisDerivRows, SurfaceParam, TriSurface};
 use trispline::{DVec3, TriMesh};
 
 fn icosahedron() -> TriMesh {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let p = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ];
-    let tris = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    TriMesh::new(
-        p.iter().map(|&(x, y, z)| DVec3::new(x, y, z)).collect(),
-        tris,
-    )
+    let (vertices, faces) = trispline::testdata::icosahedron();
+    TriMesh::new(vertices, faces)
 }
 
 /// A disc of `n` lattice sectors of size `k` around a vertex of valence `n`.

@@ -1,5 +1,7 @@
-//! Locating the third-party test data in `../shared/data` (never committed here).
+//! Locating the third-party test data in `../shared/data` (never committed here), and the
+//! small generated shapes that tests and examples share.
 
+use glam::DVec3;
 use std::path::PathBuf;
 
 /// Path of a file under `../shared/data`, or `None` when the folder is absent so that a
@@ -35,3 +37,48 @@ pub const STANFORD_SCANS: [&str; 10] = [
     "range_scans/registered/bun270.ply",
     "range_scans/registered/chin.ply",
 ];
+
+/// The regular icosahedron with vertices (0, +-1, +-t) and their cyclic permutations (t the
+/// golden ratio), faces counter-clockwise seen from outside: the closed valence-5 mesh the
+/// Loop tests, benches and generated shapes start from.
+pub fn icosahedron() -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let vertices = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .map(|(x, y, z)| DVec3::new(x, y, z));
+    let faces = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    (vertices.to_vec(), faces)
+}

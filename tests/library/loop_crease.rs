@@ -91,47 +91,12 @@ fn lattice(n: usize, seed: u64) -> Creased {
 /// A bumped icosahedron with a crease chain 0-5-4 (darts at 0 and 4, a crease vertex of
 /// valence 5 between), a crease loop 1-7-8 and a corner at 3 (three crease edges).
 fn icosahedron() -> Creased {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
     let mut r = Rng(7);
-    let pos = [
-        (-1.0, t, 0.0),
-        (1.0, t, 0.0),
-        (-1.0, -t, 0.0),
-        (1.0, -t, 0.0),
-        (0.0, -1.0, t),
-        (0.0, 1.0, t),
-        (0.0, -1.0, -t),
-        (0.0, 1.0, -t),
-        (t, 0.0, -1.0),
-        (t, 0.0, 1.0),
-        (-t, 0.0, -1.0),
-        (-t, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| DVec3::new(x, y, z) + DVec3::new(r.range(-0.2, 0.2), r.range(-0.2, 0.2), 0.0))
-    .collect();
-    let tris = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
+    let (corners, tris) = trispline::testdata::icosahedron();
+    let pos = corners
+        .into_iter()
+        .map(|p| p + DVec3::new(r.range(-0.2, 0.2), r.range(-0.2, 0.2), 0.0))
+        .collect();
     Creased {
         name: "icosahedron",
         pos,
