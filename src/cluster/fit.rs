@@ -276,9 +276,14 @@ fn run(
         }
         (_, outcome) => {
             let ending = match &outcome {
-                Outcome::Fitted { outputs, hash, .. } => Ending::Fitted(Box::new(
-                    PatchState::after_fit(&h.version, *hash, cfg.state_fit(), outputs.warm.clone()),
-                )),
+                Outcome::Fitted { outputs, hash, .. } => {
+                    Ending::Fitted(Box::new(PatchState::after_fit(
+                        &h.version,
+                        *hash,
+                        cfg.state_fit(false),
+                        outputs.warm.clone(),
+                    )))
+                }
                 Outcome::Unchanged { .. } => Ending::Unchanged,
                 _ => Ending::Rejected,
             };

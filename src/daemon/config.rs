@@ -357,24 +357,36 @@ impl DaemonConfig {
         }
     }
 
-    /// Hash of what changes a fit (the `[fit]` tables): an unchanged input is refitted when
-    /// this changes. `[output]` and `[log]` are left out on purpose: a new tessellation
-    /// applies to the next version of each patch rather than refitting every patch at the
-    /// next start; outputs newly asked for (`glb`, `report` turned on) are produced by a
-    /// refit of the patches that lack them (`wanted_outputs`).
+    /// Hash of what changes a patch's fit (the `[fit]` tables): an unchanged input is
+    /// refitted when this changes. `[output]` and `[log]` are left out on purpose: a new
+    /// tessellation applies to the next version of each patch rather than refitting every
+    /// patch at the next start; outputs newly asked for (`glb`, `report` turned on) are
+    /// produced by a refit of the patches that lack them (`wanted_outputs`). `[object]`
+    /// shapes only objects, so it is in `object_fit_hash` alone: a patch is not refitted
+    /// when it changes, and an object always is, whether its scans come from a folder or
+    /// from pipe records.
     pub fn fit_hash(&self) -> u64 {
-        // `[object]` shapes only object fits; left out while off, so that turning it on
-        // (not merely upgrading) is what refits the other patches once.
-        let shaping = match self.object.folders {
-            true => serde_json::json!({ "fit": self.fit, "object": self.object }),
-            false => serde_json::json!({ "fit": self.fit }),
-        };
+        let shaping = serde_json::json!({ "fit": self.fit });
         super::state::content_hash(shaping.to_string().as_bytes())
     }
 
-    /// What a patch's warm-start state records of this config: `(fit_hash, wanted_outputs)`.
-    pub(crate) fn state_fit(&self) -> (u64, Vec<String>) {
-        (self.fit_hash(), self.wanted_outputs())
+    /// Hash of what changes an object's fit: the `[fit]` tables and `[object]`.
+    pub fn object_fit_hash(&self) -> u64 {
+        let shaping = serde_json::json!({ "fit": self.fit, "object": self.object });
+        super::state::content_hash(shaping.to_string().as_bytes())
+    }
+
+    /// The fit hash of an input: `object_fit_hash` for an object, else `fit_hash`.
+    pub(crate) fn fit_hash_of(&self, object: bool) -> u64 {
+        match object {
+            true => self.object_fit_hash(),
+            false => self.fit_hash(),
+        }
+    }
+
+    /// What a fit's warm-start state records of this config: `(fit hash, wanted_outputs)`.
+    pub(crate) fn state_fit(&self, object: bool) -> (u64, Vec<String>) {
+        (self.fit_hash_of(object), self.wanted_outputs())
     }
 
     /// The output files a fit writes under this config.

@@ -84,6 +84,25 @@ fn fit_hash_follows_the_fit_section_only() {
     assert_eq!(b.wanted_outputs(), ["surface.json", "report.json"]);
     b.fit.budget.max_iterations += 1;
     assert_ne!(a.fit_hash(), b.fit_hash());
+    assert_ne!(a.object_fit_hash(), b.object_fit_hash());
+}
+
+#[test]
+fn the_object_table_refits_objects_only_whether_folders_are_on_or_not() {
+    let a = DaemonConfig::embedded_default().expect("default");
+    assert!(!a.object.folders);
+    let mut b = a.clone();
+    // Pipe objects exist with folders off: their merge must still count.
+    b.object.merge.cell_edges *= 2.0;
+    assert_eq!(a.fit_hash(), b.fit_hash());
+    assert_ne!(a.object_fit_hash(), b.object_fit_hash());
+    assert_eq!(b.state_fit(true).0, b.object_fit_hash());
+    assert_eq!(b.state_fit(false).0, b.fit_hash());
+    // Turning folders on refits objects, and no patch.
+    let mut c = a.clone();
+    c.object.folders = true;
+    assert_eq!(a.fit_hash(), c.fit_hash());
+    assert_ne!(a.object_fit_hash(), c.object_fit_hash());
 }
 
 #[test]

@@ -3,12 +3,13 @@
 
 use super::config::DaemonConfig;
 use super::kinds::{rejection_kind, Cause};
+use super::mesh_file::{parse_mesh, read_file_bytes, too_large, Refused};
 use super::object_job::fit_object;
 pub(crate) use super::open_files::still_changing;
 pub(crate) use super::outcome::{Outcome, Timings};
 use super::scheduler::{Arrival, Input};
 use super::state::{content_hash, StateStore};
-use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
+use crate::io::Format;
 use crate::pipeline::worker::{run_input, WarmStart};
 use std::sync::Arc;
 use std::time::Instant;
@@ -67,54 +68,27 @@ pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
 fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let a = &job.arrival;
     let limits = &job.cfg.daemon;
-    let reject = |cause: Cause, reason: String| Outcome::Rejected {
-        unsupported: matches!(cause, Cause::Pipeline(_) | Cause::TooManyVertices),
-        kind: rejection_kind(&cause),
-        reason,
-        input_hash: None,
+    let refused = |r: Refused, input_hash: Option<u64>| Outcome::Rejected {
+        kind: r.kind,
+        reason: r.reason,
+        unsupported: r.unsupported,
+        input_hash,
     };
     let start = Instant::now();
     let mut read_stamp = None;
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
         Input::Object(folder) => return fit_object(&job.arrival, &job.cfg, folder, store, t),
-        Input::File(path) => {
-            let Some(format) = Format::from_path(path) else {
-                return reject(
-                    Cause::UnknownFormat,
-                    format!("unknown extension ({})", Format::READABLE),
-                );
-            };
-            // Refuse before reading: the limit exists so that one file cannot exhaust memory.
-            match std::fs::metadata(path) {
-                Ok(m) if m.len() > limits.max_file_bytes => {
-                    return reject(
-                        Cause::TooLarge,
-                        format!(
-                            "{} bytes exceeds daemon.max_file_bytes = {}",
-                            m.len(),
-                            limits.max_file_bytes
-                        ),
-                    )
-                }
-                Ok(m) => read_stamp = Some((m.len(), m.modified().ok())),
-                Err(e) => return reject(Cause::Read(&e), format!("cannot read: {e}")),
+        Input::File(path) => match read_file_bytes(path, limits) {
+            Ok(read) => {
+                read_stamp = Some(read.stamp);
+                (Arc::new(read.bytes), read.format)
             }
-            match std::fs::read(path) {
-                Ok(b) => (Arc::new(b), format),
-                Err(e) => return reject(Cause::Read(&e), format!("cannot read: {e}")),
-            }
-        }
+            Err(r) => return refused(r, None),
+        },
     };
     if bytes.len() as u64 > limits.max_file_bytes {
-        return reject(
-            Cause::TooLarge,
-            format!(
-                "{} bytes exceeds daemon.max_file_bytes = {}",
-                bytes.len(),
-                limits.max_file_bytes
-            ),
-        );
+        return refused(too_large(bytes.len() as u64, limits), None);
     }
     let hash = content_hash(&bytes);
     t.read_ms = ms(start);
@@ -131,38 +105,19 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     if store.still_unsupported(&a.id, hash, config_hash) {
         return Outcome::StillUnsupported;
     }
-    let hashed = |o: Outcome| match o {
-        Outcome::Rejected {
-            kind,
-            reason,
-            unsupported,
-            ..
-        } => Outcome::Rejected {
-            kind,
-            reason,
-            unsupported,
-            input_hash: Some(hash),
-        },
-        other => other,
-    };
     let start = Instant::now();
-    let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
-    // A file's external glTF buffers lie beside it (the reader confines them to that
-    // folder); pipe payloads have no folder and must embed theirs.
-    let read = match &a.input {
-        Input::File(path) => match path.parent() {
-            Some(folder) => read_mesh_bytes_in(&bytes, format, &a.label, &load, folder),
-            None => read_mesh_bytes(&bytes, format, &a.label, &load),
-        },
-        Input::Inline { .. } | Input::Object(_) => read_mesh_bytes(&bytes, format, &a.label, &load),
+    let folder = match &a.input {
+        Input::File(path) => path.parent(),
+        Input::Inline { .. } | Input::Object(_) => None,
     };
+    let read = parse_mesh(&bytes, format, &a.label, limits, folder);
     // A file that changed while it was read is a stale (often cut) copy, whether or not it
     // parsed (a cut OBJ can end on a whole line): read it again once it settles.
     if let (Input::File(path), Some(before)) = (&a.input, read_stamp) {
         if still_changing(path, before, bytes.len()) {
             let parsed = match &read {
                 Ok(_) => "it parsed, but may be cut".to_string(),
-                Err(e) => e.to_string(),
+                Err(r) => r.reason.clone(),
             };
             return Outcome::Incomplete {
                 reason: format!("changed while it was read ({parsed}); read again once it settles"),
@@ -170,18 +125,11 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
         }
     }
     let mesh = match read {
-        Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
-            return hashed(reject(
-                Cause::TooManyVertices,
-                format!(
-                    "{} vertices exceeds daemon.max_vertices = {}",
-                    l.mesh.positions.len(),
-                    limits.max_vertices
-                ),
-            ))
-        }
-        Ok(l) => l.mesh,
-        Err(e) => return reject(Cause::Parse(&e), e.to_string()),
+        Ok(mesh) => mesh,
+        // A mesh the daemon will not fit is noted by its hash, so that it is not read again
+        // until it or the config changes; a broken one is quarantined.
+        Err(r) if r.unsupported => return refused(r, Some(hash)),
+        Err(r) => return refused(r, None),
     };
     drop(bytes);
     t.parse_ms = ms(start);
@@ -200,7 +148,12 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
             hash,
             rejected_scans: Vec::new(),
         },
-        Err(e) => hashed(reject(Cause::Pipeline(&e), e.to_string())),
+        Err(e) => Outcome::Rejected {
+            kind: rejection_kind(&Cause::Pipeline(&e)),
+            reason: e.to_string(),
+            unsupported: true,
+            input_hash: Some(hash),
+        },
     }
 }
 

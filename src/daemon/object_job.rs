@@ -13,17 +13,21 @@
 //!
 //! A scan that cannot be read, parsed or registered (a `.conf` naming it with bad numbers
 //! is an error, never the identity) is rejected alone and left where it is (moving it out
-//! of the folder would change the object); the other scans are fitted.
+//! of the folder would change the object); the other scans are fitted. A scan still being
+//! written (open for writing, or younger than the settle time) is not read: the watcher
+//! queues the object again once it hands that file on. When no scan is left at all (all
+//! deleted, or the folder gone), the object's outputs and state are removed
+//! (`Outcome::Emptied`): they would describe data that no longer exists.
 
 use super::config::DaemonConfig;
 use super::ids::{ignored, patch_id};
 use super::kinds::{rejection_kind, Cause};
-use super::open_files::still_changing;
+use super::mesh_file::{parse_mesh, read_file_bytes, Refused};
+use super::open_files::{open_for_writing, still_changing};
 use super::outcome::{Outcome, ScanRejection, Timings};
 use super::scheduler::Arrival;
 use super::state::{content_hash, StateStore};
 use crate::io::registration::{registration_for, Registration};
-use crate::io::{read_mesh_bytes_in, Format, LoadOptions};
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::object_session::{ObjectSession, SessionOptions};
 use crate::pipeline::worker::{InputOutputs, PartOutputs};
@@ -31,7 +35,7 @@ use crate::TriMesh;
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::{Instant, SystemTime};
+use std::time::{Duration, Instant, SystemTime};
 
 /// A scan read, parsed and registered.
 struct ReadScan {
@@ -42,20 +46,36 @@ struct ReadScan {
 }
 
 /// The newest version of every scan id in `folder`: (mtime, name) decides, as for patches.
-fn newest_scans(folder: &Path) -> std::io::Result<BTreeMap<String, PathBuf>> {
-    let mut newest: BTreeMap<String, (SystemTime, String, PathBuf)> = BTreeMap::new();
-    for entry in std::fs::read_dir(folder)?.flatten() {
+/// A file still being written is no scan yet, as the watcher would not have handed it on:
+/// a process holds it open for writing, or it changed less than `settle` ago. It is left
+/// out (an older version of its id counts), and its object is queued again once the
+/// watcher hands it on.
+fn newest_scans(folder: &Path, settle: Duration) -> std::io::Result<BTreeMap<String, PathBuf>> {
+    let folder = std::fs::canonicalize(folder)?;
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(&folder)?.flatten() {
         let path = entry.path();
-        if ignored(&path) || !std::fs::metadata(&path).is_ok_and(|m| m.is_file()) {
-            continue;
-        }
-        let (Some(id), Ok(mtime)) = (
-            patch_id(&path),
-            std::fs::metadata(&path).and_then(|m| m.modified()),
-        ) else {
+        let Ok(meta) = std::fs::metadata(&path) else {
             continue;
         };
-        let name = entry.file_name().to_string_lossy().to_string();
+        if ignored(&path) || !meta.is_file() {
+            continue;
+        }
+        if let (Some(id), Ok(mtime)) = (patch_id(&path), meta.modified()) {
+            let name = entry.file_name().to_string_lossy().to_string();
+            files.push((id, mtime, name, path));
+        }
+    }
+    let paths: Vec<&Path> = files.iter().map(|f| f.3.as_path()).collect();
+    let writers = open_for_writing(&paths);
+    let now = SystemTime::now();
+    let mut newest: BTreeMap<String, (SystemTime, String, PathBuf)> = BTreeMap::new();
+    for (id, mtime, name, path) in files {
+        let young = now.duration_since(mtime).is_ok_and(|age| age < settle);
+        if young || writers.writing(&path) == Some(true) {
+            tracing::info!(scan = %path.display(), "still being written; left out of this update");
+            continue;
+        }
         let newer = newest
             .get(&id)
             .is_none_or(|(t, n, _)| (mtime, &name) > (*t, n));
@@ -74,71 +94,33 @@ enum ScanRead {
     Changing(String),
 }
 
+/// Reads, parses and registers one scan through the daemon's checked read (`mesh_file`),
+/// the same that patches go through.
 fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
     let limits = &cfg.daemon;
-    let rejected = |kind: &'static str, reason: String, hash| {
+    let rejected = |r: Refused, hash| {
         ScanRead::Rejected(
             ScanRejection {
                 file: file.to_path_buf(),
-                kind,
-                reason,
+                kind: r.kind,
+                reason: r.reason,
             },
             hash,
         )
     };
-    let Some(format) = Format::from_path(file) else {
-        return rejected(
-            rejection_kind(&Cause::UnknownFormat),
-            "unknown extension".into(),
-            None,
-        );
+    let read = match read_file_bytes(file, limits) {
+        Ok(read) => read,
+        Err(r) => return rejected(r, None),
     };
-    let meta = match std::fs::metadata(file) {
-        Ok(m) if m.len() > limits.max_file_bytes => {
-            let reason = format!(
-                "{} bytes exceeds daemon.max_file_bytes = {}",
-                m.len(),
-                limits.max_file_bytes
-            );
-            return rejected(rejection_kind(&Cause::TooLarge), reason, None);
-        }
-        Ok(m) => m,
-        Err(e) => {
-            return rejected(
-                rejection_kind(&Cause::Read(&e)),
-                format!("cannot read: {e}"),
-                None,
-            )
-        }
-    };
-    let bytes = match std::fs::read(file) {
-        Ok(b) => b,
-        Err(e) => {
-            return rejected(
-                rejection_kind(&Cause::Read(&e)),
-                format!("cannot read: {e}"),
-                None,
-            )
-        }
-    };
-    if still_changing(file, (meta.len(), meta.modified().ok()), bytes.len()) {
+    let hash = content_hash(&read.bytes);
+    let label = file.display().to_string();
+    let parsed = parse_mesh(&read.bytes, read.format, &label, limits, file.parent());
+    if still_changing(file, read.stamp, read.bytes.len()) {
         return ScanRead::Changing(format!("scan {} changed while it was read", file.display()));
     }
-    let hash = content_hash(&bytes);
-    let label = file.display().to_string();
-    let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
-    let folder = file.parent().unwrap_or(Path::new("."));
-    let mesh = match read_mesh_bytes_in(&bytes, format, &label, &load, folder) {
-        Ok(l) if l.mesh.positions.len() > limits.max_vertices => {
-            let reason = format!(
-                "{} vertices exceeds daemon.max_vertices = {}",
-                l.mesh.positions.len(),
-                limits.max_vertices
-            );
-            return rejected(rejection_kind(&Cause::TooManyVertices), reason, Some(hash));
-        }
-        Ok(l) => l.mesh,
-        Err(e) => return rejected(rejection_kind(&Cause::Parse(&e)), e.to_string(), Some(hash)),
+    let mesh = match parsed {
+        Ok(mesh) => mesh,
+        Err(r) => return rejected(r, Some(hash)),
     };
     match registration_for(file, id) {
         Ok(registration) => ScanRead::Read(
@@ -150,9 +132,12 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
             }),
             hash,
         ),
-        Err(e) => rejected(
-            rejection_kind(&Cause::Parse(&e)),
-            format!("no usable registration: {e}"),
+        Err(e) => ScanRead::Rejected(
+            ScanRejection {
+                file: file.to_path_buf(),
+                kind: rejection_kind(&Cause::Parse(&e)),
+                reason: format!("no usable registration: {e}"),
+            },
             Some(hash),
         ),
     }
@@ -167,8 +152,18 @@ pub(crate) fn fit_object(
     t: &mut Timings,
 ) -> Outcome {
     let start = Instant::now();
-    let listed = match newest_scans(folder) {
+    // Scans of pipe records are written whole by the daemon before their object is queued.
+    let settle = match folder.starts_with(store.objects_dir()) {
+        true => Duration::ZERO,
+        false => Duration::from_millis(cfg.daemon.settle_ms),
+    };
+    let listed = match newest_scans(folder, settle) {
         Ok(l) => l,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && store.load(&a.id).is_some() => {
+            return Outcome::Emptied {
+                reason: "the object folder is gone".into(),
+            }
+        }
         Err(e) => {
             return Outcome::Rejected {
                 kind: rejection_kind(&Cause::Read(&e)),
@@ -198,7 +193,7 @@ pub(crate) fn fit_object(
     }
     let hash = content_hash(key.as_bytes());
     t.read_ms = start.elapsed().as_secs_f64() * 1e3;
-    let config_hash = cfg.fit_hash();
+    let config_hash = cfg.object_fit_hash();
     let wanted = cfg.wanted_outputs();
     let previous = store.load(&a.id);
     if previous.as_ref().is_some_and(|p| {
@@ -208,7 +203,14 @@ pub(crate) fn fit_object(
     }) {
         return Outcome::Unchanged { hash };
     }
+    if scans.is_empty() && rejected.is_empty() && previous.is_some() {
+        return Outcome::Emptied {
+            reason: "no scan left in the object folder".into(),
+        };
+    }
     if scans.is_empty() {
+        // Only broken scans: like a broken new version of a patch, they are reported and
+        // the surface of the last good scans stays.
         let reason = match rejected.first() {
             Some(r) => format!(
                 "no usable scan in the object folder (first: {}: {})",
@@ -268,5 +270,54 @@ pub(crate) fn fit_object(
         }),
         hash,
         rejected_scans: rejected,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write_aged(path: &Path, age: Duration) {
+        std::fs::write(path, b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").expect("write");
+        let file = std::fs::File::options()
+            .write(true)
+            .open(path)
+            .expect("open");
+        file.set_modified(SystemTime::now() - age).expect("mtime");
+    }
+
+    /// A scan the watcher would not hand on yet (too young, or open for writing) is no
+    /// scan of this update: the older version of its id counts instead.
+    #[test]
+    fn scans_still_being_written_are_left_out_for_their_older_version() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let folder = std::fs::canonicalize(dir.path()).expect("canonical");
+        let settle = Duration::from_secs(5);
+        write_aged(&folder.join("a@1.off"), Duration::from_secs(60));
+        write_aged(&folder.join("a@2.off"), Duration::from_secs(1));
+        write_aged(&folder.join("b.off"), Duration::from_secs(60));
+        write_aged(&folder.join("c.off"), Duration::from_secs(60));
+        let mut child = std::process::Command::new("sh")
+            .arg("-c")
+            .arg(format!(
+                "exec 3>>'{}'; exec sleep 30",
+                folder.join("c.off").display()
+            ))
+            .spawn()
+            .expect("sh runs");
+        let deadline = Instant::now() + Duration::from_secs(20);
+        let mut listed = newest_scans(&folder, settle).expect("listed");
+        while listed.contains_key("c") && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(20));
+            listed = newest_scans(&folder, settle).expect("listed");
+        }
+        let _ = child.kill();
+        let _ = child.wait();
+        assert_eq!(listed.get("a"), Some(&folder.join("a@1.off")));
+        assert_eq!(listed.get("b"), Some(&folder.join("b.off")));
+        assert!(!listed.contains_key("c"), "held open for writing");
+        let settled = newest_scans(&folder, Duration::ZERO).expect("listed");
+        assert_eq!(settled.get("a"), Some(&folder.join("a@2.off")));
+        assert_eq!(settled.get("c"), Some(&folder.join("c.off")));
     }
 }

@@ -165,6 +165,40 @@ pub(crate) fn object_arrival(
     }
 }
 
+/// Why an input may not have outputs under its id, when an object holds that id. Objects
+/// and patches share `OUT/<id>/` and the state store, so one id is one thing: an object
+/// folder of the watch folder (with `object.folders`) holds its id against everything
+/// else, an object of pipe records (kept under `objects`) against patches. A patch named
+/// like an object, or a pipe object named like an object folder, is refused by this reason.
+pub(crate) fn id_held_by_object(
+    id: &str,
+    input: &Input,
+    watch_dir: &Path,
+    objects: &Path,
+    folders: bool,
+) -> Option<String> {
+    if id.contains('/') {
+        // Object ids are single names; a nested patch id is no object's.
+        return None;
+    }
+    let folder = watch_dir.join(id);
+    let held_by_folder = folders && folder.is_dir();
+    match input {
+        Input::Object(f) if f.starts_with(objects) && held_by_folder => Some(format!(
+            "{} is an object folder of the same name; its scans are the object \"{id}\"",
+            folder.display()
+        )),
+        Input::Object(_) => None,
+        Input::File(_) | Input::Inline { .. } if held_by_folder => Some(format!(
+            "patch \"{id}\" has the name of the object folder {}; rename the file",
+            folder.display()
+        )),
+        Input::File(_) | Input::Inline { .. } => objects.join(id).is_dir().then(|| {
+            format!("patch \"{id}\" has the name of an object of pipe records; rename it")
+        }),
+    }
+}
+
 /// A refit of every object kept under `objects`: a scan stored just before a stop may not
 /// have been fitted yet (the fit is queued after the store). An object whose scans did not
 /// change since its last fit is found unchanged by its content hash and not refitted.

@@ -38,6 +38,9 @@ pub(crate) enum Outcome {
     /// Content and fit config are those of a version rejected as unsupported and left in
     /// place: not rejected (nor reported) again.
     StillUnsupported,
+    /// An object none of whose scans is left (all deleted, or its folder gone): its
+    /// outputs and state are removed, since they describe data that no longer exists.
+    Emptied { reason: String },
     /// The file changed while it was read and did not parse: a writer is still at it. Not
     /// a rejection; it is read again once it settles.
     Incomplete { reason: String },

@@ -183,6 +183,26 @@ pub(crate) fn publish(
     Ok(())
 }
 
+/// Takes `id`'s outputs down: `OUT/<id>` goes in one `unlink` (a reader sees the whole set
+/// or none), then its version folders. For an object whose scans are all gone: its surface
+/// describes data that no longer exists. False when there was nothing to take down.
+pub(crate) fn unpublish(out: &Path, id: &str) -> Result<bool, PublishError> {
+    let public = out.join(id);
+    let linked = std::fs::symlink_metadata(&public).is_ok_and(|m| m.file_type().is_symlink());
+    if linked {
+        std::fs::remove_file(&public).map_err(fs_err(&public))?;
+        std::fs::File::open(out)
+            .and_then(|d| d.sync_all())
+            .map_err(fs_err(out))?;
+    }
+    let base = out.join(VERSIONS).join(flat(id));
+    match std::fs::remove_dir_all(&base) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(linked),
+        Err(e) => Err(fs_err(&base)(e)),
+    }
+}
+
 fn remove_old_versions(base: &Path, current: u64, previous: Option<u64>) {
     let Ok(entries) = std::fs::read_dir(base) else {
         return;

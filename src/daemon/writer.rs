@@ -5,11 +5,12 @@
 use super::config::DaemonConfig;
 use super::config::{ProcessedPolicy, UnsupportedPolicy};
 use super::confine::Roots;
+use super::event_log::repair_cut_tail;
 use super::job::{JobDone, Outcome, Timings};
 use super::messages::{part_id, Msg, Summary};
-use super::object_store::{store_scan, ObjectScan};
+use super::object_store::{id_held_by_object, store_scan, ObjectScan};
 use super::ops::metrics::Metrics;
-use super::publish::publish;
+use super::publish::{publish, unpublish};
 use super::reload::ConfigCell;
 use super::scheduler::{Arrival, Input};
 use super::state::content_hash;
@@ -150,53 +151,6 @@ fn secs(t: SystemTime) -> f64 {
         .map_or(0.0, |d| d.as_secs_f64())
 }
 
-/// A kill during an append can leave the event log's last line cut: a write that crosses a
-/// page of the page cache may stop between pages on SIGKILL, so one `write` of a whole line
-/// is not enough. Before the first append of a run the cut tail is moved to
-/// `events.ndjson.torn` and the log ends at its last whole line, so that the next line
-/// does not join the fragment. Returns the length of the fragment moved, if any.
-fn repair_cut_tail(path: &Path) -> std::io::Result<Option<usize>> {
-    use std::io::{Read, Seek, SeekFrom, Write};
-    let mut log = match std::fs::OpenOptions::new()
-        .read(true)
-        .write(true)
-        .open(path)
-    {
-        Ok(f) => f,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e),
-    };
-    let len = log.metadata()?.len();
-    let (mut end, mut whole) = (len, 0u64);
-    let mut chunk = vec![0u8; 64 * 1024];
-    while end > 0 {
-        let start = end.saturating_sub(chunk.len() as u64);
-        let part = &mut chunk[..(end - start) as usize];
-        log.seek(SeekFrom::Start(start))?;
-        log.read_exact(part)?;
-        if let Some(i) = part.iter().rposition(|&b| b == b'\n') {
-            whole = start + i as u64 + 1;
-            break;
-        }
-        end = start;
-    }
-    if whole == len {
-        return Ok(None);
-    }
-    log.seek(SeekFrom::Start(whole))?;
-    let mut cut = Vec::new();
-    log.read_to_end(&mut cut)?;
-    let mut torn = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path.with_extension("ndjson.torn"))?;
-    torn.write_all(&[cut.as_slice(), b"\n"].concat())?;
-    torn.sync_data()?;
-    log.set_len(whole)?;
-    log.sync_data()?;
-    Ok(Some(cut.len()))
-}
-
 impl Writer {
     fn event_log(&self) -> PathBuf {
         self.out_dir.join("events.ndjson")
@@ -250,26 +204,7 @@ impl Writer {
                 } => self.reject(&id, &label, keep, kind, &reason),
                 WriterMsg::Event(v) => self.event(v),
                 WriterMsg::Spill(a) => self.spill(&a),
-                WriterMsg::ObjectScan(s) => match store_scan(&self.store.objects_dir(), &s) {
-                    Ok(arrival) => {
-                        let _ = self.acks.send(Msg::Arrivals(vec![arrival]));
-                    }
-                    Err(reason) => {
-                        let keep = match &s.scan.input {
-                            Input::Inline { data, .. } => {
-                                Keep::Bytes(Arc::clone(data), s.scan.version.clone())
-                            }
-                            _ => Keep::Nothing,
-                        };
-                        self.reject(
-                            &s.object,
-                            &s.scan.label,
-                            keep,
-                            "object_store_failed",
-                            &reason,
-                        );
-                    }
-                },
+                WriterMsg::ObjectScan(s) => self.object_scan(&s),
                 WriterMsg::Shutdown => break,
                 WriterMsg::Barrier(done) => {
                     let _ = done.send(());
@@ -286,6 +221,10 @@ impl Writer {
         let a = &done.arrival;
         let span = tracing::info_span!("patch", patch = %a.id, version = %a.version);
         let _guard = span.enter();
+        let taken = match done.outcome {
+            Outcome::Fitted { .. } => self.id_taken(a, &done.cfg),
+            _ => None,
+        };
         match done.outcome {
             Outcome::Rejected {
                 kind,
@@ -314,6 +253,10 @@ impl Writer {
                 self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
             }
+            Outcome::Emptied { reason } => {
+                self.emptied(a, &reason);
+                None
+            }
             Outcome::StillUnsupported => {
                 tracing::info!(
                     input = %a.label,
@@ -335,6 +278,18 @@ impl Writer {
                 self.metrics.unchanged.inc();
                 // Its content was fitted, so the processed-file policy applies.
                 self.processed(a, done.cfg.output.processed);
+                None
+            }
+            Outcome::Fitted { .. } if taken.is_some() => {
+                let reason = taken.unwrap_or_default();
+                // Not broken: left where it is (a payload is kept in quarantine) until
+                // renamed.
+                let keep = match &a.input {
+                    Input::File(p) => Keep::InPlace(p.clone()),
+                    Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
+                    Input::Object(_) => Keep::Nothing,
+                };
+                self.reject(&a.id, &a.label, keep, "id_taken", &reason);
                 None
             }
             Outcome::Fitted {
@@ -380,7 +335,12 @@ impl Writer {
                 }
                 let state = self.store.remember(
                     &a.id,
-                    PatchState::after_fit(&a.version, hash, done.cfg.state_fit(), warm),
+                    PatchState::after_fit(
+                        &a.version,
+                        hash,
+                        done.cfg.state_fit(matches!(a.input, Input::Object(_))),
+                        warm,
+                    ),
                 );
                 self.processed(a, done.cfg.output.processed);
                 Some(state)
@@ -600,6 +560,63 @@ impl Writer {
         }
     }
 
+    /// Why `a` may not publish under its id: an object holds it (`id_held_by_object`).
+    fn id_taken(&self, a: &Arrival, cfg: &DaemonConfig) -> Option<String> {
+        let objects = self.store.objects_dir();
+        id_held_by_object(
+            &a.id,
+            &a.input,
+            &self.watch_dir,
+            &objects,
+            cfg.object.folders,
+        )
+    }
+
+    /// Keeps a pipe record's scan with its object's scans and queues the object, unless an
+    /// object folder holds that id.
+    fn object_scan(&mut self, s: &ObjectScan) {
+        let folders = self.cell.get().object.folders;
+        let objects = self.store.objects_dir();
+        let held = id_held_by_object(
+            &s.object,
+            &Input::Object(objects.join(&s.object)),
+            &self.watch_dir,
+            &objects,
+            folders,
+        );
+        let stored = match held {
+            Some(reason) => Err(("id_taken", reason)),
+            None => store_scan(&objects, s).map_err(|r| ("object_store_failed", r)),
+        };
+        match stored {
+            Ok(arrival) => {
+                let _ = self.acks.send(Msg::Arrivals(vec![arrival]));
+            }
+            Err((kind, reason)) => {
+                let keep = match &s.scan.input {
+                    Input::Inline { data, .. } => {
+                        Keep::Bytes(Arc::clone(data), s.scan.version.clone())
+                    }
+                    _ => Keep::Nothing,
+                };
+                self.reject(&s.object, &s.scan.label, keep, kind, &reason);
+            }
+        }
+    }
+
+    /// An object with no scans left: its outputs and state go, and an event says so.
+    fn emptied(&mut self, a: &Arrival, reason: &str) {
+        match unpublish(&self.out_dir, &a.id) {
+            Ok(removed) => tracing::info!(removed, reason, "object has no scans left"),
+            Err(e) => {
+                tracing::error!(error = %e, "cannot remove the outputs of an emptied object");
+                self.metrics.error("write_failed");
+            }
+        }
+        self.store.forget(&a.id);
+        self.event(json!({"patch": a.id, "version": a.version, "input": a.label, "status": "removed", "reason": reason}));
+    }
+
     fn event(&self, mut line: serde_json::Value) {
         use std::io::Write;
         line["time"] = json!(secs(SystemTime::now()));
@@ -643,36 +660,4 @@ fn free_name(dir: &Path, path: &Path) -> PathBuf {
         .map(|n| dir.join(format!("{stem}~{n}{ext}")))
         .find(|p| !p.exists())
         .unwrap_or(first)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::repair_cut_tail;
-
-    #[test]
-    fn a_cut_last_event_line_moves_to_the_torn_file() {
-        let dir = tempfile::tempdir().expect("temp dir");
-        let log = dir.path().join("events.ndjson");
-        let torn = dir.path().join("events.ndjson.torn");
-        // Absent, empty and whole logs stay as they are.
-        assert_eq!(repair_cut_tail(&log).expect("absent"), None);
-        std::fs::write(&log, "").expect("write");
-        assert_eq!(repair_cut_tail(&log).expect("empty"), None);
-        // Whole lines longer than the scan's chunk, then a cut one.
-        let whole = format!("{{\"a\":\"{}\"}}\n{{\"b\":1}}\n", "x".repeat(100_000));
-        std::fs::write(&log, &whole).expect("write");
-        assert_eq!(repair_cut_tail(&log).expect("whole"), None);
-        std::fs::write(&log, format!("{whole}{{\"c\":")).expect("write");
-        assert_eq!(repair_cut_tail(&log).expect("cut"), Some(5));
-        assert_eq!(std::fs::read_to_string(&log).expect("log"), whole);
-        assert_eq!(std::fs::read_to_string(&torn).expect("torn"), "{\"c\":\n");
-        // A log that is only a fragment ends up empty; the torn file keeps both fragments.
-        std::fs::write(&log, "x".repeat(70_000)).expect("write");
-        assert_eq!(repair_cut_tail(&log).expect("fragment"), Some(70_000));
-        assert_eq!(std::fs::read(&log).expect("log").len(), 0);
-        assert_eq!(
-            std::fs::read_to_string(&torn).expect("torn").len(),
-            6 + 70_001
-        );
-    }
 }

@@ -213,7 +213,8 @@ fn write_in(folder: &Path, name: &str, text: &str) {
 }
 
 #[test]
-fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_and_removed_when_deleted() {
+fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_deleted_and_hold_their_id(
+) {
     let s = setup(&object_config(""));
     let object = s.inbox.join("ball");
     std::fs::create_dir_all(&object).expect("mkdir");
@@ -269,6 +270,30 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_and_removed_whe
         .any(|e| scans_of(e) == ["b"])));
     let report = read_json(&s.out.join("ball/report.json"));
     assert_eq!(report["session"]["scans"].as_array().map(Vec::len), Some(1));
+    // A patch file named like the object may not take the object's outputs.
+    write_in(&s.inbox, "ball.ply", &cap);
+    let taken = |e: &serde_json::Value| e["status"] == "rejected" && e["kind"] == "id_taken";
+    assert!(
+        wait_until_long(|| events(&s.out).iter().any(taken)),
+        "{}",
+        s.log()
+    );
+    assert!(
+        s.inbox.join("ball.ply").is_file(),
+        "not broken: left in place"
+    );
+    let report = read_json(&s.out.join("ball/report.json"));
+    assert_eq!(report["session"]["scans"].as_array().map(Vec::len), Some(1));
+    // Only the broken c left: rejected, and the last surface stays.
+    std::fs::remove_file(object.join("b.ply")).expect("remove");
+    let no_scans = |e: &serde_json::Value| e["status"] == "rejected" && e["kind"] == "no_scans";
+    assert!(wait_until_long(|| events(&s.out).iter().any(no_scans)));
+    assert!(s.out.join("ball/surface.json").is_file());
+    // No scan at all: the object's outputs go.
+    std::fs::remove_file(object.join("c.ply")).expect("remove");
+    let removed = |e: &serde_json::Value| e["patch"] == "ball" && e["status"] == "removed";
+    assert!(wait_until_long(|| events(&s.out).iter().any(removed)));
+    assert!(!s.out.join("ball").exists(), "{}", s.log());
     assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
 }
 

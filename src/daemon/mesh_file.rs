@@ -1,0 +1,162 @@
+//! The daemon's checked read of a mesh: a patch's file or pipe payload (`job`) and each
+//! scan of an object (`object_job`) go through the same two steps, so both refuse the same
+//! inputs with the same kinds:
+//! - `read_file_bytes`: a known format, `daemon.max_file_bytes` checked before the read
+//!   (one file must not exhaust memory), and the file's stamp before the read, for
+//!   `still_changing` afterwards;
+//! - `parse_mesh`: the reader under the daemon's limits, then `daemon.max_vertices`.
+
+use super::config::DaemonSection;
+use super::kinds::{rejection_kind, Cause};
+use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
+use crate::TriMesh;
+use std::path::Path;
+use std::time::SystemTime;
+
+/// Why a mesh was not taken.
+#[derive(Debug)]
+pub(crate) struct Refused {
+    /// `kinds::rejection_kind` of the cause.
+    pub kind: &'static str,
+    pub reason: String,
+    /// A readable mesh the daemon will not fit (over `max_vertices`), as against a broken
+    /// or unreadable file.
+    pub unsupported: bool,
+}
+
+impl Refused {
+    fn new(cause: Cause<'_>, reason: String) -> Self {
+        Self {
+            unsupported: matches!(cause, Cause::TooManyVertices),
+            kind: rejection_kind(&cause),
+            reason,
+        }
+    }
+}
+
+/// A mesh file's bytes, read within the limits.
+pub(crate) struct FileBytes {
+    pub format: Format,
+    pub bytes: Vec<u8>,
+    /// Size and mtime before the read: `still_changing` compares them after it.
+    pub stamp: (u64, Option<SystemTime>),
+}
+
+/// The error for bytes over `daemon.max_file_bytes`.
+pub(crate) fn too_large(len: u64, limits: &DaemonSection) -> Refused {
+    Refused::new(
+        Cause::TooLarge,
+        format!(
+            "{len} bytes exceeds daemon.max_file_bytes = {}",
+            limits.max_file_bytes
+        ),
+    )
+}
+
+/// Reads a mesh file whose format its extension names, refusing it before the read when it
+/// is over `daemon.max_file_bytes`.
+pub(crate) fn read_file_bytes(path: &Path, limits: &DaemonSection) -> Result<FileBytes, Refused> {
+    let Some(format) = Format::from_path(path) else {
+        return Err(Refused::new(
+            Cause::UnknownFormat,
+            format!("unknown extension ({})", Format::READABLE),
+        ));
+    };
+    let unreadable = |e: std::io::Error| Refused::new(Cause::Read(&e), format!("cannot read: {e}"));
+    let meta = std::fs::metadata(path).map_err(unreadable)?;
+    if meta.len() > limits.max_file_bytes {
+        return Err(too_large(meta.len(), limits));
+    }
+    let bytes = std::fs::read(path).map_err(unreadable)?;
+    if bytes.len() as u64 > limits.max_file_bytes {
+        // It grew between the stat and the read.
+        return Err(too_large(bytes.len() as u64, limits));
+    }
+    Ok(FileBytes {
+        format,
+        bytes,
+        stamp: (meta.len(), meta.modified().ok()),
+    })
+}
+
+/// Parses a mesh under the daemon's limits. `folder` is where a file's external glTF
+/// buffers may lie (the reader confines them to it); pipe payloads have none and must embed
+/// theirs.
+pub(crate) fn parse_mesh(
+    bytes: &[u8],
+    format: Format,
+    label: &str,
+    limits: &DaemonSection,
+    folder: Option<&Path>,
+) -> Result<TriMesh, Refused> {
+    let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
+    let read = match folder {
+        Some(folder) => read_mesh_bytes_in(bytes, format, label, &load, folder),
+        None => read_mesh_bytes(bytes, format, label, &load),
+    };
+    match read {
+        Ok(l) if l.mesh.positions.len() > limits.max_vertices => Err(Refused::new(
+            Cause::TooManyVertices,
+            format!(
+                "{} vertices exceeds daemon.max_vertices = {}",
+                l.mesh.positions.len(),
+                limits.max_vertices
+            ),
+        )),
+        Ok(l) => Ok(l.mesh),
+        Err(e) => Err(Refused::new(Cause::Parse(&e), e.to_string())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(max_file_bytes: u64, max_vertices: usize) -> DaemonSection {
+        let mut cfg = super::super::config::DaemonConfig::embedded_default().expect("default");
+        cfg.daemon.max_file_bytes = max_file_bytes;
+        cfg.daemon.max_vertices = max_vertices;
+        cfg.daemon
+    }
+
+    const TRIANGLE_OFF: &[u8] = b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+
+    #[test]
+    fn the_format_the_size_and_the_vertex_cap_are_each_refused_by_their_kind() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let odd = dir.path().join("a.xyzzy");
+        std::fs::write(&odd, TRIANGLE_OFF).expect("write");
+        let e = read_file_bytes(&odd, &limits(1 << 20, 100))
+            .err()
+            .expect("refused");
+        assert_eq!(e.kind, "unknown_format");
+        let off = dir.path().join("a.off");
+        std::fs::write(&off, TRIANGLE_OFF).expect("write");
+        let e = read_file_bytes(&off, &limits(10, 100))
+            .err()
+            .expect("refused");
+        assert_eq!((e.kind, e.unsupported), ("too_large", false));
+        let e = read_file_bytes(&dir.path().join("gone.off"), &limits(1 << 20, 100))
+            .err()
+            .expect("refused");
+        assert_eq!(e.kind, "read_not_found");
+        let read = read_file_bytes(&off, &limits(1 << 20, 100)).expect("read");
+        assert_eq!(read.stamp.0, TRIANGLE_OFF.len() as u64);
+        let mesh = parse_mesh(&read.bytes, read.format, "a.off", &limits(1 << 20, 3), None);
+        assert_eq!(mesh.expect("parsed").positions.len(), 3);
+        let e = parse_mesh(&read.bytes, read.format, "a.off", &limits(1 << 20, 2), None)
+            .err()
+            .expect("over the cap");
+        assert_eq!((e.kind, e.unsupported), ("too_many_vertices", true));
+        let e = parse_mesh(
+            b"OFF\n3 1",
+            Format::Off,
+            "cut.off",
+            &limits(1 << 20, 9),
+            None,
+        )
+        .err()
+        .expect("cut");
+        assert!(!e.unsupported && e.reason.contains("cut.off"), "{e:?}");
+    }
+}
