@@ -195,14 +195,20 @@ fn decimated_max_stays_closed() {
     assert_topology_kept(&fit);
     assert_eq!(fit.control_topology.boundary_loops, 0);
     let diag = mesh.bounds_diagonal();
+    let stray = stray_of_tessellation(&fit, 6);
     eprintln!(
-        "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}",
+        "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}, stray {:.3} % of diag",
         fit.controls.len(),
         fit.rms,
         fit.max,
-        decimated_rms(&fit)
+        decimated_rms(&fit),
+        100.0 * stray / diag
     );
     assert!(fit.rms < 2e-3 * diag);
+    // A decimated mesh has few vertices where it is flat: the feet there leave parts of
+    // the control faces uncovered, which stood 1.0 % of the diagonal off the data
+    // (23 faces in one region, each with 4-11 feet).
+    assert!(stray <= 5e-3 * diag, "stray {stray} of diagonal {diag}");
 }
 
 #[test]
