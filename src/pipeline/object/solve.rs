@@ -199,11 +199,11 @@ impl Samples {
         }
         let mut faces = 0;
         let mut params = Vec::new();
-        for f in 0..nf {
-            let sparse = count[f] < SAMPLE_AT.len();
+        for (f, (&held, &quarters)) in count.iter().zip(&covered).enumerate() {
+            let sparse = held < SAMPLE_AT.len();
             let before = params.len();
             for (q, &(u, v)) in SAMPLE_AT.iter().enumerate() {
-                if sparse || covered[f] & (1 << q) == 0 {
+                if sparse || quarters & (1 << q) == 0 {
                     params.push(SurfaceParam {
                         face: f as u32,
                         u,

@@ -90,16 +90,22 @@ mod tests {
         let (mut positions, mut faces) = sphere();
         let m = positions.len() as u32;
         positions.push(0.5 * (positions[a as usize] + positions[b as usize]));
-        for f in 0..faces.len() {
+        let on_edge: Vec<(usize, usize)> = faces
+            .iter()
+            .enumerate()
+            .filter_map(|(f, t)| {
+                let k = (0..3).find(|&k| {
+                    let (x, y) = (t[k], t[(k + 1) % 3]);
+                    (x, y) == (a, b) || (x, y) == (b, a)
+                })?;
+                Some((f, k))
+            })
+            .collect();
+        for (f, k) in on_edge {
             let t = faces[f];
-            if let Some(k) = (0..3).find(|&k| {
-                let (x, y) = (t[k], t[(k + 1) % 3]);
-                (x, y) == (a, b) || (x, y) == (b, a)
-            }) {
-                let (x, y, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
-                faces[f] = [x, m, c];
-                faces.push([m, y, c]);
-            }
+            let (x, y, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+            faces[f] = [x, m, c];
+            faces.push([m, y, c]);
         }
         (positions, faces)
     }
