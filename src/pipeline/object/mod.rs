@@ -398,20 +398,7 @@ fn fit_from(
     }
     let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
     let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let surface = match previous {
-        Some(previous) => LoopLimitSurface::with_creases_reusing(
-            control_mesh.positions.len(),
-            &control_mesh.triangles,
-            crease_edges,
-            previous,
-        ),
-        None => LoopLimitSurface::with_creases(
-            control_mesh.positions.len(),
-            &control_mesh.triangles,
-            crease_edges,
-        ),
-    }
-    .map_err(ObjectError::Surface)?;
+    let surface = limit_surface(&control_mesh, crease_edges, previous)?;
     let m = control_mesh.positions.len();
     let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
     let rim = Rim::new(&control_topo.twin, &near_boundary(&component, 0));
@@ -529,6 +516,22 @@ fn fit_from(
         layout: LayoutReport::default(),
         refinement: Vec::new(),
     })
+}
+
+/// The limit surface of `control_mesh`, taking over the unchanged patches of `previous`.
+fn limit_surface(
+    control_mesh: &TriMesh,
+    crease_edges: &[[u32; 2]],
+    previous: Option<&LoopLimitSurface>,
+) -> Result<LoopLimitSurface, ObjectError> {
+    let (count, faces) = (control_mesh.positions.len(), &control_mesh.triangles);
+    match previous {
+        Some(previous) => {
+            LoopLimitSurface::with_creases_reusing(count, faces, crease_edges, previous)
+        }
+        None => LoopLimitSurface::with_creases(count, faces, crease_edges),
+    }
+    .map_err(ObjectError::Surface)
 }
 
 /// What the first point fit works on.
