@@ -195,14 +195,43 @@ fn decimated_max_stays_closed() {
     assert_topology_kept(&fit);
     assert_eq!(fit.control_topology.boundary_loops, 0);
     let diag = mesh.bounds_diagonal();
+    let stray = stray_of_tessellation(&fit, 6);
     eprintln!(
-        "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}",
+        "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}, stray {:.3} % of diag",
         fit.controls.len(),
         fit.rms,
         fit.max,
-        decimated_rms(&fit)
+        decimated_rms(&fit),
+        100.0 * stray / diag
     );
     assert!(fit.rms < 2e-3 * diag);
+    // The stray (0.85 % of the diagonal, 1.03 % before the surface-to-data samples on
+    // uncovered quarters) is not asserted: it is still over the 0.5 % goal, on interior
+    // faces whose quarters all hold feet, between a decimated mesh's large flat triangles.
+}
+
+/// camelhead's surface ran 0.58 % of the diagonal past its sparse rim, at boundary controls
+/// of 3-4 neighbours whose faces held 1-4 feet: the boundary curve there was held by the
+/// few rim points alone. With the boundary curve sampled it stays within 0.5 %.
+#[test]
+fn camelhead_stays_on_its_sparse_rim() {
+    let Some(mesh) = load("models/camelhead.off") else {
+        return;
+    };
+    let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    assert_topology_kept(&fit);
+    assert_eq!(fit.control_topology.boundary_loops, 1);
+    let diag = fit.component.bounds_diagonal();
+    let stray = stray_of_tessellation(&fit, 6);
+    eprintln!(
+        "camelhead: {} controls, rms {:.3e}, decimated rms {:.3e}, stray {:.3} % of diag",
+        fit.controls.len(),
+        fit.rms,
+        decimated_rms(&fit),
+        100.0 * stray / diag
+    );
+    assert!(fit.rms < 0.25 * decimated_rms(&fit));
+    assert!(stray <= 5e-3 * diag, "stray {stray} of diagonal {diag}");
 }
 
 #[test]

@@ -222,8 +222,8 @@ pub struct ObjectFit {
     /// The fit before refinement, then after each refinement round (empty when refinement
     /// is off).
     pub refinement: Vec<RefineRound>,
-    /// Control faces the last round sampled for the surface-to-data term (those holding
-    /// fewer than four foot points).
+    /// Control faces the last round sampled for the surface-to-data term inside (faces
+    /// with a quarter no foot point lands on; boundary curve samples not counted).
     pub sampled_faces: usize,
 }
 
@@ -356,19 +356,36 @@ pub fn fit_on_creased_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
-    fit_from(component, control_mesh, crease_edges, params, None, opts)
+    fit_from(
+        component,
+        control_mesh,
+        crease_edges,
+        params,
+        Start::default(),
+        opts,
+    )
 }
 
-/// [`fit_on_creased_control_mesh`], its first point fit skipped when `warm` gives control
-/// positions to start the rounds from (one per control mesh vertex).
+/// What a fit may start from besides the control mesh.
+#[derive(Default)]
+struct Start<'a> {
+    /// Control positions to start the rounds from (one per control mesh vertex), the
+    /// first point fit skipped.
+    warm: Option<Vec<DVec3>>,
+    /// The surface of an earlier control mesh whose unchanged patches are reused.
+    previous: Option<&'a LoopLimitSurface>,
+}
+
+/// [`fit_on_creased_control_mesh`] from `start`.
 fn fit_from(
     component: TriMesh,
     control_mesh: TriMesh,
     crease_edges: &[[u32; 2]],
     params: Vec<SurfaceParam>,
-    warm: Option<Vec<DVec3>>,
+    start_from: Start,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
+    let Start { warm, previous } = start_from;
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let t = Instant::now();
@@ -381,12 +398,7 @@ fn fit_from(
     }
     let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
     let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let surface = LoopLimitSurface::with_creases(
-        control_mesh.positions.len(),
-        &control_mesh.triangles,
-        crease_edges,
-    )
-    .map_err(ObjectError::Surface)?;
+    let surface = limit_surface(&control_mesh, crease_edges, previous)?;
     let m = control_mesh.positions.len();
     let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
     let rim = Rim::new(&control_topo.twin, &near_boundary(&component, 0));
@@ -442,7 +454,9 @@ fn fit_from(
     let mut sampled_faces = 0;
     while taken < opts.rounds && refusals < MAX_REFUSALS {
         let samples = match &nearest {
-            Some(nearest) => Samples::find(&surface, &controls, &feet.params, &component, nearest),
+            Some(nearest) => {
+                Samples::find(&surface, &controls, &feet.params, &rim, &component, nearest)
+            }
             None => Samples::none(),
         };
         sampled_faces = samples.faces;
@@ -502,6 +516,22 @@ fn fit_from(
         layout: LayoutReport::default(),
         refinement: Vec::new(),
     })
+}
+
+/// The limit surface of `control_mesh`, taking over the unchanged patches of `previous`.
+fn limit_surface(
+    control_mesh: &TriMesh,
+    crease_edges: &[[u32; 2]],
+    previous: Option<&LoopLimitSurface>,
+) -> Result<LoopLimitSurface, ObjectError> {
+    let (count, faces) = (control_mesh.positions.len(), &control_mesh.triangles);
+    match previous {
+        Some(previous) => {
+            LoopLimitSurface::with_creases_reusing(count, faces, crease_edges, previous)
+        }
+        None => LoopLimitSurface::with_creases(count, faces, crease_edges),
+    }
+    .map_err(ObjectError::Surface)
 }
 
 /// What the first point fit works on.
@@ -584,7 +614,10 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             refined.mesh,
             &refined.creases,
             refined.params,
-            opts.refine.warm.then_some(refined.warm),
+            Start {
+                warm: opts.refine.warm.then_some(refined.warm),
+                previous: Some(&fit.surface),
+            },
             &round_opts,
         ) else {
             break;

@@ -38,6 +38,8 @@ mod cached;
 mod error;
 mod net;
 mod patch;
+mod reuse;
+mod sums;
 
 pub use error::LoopLimitError;
 
@@ -46,7 +48,9 @@ use crate::mesh::topology::{Topology, NONE};
 use glam::DVec3;
 use net::{Net, Term, VertexRule};
 use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
+use rayon::prelude::*;
 use std::sync::OnceLock;
+use sums::{restore_sum, restore_sums};
 
 /// Child nets are memoised down to this depth; deeper ones (reached only within 2^-40 of
 /// an irregular vertex) are computed on the fly so memory stays bounded.
@@ -96,7 +100,9 @@ struct IrregularPatch {
 
 enum FacePatch {
     Regular(RegularPatch),
-    Irregular(Box<IrregularPatch>),
+    /// Shared: a refined control mesh's surface reuses the patches (with their memoised
+    /// nodes) of faces whose 1-ring did not change (`with_creases_reusing`).
+    Irregular(std::sync::Arc<IrregularPatch>),
 }
 
 /// The Loop limit surface over the faces of a control mesh.
@@ -136,6 +142,28 @@ impl LoopLimitSurface {
         faces: &[[u32; 3]],
         crease_edges: &[[u32; 2]],
     ) -> Result<Self, LoopLimitError> {
+        Self::build(control_count, faces, crease_edges, None)
+    }
+
+    /// [`Self::with_creases`], reusing the patches of `previous` (with what their
+    /// evaluations memoised) for faces whose corners, in order, and 1-ring are unchanged:
+    /// a patch depends on nothing else, so the surface is the same as built afresh. A
+    /// locally refined control mesh keeps most of its faces' 1-rings.
+    pub fn with_creases_reusing(
+        control_count: usize,
+        faces: &[[u32; 3]],
+        crease_edges: &[[u32; 2]],
+        previous: &LoopLimitSurface,
+    ) -> Result<Self, LoopLimitError> {
+        Self::build(control_count, faces, crease_edges, Some(previous))
+    }
+
+    fn build(
+        control_count: usize,
+        faces: &[[u32; 3]],
+        crease_edges: &[[u32; 2]],
+        previous: Option<&LoopLimitSurface>,
+    ) -> Result<Self, LoopLimitError> {
         if faces.is_empty() {
             return Err(LoopLimitError::NoFaces);
         }
@@ -161,8 +189,18 @@ impl LoopLimitSurface {
             return Err(LoopLimitError::IsolatedVertex { vertex });
         }
         let (creases, crease_half) = Self::crease_halfedges(&topo, crease_edges)?;
+        let reusable = previous.map(reuse::Reusable::new);
         let patches = (0..faces.len())
-            .map(|f| Self::face_patch(&topo, &crease_half, f))
+            .into_par_iter()
+            .with_min_len(64)
+            .map(|f| match &reusable {
+                Some(r) => {
+                    let (support, net) = Self::face_net(&topo, &crease_half, f);
+                    r.patch(faces[f], &support, &net)
+                        .unwrap_or_else(|| Self::patch_of(support, net))
+                }
+                None => Self::face_patch(&topo, &crease_half, f),
+            })
             .collect();
         Ok(Self {
             control_count,
@@ -235,6 +273,13 @@ impl LoopLimitSurface {
     }
 
     fn face_patch(topo: &Topology, crease_half: &[bool], f: usize) -> FacePatch {
+        let (support, net) = Self::face_net(topo, crease_half, f);
+        Self::patch_of(support, net)
+    }
+
+    /// The root net of face `f` (its 1-ring, vertices as weights over themselves) and the
+    /// original control index of each support column.
+    fn face_net(topo: &Topology, crease_half: &[bool], f: usize) -> (Vec<u32>, Net) {
         let corners = topo.triangles[f];
         let mut support: Vec<u32> = corners.to_vec();
         let mut faces = vec![f];
@@ -283,6 +328,11 @@ impl LoopLimitSurface {
                 .map(|&v| topo.face_valence[v as usize])
                 .collect(),
         };
+        (support, net)
+    }
+
+    /// The patch of a face from its root net (see `face_net`).
+    fn patch_of(support: Vec<u32>, net: Net) -> FacePatch {
         if let Some(st) = net.regular_stencil() {
             return FacePatch::Regular(RegularPatch::new(&net, &st, true, |s| support[s as usize]));
         }
@@ -305,7 +355,7 @@ impl LoopLimitSurface {
             .max()
             .unwrap_or(80)
             .clamp(60, 80);
-        FacePatch::Irregular(Box::new(IrregularPatch {
+        FacePatch::Irregular(std::sync::Arc::new(IrregularPatch {
             support,
             root: Node::new(net),
             cap,
@@ -453,39 +503,6 @@ impl IrregularPatch {
             (a, b, jac) = (na, nb, jac.then(j));
             net = net.child(c);
             depth += 1;
-        }
-    }
-}
-
-/// Rounding leaves the column sums a few ulps of the largest intermediate term off their
-/// exact values (1 for the value, 0 for derivatives, which are 2^depth times larger near an
-/// irregular vertex). The residual is spread over the entries in proportion to their
-/// size, which keeps the rows exactly affine invariant without moving any weight by more
-/// than its rounding.
-fn restore_sums(acc: &mut [[f64; 6]]) {
-    for d in 0..6 {
-        let target = if d == 0 { 1.0 } else { 0.0 };
-        let (sum, size) = acc
-            .iter()
-            .fold((0.0, 0.0), |(s, a), w| (s + w[d], a + w[d].abs()));
-        if size > 0.0 {
-            let r = (sum - target) / size;
-            for w in acc.iter_mut() {
-                w[d] -= r * w[d].abs();
-            }
-        }
-    }
-}
-
-/// `restore_sums` for one column with target `target`.
-fn restore_sum(col: &mut [f64], target: f64) {
-    let (sum, size) = col
-        .iter()
-        .fold((0.0, 0.0), |(s, a), w| (s + w, a + w.abs()));
-    if size > 0.0 {
-        let r = (sum - target) / size;
-        for w in col.iter_mut() {
-            *w -= r * w.abs();
         }
     }
 }
