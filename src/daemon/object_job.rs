@@ -14,7 +14,7 @@
 //! A scan that cannot be read, parsed or registered (a `.conf` naming it with bad numbers
 //! is an error, never the identity) is rejected alone and left where it is (moving it out
 //! of the folder would change the object); the other scans are fitted. A scan still being
-//! written (open for writing, or younger than the settle time) is not read: the watcher
+//! written (a process holds it open for writing) is not read: the watcher
 //! queues the object again once it hands that file on. When no scan is left at all (all
 //! deleted, or the folder gone), the object's outputs and state are removed
 //! (`Outcome::Emptied`): they would describe data that no longer exists.
@@ -35,7 +35,7 @@ use crate::TriMesh;
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant, SystemTime};
+use std::time::{Instant, SystemTime};
 
 /// A scan read, parsed and registered.
 struct ReadScan {
@@ -47,10 +47,10 @@ struct ReadScan {
 
 /// The newest version of every scan id in `folder`: (mtime, name) decides, as for patches.
 /// A file still being written is no scan yet, as the watcher would not have handed it on:
-/// a process holds it open for writing, or it changed less than `settle` ago. It is left
-/// out (an older version of its id counts), and its object is queued again once the
-/// watcher hands it on.
-fn newest_scans(folder: &Path, settle: Duration) -> std::io::Result<BTreeMap<String, PathBuf>> {
+/// a process holds it open for writing. It is left out (an older version of its id
+/// counts), and its object is queued again when the watcher takes it after its close. (An
+/// age rule would contradict the watcher, which takes a file at its close without waiting.)
+fn newest_scans(folder: &Path) -> std::io::Result<BTreeMap<String, PathBuf>> {
     let folder = std::fs::canonicalize(folder)?;
     let mut files = Vec::new();
     for entry in std::fs::read_dir(&folder)?.flatten() {
@@ -68,11 +68,9 @@ fn newest_scans(folder: &Path, settle: Duration) -> std::io::Result<BTreeMap<Str
     }
     let paths: Vec<&Path> = files.iter().map(|f| f.3.as_path()).collect();
     let writers = open_for_writing(&paths);
-    let now = SystemTime::now();
     let mut newest: BTreeMap<String, (SystemTime, String, PathBuf)> = BTreeMap::new();
     for (id, mtime, name, path) in files {
-        let young = now.duration_since(mtime).is_ok_and(|age| age < settle);
-        if young || writers.writing(&path) == Some(true) {
+        if writers.writing(&path) == Some(true) {
             tracing::info!(scan = %path.display(), "still being written; left out of this update");
             continue;
         }
@@ -152,12 +150,7 @@ pub(crate) fn fit_object(
     t: &mut Timings,
 ) -> Outcome {
     let start = Instant::now();
-    // Scans of pipe records are written whole by the daemon before their object is queued.
-    let settle = match folder.starts_with(store.objects_dir()) {
-        true => Duration::ZERO,
-        false => Duration::from_millis(cfg.daemon.settle_ms),
-    };
-    let listed = match newest_scans(folder, settle) {
+    let listed = match newest_scans(folder) {
         Ok(l) => l,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && store.load(&a.id).is_some() => {
             return Outcome::Emptied {
@@ -276,6 +269,7 @@ pub(crate) fn fit_object(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Duration;
 
     fn write_aged(path: &Path, age: Duration) {
         std::fs::write(path, b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n").expect("write");
@@ -286,38 +280,38 @@ mod tests {
         file.set_modified(SystemTime::now() - age).expect("mtime");
     }
 
-    /// A scan the watcher would not hand on yet (too young, or open for writing) is no
-    /// scan of this update: the older version of its id counts instead.
+    /// A scan held open for writing is no scan of this update: the older version of its
+    /// id counts instead, until the writer closes it.
     #[test]
     fn scans_still_being_written_are_left_out_for_their_older_version() {
         let dir = tempfile::tempdir().expect("tmp");
         let folder = std::fs::canonicalize(dir.path()).expect("canonical");
-        let settle = Duration::from_secs(5);
         write_aged(&folder.join("a@1.off"), Duration::from_secs(60));
         write_aged(&folder.join("a@2.off"), Duration::from_secs(1));
         write_aged(&folder.join("b.off"), Duration::from_secs(60));
-        write_aged(&folder.join("c.off"), Duration::from_secs(60));
         let mut child = std::process::Command::new("sh")
             .arg("-c")
             .arg(format!(
                 "exec 3>>'{}'; exec sleep 30",
-                folder.join("c.off").display()
+                folder.join("a@2.off").display()
             ))
             .spawn()
             .expect("sh runs");
         let deadline = Instant::now() + Duration::from_secs(20);
-        let mut listed = newest_scans(&folder, settle).expect("listed");
-        while listed.contains_key("c") && Instant::now() < deadline {
+        let mut listed = newest_scans(&folder).expect("listed");
+        while listed.get("a") != Some(&folder.join("a@1.off")) && Instant::now() < deadline {
             std::thread::sleep(Duration::from_millis(20));
-            listed = newest_scans(&folder, settle).expect("listed");
+            listed = newest_scans(&folder).expect("listed");
         }
         let _ = child.kill();
         let _ = child.wait();
-        assert_eq!(listed.get("a"), Some(&folder.join("a@1.off")));
+        assert_eq!(
+            listed.get("a"),
+            Some(&folder.join("a@1.off")),
+            "a@2 held open"
+        );
         assert_eq!(listed.get("b"), Some(&folder.join("b.off")));
-        assert!(!listed.contains_key("c"), "held open for writing");
-        let settled = newest_scans(&folder, Duration::ZERO).expect("listed");
-        assert_eq!(settled.get("a"), Some(&folder.join("a@2.off")));
-        assert_eq!(settled.get("c"), Some(&folder.join("c.off")));
+        let closed = newest_scans(&folder).expect("listed");
+        assert_eq!(closed.get("a"), Some(&folder.join("a@2.off")));
     }
 }
