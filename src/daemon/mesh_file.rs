@@ -8,7 +8,7 @@
 
 use super::config::DaemonSection;
 use super::kinds::{rejection_kind, Cause};
-use crate::io::{read_mesh_bytes, read_mesh_bytes_in, Format, LoadOptions};
+use crate::io::{read_with_base, Format, LoadOptions};
 use crate::TriMesh;
 use std::path::Path;
 use std::time::SystemTime;
@@ -90,11 +90,7 @@ pub(crate) fn parse_mesh(
     folder: Option<&Path>,
 ) -> Result<TriMesh, Refused> {
     let load = LoadOptions::with_limits(limits.max_file_bytes, limits.max_vertices);
-    let read = match folder {
-        Some(folder) => read_mesh_bytes_in(bytes, format, label, &load, folder),
-        None => read_mesh_bytes(bytes, format, label, &load),
-    };
-    match read {
+    match read_with_base(bytes, format, label, &load, folder) {
         Ok(l) if l.mesh.positions.len() > limits.max_vertices => Err(Refused::new(
             Cause::TooManyVertices,
             format!(

@@ -265,7 +265,8 @@ pub fn read_mesh_bytes_in(
     read_with_base(bytes, format, name, opts, Some(folder))
 }
 
-fn read_with_base(
+/// `read_mesh_bytes` (no `base`) or `read_mesh_bytes_in` (`base`: the file's folder).
+pub(crate) fn read_with_base(
     bytes: &[u8],
     format: Format,
     name: &str,
