@@ -17,6 +17,7 @@
 use super::collocation::Collocation;
 use super::csr::Csr;
 use super::normal_matrix::{BlockMatrix, Fairness};
+pub(crate) use super::normal_solve::CholeskyPattern;
 use glam::DVec3;
 
 pub(crate) struct DistanceProblem<'a> {
@@ -88,6 +89,15 @@ pub(crate) fn solve_distance(
 /// not positive definite (controls no term holds): callers fall back to `solve_distance`.
 pub(crate) fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
     p.assemble(true).solve_direct().ok()
+}
+
+/// `solve_distance_direct` through a kept symbolic analysis: for a sequence of problems
+/// over the same controls (the rounds of one fit).
+pub(crate) fn solve_distance_direct_reusing(
+    p: &DistanceProblem,
+    pattern: &mut CholeskyPattern,
+) -> Option<Vec<DVec3>> {
+    p.assemble(true).solve_direct_reusing(pattern).ok()
 }
 
 #[cfg(test)]
