@@ -197,6 +197,25 @@ impl Pieces {
 
     /// Bit l set when x (perturbed along `dir`) lies left of knot line l.
     fn key(&self, x: DVec2, dir: DVec2) -> u128 {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked above).
+            return unsafe { self.key_avx2(x, dir) };
+        }
+        self.key_with(x, dir)
+    }
+
+    /// `key` with the line loop four lines wide: the sign tests were the largest single
+    /// item of a 40k-point DMS fit's profile (13 %), and the SSE2 build tests two at a time.
+    /// The same operations in the same order, so the same signs.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn key_avx2(&self, x: DVec2, dir: DVec2) -> u128 {
+        self.key_with(x, dir)
+    }
+
+    #[inline(always)]
+    fn key_with(&self, x: DVec2, dir: DVec2) -> u128 {
         let (mut key, mut unsure) = (0u128, 0u128);
         let lines = self.ends.len();
         for start in (0..lines).step_by(64) {
