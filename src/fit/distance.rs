@@ -17,6 +17,7 @@
 use super::collocation::Collocation;
 use super::csr::Csr;
 use super::normal_matrix::{BlockMatrix, Fairness};
+pub(crate) use super::normal_solve::CholeskyPattern;
 use glam::DVec3;
 
 pub(crate) struct DistanceProblem<'a> {
@@ -88,6 +89,15 @@ pub(crate) fn solve_distance(
 /// not positive definite (controls no term holds): callers fall back to `solve_distance`.
 pub(crate) fn solve_distance_direct(p: &DistanceProblem) -> Option<Vec<DVec3>> {
     p.assemble(true).solve_direct().ok()
+}
+
+/// `solve_distance_direct` through a kept symbolic analysis: for a sequence of problems
+/// over the same controls (the rounds of one fit).
+pub(crate) fn solve_distance_direct_reusing(
+    p: &DistanceProblem,
+    pattern: &mut CholeskyPattern,
+) -> Option<Vec<DVec3>> {
+    p.assemble(true).solve_direct_reusing(pattern).ok()
 }
 
 #[cfg(test)]
@@ -292,5 +302,59 @@ mod tests {
                 "{a} vs {b}"
             );
         }
+    }
+    /// Rounds through one kept analysis: a second matrix on the same pattern reuses it, one
+    /// with a coupling outside it is analysed again over the union, and every solve equals
+    /// a fresh factorisation's.
+    #[test]
+    fn kept_analysis_serves_later_patterns_and_solves_alike() {
+        let m = 10;
+        let rows_of = |extra: bool| -> Vec<Vec<(u32, f64)>> {
+            (0..80)
+                .map(|j| {
+                    let a = (j % m) as u32;
+                    let mut row = vec![
+                        (a, 0.5 + 0.001 * j as f64),
+                        ((a + 1) % m as u32, 0.3),
+                        ((a + 2) % m as u32, 0.2),
+                    ];
+                    if extra && j == 7 {
+                        row.push(((a + 5) % m as u32, 0.1));
+                    }
+                    row.sort_by_key(|e| e.0);
+                    row.dedup_by_key(|e| e.0);
+                    row
+                })
+                .collect()
+        };
+        let data: Vec<DVec3> = (0..80)
+            .map(|j| DVec3::new((j as f64 * 0.3).sin(), j as f64 * 0.02, (j as f64).cos()))
+            .collect();
+        let mut pattern = CholeskyPattern::default();
+        for (round, extra) in [false, false, true, false].into_iter().enumerate() {
+            let rows = rows_of(extra);
+            let basis = Csr::from_rows(m, rows.iter().map(|r| r.as_slice()));
+            let normals: Vec<DVec3> = (0..80)
+                .map(|j| DVec3::new(0.2, (j as f64 + round as f64).sin() * 0.3, 1.0).normalize())
+                .collect();
+            let p = DistanceProblem {
+                basis: &basis,
+                data: &data,
+                normals: &normals,
+                tangential: &[0.01; 80],
+                fairness: None,
+                smoothing: 0.0,
+            };
+            let kept = solve_distance_direct_reusing(&p, &mut pattern).expect("definite");
+            let fresh = solve_distance_direct(&p).expect("definite");
+            for (a, b) in kept.iter().zip(&fresh) {
+                assert!(
+                    (*a - *b).length() < 1e-10 * b.length().max(1.0),
+                    "{a} vs {b}"
+                );
+            }
+        }
+        // Rounds 1, 2 and 4 fit the kept pattern; round 3 adds a coupling.
+        assert_eq!((pattern.analyses, pattern.reuses), (2, 2));
     }
 }

@@ -93,23 +93,254 @@ fn pcg(
     (x, max_iter)
 }
 
-/// Lower triangle of a symmetric matrix given by columns (the `lower_only` assembly).
-fn cholesky_solve(
+/// faer's symbolic Cholesky analysis (fill-reducing ordering, elimination tree,
+/// supernodes) of one sparsity pattern, kept for the next matrices whose pattern it
+/// covers, and the numeric factor's storage. The rounds of a planar fit solve one normal
+/// matrix per round over the same controls: a pair of controls is coupled when some data
+/// point lies in both supports, which foot points moving by a fraction of a cell rarely
+/// change, so one analysis serves every round and each round pays only the numeric
+/// factorisation (in the stop-30 profile of a 40k-point DMS fit the analysis was redone
+/// every round). A matrix with an entry outside the kept pattern is analysed again over
+/// the union of both patterns, so later rounds fit in it.
+///
+/// Block systems (`block` unknowns per control, coupled in dense blocks) are ordered on
+/// the control graph, each control's unknowns kept together: the minimum-degree ordering
+/// then runs on a graph `block^2` times smaller (in the profile of the 3m x 3m distance
+/// rounds it cost more than the numeric factorisation), and a block's unknowns, which
+/// share every neighbour, would land side by side in a supernode anyway.
+#[derive(Default)]
+pub(crate) struct CholeskyPattern {
     size: usize,
     col_ptr: Vec<usize>,
     rows: Vec<usize>,
-    vals: Vec<f64>,
+    symbolic: Option<faer::sparse::linalg::cholesky::SymbolicCholesky<usize>>,
+    /// The numeric factor's values, kept so that a refactorisation writes into memory
+    /// already mapped.
+    factor: Vec<f64>,
+    /// Symbolic analyses run.
+    pub analyses: usize,
+    /// Factorisations that reused the kept analysis.
+    pub reuses: usize,
+}
+
+impl CholeskyPattern {
+    /// The values of a lower-triangle matrix (`col_ptr`, `rows`, `vals`, rows sorted
+    /// within each column) placed in the kept pattern, zero where the matrix has no
+    /// entry; `None` when the matrix has an entry the pattern lacks.
+    fn scatter(
+        &self,
+        size: usize,
+        col_ptr: &[usize],
+        rows: &[usize],
+        vals: &[f64],
+    ) -> Option<Vec<f64>> {
+        if self.symbolic.is_none() || self.size != size {
+            return None;
+        }
+        let mut out = vec![0.0; self.rows.len()];
+        for col in 0..size {
+            let kept = &self.rows[self.col_ptr[col]..self.col_ptr[col + 1]];
+            let mut at = 0;
+            for k in col_ptr[col]..col_ptr[col + 1] {
+                let offset = kept[at..].iter().position(|&r| r == rows[k])?;
+                at += offset;
+                out[self.col_ptr[col] + at] = vals[k];
+                at += 1;
+            }
+        }
+        Some(out)
+    }
+
+    /// The union of the kept pattern (when of the same size) and this one, with the
+    /// matrix's values in it.
+    fn union(
+        &self,
+        size: usize,
+        col_ptr: &[usize],
+        rows: &[usize],
+        vals: &[f64],
+    ) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+        let keep_old = self.symbolic.is_some() && self.size == size;
+        let mut union_ptr = Vec::with_capacity(size + 1);
+        union_ptr.push(0);
+        let mut union_rows = Vec::with_capacity(rows.len());
+        let mut union_vals = Vec::with_capacity(rows.len());
+        for col in 0..size {
+            let new = col_ptr[col]..col_ptr[col + 1];
+            let old: &[usize] = if keep_old {
+                &self.rows[self.col_ptr[col]..self.col_ptr[col + 1]]
+            } else {
+                &[]
+            };
+            let (mut i, mut k) = (0, new.start);
+            while i < old.len() || k < new.end {
+                if k < new.end && (i >= old.len() || rows[k] <= old[i]) {
+                    if i < old.len() && old[i] == rows[k] {
+                        i += 1;
+                    }
+                    union_rows.push(rows[k]);
+                    union_vals.push(vals[k]);
+                    k += 1;
+                } else {
+                    union_rows.push(old[i]);
+                    union_vals.push(0.0);
+                    i += 1;
+                }
+            }
+            union_ptr.push(union_rows.len());
+        }
+        (union_ptr, union_rows, union_vals)
+    }
+
+    /// Minimum-degree ordering of the control graph (`block` unknowns per control,
+    /// consecutive), expanded to the unknowns: (forward, inverse).
+    fn block_ordering(
+        size: usize,
+        col_ptr: &[usize],
+        rows: &[usize],
+        block: usize,
+    ) -> Result<(Vec<usize>, Vec<usize>), DirectFailure> {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::sparse::linalg::amd;
+        use faer::sparse::SymbolicSparseColMatRef;
+        let controls = size / block;
+        let mut coarse_ptr = Vec::with_capacity(controls + 1);
+        coarse_ptr.push(0);
+        let mut coarse_rows = Vec::new();
+        for c in 0..controls {
+            let first = coarse_rows.len();
+            for &r in &rows[col_ptr[block * c]..col_ptr[block * c + 1]] {
+                let j = r / block;
+                if coarse_rows.len() == first || coarse_rows[coarse_rows.len() - 1] != j {
+                    coarse_rows.push(j);
+                }
+            }
+            coarse_ptr.push(coarse_rows.len());
+        }
+        let graph = SymbolicSparseColMatRef::new_checked(
+            controls,
+            controls,
+            &coarse_ptr,
+            None,
+            &coarse_rows,
+        );
+        let (mut fwd, mut inv) = (vec![0usize; controls], vec![0usize; controls]);
+        let mut mem = MemBuffer::new(amd::order_scratch::<usize>(controls, coarse_rows.len()));
+        amd::order(
+            &mut fwd,
+            &mut inv,
+            graph,
+            amd::Control::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|_| DirectFailure::NotDefinite)?;
+        let expand = |p: &[usize]| -> Vec<usize> {
+            p.iter()
+                .flat_map(|&c| (0..block).map(move |q| block * c + q))
+                .collect()
+        };
+        Ok((expand(&fwd), expand(&inv)))
+    }
+
+    /// Analyses the union of the kept pattern and this one (`block`: unknowns per
+    /// control, ordered on the control graph when above 1), and returns the matrix's
+    /// values in it.
+    fn analyse(
+        &mut self,
+        size: usize,
+        col_ptr: &[usize],
+        rows: &[usize],
+        vals: &[f64],
+        block: usize,
+    ) -> Result<Vec<f64>, DirectFailure> {
+        use faer::perm::PermRef;
+        use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, SymmetricOrdering};
+        use faer::sparse::SymbolicSparseColMatRef;
+        let (union_ptr, union_rows, union_vals) = self.union(size, col_ptr, rows, vals);
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(size, size, &union_ptr, None, &union_rows);
+        let ordering = if block > 1 && size % block == 0 {
+            Some(Self::block_ordering(size, &union_ptr, &union_rows, block)?)
+        } else {
+            None
+        };
+        let ord = match &ordering {
+            Some((fwd, inv)) => SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, size)),
+            None => SymmetricOrdering::Amd,
+        };
+        let symbolic =
+            factorize_symbolic_cholesky(pattern, faer::Side::Lower, ord, Default::default())
+                .map_err(|_| DirectFailure::NotDefinite)?;
+        self.size = size;
+        self.col_ptr = union_ptr;
+        self.rows = union_rows;
+        self.symbolic = Some(symbolic);
+        self.analyses += 1;
+        Ok(union_vals)
+    }
+
+    /// Solves with the lower triangle of a symmetric matrix given by columns (rows sorted
+    /// within each column) in place of `b`, reusing the kept analysis where it covers the
+    /// pattern.
+    fn solve(
+        &mut self,
+        size: usize,
+        (col_ptr, rows, vals): (&[usize], &[usize], &[f64]),
+        block: usize,
+        b: &mut faer::Mat<f64>,
+    ) -> Result<(), DirectFailure> {
+        use faer::dyn_stack::{MemBuffer, MemStack};
+        use faer::linalg::cholesky::llt::factor::LltRegularization;
+        use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+        let values = match self.scatter(size, col_ptr, rows, vals) {
+            Some(values) => {
+                self.reuses += 1;
+                values
+            }
+            None => self.analyse(size, col_ptr, rows, vals, block)?,
+        };
+        let symbolic = self.symbolic.as_ref().ok_or(DirectFailure::NotDefinite)?;
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(size, size, &self.col_ptr, None, &self.rows);
+        let par = faer::get_global_parallelism();
+        self.factor.clear();
+        self.factor.resize(symbolic.len_val(), 0.0);
+        let mut mem = MemBuffer::new(
+            symbolic
+                .factorize_numeric_llt_scratch::<f64>(par, Default::default())
+                .or(symbolic.solve_in_place_scratch::<f64>(b.ncols(), par)),
+        );
+        let llt = symbolic
+            .factorize_numeric_llt::<f64>(
+                &mut self.factor,
+                SparseColMatRef::new(pattern, &values),
+                faer::Side::Lower,
+                LltRegularization::default(),
+                par,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|_| DirectFailure::NotDefinite)?;
+        llt.solve_in_place_with_conj(faer::Conj::No, b.as_mut(), par, MemStack::new(&mut mem));
+        Ok(())
+    }
+}
+
+/// Lower triangle of a symmetric matrix given by columns (the `lower_only` assembly),
+/// factorised through `pattern` (`block` unknowns per control).
+#[allow(clippy::too_many_arguments)]
+fn cholesky_solve(
+    pattern: &mut CholeskyPattern,
+    size: usize,
+    col_ptr: &[usize],
+    rows: &[usize],
+    vals: &[f64],
     rhs: impl Fn(usize, usize) -> f64,
     ncols_rhs: usize,
+    block: usize,
 ) -> Result<faer::Mat<f64>, DirectFailure> {
-    use faer::linalg::solvers::Solve;
-    use faer::sparse::{SparseColMat, SymbolicSparseColMat};
-    let symbolic = SymbolicSparseColMat::new_checked(size, size, col_ptr, None, rows);
-    let llt = SparseColMat::new(symbolic, vals)
-        .sp_cholesky(faer::Side::Lower)
-        .map_err(|_| DirectFailure::NotDefinite)?;
     let mut b = faer::Mat::<f64>::from_fn(size, ncols_rhs, rhs);
-    llt.solve_in_place(b.as_mut());
+    pattern.solve(size, (col_ptr, rows, vals), block, &mut b)?;
     Ok(b)
 }
 
@@ -149,9 +380,19 @@ impl ScalarMatrix {
     /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly.
     pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
-        let vals = self.entries.iter().map(|e| e[SCALAR]).collect();
-        let rows = self.idx.iter().map(|&j| j as usize).collect();
-        let b = cholesky_solve(m, self.ptr.clone(), rows, vals, |i, k| self.rhs[i][k], 3)?;
+        let vals: Vec<f64> = self.entries.iter().map(|e| e[SCALAR]).collect();
+        let rows: Vec<usize> = self.idx.iter().map(|&j| j as usize).collect();
+        let mut pattern = CholeskyPattern::default();
+        let b = cholesky_solve(
+            &mut pattern,
+            m,
+            &self.ptr,
+            &rows,
+            &vals,
+            |i, k| self.rhs[i][k],
+            3,
+            1,
+        )?;
         let x: Vec<DVec3> = (0..m)
             .map(|i| DVec3::new(b[(i, 0)], b[(i, 1)], b[(i, 2)]))
             .collect();
@@ -176,6 +417,14 @@ impl BlockMatrix {
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.
     pub(crate) fn solve_direct(&self) -> Result<Vec<DVec3>, DirectFailure> {
+        self.solve_direct_reusing(&mut CholeskyPattern::default())
+    }
+
+    /// `solve_direct` through a kept analysis (`CholeskyPattern`).
+    pub(crate) fn solve_direct_reusing(
+        &self,
+        pattern: &mut CholeskyPattern,
+    ) -> Result<Vec<DVec3>, DirectFailure> {
         let m = self.rhs.len();
         let mut col_ptr = Vec::with_capacity(3 * m + 1);
         col_ptr.push(0);
@@ -196,7 +445,16 @@ impl BlockMatrix {
                 col_ptr.push(rows.len());
             }
         }
-        let b = cholesky_solve(3 * m, col_ptr, rows, vals, |i, _| self.rhs[i / 3][i % 3], 1)?;
+        let b = cholesky_solve(
+            pattern,
+            3 * m,
+            &col_ptr,
+            &rows,
+            &vals,
+            |i, _| self.rhs[i / 3][i % 3],
+            1,
+            3,
+        )?;
         let x: Vec<DVec3> = (0..m)
             .map(|c| DVec3::new(b[(3 * c, 0)], b[(3 * c + 1, 0)], b[(3 * c + 2, 0)]))
             .collect();

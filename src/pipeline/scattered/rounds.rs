@@ -12,7 +12,9 @@
 
 use super::error::ScatteredError;
 use super::info::PlanarStages;
-use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
+use crate::fit::distance::{
+    solve_distance, solve_distance_direct_reusing, CholeskyPattern, DistanceProblem,
+};
 use crate::fit::{Budget, Collocation, FitOutcome, Method};
 use crate::pipeline::scan::{Correction, CorrectionConfig};
 use crate::pipeline::worker::FitConfig;
@@ -108,17 +110,19 @@ fn distance_round(
     smoothing: f64,
     tangential: f64,
     stages: &mut PlanarStages,
+    pattern: &mut CholeskyPattern,
 ) -> Vec<DVec3> {
     let basis = stages
         .rows
         .time(|| collocation_matrix(surface, &feet.params));
     stages.solves.time(|| {
         distance_solve(
-            &basis, controls, feet, data, fairness, smoothing, tangential,
+            &basis, controls, feet, data, fairness, smoothing, tangential, pattern,
         )
     })
 }
 
+#[allow(clippy::too_many_arguments)]
 fn distance_solve(
     basis: &crate::fit::Csr,
     controls: &[DVec3],
@@ -127,6 +131,7 @@ fn distance_solve(
     fairness: &Collocation,
     smoothing: f64,
     tangential: f64,
+    pattern: &mut CholeskyPattern,
 ) -> Vec<DVec3> {
     let tangential = vec![tangential; data.len()];
     let problem = DistanceProblem {
@@ -137,7 +142,7 @@ fn distance_solve(
         fairness: Some(fairness),
         smoothing,
     };
-    solve_distance_direct(&problem).unwrap_or_else(|| {
+    solve_distance_direct_reusing(&problem, pattern).unwrap_or_else(|| {
         solve_distance(
             &problem,
             controls.to_vec(),
@@ -213,6 +218,8 @@ pub(super) fn fit_rounds(
     let mut rms_history = vec![feet.rms];
     let fairness = Collocation::new(fairness_operator(surface));
     let mut gains = Vec::new();
+    // One symbolic analysis for the rounds' normal matrices (`CholeskyPattern`).
+    let mut pattern = CholeskyPattern::default();
     for _ in 0..correction.rounds {
         let controls = match correction.kind {
             Correction::Distance => distance_round(
@@ -224,6 +231,7 @@ pub(super) fn fit_rounds(
                 options.smoothing,
                 correction.tangential,
                 &mut stages,
+                &mut pattern,
             ),
             Correction::Parameters => {
                 options.initial = InitialNet::Given(outcome.controls.clone());
