@@ -89,7 +89,11 @@ impl MergeField {
             || opts.radius_cells + PROJECTION_REACH_CELLS >= BLOCK as f64
             || opts.radius_cells.is_nan();
         let mut core: FxHashSet<CellKey> = FxHashSet::default();
-        for (scan, step) in removed.iter().map(|s| (s, -1i64)).chain(added.iter().map(|s| (s, 1))) {
+        for (scan, step) in removed
+            .iter()
+            .map(|s| (s, -1i64))
+            .chain(added.iter().map(|s| (s, 1)))
+        {
             for p in &scan.points {
                 let c = key(*p, cell);
                 core.insert(block_of(c));
@@ -103,7 +107,11 @@ impl MergeField {
         let region = (!whole).then(|| dilated(&core));
         let near_region = region.as_ref().map(dilated);
         let in_region = |c: CellKey| region.as_ref().is_none_or(|r| r.contains(&block_of(c)));
-        let near = |c: CellKey| near_region.as_ref().is_none_or(|r| r.contains(&block_of(c)));
+        let near = |c: CellKey| {
+            near_region
+                .as_ref()
+                .is_none_or(|r| r.contains(&block_of(c)))
+        };
         self.candidates.retain(|c, _| !in_region(*c));
         self.corners.retain(|c, _| !in_region(*c));
 

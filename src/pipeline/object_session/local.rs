@@ -55,7 +55,6 @@ pub(super) struct LocalOptions {
 /// A refit's result: the new data, controls and feet, and what it touched.
 pub(super) struct LocalFit {
     pub data: Vec<DVec3>,
-    pub cells: Vec<CellKey>,
     pub controls: Vec<DVec3>,
     pub params: Vec<SurfaceParam>,
     pub errors: Vec<f64>,
@@ -73,7 +72,6 @@ pub(super) struct LocalFit {
 /// The new data matched to the previous fit by cell.
 struct Matched {
     data: Vec<DVec3>,
-    cells: Vec<CellKey>,
     params: Vec<SurfaceParam>,
     /// The previous point each point was matched to, `None` for a changed one.
     same_as: Vec<Option<usize>>,
@@ -88,7 +86,6 @@ fn match_data(previous: &Previous, cells: &[CellKey], positions: &[DVec3]) -> Ma
         .collect();
     let mut m = Matched {
         data: Vec::with_capacity(positions.len()),
-        cells: Vec::with_capacity(positions.len()),
         params: Vec::with_capacity(positions.len()),
         same_as: Vec::with_capacity(positions.len()),
     };
@@ -100,10 +97,8 @@ fn match_data(previous: &Previous, cells: &[CellKey], positions: &[DVec3]) -> Ma
             continue;
         };
         m.data.push(*p);
-        m.cells.push(*c);
         m.params.push(previous.params[k]);
-        m.same_as
-            .push(kept.filter(|&k| previous.data[k] == *p));
+        m.same_as.push(kept.filter(|&k| previous.data[k] == *p));
     }
     m
 }
@@ -255,7 +250,6 @@ pub(super) fn refit(
     }
     Some(LocalFit {
         data: matched.data,
-        cells: matched.cells,
         controls,
         params: feet.params,
         errors: feet.errors,
@@ -267,7 +261,11 @@ pub(super) fn refit(
 }
 
 /// The controls the basis rows of the `changed` points touch, and their neighbours.
-fn free_controls(surface: &LoopLimitSurface, params: &[SurfaceParam], changed: &[usize]) -> Vec<bool> {
+fn free_controls(
+    surface: &LoopLimitSurface,
+    params: &[SurfaceParam],
+    changed: &[usize],
+) -> Vec<bool> {
     let m = surface.control_count();
     let mut touched = vec![false; m];
     let mut row = Vec::new();
@@ -338,9 +336,9 @@ impl System<'_> {
         };
         let (mut targets, mut normals, mut tangential) = (vec![], vec![], vec![]);
         let push_row = |entries: &mut dyn Iterator<Item = (u32, f64)>,
-                            target: DVec3,
-                            scale: f64,
-                            basis: &mut Csr| {
+                        target: DVec3,
+                        scale: f64,
+                        basis: &mut Csr| {
             let mut fixed = DVec3::ZERO;
             for (c, w) in entries {
                 match self.column[c as usize] {
@@ -376,7 +374,12 @@ impl System<'_> {
             }
             for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
                 let mut entries = span.clone().map(|e| (l.col_idx[e], l.values[e]));
-                targets.push(push_row(&mut entries, DVec3::ZERO, self.fairness_scale, &mut basis));
+                targets.push(push_row(
+                    &mut entries,
+                    DVec3::ZERO,
+                    self.fairness_scale,
+                    &mut basis,
+                ));
                 normals.push(axis);
                 tangential.push(0.0);
             }

@@ -30,10 +30,10 @@ use crate::pipeline::object::ObjectOptions;
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
-use local::{LastFit, LocalOptions, Previous};
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
 use glam::DVec3;
+use local::{LastFit, LocalOptions, Previous};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -324,7 +324,11 @@ impl ObjectSession {
         let t = Instant::now();
         let all: Vec<&ScanSamples> = self.scans.values().map(|s| &s.samples).collect();
         // Taken out: after a failed fit the next update merges from scratch.
-        let merged = match self.field.take().filter(|f| !self.opts.cold && f.cell() == cell) {
+        let merged = match self
+            .field
+            .take()
+            .filter(|f| !self.opts.cold && f.cell() == cell)
+        {
             Some(mut field) => {
                 let new: Vec<&ScanSamples> = added
                     .iter()
