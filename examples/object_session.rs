@@ -10,17 +10,26 @@
 //!    changed region.
 //! 3. At the end: each scan's distance to the surface beside its distance to bun_zipper;
 //!    how much of bun_zipper lies within 0.5 mm of the surface where the scans cover it.
-//! 4. The same scans in the reverse order: the two end surfaces' distance.
+//! 4. A new version of bun045 (its registration corrected by 30 um): the local update
+//!    (merge around the scan, refit of the controls around it) beside the same update
+//!    from scratch (`SessionOptions::cold`), their times and RMS and the two surfaces'
+//!    distance.
+//! 5. The same scans in the reverse order: the two end surfaces' distance.
+//!
+//! Times are wall and process CPU (user + sys, all threads) per update; every local merge
+//! is checked against a merge from scratch of the same scans.
 
 use std::path::{Path, PathBuf};
 use trispline::io::registration::registration_for;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::rigid::RigidTransform;
+use trispline::pipeline::merge::merge;
 use trispline::pipeline::object_session::{
     distance_stats, surface_mesh, surface_points_at_data, DistanceStats, ObjectSession,
-    SessionOptions,
+    SessionOptions, SessionUpdate,
 };
+use trispline::pipeline::scattered::process_cpu_ms;
 use trispline::{DVec3, TriMesh};
 
 const SCANS: [&str; 5] = ["bun000", "bun045", "bun180", "bun270", "chin"];
@@ -89,7 +98,8 @@ fn main() {
         measure_scans: false,
         ..Default::default()
     };
-    let forward = run(&scans, opts.clone(), "arrival order");
+    let (forward, mut session) = run(&scans, opts.clone(), "arrival order");
+    replacement(&scans, &mut session, &opts);
     println!("\n== each scan's points: to the surface vs to bun_zipper");
     let surface = surface_mesh(&forward);
     let mut ratios = Vec::new();
@@ -112,7 +122,7 @@ fn main() {
     coverage_check(&scans, &surface, &zipper);
 
     let reversed: Vec<_> = scans.iter().rev().cloned().collect();
-    let backward = run(&reversed, opts, "reverse order");
+    let (backward, _) = run(&reversed, opts, "reverse order");
     let other = surface_mesh(&backward);
     let ab = distance_stats(&surface_points_at_data(&forward), &other);
     let ba = distance_stats(&surface_points_at_data(&backward), &surface);
@@ -127,32 +137,61 @@ fn main() {
 
 type Scan<'a> = (&'a str, TriMesh, RigidTransform, DistanceStats);
 
-fn run(scans: &[Scan], opts: SessionOptions, label: &str) -> trispline::pipeline::PatchFit {
+fn load_average() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|l| l.split_whitespace().next().unwrap_or("?").to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// One update's line: times (wall and CPU), path, how it was fitted, the merged region.
+fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
+    let session = &u.outputs.report["session"];
+    let fitted = match (&u.local, &u.cold_because) {
+        (Some(l), _) => format!(
+            "local: {} controls refitted, {} changed / {} moving points, {} rounds",
+            l.controls.len(),
+            l.changed_points,
+            l.moving_points,
+            l.rounds
+        ),
+        (None, Some(why)) => format!("whole fit ({why})"),
+        (None, None) => "whole fit".into(),
+    };
+    format!(
+        "{id:7} {:7.0} ms wall {:7.0} ms cpu (merge {:5.0}, fit {:6.0}, outputs {:5.0}) load {}  path {:6}  views {:3.0} deg  controls {:5}  merged {:6} ({} cells recomputed)  rms {:5.1} um  changed +{} -{} ~{} ={}\n        {fitted}",
+        u.times.total_ms,
+        cpu_ms,
+        u.times.merge_ms,
+        u.times.fit_ms,
+        u.times.outputs_ms,
+        load_average(),
+        u.path,
+        session["view_spread_deg"].as_f64().unwrap_or(f64::NAN),
+        u.fit.controls.len(),
+        u.merged_vertices,
+        u.recomputed_cells,
+        um(u.fit.geometric_rms()),
+        u.change.added,
+        u.change.removed,
+        u.change.moved,
+        u.change.kept,
+    )
+}
+
+fn run(
+    scans: &[Scan],
+    opts: SessionOptions,
+    label: &str,
+) -> (trispline::pipeline::PatchFit, ObjectSession) {
     println!("\n== session, {label}");
-    let mut session = ObjectSession::new(opts);
+    let mut session = ObjectSession::new(opts.clone());
     let mut last = None;
     for (id, mesh, t, _) in scans {
+        let cpu = process_cpu_ms();
         match session.add_scan(id, mesh, *t) {
             Ok(u) => {
-                let rms = u.fit.geometric_rms();
-                let session = &u.outputs.report["session"];
-                println!(
-                    "+{id:7} {:7.0} ms (merge {:5.0}, fit {:6.0}, outputs {:5.0})  path {:6}  views {:3.0} deg  warm {:5}  controls {:5}  merged {:6}  rms {:5.1} um  changed +{} -{} ~{} ={}",
-                    u.times.total_ms,
-                    u.times.merge_ms,
-                    u.times.fit_ms,
-                    u.times.outputs_ms,
-                    u.path,
-                    session["view_spread_deg"].as_f64().unwrap_or(f64::NAN),
-                    u.fit.warm_start,
-                    u.fit.controls.len(),
-                    u.merged_vertices,
-                    um(rms),
-                    u.change.added,
-                    u.change.removed,
-                    u.change.moved,
-                    u.change.kept,
-                );
+                println!("+{}", describe(id, &u, process_cpu_ms() - cpu));
+                check_merge(&session, &opts, u.merged_vertices);
                 last = Some(u.fit);
             }
             Err(e) => {
@@ -165,8 +204,71 @@ fn run(scans: &[Scan], opts: SessionOptions, label: &str) -> trispline::pipeline
         println!("merge cell {:.3} mm", cell * 1e3);
     }
     match last {
-        Some(f) => f,
+        Some(f) => (f, session),
         None => std::process::exit(1),
+    }
+}
+
+/// The session's merge against a merge from scratch of the same scans, with its time.
+fn check_merge(session: &ObjectSession, opts: &SessionOptions, vertices: usize) {
+    let Some(cell) = session.cell() else {
+        return;
+    };
+    let all: Vec<_> = session.scans().values().map(|s| &s.samples).collect();
+    let (t, cpu) = (std::time::Instant::now(), process_cpu_ms());
+    let cold = merge(&all, cell, &opts.merge);
+    println!(
+        "        merge from scratch: {:.0} ms wall {:.0} ms cpu, {} vertices ({})",
+        t.elapsed().as_secs_f64() * 1e3,
+        process_cpu_ms() - cpu,
+        cold.mesh.positions.len(),
+        if cold.mesh.positions.len() == vertices {
+            "same count as the local merge"
+        } else {
+            "DIFFERS from the local merge"
+        }
+    );
+}
+
+/// A new version of bun045, its registration moved by 30 um: locally and from scratch.
+fn replacement(scans: &[Scan], session: &mut ObjectSession, opts: &SessionOptions) {
+    let Some((id, mesh, t, _)) = scans.iter().find(|s| s.0 == "bun045") else {
+        return;
+    };
+    let corrected = RigidTransform {
+        translation: t.translation + DVec3::new(30e-6, 0.0, 0.0),
+        ..*t
+    };
+    println!("\n== a new version of {id}: registration moved 30 um along x");
+    let mut cold = ObjectSession::new(SessionOptions {
+        cold: true,
+        ..opts.clone()
+    });
+    let staged: Vec<(&str, &TriMesh, RigidTransform)> =
+        scans.iter().map(|s| (s.0, &s.1, s.2)).collect();
+    if let Err(e) = cold.add_scans(&staged) {
+        eprintln!("{e}");
+        return;
+    }
+    let mut fits = Vec::new();
+    for (label, s) in [("local", &mut *session), ("cold", &mut cold)] {
+        let cpu = process_cpu_ms();
+        match s.add_scan(id, mesh, corrected) {
+            Ok(u) => {
+                println!("{label:5} {}", describe(id, &u, process_cpu_ms() - cpu));
+                fits.push(u.fit);
+            }
+            Err(e) => eprintln!("{label}: {e}"),
+        }
+    }
+    if let [local, cold] = &fits[..] {
+        let d = distance_stats(&surface_points_at_data(local), &surface_mesh(cold));
+        println!(
+            "local surface to the surface from scratch: rms {:.1} um, p95 {:.1} um, max {:.1} um",
+            um(d.rms),
+            um(d.p95),
+            um(d.max)
+        );
     }
 }
 

@@ -223,6 +223,8 @@ pub(crate) fn fit_object(
         merge: cfg.object.merge.clone(),
         worker: cfg.worker_config(),
         measure_scans: cfg.object.measure_scans,
+        // A fresh session per update: no merge grid or fit is kept for a next one.
+        cold: true,
     });
     let staged: Vec<(&str, &TriMesh, RigidTransform)> = scans
         .iter()

@@ -24,6 +24,7 @@ mod object_crease;
 mod object_fit;
 mod object_pipeline;
 mod object_session;
+mod object_session_local;
 mod planar_product;
 mod planar_subdivided;
 mod point_clouds;

@@ -15,12 +15,12 @@ use trispline::pipeline::object_session::{
 use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
-const RADIUS: f64 = 0.05;
+pub(crate) const RADIUS: f64 = 0.05;
 
 /// A range-scan-like view of the sphere from direction `view`: a square grid of `2 n + 1`
 /// points a side across the sphere's silhouette, kept within 0.95 of the radius, lifted
 /// onto the near half; `lift` moves the whole view along `view` (a registration error).
-fn view(view: DVec3, n: i32, lift: f64) -> TriMesh {
+pub(crate) fn view(view: DVec3, n: i32, lift: f64) -> TriMesh {
     let d = view.normalize();
     let e1 = d.any_orthonormal_vector();
     let e2 = d.cross(e1);
@@ -52,7 +52,7 @@ fn view(view: DVec3, n: i32, lift: f64) -> TriMesh {
 }
 
 /// Each view overlaps one before it (the worker fits the merged data's largest piece).
-const AXES: [DVec3; 6] = [
+pub(crate) const AXES: [DVec3; 6] = [
     DVec3::X,
     DVec3::Y,
     DVec3::NEG_X,

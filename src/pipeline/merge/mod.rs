@@ -15,6 +15,7 @@
 //! (no double weight), and two views a few tens of micrometres apart give one surface
 //! between them, not a ripple between the two.
 
+mod field;
 mod implicit;
 mod nets;
 mod types;
@@ -22,10 +23,10 @@ mod types;
 use crate::mesh::rigid::RigidTransform;
 use crate::TriMesh;
 use glam::DVec3;
-use implicit::{Implicit, PointIndex};
 use rustc_hash::FxHashMap;
 use std::collections::VecDeque;
 
+pub use field::MergeField;
 pub use types::{CellKey, MergeOptions, Merged, ScanSamples};
 
 /// The samples of a scan mesh (in its own frame) moved by `transform` into the object
@@ -134,15 +135,7 @@ pub fn median_edge(mesh: &TriMesh) -> f64 {
 
 /// Merges the samples of every scan on a grid of cell size `cell` (see the module docs).
 pub fn merge(scans: &[&ScanSamples], cell: f64, opts: &MergeOptions) -> Merged {
-    let radius = opts.radius_cells * cell;
-    let index = PointIndex::build(scans, radius);
-    let implicit = Implicit {
-        index: &index,
-        scans,
-        radius,
-        sigma: opts.sigma_cells * cell,
-    };
-    nets::surface_nets(&implicit, scans, cell, opts)
+    MergeField::new(cell).update(scans, scans, &[], opts)
 }
 
 /// How two merges differ: the cells whose vertex appeared, went, or moved.

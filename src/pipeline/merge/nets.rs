@@ -4,11 +4,10 @@
 //! defined in a thin band around the scans (a dense box around a bunny at 1 mm would be
 //! 150^3 cells, 30 times the band).
 
-use super::implicit::{key, Implicit};
-use super::types::{CellKey, MergeOptions, Merged, ScanSamples};
+use super::implicit::Implicit;
+use super::types::CellKey;
 use glam::DVec3;
-use rayon::prelude::*;
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 
 /// A vertex whose samples' centroid lies further than this share of the Gaussian width
 /// across the normal stands past the data's rim (inside the data the centroid is close;
@@ -16,11 +15,11 @@ use rustc_hash::{FxHashMap, FxHashSet};
 /// vertex is dropped.
 const RIM_SHIFT_OF_SIGMA: f64 = 0.35;
 
-fn corner_position(c: CellKey, cell: f64) -> DVec3 {
+pub(super) fn corner_position(c: CellKey, cell: f64) -> DVec3 {
     DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * cell
 }
 
-fn add(c: CellKey, d: [i32; 3]) -> CellKey {
+pub(super) fn add(c: CellKey, d: [i32; 3]) -> CellKey {
     [
         c[0].saturating_add(d[0]),
         c[1].saturating_add(d[1]),
@@ -28,7 +27,7 @@ fn add(c: CellKey, d: [i32; 3]) -> CellKey {
     ]
 }
 
-const CORNERS: [[i32; 3]; 8] = [
+pub(super) const CORNERS: [[i32; 3]; 8] = [
     [0, 0, 0],
     [1, 0, 0],
     [0, 1, 0],
@@ -55,72 +54,8 @@ const EDGES: [(usize, usize); 12] = [
     (3, 7),
 ];
 
-/// The merged mesh of the samples of `scans` (see `merge`).
-pub(super) fn surface_nets(
-    implicit: &Implicit,
-    scans: &[&ScanSamples],
-    cell: f64,
-    opts: &MergeOptions,
-) -> Merged {
-    // Cells holding a sample and their neighbours: the zero set passes within a cell of
-    // the samples.
-    let mut candidates: FxHashSet<CellKey> = FxHashSet::default();
-    for scan in scans {
-        for p in &scan.points {
-            let c = key(*p, cell);
-            for d in NEIGHBOURS {
-                candidates.insert(add(c, d));
-            }
-        }
-    }
-    let mut candidates: Vec<CellKey> = candidates.into_iter().collect();
-    candidates.sort_unstable();
-    let mut corner_keys: Vec<CellKey> = candidates
-        .iter()
-        .flat_map(|c| CORNERS.iter().map(move |d| add(*c, *d)))
-        .collect();
-    corner_keys.sort_unstable();
-    corner_keys.dedup();
-    let values: Vec<Option<f64>> = corner_keys
-        .par_iter()
-        .with_min_len(512)
-        .map(|c| implicit.at(corner_position(*c, cell)).map(|s| s.value))
-        .collect();
-    let corners: FxHashMap<CellKey, f64> = corner_keys
-        .iter()
-        .zip(&values)
-        .filter_map(|(c, v)| v.map(|v| (*c, v)))
-        .collect();
-    let keep = opts.keep_cells * cell;
-    let vertices: Vec<Option<(DVec3, DVec3)>> = candidates
-        .par_iter()
-        .with_min_len(256)
-        .map(|c| cell_vertex(implicit, &corners, *c, cell, opts.projections, keep))
-        .collect();
-    let mut merged = Merged {
-        cell,
-        corners_evaluated: corner_keys.len(),
-        ..Default::default()
-    };
-    let mut index: FxHashMap<CellKey, u32> = FxHashMap::default();
-    for (c, v) in candidates.iter().zip(&vertices) {
-        match v {
-            Some((p, n)) => {
-                index.insert(*c, merged.mesh.positions.len() as u32);
-                merged.mesh.positions.push(*p);
-                merged.normals.push(*n);
-                merged.cells.push(*c);
-            }
-            None if crossed(&corners, *c) => merged.dropped_vertices += 1,
-            None => {}
-        }
-    }
-    merged.mesh.triangles = quads(&corners, &corner_keys, &index, &merged.mesh.positions);
-    merged
-}
-
 /// The 27 offsets of a cell and its neighbours.
-const NEIGHBOURS: [[i32; 3]; 27] = {
+pub(super) const NEIGHBOURS: [[i32; 3]; 27] = {
     let mut all = [[0; 3]; 27];
     let mut k = 0;
     while k < 27 {
@@ -143,7 +78,7 @@ fn cell_values(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> Option<[f64; 8]
     Some(v)
 }
 
-fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
+pub(super) fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
     cell_values(corners, c)
         .is_some_and(|v| v.iter().any(|&x| x < 0.0) && v.iter().any(|&x| x >= 0.0))
 }
@@ -152,7 +87,7 @@ fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
 /// the zero set along the function's normal; `None` when the cell is not crossed, too few
 /// samples hold the local quadric, or the projection ends further than `keep` from every
 /// sample.
-fn cell_vertex(
+pub(super) fn cell_vertex(
     implicit: &Implicit,
     corners: &FxHashMap<CellKey, f64>,
     c: CellKey,
@@ -202,7 +137,7 @@ fn cell_vertex(
 
 /// Two triangles per grid edge the zero set crosses whose four cells have vertices,
 /// turned so that their normal points where the function grows.
-fn quads(
+pub(super) fn quads(
     corners: &FxHashMap<CellKey, f64>,
     corner_keys: &[CellKey],
     index: &FxHashMap<CellKey, u32>,

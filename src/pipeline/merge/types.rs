@@ -75,8 +75,11 @@ pub struct Merged {
     pub cells: Vec<CellKey>,
     /// The cell size used.
     pub cell: f64,
-    /// Grid corners at which the implicit function was evaluated.
+    /// Grid corners at which the implicit function was evaluated in this update.
     pub corners_evaluated: usize,
+    /// Candidate cells whose vertex was computed in this update (all of them in a merge
+    /// from scratch, those around the changed scans' samples in a `MergeField` update).
+    pub recomputed_cells: usize,
     /// Crossed cells whose vertex was dropped past the data's rim (no sample within
     /// `keep_cells`, the samples' centroid off to one side, or too few for the quadric).
     pub dropped_vertices: usize,

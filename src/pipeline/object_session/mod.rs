@@ -17,20 +17,23 @@
 //! an object whose box it does not widen. So a change of coverage refits cold, and the
 //! surface of a set of scans does not depend on the order they arrived in.
 
+mod local;
 mod measure;
 
 pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{
-    median_edge, merge, scan_samples, MergeChange, MergeOptions, Merged, ScanSamples,
+    median_edge, scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
+use crate::pipeline::object::ObjectOptions;
 use crate::pipeline::worker::{
-    fit_patch, outputs_of, Domain, PatchOutputs, WarmStart, WorkerConfig,
+    fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
 use glam::DVec3;
+use local::{LastFit, LocalOptions, Previous};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -58,6 +61,9 @@ pub struct SessionOptions {
     /// Measure every scan's distance to the new surface after each update (costs a
     /// tessellation and a point-to-mesh query per scan point).
     pub measure_scans: bool,
+    /// Merge and fit every update from scratch (no local merge or refit): the reference
+    /// the local updates are measured against.
+    pub cold: bool,
 }
 
 /// Why an update failed (the session keeps its previous state).
@@ -112,6 +118,20 @@ pub struct SessionScan {
     pub spacing: f64,
 }
 
+/// What a local refit touched.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct LocalRefit {
+    /// The controls solved again (indices into the surface's controls, sorted); every
+    /// other control kept its position.
+    pub controls: Vec<u32>,
+    /// Merged points that moved or appeared.
+    pub changed_points: usize,
+    /// Points over the patches the refitted controls move (their feet found again).
+    pub moving_points: usize,
+    /// Squared-distance rounds taken.
+    pub rounds: usize,
+}
+
 /// Stage times of one update, in milliseconds.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct UpdateTimes {
@@ -153,6 +173,12 @@ pub struct SessionUpdate {
     pub merged_triangles: usize,
     /// Where the merged data changed since the previous update.
     pub change: MergeChange,
+    /// Merge cells whose vertex was computed again (all of them in a merge from scratch).
+    pub recomputed_cells: usize,
+    /// The local refit, when the update took one.
+    pub local: Option<LocalRefit>,
+    /// Why the update fitted from scratch (`None` after a local refit).
+    pub cold_because: Option<String>,
     /// Stage times.
     pub times: UpdateTimes,
     /// Every scan's distance to the surface (empty unless `measure_scans`).
@@ -166,6 +192,10 @@ pub struct ObjectSession {
     scans: BTreeMap<String, SessionScan>,
     merged: Option<Merged>,
     warm: Option<WarmStart>,
+    /// The merge's grid state, for the next update's local merge.
+    field: Option<MergeField>,
+    /// The last update's object fit, for the next local refit.
+    last: Option<LastFit>,
 }
 
 impl ObjectSession {
@@ -177,6 +207,8 @@ impl ObjectSession {
             scans: BTreeMap::new(),
             merged: None,
             warm: None,
+            field: None,
+            last: None,
         }
     }
 
@@ -230,7 +262,13 @@ impl ObjectSession {
         for (id, scan) in staged {
             previous.push((id.clone(), self.scans.insert(id, scan)));
         }
-        self.update(start, samples_ms).inspect_err(|_| {
+        let added: Vec<&str> = previous.iter().map(|(id, _)| id.as_str()).collect();
+        let removed: Vec<&ScanSamples> = previous
+            .iter()
+            .filter_map(|(_, p)| p.as_ref().map(|p| &p.samples))
+            .collect();
+        let result = self.update(start, samples_ms, &added, &removed);
+        result.inspect_err(|_| {
             for (id, p) in previous.into_iter().rev() {
                 match p {
                     Some(p) => self.scans.insert(id, p),
@@ -259,15 +297,25 @@ impl ObjectSession {
             self.merged = None;
             self.warm = None;
             self.cell = None;
+            self.field = None;
+            self.last = None;
             return Err(SessionError::NoScans);
         }
-        self.update(start, 0.0).inspect_err(|_| {
+        let result = self.update(start, 0.0, &[], &[&removed.samples]);
+        result.inspect_err(|_| {
             self.scans.insert(id.into(), removed);
         })
     }
 
-    /// Merges every scan, fits the merged mesh from the previous warm start and measures.
-    fn update(&mut self, start: Instant, samples_ms: f64) -> Result<SessionUpdate, SessionError> {
+    /// Merges the scans (locally around `added` and `removed` when the grid is kept),
+    /// refits locally or fits from scratch, and measures.
+    fn update(
+        &mut self,
+        start: Instant,
+        samples_ms: f64,
+        added: &[&str],
+        removed: &[&ScanSamples],
+    ) -> Result<SessionUpdate, SessionError> {
         let cell = self.current_cell().ok_or(SessionError::NoScans)?;
         let mut times = UpdateTimes {
             samples_ms,
@@ -275,7 +323,28 @@ impl ObjectSession {
         };
         let t = Instant::now();
         let all: Vec<&ScanSamples> = self.scans.values().map(|s| &s.samples).collect();
-        let merged = merge(&all, cell, &self.opts.merge);
+        // Taken out: after a failed fit the next update merges from scratch.
+        let merged = match self
+            .field
+            .take()
+            .filter(|f| !self.opts.cold && f.cell() == cell)
+        {
+            Some(mut field) => {
+                let new: Vec<&ScanSamples> = added
+                    .iter()
+                    .filter_map(|id| self.scans.get(*id).map(|s| &s.samples))
+                    .collect();
+                let merged = field.update(&all, &new, removed, &self.opts.merge);
+                self.field = Some(field);
+                merged
+            }
+            None => {
+                let mut field = MergeField::new(cell);
+                let merged = field.update(&all, &all, &[], &self.opts.merge);
+                self.field = (!self.opts.cold).then_some(field);
+                merged
+            }
+        };
         times.merge_ms = ms_since(t);
         let empty = Merged::default();
         // Cells of another size name other places: everything counts as new.
@@ -287,10 +356,6 @@ impl ObjectSession {
         );
         let coverage_change =
             (change.added + change.removed) as f64 / merged.mesh.positions.len().max(1) as f64;
-        let warm = self
-            .warm
-            .as_ref()
-            .filter(|_| coverage_change <= WARM_MAX_COVERAGE_CHANGE);
         let spread = view_spread_deg(self.scans.values());
         let mut worker = self.opts.worker.clone();
         let wraps = worker.fit.domain == Domain::Auto && spread > VIEW_SPREAD_DEG;
@@ -298,19 +363,10 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
-        let fitted = match fit_patch(&merged.mesh, warm, &worker) {
-            Ok(f) => f,
-            // Views that wrap around without closing can pass the worker's disk test and
-            // still fold on any plane: the merged data is no disk, the control mesh takes it.
-            Err(
-                PipelineError::ScanFailed { .. }
-                | PipelineError::MapFailed { .. }
-                | PipelineError::NotDiskLike { .. },
-            ) if worker.fit.domain == Domain::Auto => {
-                worker.fit.domain = Domain::Mesh;
-                fit_patch(&merged.mesh, warm, &worker).map_err(SessionError::Fit)?
-            }
-            Err(e) => return Err(SessionError::Fit(e)),
+        let cold_because = self.why_cold(before.is_some(), coverage_change);
+        let (fitted, local) = match cold_because {
+            None => self.refit_locally(&merged, &worker)?,
+            Some(_) => (self.fit_cold(&merged, coverage_change, &mut worker)?, None),
         };
         times.fit_ms = ms_since(t);
         let path = if fitted.object.is_some() {
@@ -318,25 +374,25 @@ impl ObjectSession {
         } else {
             "scan"
         };
+        self.last = if self.opts.cold {
+            None
+        } else {
+            LastFit::of(&fitted, &merged)
+        };
         let fit = fitted.fit.clone();
         let t = Instant::now();
         let mut outputs = outputs_of(fitted, &worker, t);
         times.outputs_ms = ms_since(t);
         let t = Instant::now();
-        let scans = if self.opts.measure_scans {
-            let surface = surface_mesh(&fit);
-            self.scans
-                .iter()
-                .map(|(id, s)| ScanDistance {
-                    id: id.clone(),
-                    stats: distance_stats(&s.samples.points, &surface),
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let scans = self.measure(&fit);
         times.measure_ms = ms_since(t);
         times.total_ms = ms_since(start);
+        let mut region = serde_json::to_value(&change).unwrap_or_default();
+        region["recomputed_cells"] = json!(merged.recomputed_cells);
+        region["corners_evaluated"] = json!(merged.corners_evaluated);
+        region["fit"] = json!(if local.is_some() { "local" } else { "whole" });
+        region["cold_because"] = json!(cold_because);
+        region["local_refit"] = json!(local);
         outputs.report["session"] = json!({
             "scans": self.scans.iter().map(|(id, s)| json!({
                 "id": id,
@@ -349,14 +405,15 @@ impl ObjectSession {
                 "vertices": merged.mesh.positions.len(),
                 "triangles": merged.mesh.triangles.len(),
                 "corners_evaluated": merged.corners_evaluated,
+                "recomputed_cells": merged.recomputed_cells,
                 "dropped_vertices": merged.dropped_vertices,
             },
             "path": path,
             "view_spread_deg": spread,
             "views_wrap_around": wraps,
-            "warm_offered": warm.is_some(),
+            "warm_offered": local.is_some() || coverage_change <= WARM_MAX_COVERAGE_CHANGE,
             "coverage_change": coverage_change,
-            "updated_region": change,
+            "updated_region": region,
             "scan_distances": scans,
             "stages": times,
         });
@@ -368,12 +425,125 @@ impl ObjectSession {
             merged_vertices: merged.mesh.positions.len(),
             merged_triangles: merged.mesh.triangles.len(),
             change,
+            recomputed_cells: merged.recomputed_cells,
+            local,
+            cold_because,
             times,
             scans,
         };
         self.merged = Some(merged);
         self.cell = Some(cell);
         Ok(update)
+    }
+
+    /// Why this update cannot refit the previous control mesh locally (`None`: it can).
+    fn why_cold(&self, same_grid: bool, coverage_change: f64) -> Option<String> {
+        if self.opts.cold {
+            return Some("cold updates asked for".into());
+        }
+        if self.last.is_none() {
+            return Some("no previous object fit".into());
+        }
+        if !same_grid {
+            return Some("the merge cell changed".into());
+        }
+        (coverage_change > WARM_MAX_COVERAGE_CHANGE).then(|| {
+            format!(
+                "coverage changed: {:.1} % of the merged cells appeared or went",
+                100.0 * coverage_change
+            )
+        })
+    }
+
+    /// The local refit of the previous control mesh; from scratch if it finds no data on
+    /// the previous fit's ground.
+    fn refit_locally(
+        &self,
+        merged: &Merged,
+        worker: &WorkerConfig,
+    ) -> Result<(FittedPatch, Option<LocalRefit>), SessionError> {
+        let t = Instant::now();
+        let cold = || -> Result<(FittedPatch, Option<LocalRefit>), SessionError> {
+            let mut worker = worker.clone();
+            Ok((self.fit_cold(merged, 0.0, &mut worker)?, None))
+        };
+        // `why_cold` let only an object fit through: these fall back for safety alone.
+        let Some(last) = self.last.as_ref() else {
+            return cold();
+        };
+        let crate::pipeline::SurfaceModel::Mesh(surface) = &last.fit.model else {
+            return cold();
+        };
+        let defaults = ObjectOptions::default();
+        let opts = LocalOptions {
+            rounds: worker.fit.correction.rounds.max(1),
+            min_gain: defaults.min_gain,
+            tangential: defaults.tangential,
+            smoothing: worker.fit.scan.smoothing,
+        };
+        let previous = Previous {
+            surface,
+            controls: &last.fit.controls,
+            data: &last.fit.data,
+            params: &last.fit.params,
+            errors: &last.fit.geometric_errors,
+            cells: &last.cells,
+        };
+        let fitted = local::refit(&previous, &merged.cells, &merged.mesh.positions, &opts);
+        let Some(fitted) = fitted else {
+            return cold();
+        };
+        let summary = LocalRefit {
+            controls: fitted.free_controls.clone(),
+            changed_points: fitted.changed_points,
+            moving_points: fitted.moving_points,
+            rounds: fitted.rounds.len() - 1,
+        };
+        let budget = worker.fit.budget.resolve(&merged.mesh);
+        Ok((last.refitted(&fitted, budget, ms_since(t)), Some(summary)))
+    }
+
+    /// The worker's fit of the merged mesh, from the previous surface when the merged
+    /// data covers the same ground.
+    fn fit_cold(
+        &self,
+        merged: &Merged,
+        coverage_change: f64,
+        worker: &mut WorkerConfig,
+    ) -> Result<FittedPatch, SessionError> {
+        let warm = self
+            .warm
+            .as_ref()
+            .filter(|_| coverage_change <= WARM_MAX_COVERAGE_CHANGE);
+        match fit_patch(&merged.mesh, warm, worker) {
+            Ok(f) => Ok(f),
+            // Views that wrap around without closing can pass the worker's disk test and
+            // still fold on any plane: the merged data is no disk, the control mesh takes it.
+            Err(
+                PipelineError::ScanFailed { .. }
+                | PipelineError::MapFailed { .. }
+                | PipelineError::NotDiskLike { .. },
+            ) if worker.fit.domain == Domain::Auto => {
+                worker.fit.domain = Domain::Mesh;
+                fit_patch(&merged.mesh, warm, worker).map_err(SessionError::Fit)
+            }
+            Err(e) => Err(SessionError::Fit(e)),
+        }
+    }
+
+    /// Every scan's distance to the surface, when asked.
+    fn measure(&self, fit: &PatchFit) -> Vec<ScanDistance> {
+        if !self.opts.measure_scans {
+            return Vec::new();
+        }
+        let surface = surface_mesh(fit);
+        self.scans
+            .iter()
+            .map(|(id, s)| ScanDistance {
+                id: id.clone(),
+                stats: distance_stats(&s.samples.points, &surface),
+            })
+            .collect()
     }
 }
 

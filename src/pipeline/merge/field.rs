@@ -1,0 +1,198 @@
+//! The merge kept between updates, so that a new, replaced or removed scan recomputes the
+//! function and the vertices only around its own samples.
+//!
+//! A sample changes the function only at corners within the averaging radius of it, and a
+//! cell's vertex only through its corners and the samples around the point it is projected
+//! from (inside the cell or next to it). So the grid is cut into blocks of `BLOCK` cells;
+//! the blocks holding a changed sample and their 26 neighbours are the region, every other
+//! cell is at least `BLOCK` cells from a changed sample and keeps its corners and vertex.
+//! In the region the candidate cells, corner values and vertices are recomputed exactly as
+//! a merge from scratch does, and the mesh is assembled from all cells in key order: the
+//! merge of a set of scans is the same whether it was built at once or scan by scan.
+
+use super::implicit::{key, Implicit, PointIndex};
+use super::nets::{add, cell_vertex, corner_position, crossed, quads, CORNERS, NEIGHBOURS};
+use super::types::{CellKey, MergeOptions, Merged, ScanSamples};
+use glam::DVec3;
+use rayon::prelude::*;
+use rustc_hash::{FxHashMap, FxHashSet};
+
+/// Side of a block, in cells. It must exceed how far a sample reaches: the averaging
+/// radius (`radius_cells`) around a corner, plus the two cells a vertex may sit from its
+/// cell's corners while it is projected.
+const BLOCK: i32 = 8;
+/// Cells a vertex's projection reaches beyond the averaging radius (see `BLOCK`).
+const PROJECTION_REACH_CELLS: f64 = 2.0;
+
+/// The merge grid's state: which cells hold samples, the function at the corners of the
+/// cells the surface may cross, and each such cell's vertex.
+#[derive(Clone, Debug, Default)]
+pub struct MergeField {
+    cell: f64,
+    /// Samples per cell (of every scan merged).
+    occupancy: FxHashMap<CellKey, u32>,
+    /// Cells next to a sample (the candidates) and their vertex, if the surface crosses
+    /// them inside the data.
+    candidates: FxHashMap<CellKey, Option<(DVec3, DVec3)>>,
+    /// The function at the candidates' corners, where it is defined.
+    corners: FxHashMap<CellKey, f64>,
+}
+
+fn block_of(c: CellKey) -> CellKey {
+    [
+        c[0].div_euclid(BLOCK),
+        c[1].div_euclid(BLOCK),
+        c[2].div_euclid(BLOCK),
+    ]
+}
+
+/// `blocks` and their 26 neighbours.
+fn dilated(blocks: &FxHashSet<CellKey>) -> FxHashSet<CellKey> {
+    blocks
+        .iter()
+        .flat_map(|b| NEIGHBOURS.iter().map(move |d| add(*b, *d)))
+        .collect()
+}
+
+impl MergeField {
+    /// An empty field on a grid of cell size `cell`.
+    pub fn new(cell: f64) -> Self {
+        Self {
+            cell,
+            ..Default::default()
+        }
+    }
+
+    /// The grid's cell size.
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
+    /// Whether no sample has been merged.
+    pub fn is_empty(&self) -> bool {
+        self.occupancy.is_empty()
+    }
+
+    /// The merge of `scans` (every scan merged now) after `added` joined them and
+    /// `removed` left: recomputed only in the blocks around the samples of `added` and
+    /// `removed` (everywhere when the field is empty or the options reach further than a
+    /// block). The result equals `merge(scans, ..)`.
+    pub fn update(
+        &mut self,
+        scans: &[&ScanSamples],
+        added: &[&ScanSamples],
+        removed: &[&ScanSamples],
+        opts: &MergeOptions,
+    ) -> Merged {
+        let cell = self.cell;
+        let whole = self.occupancy.is_empty()
+            || opts.radius_cells + PROJECTION_REACH_CELLS >= BLOCK as f64
+            || opts.radius_cells.is_nan();
+        let mut core: FxHashSet<CellKey> = FxHashSet::default();
+        for (scan, step) in removed
+            .iter()
+            .map(|s| (s, -1i64))
+            .chain(added.iter().map(|s| (s, 1)))
+        {
+            for p in &scan.points {
+                let c = key(*p, cell);
+                core.insert(block_of(c));
+                let count = self.occupancy.entry(c).or_default();
+                *count = (*count as i64 + step).max(0) as u32;
+                if *count == 0 {
+                    self.occupancy.remove(&c);
+                }
+            }
+        }
+        let region = (!whole).then(|| dilated(&core));
+        let near_region = region.as_ref().map(dilated);
+        let in_region = |c: CellKey| region.as_ref().is_none_or(|r| r.contains(&block_of(c)));
+        let near = |c: CellKey| {
+            near_region
+                .as_ref()
+                .is_none_or(|r| r.contains(&block_of(c)))
+        };
+        self.candidates.retain(|c, _| !in_region(*c));
+        self.corners.retain(|c, _| !in_region(*c));
+
+        let mut fresh: FxHashSet<CellKey> = FxHashSet::default();
+        for o in self.occupancy.keys().filter(|o| near(**o)) {
+            for d in NEIGHBOURS {
+                let c = add(*o, d);
+                if in_region(c) {
+                    fresh.insert(c);
+                }
+            }
+        }
+        let mut fresh: Vec<CellKey> = fresh.into_iter().collect();
+        fresh.sort_unstable();
+        // The region's corners of its own candidates and of the kept ones beside it.
+        let mut corner_keys: Vec<CellKey> = fresh
+            .iter()
+            .chain(self.candidates.keys().filter(|c| near(**c)))
+            .flat_map(|c| CORNERS.iter().map(move |d| add(*c, *d)))
+            .filter(|k| in_region(*k))
+            .collect();
+        corner_keys.sort_unstable();
+        corner_keys.dedup();
+
+        let radius = opts.radius_cells * cell;
+        let index = PointIndex::build(scans, radius);
+        let implicit = Implicit {
+            index: &index,
+            scans,
+            radius,
+            sigma: opts.sigma_cells * cell,
+        };
+        let values: Vec<Option<f64>> = corner_keys
+            .par_iter()
+            .with_min_len(512)
+            .map(|c| implicit.at(corner_position(*c, cell)).map(|s| s.value))
+            .collect();
+        self.corners.extend(
+            corner_keys
+                .iter()
+                .zip(&values)
+                .filter_map(|(c, v)| v.map(|v| (*c, v))),
+        );
+        let keep = opts.keep_cells * cell;
+        let corners = &self.corners;
+        let vertices: Vec<Option<(DVec3, DVec3)>> = fresh
+            .par_iter()
+            .with_min_len(256)
+            .map(|c| cell_vertex(&implicit, corners, *c, cell, opts.projections, keep))
+            .collect();
+        self.candidates.extend(fresh.iter().copied().zip(vertices));
+        let mut merged = self.assemble();
+        merged.corners_evaluated = corner_keys.len();
+        merged.recomputed_cells = fresh.len();
+        merged
+    }
+
+    /// The mesh of every candidate's vertex, in cell order (as a merge from scratch).
+    fn assemble(&self) -> Merged {
+        let mut cells: Vec<(&CellKey, &Option<(DVec3, DVec3)>)> = self.candidates.iter().collect();
+        cells.sort_unstable_by_key(|(c, _)| **c);
+        let mut merged = Merged {
+            cell: self.cell,
+            ..Default::default()
+        };
+        let mut index: FxHashMap<CellKey, u32> = FxHashMap::default();
+        for (c, v) in cells {
+            match v {
+                Some((p, n)) => {
+                    index.insert(*c, merged.mesh.positions.len() as u32);
+                    merged.mesh.positions.push(*p);
+                    merged.normals.push(*n);
+                    merged.cells.push(*c);
+                }
+                None if crossed(&self.corners, *c) => merged.dropped_vertices += 1,
+                None => {}
+            }
+        }
+        let mut corner_keys: Vec<CellKey> = self.corners.keys().copied().collect();
+        corner_keys.sort_unstable();
+        merged.mesh.triangles = quads(&self.corners, &corner_keys, &index, &merged.mesh.positions);
+        merged
+    }
+}

@@ -1,0 +1,164 @@
+//! Local updates of an object: the merge recomputed only around a changed scan equals the
+//! merge from scratch, and a new version of a view over ground the control mesh covers
+//! refits only the controls around it.
+
+use super::object_session::{view, AXES, RADIUS};
+use glam::DVec3;
+use trispline::mesh::rigid::RigidTransform;
+use trispline::pipeline::merge::{merge, scan_samples, MergeField, MergeOptions, Merged};
+use trispline::pipeline::object_session::{ObjectSession, SessionOptions};
+
+/// The two merges have the same cells, vertices and triangles.
+fn assert_same(local: &Merged, cold: &Merged, what: &str) {
+    assert_eq!(local.cells, cold.cells, "{what}: cells");
+    assert_eq!(
+        local.mesh.triangles, cold.mesh.triangles,
+        "{what}: triangles"
+    );
+    let worst = local
+        .mesh
+        .positions
+        .iter()
+        .zip(&cold.mesh.positions)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    assert!(worst == 0.0, "{what}: vertices differ by {worst}");
+    assert_eq!(
+        local.dropped_vertices, cold.dropped_vertices,
+        "{what}: dropped"
+    );
+}
+
+#[test]
+fn a_merge_updated_scan_by_scan_equals_the_merge_from_scratch() {
+    let opts = MergeOptions::default();
+    let samples = |axis: DVec3, lift: f64| {
+        scan_samples(&view(axis, 30, lift), &RigidTransform::IDENTITY, &opts)
+    };
+    let views: Vec<_> = AXES.iter().map(|a| samples(*a, 0.0)).collect();
+    let cell = 1.5 * RADIUS / 30.0;
+    let mut field = MergeField::new(cell);
+    let mut held: Vec<&_> = Vec::new();
+    for (k, v) in views.iter().enumerate() {
+        held.push(v);
+        let local = field.update(&held, &[v], &[], &opts);
+        let cold = merge(&held, cell, &opts);
+        assert_same(&local, &cold, &format!("view {k} added"));
+        if k > 0 {
+            // Views from the axes see about a third of the sphere each: the blocks around
+            // one leave some cells untouched.
+            assert!(
+                local.recomputed_cells < cold.recomputed_cells,
+                "view {k}: {} recomputed",
+                local.recomputed_cells
+            );
+        }
+    }
+    // A new version of view 0, 60 um further out, replaces it.
+    let moved = samples(AXES[0], 60e-6);
+    held[0] = &moved;
+    let local = field.update(&held, &[&moved], &[&views[0]], &opts);
+    assert_same(&local, &merge(&held, cell, &opts), "view 0 replaced");
+    assert!(local.recomputed_cells > 0);
+    // View 5 removed.
+    let gone = held.pop().expect("six views");
+    let local = field.update(&held, &[], &[gone], &opts);
+    assert_same(&local, &merge(&held, cell, &opts), "view 5 removed");
+}
+
+#[test]
+fn a_new_version_of_a_view_refits_only_the_controls_around_it() {
+    let views: Vec<_> = AXES.iter().map(|a| view(*a, 30, 0.0)).collect();
+    let session_of = |cold: bool| {
+        let mut session = ObjectSession::new(SessionOptions {
+            cold,
+            ..Default::default()
+        });
+        for (k, v) in views.iter().enumerate() {
+            session
+                .add_scan(&format!("v{k}"), v, RigidTransform::IDENTITY)
+                .expect("update");
+        }
+        session
+    };
+    let mut local = session_of(false);
+    let mut cold = session_of(true);
+    let before = local
+        .add_scan("v0", &views[0], RigidTransform::IDENTITY)
+        .expect("the same version again");
+    // The same scan again changes no cell: nothing is refitted.
+    let same = before.local.as_ref().expect("a local refit");
+    assert_eq!(same.changed_points, 0);
+    assert!(same.controls.is_empty());
+    let lifted = view(AXES[0], 30, 80e-6);
+    let after = local
+        .add_scan("v0", &lifted, RigidTransform::IDENTITY)
+        .expect("a new version of v0");
+    let reference = cold
+        .add_scan("v0", &lifted, RigidTransform::IDENTITY)
+        .expect("a new version of v0, from scratch");
+    let refit = after.local.as_ref().expect("a local refit");
+    let controls = after.fit.controls.len();
+    eprintln!(
+        "local: {} of {controls} controls, {} changed and {} moving points, {} rounds, rms {:.2e} (from scratch {:.2e}), fit {:.0} ms against {:.0} ms; region {}",
+        refit.controls.len(),
+        refit.changed_points,
+        refit.moving_points,
+        refit.rounds,
+        after.fit.geometric_rms(),
+        reference.fit.geometric_rms(),
+        after.times.fit_ms,
+        reference.times.fit_ms,
+        after.outputs.report["session"]["updated_region"]["fit"],
+    );
+    assert!(reference.local.is_none());
+    assert!(reference.cold_because.is_some());
+    assert!(refit.changed_points > 0 && refit.rounds > 0);
+    // The sphere's control mesh is coarse (about 130 controls): the view's ground and its
+    // ring hold most of them, but not the far side's (checked below).
+    assert!(
+        refit.controls.len() < controls,
+        "{} of {controls}",
+        refit.controls.len()
+    );
+    assert_eq!(
+        after.outputs.report["session"]["updated_region"]["fit"],
+        "local"
+    );
+    // Controls not refitted kept their positions; the far side's did not move.
+    for (c, (a, b)) in after
+        .fit
+        .controls
+        .iter()
+        .zip(&before.fit.controls)
+        .enumerate()
+    {
+        if refit.controls.binary_search(&(c as u32)).is_err() {
+            assert_eq!(a, b, "control {c} moved");
+        } else if b.x < -0.5 * RADIUS {
+            panic!("control {c} at {b} on the far side was refitted");
+        }
+    }
+    // The surface followed the view's ground outward (80 um): the points there lie on it.
+    let there: Vec<f64> = after
+        .fit
+        .data
+        .iter()
+        .zip(&after.fit.geometric_errors)
+        .filter(|(p, _)| p.x > 0.9 * RADIUS)
+        .map(|(_, e)| *e)
+        .collect();
+    let rms_there = (there.iter().map(|e| e * e).sum::<f64>() / there.len().max(1) as f64).sqrt();
+    assert!(
+        there.len() > 20 && rms_there < 2e-5,
+        "{} points, rms {rms_there}",
+        there.len()
+    );
+    // As close to the data as the fit from scratch.
+    assert!(
+        after.fit.geometric_rms() < 1.5 * reference.fit.geometric_rms() + 2e-6,
+        "{} against {}",
+        after.fit.geometric_rms(),
+        reference.fit.geometric_rms()
+    );
+}
