@@ -408,8 +408,14 @@ impl TriSurface for DmsSpline {
     }
 
     fn step(&self, p: SurfaceParam, du: f64, dv: f64) -> SurfaceParam {
+        let (u, v) = (p.u + du, p.v + dv);
+        // Most Newton steps stay inside their face: no look-up then (`locate` gives the
+        // same parameter for a point strictly inside one face).
+        if u > 0.0 && v > 0.0 && u + v < 1.0 {
+            return SurfaceParam { face: p.face, u, v };
+        }
         let [a, b, c] = self.corners(p.face as usize);
-        let x = c + (a - c) * (p.u + du) + (b - c) * (p.v + dv);
+        let x = c + (a - c) * u + (b - c) * v;
         if let Some(q) = self.locate(x) {
             return q;
         }

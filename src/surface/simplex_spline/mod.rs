@@ -376,6 +376,11 @@ mod tests {
                         points.push((pool[a] + (pool[b] - pool[a]) * t, dir));
                     }
                 }
+                // The vector sign key (where the CPU has one) is the plain loop's.
+                let pieces = family.pieces.as_ref().expect("kept in pieces");
+                for &(x, dir) in &points {
+                    assert_eq!(pieces.key(x, dir), pieces.key_with(x, dir), "x {x}");
+                }
                 let (mut scratch, mut want, mut got) = (Vec::new(), Vec::new(), Vec::new());
                 let mut reference = Vec::new();
                 let mut scale = [0.0f64; 6];
