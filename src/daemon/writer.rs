@@ -36,6 +36,19 @@ pub enum Keep {
     Nothing,
 }
 
+impl Keep {
+    /// What to keep of a rejected input: a file as `file` decides, a pipe payload's bytes
+    /// in quarantine under `version`, nothing of an object folder (an object's scans stay
+    /// its scans: the folder is never moved).
+    fn of_input(input: &Input, version: &str, file: impl FnOnce(&Path) -> Keep) -> Keep {
+        match input {
+            Input::File(p) => file(p),
+            Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), version.to_string()),
+            Input::Object(_) => Keep::Nothing,
+        }
+    }
+}
+
 pub enum WriterMsg {
     Done(JobDone),
     Superseded {
@@ -243,13 +256,13 @@ impl Writer {
                         tracing::warn!(error = %e, "cannot note an unsupported input");
                     }
                 }
-                let keep = match &a.input {
-                    Input::File(p) if in_place => Keep::InPlace(p.clone()),
-                    Input::File(p) => Keep::Move(p.clone()),
-                    Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
-                    // The object's scans stay its scans: the folder is never moved.
-                    Input::Object(_) => Keep::Nothing,
-                };
+                let keep = Keep::of_input(&a.input, &a.version, |p| {
+                    if in_place {
+                        Keep::InPlace(p.to_path_buf())
+                    } else {
+                        Keep::Move(p.to_path_buf())
+                    }
+                });
                 self.reject(&a.id, &a.label, keep, kind, &reason);
                 None
             }
@@ -284,11 +297,7 @@ impl Writer {
                 let reason = taken.unwrap_or_default();
                 // Not broken: left where it is (a payload is kept in quarantine) until
                 // renamed.
-                let keep = match &a.input {
-                    Input::File(p) => Keep::InPlace(p.clone()),
-                    Input::Inline { data, .. } => Keep::Bytes(Arc::clone(data), a.version.clone()),
-                    Input::Object(_) => Keep::Nothing,
-                };
+                let keep = Keep::of_input(&a.input, &a.version, |p| Keep::InPlace(p.to_path_buf()));
                 self.reject(&a.id, &a.label, keep, "id_taken", &reason);
                 None
             }
@@ -593,12 +602,8 @@ impl Writer {
                 let _ = self.acks.send(Msg::Arrivals(vec![arrival]));
             }
             Err((kind, reason)) => {
-                let keep = match &s.scan.input {
-                    Input::Inline { data, .. } => {
-                        Keep::Bytes(Arc::clone(data), s.scan.version.clone())
-                    }
-                    _ => Keep::Nothing,
-                };
+                // A scan file stays where the pipe reader found it.
+                let keep = Keep::of_input(&s.scan.input, &s.scan.version, |_| Keep::Nothing);
                 self.reject(&s.object, &s.scan.label, keep, kind, &reason);
             }
         }
