@@ -18,6 +18,14 @@
 //!
 //! Times are wall and process CPU (user + sys, all threads) per update; every local merge
 //! is checked against a merge from scratch of the same scans.
+//!
+//! Beside 3, bun_zipper's vertices are split by whether the merged data already misses
+//! them (the merge's fault) or only the surface does (the fit's). `OBJ_SESSION_MERGE_ONLY=1`
+//! runs only the merge of all scans against bun_zipper (no fit); `OBJ_SESSION_DUMP=FILE`
+//! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
+//! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
+//! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_RIM_SHIFT`,
+//! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls).
 
 use std::path::{Path, PathBuf};
 use trispline::io::registration::registration_for;
@@ -94,10 +102,34 @@ fn main() {
         scans.push((id, mesh, registration.transform, rt));
     }
 
-    let opts = SessionOptions {
+    let mut opts = SessionOptions {
         measure_scans: false,
         ..Default::default()
     };
+    // Variants for comparison runs, from the environment.
+    let env = |k: &str| std::env::var(k).ok().and_then(|s| s.parse::<f64>().ok());
+    if let Some(k) = env("OBJ_MERGE_KEEP_CELLS") {
+        opts.merge.keep_cells = k;
+    }
+    if let Some(c) = env("OBJ_MERGE_CELL_EDGES") {
+        opts.merge.cell_edges = c;
+    }
+    if let Some(w) = env("OBJ_MERGE_RIM_WEIGHT") {
+        opts.merge.rim_weight = w;
+    }
+    if let Some(p) = env("OBJ_SESSION_PCT") {
+        opts.worker.fit.scan.target_controls_pct = p;
+    }
+    if let Some(r) = env("OBJ_MERGE_RIM_SHIFT") {
+        opts.merge.rim_shift_sigmas = r;
+    }
+    if let Some(r) = env("OBJ_MERGE_RADIUS_CELLS") {
+        opts.merge.radius_cells = r;
+    }
+    if std::env::var("OBJ_SESSION_MERGE_ONLY").is_ok() {
+        merge_only(&scans, &opts, &zipper);
+        return;
+    }
     let (forward, mut session) = run(&scans, opts.clone(), "arrival order");
     replacement(&scans, &mut session, &opts);
     println!("\n== each scan's points: to the surface vs to bun_zipper");
@@ -120,6 +152,7 @@ fn main() {
         println!("{id:7} ratio to VRIP: median {m:.2}x  p95 {p:.2}x");
     }
     coverage_check(&scans, &surface, &zipper);
+    merged_coverage(&session, &opts, &surface, &zipper);
 
     let reversed: Vec<_> = scans.iter().rev().cloned().collect();
     let (backward, _) = run(&reversed, opts, "reverse order");
@@ -317,6 +350,187 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
         stats.max * 1e3,
         row(&stats)
     );
+}
+
+/// Which of bun_zipper's vertices the merged data (what the surface is fitted to) already
+/// misses, and which only the surface misses: a vertex far from the surface but near the
+/// merged mesh is the fit's fault, one far from both is the merge's.
+fn merged_coverage(
+    session: &ObjectSession,
+    opts: &SessionOptions,
+    surface: &TriMesh,
+    zipper: &TriMesh,
+) {
+    let Some(cell) = session.cell() else {
+        return;
+    };
+    let all: Vec<_> = session.scans().values().map(|s| &s.samples).collect();
+    let merged = merge(&all, cell, &opts.merge).mesh;
+    let to_merged = MeshDistance::new(&merged);
+    let to_surface = MeshDistance::new(surface);
+    let to_zipper = MeshDistance::new(zipper);
+    let (mut fit_only, mut both, mut merge_only, mut near) = (0, 0, 0, 0);
+    let mut dump = String::new();
+    for p in &zipper.positions {
+        let (Some(dm), Some(ds)) = (to_merged.distance(*p), to_surface.distance(*p)) else {
+            continue;
+        };
+        if dm > 2e-3 {
+            continue; // not covered by the merged data at all
+        }
+        near += 1;
+        match (dm > 5e-4, ds > 5e-4) {
+            (false, true) => fit_only += 1,
+            (true, true) => {
+                both += 1;
+                dump += &format!("{} {} {} {dm} {ds}\n", p.x, p.y, p.z);
+            }
+            (true, false) => merge_only += 1,
+            _ => {}
+        }
+    }
+    if let Ok(path) = std::env::var("OBJ_SESSION_DUMP") {
+        let _ = std::fs::write(path, dump);
+    }
+    let stray = surface
+        .positions
+        .iter()
+        .filter_map(|p| to_merged.distance(*p))
+        .filter(|&d| d > 5e-4)
+        .count();
+    let zipper_off = merged
+        .positions
+        .iter()
+        .filter_map(|p| to_zipper.distance(*p))
+        .filter(|&d| d > 5e-4)
+        .count();
+    println!(
+        "bun_zipper vertices within 2 mm of the merged mesh: {near}; over 0.5 mm from the surface only: {fit_only}, from both: {both}, from the merged mesh only: {merge_only}"
+    );
+    println!(
+        "surface vertices over 0.5 mm from the merged mesh: {stray} of {}; merged vertices over 0.5 mm from bun_zipper: {zipper_off} of {}",
+        surface.positions.len(),
+        merged.positions.len()
+    );
+}
+
+/// The merge of all scans alone against bun_zipper (no fit): its coverage and time.
+fn merge_only(scans: &[Scan], opts: &SessionOptions, zipper: &TriMesh) {
+    let all: Vec<_> = scans.iter().map(|(id, m, t, _)| (*id, m, *t)).collect();
+    let samples: Vec<_> = all
+        .iter()
+        .map(|(_, m, t)| trispline::pipeline::merge::scan_samples(m, t, &opts.merge))
+        .collect();
+    let spacings = all
+        .iter()
+        .map(|(_, m, _)| trispline::pipeline::merge::median_edge(m));
+    let Some(cell) = trispline::pipeline::object_session::object_cell(spacings, &opts.merge) else {
+        return;
+    };
+    let refs: Vec<_> = samples.iter().collect();
+    let t = std::time::Instant::now();
+    let merged = merge(&refs, cell, &opts.merge).mesh;
+    println!(
+        "merge of all scans: cell {:.3} mm, {} vertices, {:.0} ms",
+        cell * 1e3,
+        merged.positions.len(),
+        t.elapsed().as_secs_f64() * 1e3
+    );
+    let to_merged = MeshDistance::new(&merged);
+    let mut dump = String::new();
+    let (mut near, mut far) = (0, 0);
+    for p in &zipper.positions {
+        let Some(d) = to_merged.distance(*p) else {
+            continue;
+        };
+        if d <= 2e-3 {
+            near += 1;
+            if d > 5e-4 {
+                far += 1;
+                dump += &format!("{} {} {} {d}\n", p.x, p.y, p.z);
+            }
+        }
+    }
+    println!("bun_zipper vertices within 2 mm of the merge: {near}, over 0.5 mm: {far}");
+    let to_zipper = MeshDistance::new(zipper);
+    let off: Vec<f64> = merged
+        .positions
+        .iter()
+        .filter_map(|p| to_zipper.distance(*p))
+        .collect();
+    println!(
+        "merged vertices from bun_zipper: over 0.5 mm {}, over 2 mm {}, max {:.2} mm",
+        off.iter().filter(|&&d| d > 5e-4).count(),
+        off.iter().filter(|&&d| d > 2e-3).count(),
+        off.iter().fold(0.0f64, |m, &d| m.max(d)) * 1e3
+    );
+    for (id, mesh, t, zipper_stats) in scans {
+        let points: Vec<DVec3> = used_vertices(mesh)
+            .iter()
+            .map(|&v| t.apply(mesh.positions[v]))
+            .collect();
+        let to_merge = distance_stats(&points, &merged);
+        if std::env::var("OBJ_SESSION_DUMP_SCAN").is_ok_and(|s| s == *id) {
+            dump_scan(mesh, t, &merged, zipper);
+        }
+        println!("{id:7} to the merge: {}", row(&to_merge));
+        println!("{:7} bun_zipper:   {}", "", row(zipper_stats));
+    }
+    if let Ok(path) = std::env::var("OBJ_SESSION_DUMP") {
+        let _ = std::fs::write(path, dump);
+    }
+}
+
+/// Every used vertex of one scan: position, distance to the merge and to bun_zipper, and
+/// its ring from the scan's rim (0 on it), to /tmp/scan_dump.txt.
+fn dump_scan(mesh: &TriMesh, t: &RigidTransform, merged: &TriMesh, zipper: &TriMesh) {
+    let mut edges: std::collections::HashMap<(u32, u32), u32> = Default::default();
+    for tri in &mesh.triangles {
+        for k in 0..3 {
+            let (a, b) = (tri[k], tri[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let n = mesh.positions.len();
+    let mut ring = vec![usize::MAX; n];
+    let mut next = Vec::new();
+    for (&(a, b), &c) in &edges {
+        if c == 1 {
+            for v in [a, b] {
+                ring[v as usize] = 0;
+                next.push(v);
+            }
+        }
+    }
+    let mut neighbours = vec![Vec::new(); n];
+    for &(a, b) in edges.keys() {
+        neighbours[a as usize].push(b);
+        neighbours[b as usize].push(a);
+    }
+    let mut level = 0;
+    while !next.is_empty() && level < 20 {
+        level += 1;
+        let mut grown = Vec::new();
+        for v in next {
+            for &w in &neighbours[v as usize] {
+                if ring[w as usize] == usize::MAX {
+                    ring[w as usize] = level;
+                    grown.push(w);
+                }
+            }
+        }
+        next = grown;
+    }
+    let (qm, qz) = (MeshDistance::new(merged), MeshDistance::new(zipper));
+    let mut out = String::new();
+    for v in used_vertices(mesh) {
+        let p = t.apply(mesh.positions[v]);
+        let (Some(dm), Some(dz)) = (qm.distance(p), qz.distance(p)) else {
+            continue;
+        };
+        out += &format!("{} {} {} {dm} {dz} {}\n", p.x, p.y, p.z, ring[v].min(99));
+    }
+    let _ = std::fs::write("/tmp/scan_dump.txt", out);
 }
 
 fn used_vertices(mesh: &TriMesh) -> Vec<usize> {

@@ -39,7 +39,7 @@ pub(crate) fn validate_object(
     o: &ObjectSection,
 ) -> Result<(), (&'static str, String, &'static str)> {
     let m = &o.merge;
-    let rules: [(bool, &'static str, f64, &'static str); 7] = [
+    let rules: [(bool, &'static str, f64, &'static str); 8] = [
         (
             m.cell.is_finite() && (0.0..=1.0).contains(&m.cell),
             "object.merge.cell",
@@ -77,6 +77,12 @@ pub(crate) fn validate_object(
             "must be 0.1..=8",
         ),
         (
+            (0.1..=4.0).contains(&m.rim_shift_sigmas),
+            "object.merge.rim_shift_sigmas",
+            m.rim_shift_sigmas,
+            "must be 0.1..=4",
+        ),
+        (
             m.ramp_rings <= 64 && m.projections <= 8,
             "object.merge.ramp_rings / projections",
             m.ramp_rings as f64,
@@ -109,6 +115,12 @@ mod tests {
         assert_eq!(
             validate_object(&o).err().map(|e| e.0),
             Some("object.merge.cell")
+        );
+        let mut o = ObjectSection::default();
+        o.merge.rim_shift_sigmas = 0.0;
+        assert_eq!(
+            validate_object(&o).err().map(|e| e.0),
+            Some("object.merge.rim_shift_sigmas")
         );
     }
 }

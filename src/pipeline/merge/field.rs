@@ -156,11 +156,22 @@ impl MergeField {
                 .filter_map(|(c, v)| v.map(|v| (*c, v))),
         );
         let keep = opts.keep_cells * cell;
+        let rim_shift = opts.rim_shift_sigmas * implicit.sigma;
         let corners = &self.corners;
         let vertices: Vec<Option<(DVec3, DVec3)>> = fresh
             .par_iter()
             .with_min_len(256)
-            .map(|c| cell_vertex(&implicit, corners, *c, cell, opts.projections, keep))
+            .map(|c| {
+                cell_vertex(
+                    &implicit,
+                    corners,
+                    *c,
+                    cell,
+                    opts.projections,
+                    keep,
+                    rim_shift,
+                )
+            })
             .collect();
         self.candidates.extend(fresh.iter().copied().zip(vertices));
         let mut merged = self.assemble();

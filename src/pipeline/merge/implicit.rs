@@ -63,9 +63,9 @@ pub(super) struct Sample {
     pub normal: DVec3,
     /// Distance to the nearest sample.
     pub nearest: f64,
-    /// Distance, across the normal, from the point to the weighted centroid of the samples:
-    /// small inside the data, about half the Gaussian width on a scan's outer rim.
-    pub centroid_shift: f64,
+    /// From the point to the weighted centroid of the samples, across the normal: short
+    /// inside the data, about half the Gaussian width on a scan's outer rim.
+    pub centroid_offset: DVec3,
 }
 
 /// The weighted signed distance of the samples within `radius`.
@@ -170,7 +170,7 @@ impl Implicit<'_> {
                 value: sum_f / sum_w,
                 normal,
                 nearest: best.0.sqrt(),
-                centroid_shift: (shift - shift.dot(normal) * normal).length(),
+                centroid_offset: shift - shift.dot(normal) * normal,
             }
         })
     }

@@ -9,12 +9,6 @@ use super::types::CellKey;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 
-/// A vertex whose samples' centroid lies further than this share of the Gaussian width
-/// across the normal stands past the data's rim (inside the data the centroid is close;
-/// at a straight rim it is about 0.56 sigma in): there the quadric extrapolates, so the
-/// vertex is dropped.
-const RIM_SHIFT_OF_SIGMA: f64 = 0.35;
-
 pub(super) fn corner_position(c: CellKey, cell: f64) -> DVec3 {
     DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * cell
 }
@@ -85,8 +79,9 @@ pub(super) fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
 
 /// The vertex of a crossed cell: the mean of its edges' zero crossings, projected onto
 /// the zero set along the function's normal; `None` when the cell is not crossed, too few
-/// samples hold the local quadric, or the projection ends further than `keep` from every
-/// sample.
+/// samples hold the local quadric, the projection ends further than `keep` from every
+/// sample, or past the data's rim (the samples' centroid over `rim_shift` across the
+/// normal).
 pub(super) fn cell_vertex(
     implicit: &Implicit,
     corners: &FxHashMap<CellKey, f64>,
@@ -94,6 +89,7 @@ pub(super) fn cell_vertex(
     cell: f64,
     projections: usize,
     keep: f64,
+    rim_shift: f64,
 ) -> Option<(DVec3, DVec3)> {
     let v = cell_values(corners, c)?;
     let origin = corner_position(c, cell);
@@ -131,8 +127,11 @@ pub(super) fn cell_vertex(
     // of micrometres at a scan's spacing): it is dropped, the surface stops there.
     x = implicit.refine(x, last.normal)?;
     last = implicit.at(x)?;
-    let inside = last.centroid_shift <= RIM_SHIFT_OF_SIGMA * implicit.sigma;
-    (last.nearest <= keep && inside && x.is_finite()).then_some((x, last.normal))
+    let shift = last.centroid_offset.length();
+    if shift > rim_shift {
+        return None;
+    }
+    (last.nearest <= keep && x.is_finite()).then_some((x, last.normal))
 }
 
 /// Two triangles per grid edge the zero set crosses whose four cells have vertices,
