@@ -24,7 +24,7 @@
 //! runs only the merge of all scans against bun_zipper (no fit); `OBJ_SESSION_DUMP=FILE`
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
-//! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_RIM_SHIFT`,
+//! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
 //! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls).
 
 use std::path::{Path, PathBuf};
@@ -120,8 +120,8 @@ fn main() {
     if let Some(p) = env("OBJ_SESSION_PCT") {
         opts.worker.fit.scan.target_controls_pct = p;
     }
-    if let Some(r) = env("OBJ_MERGE_RIM_SHIFT") {
-        opts.merge.rim_shift_sigmas = r;
+    if let Some(o) = env("OBJ_MERGE_OVERHANG") {
+        opts.merge.rim_overhang_cells = o;
     }
     if let Some(r) = env("OBJ_MERGE_RADIUS_CELLS") {
         opts.merge.radius_cells = r;
@@ -429,13 +429,16 @@ fn merge_only(scans: &[Scan], opts: &SessionOptions, zipper: &TriMesh) {
     };
     let refs: Vec<_> = samples.iter().collect();
     let t = std::time::Instant::now();
-    let merged = merge(&refs, cell, &opts.merge).mesh;
+    let merged = merge(&refs, cell, &opts.merge);
     println!(
-        "merge of all scans: cell {:.3} mm, {} vertices, {:.0} ms",
+        "merge of all scans: cell {:.3} mm, {} vertices, {:.0} ms, {} holes closed, {}",
         cell * 1e3,
-        merged.positions.len(),
-        t.elapsed().as_secs_f64() * 1e3
+        merged.mesh.positions.len(),
+        t.elapsed().as_secs_f64() * 1e3,
+        merged.closed_holes,
+        trispline::mesh::stats::mesh_stats(&merged.mesh, 0).boundary_loops,
     );
+    let merged = merged.mesh;
     let to_merged = MeshDistance::new(&merged);
     let mut dump = String::new();
     let (mut near, mut far) = (0, 0);

@@ -77,10 +77,10 @@ pub(crate) fn validate_object(
             "must be 0.1..=8",
         ),
         (
-            (0.1..=4.0).contains(&m.rim_shift_sigmas),
-            "object.merge.rim_shift_sigmas",
-            m.rim_shift_sigmas,
-            "must be 0.1..=4",
+            (0.0..=4.0).contains(&m.rim_overhang_cells),
+            "object.merge.rim_overhang_cells",
+            m.rim_overhang_cells,
+            "must be 0..=4",
         ),
         (
             m.ramp_rings <= 64 && m.projections <= 8,
@@ -117,10 +117,10 @@ mod tests {
             Some("object.merge.cell")
         );
         let mut o = ObjectSection::default();
-        o.merge.rim_shift_sigmas = 0.0;
+        o.merge.rim_overhang_cells = -1.0;
         assert_eq!(
             validate_object(&o).err().map(|e| e.0),
-            Some("object.merge.rim_shift_sigmas")
+            Some("object.merge.rim_overhang_cells")
         );
     }
 }

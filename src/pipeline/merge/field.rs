@@ -10,6 +10,7 @@
 //! a merge from scratch does, and the mesh is assembled from all cells in key order: the
 //! merge of a set of scans is the same whether it was built at once or scan by scan.
 
+use super::holes::close_holes_inside_data;
 use super::implicit::{key, Implicit, PointIndex};
 use super::nets::{add, cell_vertex, corner_position, crossed, quads, CORNERS, NEIGHBOURS};
 use super::types::{CellKey, MergeOptions, Merged, ScanSamples};
@@ -156,7 +157,7 @@ impl MergeField {
                 .filter_map(|(c, v)| v.map(|v| (*c, v))),
         );
         let keep = opts.keep_cells * cell;
-        let rim_shift = opts.rim_shift_sigmas * implicit.sigma;
+        let overhang = opts.rim_overhang_cells * cell;
         let corners = &self.corners;
         let vertices: Vec<Option<(DVec3, DVec3)>> = fresh
             .par_iter()
@@ -169,12 +170,15 @@ impl MergeField {
                     cell,
                     opts.projections,
                     keep,
-                    rim_shift,
+                    overhang,
                 )
             })
             .collect();
         self.candidates.extend(fresh.iter().copied().zip(vertices));
         let mut merged = self.assemble();
+        if opts.close_holes {
+            merged.closed_holes = close_holes_inside_data(&mut merged.mesh, &implicit);
+        }
         merged.corners_evaluated = corner_keys.len();
         merged.recomputed_cells = fresh.len();
         merged

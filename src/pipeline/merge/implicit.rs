@@ -2,7 +2,7 @@
 //! weighted signed distance along the samples' normals (see the module docs of `merge`).
 
 use super::types::ScanSamples;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use nalgebra::{Matrix6, Vector6};
 use rustc_hash::FxHashMap;
 
@@ -63,9 +63,6 @@ pub(super) struct Sample {
     pub normal: DVec3,
     /// Distance to the nearest sample.
     pub nearest: f64,
-    /// From the point to the weighted centroid of the samples, across the normal: short
-    /// inside the data, about half the Gaussian width on a scan's outer rim.
-    pub centroid_offset: DVec3,
 }
 
 /// The weighted signed distance of the samples within `radius`.
@@ -132,6 +129,26 @@ impl Implicit<'_> {
         c[0].is_finite().then(|| x + c[0] * normal)
     }
 
+    /// How far `x` stands beyond the data in the tangent plane of `normal`: the distance
+    /// from `x` to the convex hull of the projections of the same-sheet samples within the
+    /// radius (0 inside the data, and on its rim). Unlike their weighted centroid, it does
+    /// not move with the weights (a scan's rim ramp) or with the samples' spacing (sparse
+    /// at grazing angles). `None` with fewer than three samples off one line.
+    pub(super) fn overhang(&self, x: DVec3, normal: DVec3) -> Option<f64> {
+        let e1 = normal.any_orthonormal_vector();
+        let e2 = normal.cross(e1);
+        let r2 = self.radius * self.radius;
+        let mut projected: Vec<DVec2> = Vec::with_capacity(64);
+        self.index.around(x, |s, i| {
+            let scan = self.scans[s as usize];
+            let d = scan.points[i as usize] - x;
+            if d.length_squared() <= r2 && scan.normals[i as usize].dot(normal) >= SAME_SHEET_COS {
+                projected.push(DVec2::new(d.dot(e1), d.dot(e2)));
+            }
+        });
+        super::support::distance_to_hull(&mut projected)
+    }
+
     /// The function at `x`; `None` where no sample lies within the radius (or their weights
     /// vanish).
     pub(super) fn at(&self, x: DVec3) -> Option<Sample> {
@@ -150,7 +167,7 @@ impl Implicit<'_> {
         let &(_, bs, bi) = near.get(best.1)?;
         let sheet = self.scans[bs as usize].normals[bi as usize];
         let inv = 1.0 / (self.sigma * self.sigma);
-        let (mut sum_w, mut sum_f, mut sum_n, mut sum_p) = (0.0, 0.0, DVec3::ZERO, DVec3::ZERO);
+        let (mut sum_w, mut sum_f, mut sum_n) = (0.0, 0.0, DVec3::ZERO);
         for &(d2, s, i) in &near {
             let scan = self.scans[s as usize];
             let n = scan.normals[i as usize];
@@ -161,17 +178,12 @@ impl Implicit<'_> {
             sum_w += w;
             sum_f += w * n.dot(x - scan.points[i as usize]);
             sum_n += w * n;
-            sum_p += w * (scan.points[i as usize] - x);
         }
         let normal = sum_n.try_normalize()?;
-        (sum_w > 0.0).then(|| {
-            let shift = sum_p / sum_w;
-            Sample {
-                value: sum_f / sum_w,
-                normal,
-                nearest: best.0.sqrt(),
-                centroid_offset: shift - shift.dot(normal) * normal,
-            }
+        (sum_w > 0.0).then(|| Sample {
+            value: sum_f / sum_w,
+            normal,
+            nearest: best.0.sqrt(),
         })
     }
 }

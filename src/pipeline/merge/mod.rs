@@ -16,8 +16,10 @@
 //! between them, not a ripple between the two.
 
 mod field;
+mod holes;
 mod implicit;
 mod nets;
+mod support;
 mod types;
 
 use crate::mesh::rigid::RigidTransform;

@@ -80,8 +80,7 @@ pub(super) fn crossed(corners: &FxHashMap<CellKey, f64>, c: CellKey) -> bool {
 /// The vertex of a crossed cell: the mean of its edges' zero crossings, projected onto
 /// the zero set along the function's normal; `None` when the cell is not crossed, too few
 /// samples hold the local quadric, the projection ends further than `keep` from every
-/// sample, or past the data's rim (the samples' centroid over `rim_shift` across the
-/// normal).
+/// sample, or further than `overhang` beyond the data's rim (`Implicit::overhang`).
 pub(super) fn cell_vertex(
     implicit: &Implicit,
     corners: &FxHashMap<CellKey, f64>,
@@ -89,7 +88,7 @@ pub(super) fn cell_vertex(
     cell: f64,
     projections: usize,
     keep: f64,
-    rim_shift: f64,
+    overhang: f64,
 ) -> Option<(DVec3, DVec3)> {
     let v = cell_values(corners, c)?;
     let origin = corner_position(c, cell);
@@ -127,8 +126,7 @@ pub(super) fn cell_vertex(
     // of micrometres at a scan's spacing): it is dropped, the surface stops there.
     x = implicit.refine(x, last.normal)?;
     last = implicit.at(x)?;
-    let shift = last.centroid_offset.length();
-    if shift > rim_shift {
+    if implicit.overhang(x, last.normal)? > overhang {
         return None;
     }
     (last.nearest <= keep && x.is_finite()).then_some((x, last.normal))

@@ -34,15 +34,17 @@ pub struct MergeOptions {
     /// A merged vertex is kept only within this many cells of a sample: the surface stops
     /// where the data stops.
     pub keep_cells: f64,
-    /// A merged vertex is dropped where its samples' weighted centroid lies further than
-    /// this many Gaussian widths across the normal: past the data's rim, where the local
-    /// quadric extrapolates. Inside the data the shift is about 0; on a straight rim it is
-    /// 1/sqrt(pi) = 0.56 (the mean of a half Gaussian of these weights). At 0.35 the
-    /// surface stops short of the rim (a vertex dropped takes the faces of its cell's
-    /// ring): on the bunny's views it loses their outer two vertex rings. Up to 0.9 they
-    /// are kept, but on steep rims (72 degrees off the view axis) the quadric then
-    /// extrapolates by up to 0.34 mm, and a closed merge of six views kept two holes.
-    pub rim_shift_sigmas: f64,
+    /// A merged vertex is dropped where it stands further than this many cells beyond the
+    /// data: beyond the convex hull of the samples around it, in their tangent plane. At 0
+    /// the surface reaches each view's rim and stops there; a larger value lets the local
+    /// quadric extrapolate past it. (A rule on the samples' weighted centroid instead moved
+    /// with the weights' ramp at a scan's rim and with the samples' spacing: it either
+    /// stopped two vertex rings short of the bunny's rims or extrapolated on a sphere's
+    /// steep ones.)
+    pub rim_overhang_cells: f64,
+    /// Close the holes the meshing leaves inside the data (holes whose centre lies within
+    /// the samples' hull; wider ones, where no scan saw the object, stay open).
+    pub close_holes: bool,
 }
 
 impl Default for MergeOptions {
@@ -56,7 +58,8 @@ impl Default for MergeOptions {
             rim_weight: 0.05,
             projections: 2,
             keep_cells: 0.75,
-            rim_shift_sigmas: 0.35,
+            rim_overhang_cells: 0.0,
+            close_holes: true,
         }
     }
 }
@@ -91,6 +94,8 @@ pub struct Merged {
     /// from scratch, those around the changed scans' samples in a `MergeField` update).
     pub recomputed_cells: usize,
     /// Crossed cells whose vertex was dropped past the data's rim (no sample within
-    /// `keep_cells`, the samples' centroid off to one side, or too few for the quadric).
+    /// `keep_cells`, beyond the samples' hull, or too few for the quadric).
     pub dropped_vertices: usize,
+    /// Holes inside the data closed (see `MergeOptions::close_holes`).
+    pub closed_holes: usize,
 }

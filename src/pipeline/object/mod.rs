@@ -51,6 +51,12 @@ const MAX_REFUSALS: usize = 3;
 /// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
 const MIN_BOUNDARY_LOOP: usize = 6;
 
+/// The topology of the surface [`fit_object`] fits to `mesh`: its cleaned largest
+/// component's; `None` when nothing is left or it is not manifold.
+pub fn fitted_topology(mesh: &TriMesh, clean: &CleanOptions) -> Option<SurfaceTopology> {
+    SurfaceTopology::of(&largest_component(mesh, clean)?).ok()
+}
+
 /// Budget, cleaning, simplification and fitting settings of [`fit_object`].
 #[derive(Clone, Debug)]
 pub struct ObjectOptions {

@@ -23,10 +23,11 @@ mod measure;
 pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
 
 use crate::mesh::rigid::RigidTransform;
+use crate::mesh::simplify::SurfaceTopology;
 use crate::pipeline::merge::{
     median_edge, scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
-use crate::pipeline::object::ObjectOptions;
+use crate::pipeline::object::{fitted_topology, ObjectOptions};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
@@ -363,7 +364,11 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
-        let cold_because = self.why_cold(before.is_some(), coverage_change);
+        let reshaped = self
+            .last
+            .as_ref()
+            .and_then(|last| topology_change(&last.data_topology, &merged));
+        let cold_because = self.why_cold(before.is_some(), coverage_change, reshaped);
         let (fitted, local) = match cold_because {
             None => self.refit_locally(&merged, &worker)?,
             Some(_) => (self.fit_cold(&merged, coverage_change, &mut worker)?, None),
@@ -407,6 +412,7 @@ impl ObjectSession {
                 "corners_evaluated": merged.corners_evaluated,
                 "recomputed_cells": merged.recomputed_cells,
                 "dropped_vertices": merged.dropped_vertices,
+                "closed_holes": merged.closed_holes,
             },
             "path": path,
             "view_spread_deg": spread,
@@ -437,7 +443,12 @@ impl ObjectSession {
     }
 
     /// Why this update cannot refit the previous control mesh locally (`None`: it can).
-    fn why_cold(&self, same_grid: bool, coverage_change: f64) -> Option<String> {
+    fn why_cold(
+        &self,
+        same_grid: bool,
+        coverage_change: f64,
+        topology_change: Option<String>,
+    ) -> Option<String> {
         if self.opts.cold {
             return Some("cold updates asked for".into());
         }
@@ -446,6 +457,11 @@ impl ObjectSession {
         }
         if !same_grid {
             return Some("the merge cell changed".into());
+        }
+        // A local refit keeps the control mesh, so it keeps its holes and handles: a view
+        // that closes a hole must rebuild it, however few cells it adds.
+        if topology_change.is_some() {
+            return topology_change;
         }
         (coverage_change > WARM_MAX_COVERAGE_CHANGE).then(|| {
             format!(
@@ -581,6 +597,21 @@ fn view_direction(samples: &ScanSamples) -> Option<DVec3> {
     (sum.length() > 0.2 * total)
         .then(|| sum.normalize())
         .filter(|d| d.is_finite())
+}
+
+/// How the surface the worker would fit to `merged` (its cleaned largest part) differs in
+/// topology from the one the previous fit had, if it does. Only that part counts: the
+/// merge's loose bits and their holes come and go with every update.
+fn topology_change(previous: &SurfaceTopology, merged: &Merged) -> Option<String> {
+    let Some(now) = fitted_topology(&merged.mesh, &ObjectOptions::default().clean) else {
+        return Some("the merged data's largest part is not a manifold surface".into());
+    };
+    (now.boundary_loops != previous.boundary_loops || now.euler != previous.euler).then(|| {
+        format!(
+            "topology changed: {} boundary loops, Euler characteristic {} (were {}, {})",
+            now.boundary_loops, now.euler, previous.boundary_loops, previous.euler
+        )
+    })
 }
 
 /// The largest angle (degrees) between two scans' viewing directions; 180 when a scan has

@@ -1,0 +1,91 @@
+//! How far a point stands beyond the samples around it, in their tangent plane: the
+//! distance from the point to the convex hull of the samples' projections (0 inside).
+//! Hand-written: 2D hulls of a hundred points, the only geometry the merge needs from a
+//! computational-geometry crate (`geo` would bring its own types and dependencies).
+
+use glam::DVec2;
+
+/// The distance from the origin to the convex hull of `points` (0 when the origin lies
+/// inside it or on it); `None` for fewer than three points or a hull without area.
+pub(super) fn distance_to_hull(points: &mut [DVec2]) -> Option<f64> {
+    let hull = convex_hull(points);
+    if hull.len() < 3 {
+        return None;
+    }
+    let mut inside = true;
+    let mut nearest = f64::MAX;
+    for k in 0..hull.len() {
+        let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
+        // Counter-clockwise hull: the origin is inside when left of every edge.
+        if (b - a).perp_dot(-a) < 0.0 {
+            inside = false;
+        }
+        nearest = nearest.min(distance_to_segment(a, b));
+    }
+    Some(if inside { 0.0 } else { nearest })
+}
+
+/// Distance from the origin to the segment [a, b].
+fn distance_to_segment(a: DVec2, b: DVec2) -> f64 {
+    let ab = b - a;
+    let len2 = ab.length_squared();
+    let t = if len2 > 0.0 {
+        (-a.dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (a + t * ab).length()
+}
+
+/// Andrew's monotone chain: the hull counter-clockwise, collinear points left out.
+fn convex_hull(points: &mut [DVec2]) -> Vec<DVec2> {
+    points.sort_by(|p, q| p.x.total_cmp(&q.x).then(p.y.total_cmp(&q.y)));
+    let turn = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
+    let mut hull: Vec<DVec2> = Vec::with_capacity(points.len() + 1);
+    for &p in points.iter() {
+        while hull.len() >= 2 && turn(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            hull.pop();
+        }
+        hull.push(p);
+    }
+    let lower = hull.len() + 1;
+    for &p in points.iter().rev().skip(1) {
+        while hull.len() >= lower && turn(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            hull.pop();
+        }
+        hull.push(p);
+    }
+    hull.pop();
+    hull
+}
+
+#[cfg(test)]
+mod tests {
+    use super::distance_to_hull;
+    use glam::DVec2;
+
+    fn grid(x0: f64, x1: f64) -> Vec<DVec2> {
+        let mut g = Vec::new();
+        for i in 0..=10 {
+            for j in 0..=10 {
+                let t = i as f64 / 10.0;
+                g.push(DVec2::new(x0 + (x1 - x0) * t, -1.0 + 0.2 * j as f64));
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn inside_the_samples_is_zero_and_beyond_their_rim_is_the_gap() {
+        assert_eq!(distance_to_hull(&mut grid(-1.0, 1.0)), Some(0.0));
+        // Samples from x = -1 to x = -0.3: the origin stands 0.3 beyond their rim.
+        let d = distance_to_hull(&mut grid(-1.0, -0.3)).expect("hull");
+        assert!((d - 0.3).abs() < 1e-12, "{d}");
+        // On the rim itself.
+        let d = distance_to_hull(&mut grid(-1.0, 0.0)).expect("hull");
+        assert!(d.abs() < 1e-12, "{d}");
+        // Samples in a line hold no hull.
+        let mut line: Vec<DVec2> = (0..5).map(|i| DVec2::new(i as f64, 0.0)).collect();
+        assert_eq!(distance_to_hull(&mut line), None);
+    }
+}
