@@ -359,6 +359,9 @@ impl ObjectSession {
             (change.added + change.removed) as f64 / merged.mesh.positions.len().max(1) as f64;
         let spread = view_spread_deg(self.scans.values());
         let mut worker = self.opts.worker.clone();
+        let coarsest = self.scans.values().map(|s| s.spacing).fold(0.0, f64::max);
+        worker.fit.scan.target_controls_pct =
+            object_controls_pct(worker.fit.scan.target_controls_pct, cell, coarsest);
         let wraps = worker.fit.domain == Domain::Auto && spread > VIEW_SPREAD_DEG;
         if wraps {
             worker.fit.domain = Domain::Mesh;
@@ -582,6 +585,21 @@ pub fn object_cell(spacings: impl Iterator<Item = f64>, opts: &MergeOptions) -> 
         .fold(None, |m: Option<f64>, s| Some(m.map_or(s, |m| m.max(s))))?;
     let raw = opts.cell_edges * coarsest;
     Some(2f64.powf((raw.log2() * 8.0).round() / 8.0))
+}
+
+/// The worker's control budget for the merged data. The budget is a share of the data
+/// points, and a merged vertex stands for the (cell / spacing)^2 scan points of its cell
+/// (2.25 at the default 1.5 edges): the share is scaled by that, so that an object gets
+/// the control density a single scan of it would (on the bunny's five views: 4118
+/// controls instead of 2957, the scans' median distance to the surface 0.75-1.00x their
+/// distance to bun_zipper instead of 0.96-1.20x).
+fn object_controls_pct(scan_pct: f64, cell: f64, spacing: f64) -> f64 {
+    let points_per_vertex = if spacing > 0.0 && cell.is_finite() {
+        (cell / spacing).powi(2).max(1.0)
+    } else {
+        1.0
+    };
+    (scan_pct * points_per_vertex).min(100.0)
 }
 
 /// The weighted mean of a scan's sample normals, unit length (`None` if they cancel out).
