@@ -9,7 +9,9 @@
 //!    stages), the path, controls, merged points, the fit's RMS to the merged data and the
 //!    changed region.
 //! 3. At the end: each scan's distance to the surface beside its distance to bun_zipper;
-//!    how much of bun_zipper lies within 0.5 mm of the surface where the scans cover it.
+//!    how much of bun_zipper lies within 0.5 mm of the surface where the scans cover it
+//!    (a scan point within 1 mm), and of that, inside the scans' rim (scan points all
+//!    around it).
 //! 4. A new version of bun045 (its registration corrected by 30 um): the local update
 //!    (merge around the scan, refit of the controls around it) beside the same update
 //!    from scratch (`SessionOptions::cold`), their times and RMS and the two surfaces'
@@ -320,18 +322,21 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
             buckets.entry(key(p)).or_default().push(p);
         }
     }
-    let covered_at = |p: DVec3| {
+    let near = |p: DVec3| -> Vec<DVec3> {
         let (a, b, c) = key(p);
-        (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| {
-                (-1..=1).any(|dz| {
-                    buckets
-                        .get(&(a + dx, b + dy, c + dz))
-                        .is_some_and(|v| v.iter().any(|q| q.distance(p) <= COVER))
-                })
-            })
-        })
+        let mut found = Vec::new();
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(v) = buckets.get(&(a + dx, b + dy, c + dz)) {
+                        found.extend(v.iter().copied().filter(|q| q.distance(p) <= COVER));
+                    }
+                }
+            }
+        }
+        found
     };
+    let covered_at = |p: DVec3| !near(p).is_empty();
     let covered: Vec<DVec3> = zipper
         .positions
         .iter()
@@ -350,6 +355,60 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
         stats.max * 1e3,
         row(&stats)
     );
+    // Inside the data's rim: scan points all around the vertex in its tangent plane (no
+    // angular gap of half a turn). A vertex within 1 mm of a scan point but beyond the
+    // scans' rim lies where the surface, stopping at the rim, cannot be.
+    let normals = vertex_normals(zipper);
+    let (mut inside, mut inside_within, mut inside_max) = (0, 0, 0.0f64);
+    for (p, n) in zipper.positions.iter().zip(&normals) {
+        let around = near(*p);
+        if around.is_empty() || !surrounded(*p, *n, &around) {
+            continue;
+        }
+        let Some(d) = query.distance(*p) else {
+            continue;
+        };
+        inside += 1;
+        inside_within += usize::from(d <= 5e-4);
+        inside_max = inside_max.max(d);
+    }
+    println!(
+        "  of which inside the scans' rim ({inside} vertices): {:.2} % within 0.5 mm, max {:.3} mm",
+        100.0 * inside_within as f64 / inside.max(1) as f64,
+        inside_max * 1e3
+    );
+}
+
+/// Area-weighted vertex normals.
+fn vertex_normals(mesh: &TriMesh) -> Vec<DVec3> {
+    let mut normals = vec![DVec3::ZERO; mesh.positions.len()];
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+        for v in t {
+            normals[*v as usize] += (b - a).cross(c - a);
+        }
+    }
+    normals.iter().map(|n| n.normalize_or_zero()).collect()
+}
+
+/// Whether `points` surround `p` in the plane of `normal`: their directions from `p`
+/// leave no angular gap of half a turn or more.
+fn surrounded(p: DVec3, normal: DVec3, points: &[DVec3]) -> bool {
+    let e1 = normal.any_orthonormal_vector();
+    let e2 = normal.cross(e1);
+    let mut angles: Vec<f64> = points
+        .iter()
+        .map(|q| *q - p)
+        .filter(|d| d.length() > 1e-9)
+        .map(|d| d.dot(e2).atan2(d.dot(e1)))
+        .collect();
+    if angles.len() < 3 {
+        return false;
+    }
+    angles.sort_by(f64::total_cmp);
+    let wrap = angles[0] + std::f64::consts::TAU - angles[angles.len() - 1];
+    let gap = angles.windows(2).map(|w| w[1] - w[0]).fold(wrap, f64::max);
+    gap < std::f64::consts::PI
 }
 
 /// Which of bun_zipper's vertices the merged data (what the surface is fitted to) already
