@@ -367,11 +367,7 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
-        let reshaped = self
-            .last
-            .as_ref()
-            .and_then(|last| topology_change(&last.data_topology, &merged));
-        let cold_because = self.why_cold(before.is_some(), coverage_change, reshaped);
+        let cold_because = self.why_cold(before.is_some(), coverage_change, &merged);
         let (fitted, local) = match cold_because {
             None => self.refit_locally(&merged, &worker)?,
             Some(_) => (self.fit_cold(&merged, coverage_change, &mut worker)?, None),
@@ -446,32 +442,25 @@ impl ObjectSession {
     }
 
     /// Why this update cannot refit the previous control mesh locally (`None`: it can).
-    fn why_cold(
-        &self,
-        same_grid: bool,
-        coverage_change: f64,
-        topology_change: Option<String>,
-    ) -> Option<String> {
+    fn why_cold(&self, same_grid: bool, coverage_change: f64, merged: &Merged) -> Option<String> {
         if self.opts.cold {
             return Some("cold updates asked for".into());
         }
-        if self.last.is_none() {
+        let Some(last) = self.last.as_ref() else {
             return Some("no previous object fit".into());
-        }
+        };
         if !same_grid {
             return Some("the merge cell changed".into());
         }
-        // A local refit keeps the control mesh, so it keeps its holes and handles: a view
-        // that closes a hole must rebuild it, however few cells it adds.
-        if topology_change.is_some() {
-            return topology_change;
-        }
-        (coverage_change > WARM_MAX_COVERAGE_CHANGE).then(|| {
-            format!(
+        if coverage_change > WARM_MAX_COVERAGE_CHANGE {
+            return Some(format!(
                 "coverage changed: {:.1} % of the merged cells appeared or went",
                 100.0 * coverage_change
-            )
-        })
+            ));
+        }
+        // A local refit keeps the control mesh, so it keeps its holes and handles: a view
+        // that closes a hole must rebuild it, however few cells it adds.
+        topology_change(&last.data_topology, merged)
     }
 
     /// The local refit of the previous control mesh; from scratch if it finds no data on
