@@ -25,40 +25,37 @@ const MAX_LOOP_EDGES: usize = 32;
 /// Closes the holes of `mesh` that lie inside the data (see the module docs); returns how
 /// many were closed.
 pub(super) fn close_holes_inside_data(mesh: &mut TriMesh, implicit: &Implicit) -> usize {
-    let mut edges: FxHashSet<(u32, u32)> = FxHashSet::default();
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            edges.insert((t[k], t[(k + 1) % 3]));
-        }
-    }
+    let mut edges: FxHashSet<(u32, u32)> = directed_edges(&mesh.triangles).collect();
     let mut closed = 0;
     for ring in boundary_loops(&mesh.triangles, &edges) {
         let Some(triangles) = fill(&ring, &mesh.positions, &edges, implicit) else {
             continue;
         };
-        for t in &triangles {
-            for k in 0..3 {
-                edges.insert((t[k], t[(k + 1) % 3]));
-            }
-        }
+        edges.extend(directed_edges(&triangles));
         mesh.triangles.extend(triangles);
         closed += 1;
     }
     closed
 }
 
+/// The edges of `triangles` in the direction each face runs them.
+fn directed_edges(triangles: &[[u32; 3]]) -> impl Iterator<Item = (u32, u32)> + '_ {
+    triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+}
+
 /// The loops of boundary edges (edges whose reverse no face runs) of at most
 /// `MAX_LOOP_EDGES`, each in the direction its faces run it, in the order of their
 /// smallest vertex; loops through a vertex with several boundary edges out are skipped.
+/// Not `remesh::boundary_loops`: that walks a half-edge `Topology`, which the merged mesh,
+/// with surface nets' few non-manifold spots, may not have.
 fn boundary_loops(triangles: &[[u32; 3]], edges: &FxHashSet<(u32, u32)>) -> Vec<Vec<u32>> {
     let mut next: FxHashMap<u32, Option<u32>> = FxHashMap::default();
-    for t in triangles {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            if !edges.contains(&(b, a)) {
-                // A second boundary edge out of `a` makes the walk ambiguous.
-                next.entry(a).and_modify(|n| *n = None).or_insert(Some(b));
-            }
+    for (a, b) in directed_edges(triangles) {
+        if !edges.contains(&(b, a)) {
+            // A second boundary edge out of `a` makes the walk ambiguous.
+            next.entry(a).and_modify(|n| *n = None).or_insert(Some(b));
         }
     }
     let mut starts: Vec<u32> = next.keys().copied().collect();
@@ -180,7 +177,7 @@ fn is_ear(a: usize, b: usize, c: usize, left: &[usize], plane: &[DVec2]) -> bool
 
 #[cfg(test)]
 mod tests {
-    use super::{boundary_loops, ear_clip};
+    use super::{boundary_loops, directed_edges, ear_clip};
     use glam::{DVec2, DVec3};
     use rustc_hash::FxHashSet;
 
@@ -201,21 +198,23 @@ mod tests {
         let positions: Vec<DVec3> = (0..16)
             .map(|v| DVec3::new((v % 4) as f64, (v / 4) as f64, 0.0))
             .collect();
-        let edges: FxHashSet<(u32, u32)> = triangles
-            .iter()
-            .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
-            .collect();
+        let edges: FxHashSet<(u32, u32)> = directed_edges(&triangles).collect();
+        // A loop reversed (as the fill runs it) and its corners in the grid's plane.
+        let reversed = |ring: &[u32]| -> (Vec<u32>, Vec<DVec2>) {
+            let polygon: Vec<u32> = ring.iter().rev().copied().collect();
+            let plane = polygon
+                .iter()
+                .map(|&v| positions[v as usize].truncate())
+                .collect();
+            (polygon, plane)
+        };
         let loops = boundary_loops(&triangles, &edges);
         // The outer rim (12 edges) and the hole (4 edges).
         let mut lengths: Vec<usize> = loops.iter().map(|l| l.len()).collect();
         lengths.sort_unstable();
         assert_eq!(lengths, vec![4, 12]);
         let hole = loops.iter().find(|l| l.len() == 4).expect("hole");
-        let polygon: Vec<u32> = hole.iter().rev().copied().collect();
-        let plane: Vec<DVec2> = polygon
-            .iter()
-            .map(|&v| positions[v as usize].truncate())
-            .collect();
+        let (polygon, plane) = reversed(hole);
         let fill = ear_clip(&polygon, &plane, &positions, &edges).expect("fill");
         assert_eq!(fill.len(), 2);
         // The fill runs every hole edge the other way round: the mesh is closed there.
@@ -231,11 +230,7 @@ mod tests {
         }
         // The outer rim, run the wrong way round, is no counter-clockwise polygon.
         let rim = loops.iter().find(|l| l.len() == 12).expect("rim");
-        let polygon: Vec<u32> = rim.iter().rev().copied().collect();
-        let plane: Vec<DVec2> = polygon
-            .iter()
-            .map(|&v| positions[v as usize].truncate())
-            .collect();
+        let (polygon, plane) = reversed(rim);
         assert!(ear_clip(&polygon, &plane, &positions, &edges).is_none());
     }
 }

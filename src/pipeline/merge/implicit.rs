@@ -93,22 +93,14 @@ impl Implicit<'_> {
     pub(super) fn refine(&self, x: DVec3, normal: DVec3) -> Option<DVec3> {
         let e1 = normal.any_orthonormal_vector();
         let e2 = normal.cross(e1);
-        let r2 = self.radius * self.radius;
         let inv = 1.0 / (self.sigma * self.sigma);
         let scale = 1.0 / self.sigma;
         let mut normal_matrix = Matrix6::<f64>::zeros();
         let mut rhs = Vector6::<f64>::zeros();
         let mut count = 0;
         let mut total = 0.0;
-        self.index.around(x, |s, i| {
-            let scan = self.scans[s as usize];
-            let p = scan.points[i as usize];
-            let d = p - x;
-            let d2 = d.length_squared();
-            if d2 > r2 || scan.normals[i as usize].dot(normal) < SAME_SHEET_COS {
-                return;
-            }
-            let w = scan.weights[i as usize] * (-d2 * inv).exp();
+        self.same_sheet_around(x, normal, |d, weight| {
+            let w = weight * (-d.length_squared() * inv).exp();
             let (u, v) = (d.dot(e1) * scale, d.dot(e2) * scale);
             let basis = Vector6::new(1.0, u, v, u * u, u * v, v * v);
             normal_matrix += w * basis * basis.transpose();
@@ -137,16 +129,25 @@ impl Implicit<'_> {
     pub(super) fn overhang(&self, x: DVec3, normal: DVec3) -> Option<f64> {
         let e1 = normal.any_orthonormal_vector();
         let e2 = normal.cross(e1);
-        let r2 = self.radius * self.radius;
         let mut projected: Vec<DVec2> = Vec::with_capacity(64);
+        self.same_sheet_around(x, normal, |d, _| {
+            projected.push(DVec2::new(d.dot(e1), d.dot(e2)));
+        });
+        super::support::distance_to_hull(&mut projected)
+    }
+
+    /// Calls `visit` with the offset from `x` and the weight of every sample within the
+    /// radius whose normal is within `SAME_SHEET_COS` of `normal` (the sheet `x` is on).
+    fn same_sheet_around(&self, x: DVec3, normal: DVec3, mut visit: impl FnMut(DVec3, f64)) {
+        let r2 = self.radius * self.radius;
         self.index.around(x, |s, i| {
             let scan = self.scans[s as usize];
             let d = scan.points[i as usize] - x;
-            if d.length_squared() <= r2 && scan.normals[i as usize].dot(normal) >= SAME_SHEET_COS {
-                projected.push(DVec2::new(d.dot(e1), d.dot(e2)));
+            if d.length_squared() > r2 || scan.normals[i as usize].dot(normal) < SAME_SHEET_COS {
+                return;
             }
+            visit(d, scan.weights[i as usize]);
         });
-        super::support::distance_to_hull(&mut projected)
     }
 
     /// The function at `x`; `None` where no sample lies within the radius (or their weights
