@@ -199,6 +199,14 @@ fn face_normal(p: [DVec3; 3]) -> DVec3 {
     (p[1] - p[0]).cross(p[2] - p[0])
 }
 
+/// A ball holding the triangle: its centroid, and the distance to its furthest corner
+/// (a little more, for rounding).
+fn bounding_ball(t: [DVec3; 3]) -> (DVec3, f64) {
+    let centre = (t[0] + t[1] + t[2]) / 3.0;
+    let radius = t.iter().map(|c| c.distance(centre)).fold(0.0, f64::max);
+    (centre, radius * (1.0 + 1e-12))
+}
+
 fn quality(p: [DVec3; 3]) -> f64 {
     let edges = (p[1] - p[0]).length_squared()
         + (p[2] - p[1]).length_squared()
@@ -605,19 +613,34 @@ impl<'a> State<'a> {
     }
 
     /// Re-projects the input points of the faces a collapse changed onto the nearest face
-    /// of the new fan around `k`.
+    /// of the new fan around `k` (the first in fan order on a tie). Most points stay on or
+    /// beside the face they were on, so a fan face whose bounding ball lies further from
+    /// the point than that face (or than the nearest face found so far) cannot win and is
+    /// not projected onto: the same faces win as when every fan face is tried.
     fn carry_points(&mut self, k: u32, affected: &[u32]) {
         let fan = &self.vfaces[k as usize];
+        let triangles: Vec<[DVec3; 3]> = fan
+            .iter()
+            .map(|&f| self.faces[f as usize].map(|v| self.pos[v as usize]))
+            .collect();
+        let balls: Vec<(DVec3, f64)> = triangles.iter().map(|t| bounding_ball(*t)).collect();
         let mut points = Vec::new();
         for &f in affected {
             points.append(&mut self.face_points[f as usize]);
         }
         for p in points {
             let q = self.input[p as usize];
+            let was_on = fan.iter().position(|&f| f == self.land_face[p as usize]);
+            let bound = was_on.map_or(f64::INFINITY, |i| project_onto_triangle(q, triangles[i]).0);
             let mut best = (f64::INFINITY, fan[0], [1.0, 0.0, 0.0]);
-            for &f in fan {
-                let tri = self.faces[f as usize].map(|v| self.pos[v as usize]);
-                let (d2, bary) = project_onto_triangle(q, tri);
+            for (i, &f) in fan.iter().enumerate() {
+                let (centre, radius) = balls[i];
+                let gap = q.distance(centre) - radius;
+                // The slack covers the rounding of the distances compared.
+                if gap > 0.0 && gap * gap > best.0.min(bound) * (1.0 + 1e-9) {
+                    continue;
+                }
+                let (d2, bary) = project_onto_triangle(q, triangles[i]);
                 if d2 < best.0 {
                     best = (d2, f, bary);
                 }

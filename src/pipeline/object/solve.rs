@@ -288,11 +288,15 @@ impl Feet {
         start: &[SurfaceParam],
     ) -> Feet {
         let evaluate = surface.evaluator(controls);
-        let found: Vec<(SurfaceParam, DVec3, f64)> = data
+        // Points taken face by face: the evaluator keeps the last leaf patch of an
+        // irregular face it evaluated, which serves the next point on that face again.
+        let mut order: Vec<u32> = (0..data.len() as u32).collect();
+        order.sort_by_key(|&i| start[i as usize].face);
+        let by_face: Vec<(SurfaceParam, DVec3, f64)> = order
             .par_iter()
-            .zip(start.par_iter())
             .with_min_len(256)
-            .map(|(p, s)| {
+            .map(|&i| {
+                let (p, s) = (&data[i as usize], &start[i as usize]);
                 let (param, d) = foot_point(surface, &*evaluate, *p, *s);
                 let r = d.position - *p;
                 // Where the tangents degenerate the residual is the best normal at hand.
@@ -303,6 +307,21 @@ impl Feet {
                 (param, n, r.length())
             })
             .collect();
+        let mut found = vec![
+            (
+                SurfaceParam {
+                    face: 0,
+                    u: 0.0,
+                    v: 0.0
+                },
+                DVec3::ZERO,
+                0.0
+            );
+            data.len()
+        ];
+        for (&i, f) in order.iter().zip(by_face) {
+            found[i as usize] = f;
+        }
         let mut feet = Feet {
             params: Vec::with_capacity(found.len()),
             normals: Vec::with_capacity(found.len()),

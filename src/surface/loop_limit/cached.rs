@@ -15,13 +15,14 @@ use std::sync::atomic::{AtomicU64, Ordering};
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
 /// The last irregular-face leaf each thread evaluated: evaluator id, the leaf patch's
-/// address, its ordinates and base. Consecutive evaluations (Newton steps of one point,
+/// address and the face (faces of one 1-ring shape share their leaves, each over its own
+/// controls), its ordinates and base. Consecutive evaluations (Newton steps of one point,
 /// neighbouring data points) mostly land in the same leaf, whose ordinates then cost
 /// nothing.
-type LeafMemo = (u64, usize, [DVec3; 15], DVec3);
+type LeafMemo = (u64, (usize, usize), [DVec3; 15], DVec3);
 
 thread_local! {
-    static LAST_LEAF: Cell<LeafMemo> = const { Cell::new((0, 0, [DVec3::ZERO; 15], DVec3::ZERO)) };
+    static LAST_LEAF: Cell<LeafMemo> = const { Cell::new((0, (0, 0), [DVec3::ZERO; 15], DVec3::ZERO)) };
 }
 
 pub(super) struct CachedEvaluator<'a> {
@@ -67,7 +68,7 @@ impl<'a> CachedEvaluator<'a> {
                     // are scaled by 2^depth in the derivatives, so their rounding must
                     // be that of the local geometry, not of the coordinates' magnitude
                     // (the rows get the same from `restore_sums`).
-                    let key = rp as *const _ as usize;
+                    let key = (rp as *const _ as usize, f);
                     let (id, at, mut ords, mut base) = LAST_LEAF.get();
                     if (id, at) != (self.id, key) {
                         let origin = self.controls[ip.support[0] as usize];

@@ -13,7 +13,10 @@
 //! descent follows the child containing the parameter until the child is regular. Every
 //! local vertex is kept as weights over the face's original 1-ring, so the final row is in
 //! original control indices. The child nets are memoised per quadtree node
-//! (`OnceLock`, so the surface is `Sync` and rows can be built from many threads).
+//! (`OnceLock`, so the surface is `Sync` and rows can be built from many threads), and
+//! a quadtree is a function of its root net, which lists the 1-ring in a canonical order:
+//! faces whose 1-rings have one shape share one quadtree (`reuse`), their leaves mapped
+//! to each face's own controls.
 //!
 //! Only original vertices can be irregular (subdivision adds interior vertices of valence 6
 //! and boundary vertices with 3 faces), so a descent goes deep only towards one of them:
@@ -39,6 +42,7 @@ mod error;
 mod net;
 mod patch;
 mod reuse;
+mod roots;
 mod sums;
 
 pub use error::LoopLimitError;
@@ -48,7 +52,6 @@ use crate::mesh::topology::{Topology, NONE};
 use glam::DVec3;
 use net::{Net, Term, VertexRule};
 use patch::{add_column, add_patch_rows, cap_rows, pick_child, Jac, RegularPatch};
-use rayon::prelude::*;
 use std::sync::OnceLock;
 use sums::{restore_sum, restore_sums};
 
@@ -93,15 +96,16 @@ impl Node {
 struct IrregularPatch {
     /// Original control index of each support column (the face's 1-ring).
     support: Vec<u32>,
-    root: Node,
+    /// The quadtree of child nets, shared by every face of the same 1-ring shape (see
+    /// `reuse`): it is a function of the root net alone, which is the identity over the
+    /// support in the canonical order of `face_net`.
+    root: std::sync::Arc<Node>,
     /// Depth at which the descent stops (see `cap_rows`).
     cap: usize,
 }
 
 enum FacePatch {
     Regular(RegularPatch),
-    /// Shared: a refined control mesh's surface reuses the patches (with their memoised
-    /// nodes) of faces whose 1-ring did not change (`with_creases_reusing`).
     Irregular(std::sync::Arc<IrregularPatch>),
 }
 
@@ -145,9 +149,9 @@ impl LoopLimitSurface {
         Self::build(control_count, faces, crease_edges, None)
     }
 
-    /// [`Self::with_creases`], reusing the patches of `previous` (with what their
-    /// evaluations memoised) for faces whose corners, in order, and 1-ring are unchanged:
-    /// a patch depends on nothing else, so the surface is the same as built afresh. A
+    /// [`Self::with_creases`], taking over the quadtrees of `previous` (with what its
+    /// evaluations memoised) for faces whose 1-ring has the shape of one of its faces':
+    /// a quadtree depends on nothing else, so the surface is the same as built afresh. A
     /// locally refined control mesh keeps most of its faces' 1-rings.
     pub fn with_creases_reusing(
         control_count: usize,
@@ -189,19 +193,7 @@ impl LoopLimitSurface {
             return Err(LoopLimitError::IsolatedVertex { vertex });
         }
         let (creases, crease_half) = Self::crease_halfedges(&topo, crease_edges)?;
-        let reusable = previous.map(reuse::Reusable::new);
-        let patches = (0..faces.len())
-            .into_par_iter()
-            .with_min_len(64)
-            .map(|f| match &reusable {
-                Some(r) => {
-                    let (support, net) = Self::face_net(&topo, &crease_half, f);
-                    r.patch(faces[f], &support, &net)
-                        .unwrap_or_else(|| Self::patch_of(support, net))
-                }
-                None => Self::face_patch(&topo, &crease_half, f),
-            })
-            .collect();
+        let patches = Self::patches(&topo, &crease_half, previous);
         Ok(Self {
             control_count,
             topo,
@@ -270,96 +262,6 @@ impl LoopLimitSurface {
             .iter()
             .filter(|p| matches!(p, FacePatch::Irregular(_)))
             .count()
-    }
-
-    fn face_patch(topo: &Topology, crease_half: &[bool], f: usize) -> FacePatch {
-        let (support, net) = Self::face_net(topo, crease_half, f);
-        Self::patch_of(support, net)
-    }
-
-    /// The root net of face `f` (its 1-ring, vertices as weights over themselves) and the
-    /// original control index of each support column.
-    fn face_net(topo: &Topology, crease_half: &[bool], f: usize) -> (Vec<u32>, Net) {
-        let corners = topo.triangles[f];
-        let mut support: Vec<u32> = corners.to_vec();
-        let mut faces = vec![f];
-        for &c in &corners {
-            for &h in topo.ring_halfedges(c) {
-                if h != NONE && !faces.contains(&((h / 3) as usize)) {
-                    faces.push((h / 3) as usize);
-                }
-            }
-        }
-        let mut tris = Vec::with_capacity(faces.len());
-        let mut bnd = Vec::with_capacity(faces.len());
-        let mut crease = Vec::with_capacity(faces.len());
-        for &g in &faces {
-            let mut t = [0u32; 3];
-            for (k, &v) in topo.triangles[g].iter().enumerate() {
-                t[k] = match support.iter().position(|&s| s == v) {
-                    Some(i) => i as u32,
-                    None => {
-                        support.push(v);
-                        (support.len() - 1) as u32
-                    }
-                };
-            }
-            tris.push(t);
-            bnd.push([0, 1, 2].map(|k| topo.twin[3 * g + k] == NONE));
-            crease.push([0, 1, 2].map(|k| crease_half[3 * g + k]));
-        }
-        let n = support.len();
-        let mut base = vec![0.0; n];
-        base[0] = 1.0;
-        let mut rows = vec![0.0; n * n];
-        for i in 1..n {
-            rows[i * n + i] = 1.0;
-            rows[i * n] = -1.0;
-        }
-        let net = Net {
-            base,
-            rows,
-            nsup: n,
-            tris,
-            bnd,
-            crease,
-            faces_total: support
-                .iter()
-                .map(|&v| topo.face_valence[v as usize])
-                .collect(),
-        };
-        (support, net)
-    }
-
-    /// The patch of a face from its root net (see `face_net`).
-    fn patch_of(support: Vec<u32>, net: Net) -> FacePatch {
-        if let Some(st) = net.regular_stencil() {
-            return FacePatch::Regular(RegularPatch::new(&net, &st, true, |s| support[s as usize]));
-        }
-        // Deep enough that the node's image is below f64 resolution: near an interior
-        // vertex of valence n the limit surface shrinks by the subdominant eigenvalue
-        // 3/8 + cos(2 pi / n) / 4 per level (at most 5/8; 80 levels of 5/8 is 5e-17).
-        // Near a boundary vertex the boundary curve shrinks by 1/2 per level; the
-        // cross-boundary rate is not derived here, so those take the full 80 as margin
-        // (the cap costs nothing unless a parameter is within 2^-cap of the vertex).
-        let cap = (0..3u32)
-            .filter_map(|v| net.vertex_rule(v))
-            .map(|k| match k {
-                VertexRule::Smooth { ring, dart: false } => {
-                    let lambda =
-                        0.375 + 0.25 * (2.0 * std::f64::consts::PI / ring.len() as f64).cos();
-                    (-38.0 / lambda.ln()).ceil() as usize
-                }
-                _ => 80,
-            })
-            .max()
-            .unwrap_or(80)
-            .clamp(60, 80);
-        FacePatch::Irregular(std::sync::Arc::new(IrregularPatch {
-            support,
-            root: Node::new(net),
-            cap,
-        }))
     }
 }
 
@@ -443,7 +345,7 @@ impl IrregularPatch {
         let at_corner = matches!((u, v), (1.0, 0.0) | (0.0, 1.0) | (0.0, 0.0));
         let (mut a, mut b) = (u, v);
         let mut jac = Jac::ID;
-        let mut node = &self.root;
+        let mut node: &Node = &self.root;
         let mut depth = 0;
         loop {
             if let Some(rp) = &node.regular {
@@ -463,7 +365,7 @@ impl IrregularPatch {
     fn descend(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
         let (mut a, mut b) = (u, v);
         let mut jac = Jac::ID;
-        let mut node = &self.root;
+        let mut node: &Node = &self.root;
         let mut depth = 0;
         loop {
             if let Some(rp) = &node.regular {

@@ -28,7 +28,8 @@ pub(super) struct Net {
     pub bnd: Vec<[bool; 3]>,
     /// Edge k of a triangle is a crease edge (both triangles of the edge say so).
     pub crease: Vec<[bool; 3]>,
-    /// Faces around each vertex in the whole mesh at this level (the net may hold fewer).
+    /// Faces around each vertex in the whole mesh at this level where the net holds them
+    /// all; more than the net holds (`PARTIAL_STAR` at the root) where it does not.
     pub faces_total: Vec<u32>,
 }
 

@@ -1,53 +1,66 @@
-//! Patches of a previous surface taken over by a new one over a changed control mesh.
+//! One quadtree of child nets per 1-ring shape, shared by the faces of that shape and
+//! handed on to the surface of a refined control mesh.
 //!
-//! Why: a whole-object fit refines its control mesh locally and builds the limit surface
-//! of each refined mesh; most of an irregular patch's cost is the quadtree of child nets
-//! its evaluations memoise, and faces away from the splits keep their 1-ring, so their
-//! patches (memo included) are the same and need not be built again.
+//! Why: most of an irregular patch's cost is the quadtree of child nets its evaluations
+//! memoise. A tree is a function of its root net alone, and a root net is the identity
+//! over the face's 1-ring listed in a canonical order (`LoopLimitSurface::face_net`), so
+//! it is fixed by the 1-ring's shape: triangles, boundary and crease flags and the faces
+//! around each vertex. A control mesh from simplification has few shapes (the valences of
+//! a face's corners and their neighbours), so faces share trees, and a refined control
+//! mesh finds most of its shapes already built, with their memo, in the previous surface.
 
 use super::net::Net;
-use super::{FacePatch, LoopLimitSurface};
+use super::{FacePatch, LoopLimitSurface, Node};
 use std::collections::HashMap;
+use std::sync::Arc;
 
-/// The irregular patches of a surface, by their face's corners in order.
-pub(super) struct Reusable<'a> {
-    surface: &'a LoopLimitSurface,
-    by_corners: HashMap<[u32; 3], usize>,
+/// What identifies a root net: everything in it but its weights, which are the identity.
+#[derive(Clone, PartialEq, Eq, Hash)]
+struct Shape {
+    tris: Vec<[u32; 3]>,
+    bnd: Vec<[bool; 3]>,
+    crease: Vec<[bool; 3]>,
+    faces_total: Vec<u32>,
 }
 
-impl<'a> Reusable<'a> {
-    pub(super) fn new(surface: &'a LoopLimitSurface) -> Self {
-        let by_corners = surface
-            .topo
-            .triangles
-            .iter()
-            .enumerate()
-            .filter(|&(f, _)| matches!(surface.patches[f], FacePatch::Irregular(_)))
-            .map(|(f, t)| (*t, f))
-            .collect();
+impl Shape {
+    fn of(net: &Net) -> Self {
         Self {
-            surface,
-            by_corners,
+            tris: net.tris.clone(),
+            bnd: net.bnd.clone(),
+            crease: net.crease.clone(),
+            faces_total: net.faces_total.clone(),
         }
     }
+}
 
-    /// The previous patch of the face with `corners`, if it was irregular and was built
-    /// from the same root net: the same support (original control indices) and the same
-    /// 1-ring (triangles, boundary and crease flags, faces around each support vertex).
-    /// A root net's weights are the identity over its support, so nothing else differs.
-    pub(super) fn patch(&self, corners: [u32; 3], support: &[u32], net: &Net) -> Option<FacePatch> {
-        let f = *self.by_corners.get(&corners)?;
-        let FacePatch::Irregular(ip) = self.surface.patches.get(f)? else {
-            return None;
-        };
-        let old = &ip.root.net;
-        let same = ip.support == support
-            && old.nsup == net.nsup
-            && old.tris == net.tris
-            && old.bnd == net.bnd
-            && old.crease == net.crease
-            && old.faces_total == net.faces_total;
-        same.then(|| FacePatch::Irregular(ip.clone()))
+/// The quadtrees built so far, by the shape of their root net.
+#[derive(Default)]
+pub(super) struct Trees {
+    by_shape: HashMap<Shape, Arc<Node>>,
+}
+
+impl Trees {
+    /// The trees of a surface's irregular faces.
+    pub(super) fn of(surface: &LoopLimitSurface) -> Self {
+        let mut trees = Self::default();
+        for patch in &surface.patches {
+            if let FacePatch::Irregular(ip) = patch {
+                trees
+                    .by_shape
+                    .entry(Shape::of(&ip.root.net))
+                    .or_insert_with(|| ip.root.clone());
+            }
+        }
+        trees
+    }
+
+    /// The tree whose root is `net`: one already built for its shape, else a new one.
+    pub(super) fn root(&mut self, net: Net) -> Arc<Node> {
+        self.by_shape
+            .entry(Shape::of(&net))
+            .or_insert_with(|| Arc::new(Node::new(net)))
+            .clone()
     }
 }
 
@@ -111,7 +124,8 @@ mod tests {
     }
 
     #[test]
-    fn a_refined_mesh_shares_the_unchanged_patches_and_evaluates_as_built_afresh() {
+    fn faces_of_one_shape_share_a_tree_which_a_refined_mesh_takes_over_and_evaluates_as_built_afresh(
+    ) {
         let (positions, faces) = sphere();
         let first = LoopLimitSurface::new(positions.len(), &faces).expect("a closed mesh");
         // Evaluations fill the first surface's memo, which the second then carries.
@@ -132,19 +146,59 @@ mod tests {
         let reused =
             LoopLimitSurface::with_creases_reusing(refined.len(), &refined_faces, &[], &first)
                 .expect("a closed mesh");
-        let shared = reused
-            .patches
-            .iter()
-            .filter(|p| matches!(p, FacePatch::Irregular(ip) if Arc::strong_count(ip) > 1))
-            .count();
-        // Faces near the split changed their 1-ring; the irregular ones on the far side
-        // of the sphere were taken over.
-        assert!(shared > 0, "no patch was reused");
-        assert!(shared < refined_faces.len(), "changed patches were reused");
+        let roots = |s: &LoopLimitSurface| -> Vec<*const Node> {
+            s.patches
+                .iter()
+                .filter_map(|p| match p {
+                    FacePatch::Irregular(ip) => Some(Arc::as_ptr(&ip.root)),
+                    _ => None,
+                })
+                .collect()
+        };
+        let before = roots(&first);
+        let after = roots(&reused);
+        let taken_over = after.iter().filter(|r| before.contains(r)).count();
+        // Faces of the split changed their 1-ring's shape (valences 4 and 7 appear); the
+        // irregular faces of the old shapes took over the first surface's trees.
+        assert!(taken_over > 0, "no tree was taken over");
+        assert!(taken_over < after.len(), "new shapes took over old trees");
+        // The icosahedron's irregular faces are the 60 corner children of its faces,
+        // each with its valence-5 corner first (`sphere`): one shape, one tree.
+        let mut distinct = before.clone();
+        distinct.sort();
+        distinct.dedup();
+        assert_eq!((before.len(), distinct.len()), (60, 1));
         assert_eq!(
             evaluate_all(&fresh, &refined),
             evaluate_all(&reused, &refined),
             "a reused patch evaluates differently"
         );
+    }
+
+    #[test]
+    fn faces_sharing_a_tree_evaluate_over_their_own_controls() {
+        let (positions, faces) = sphere();
+        let surface = LoopLimitSurface::new(positions.len(), &faces).expect("a closed mesh");
+        let shared: Vec<u32> = (0..faces.len() as u32)
+            .filter(|&f| matches!(surface.patches[f as usize], FacePatch::Irregular(_)))
+            .collect();
+        let evaluate = surface.evaluator(&positions);
+        // The same leaf of the shared tree, face after face: the evaluator's memo of the
+        // last leaf must not hand one face's surface to the next.
+        for &face in &shared {
+            let p = SurfaceParam {
+                face,
+                u: 0.1,
+                v: 0.05,
+            };
+            let cached = evaluate(p);
+            let direct = surface.evaluate(&positions, p);
+            assert!(
+                cached.position.distance(direct.position) < 1e-12,
+                "face {face}: {:?} vs {:?}",
+                cached.position,
+                direct.position
+            );
+        }
     }
 }
