@@ -42,6 +42,10 @@ use trispline::pipeline::object_session::{
 use trispline::pipeline::scattered::process_cpu_ms;
 use trispline::{DVec3, TriMesh};
 
+// The daemon's allocator, so that the update times are the daemon's.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 const SCANS: [&str; 5] = ["bun000", "bun045", "bun180", "bun270", "chin"];
 
 fn um(x: f64) -> f64 {
@@ -58,6 +62,7 @@ fn row(stats: &DistanceStats) -> String {
 }
 
 fn main() {
+    trispline::allocator::keep_freed_memory();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)
