@@ -290,7 +290,8 @@ impl Feet {
         let evaluate = surface.evaluator(controls);
         // Points taken face by face: the evaluator keeps the last leaf patch of an
         // irregular face it evaluated, which serves the next point on that face again.
-        let mut order: Vec<u32> = (0..data.len() as u32).collect();
+        let n = data.len().min(start.len());
+        let mut order: Vec<u32> = (0..n as u32).collect();
         order.sort_by_key(|&i| start[i as usize].face);
         let by_face: Vec<(SurfaceParam, DVec3, f64)> = order
             .par_iter()
@@ -307,30 +308,14 @@ impl Feet {
                 (param, n, r.length())
             })
             .collect();
-        let mut found = vec![
-            (
-                SurfaceParam {
-                    face: 0,
-                    u: 0.0,
-                    v: 0.0
-                },
-                DVec3::ZERO,
-                0.0
-            );
-            data.len()
-        ];
-        for (&i, f) in order.iter().zip(by_face) {
-            found[i as usize] = f;
-        }
         let mut feet = Feet {
-            params: Vec::with_capacity(found.len()),
-            normals: Vec::with_capacity(found.len()),
-            distances: Vec::with_capacity(found.len()),
+            params: start[..n].to_vec(),
+            normals: vec![DVec3::ZERO; n],
+            distances: vec![0.0; n],
         };
-        for (param, n, d) in found {
-            feet.params.push(param);
-            feet.normals.push(n);
-            feet.distances.push(d);
+        for (&i, (param, n, d)) in order.iter().zip(by_face) {
+            let i = i as usize;
+            (feet.params[i], feet.normals[i], feet.distances[i]) = (param, n, d);
         }
         feet
     }
