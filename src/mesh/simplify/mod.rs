@@ -631,7 +631,8 @@ impl<'a> State<'a> {
         for p in points {
             let q = self.input[p as usize];
             let was_on = fan.iter().position(|&f| f == self.land_face[p as usize]);
-            let bound = was_on.map_or(f64::INFINITY, |i| project_onto_triangle(q, triangles[i]).0);
+            let on_own = was_on.map(|i| (i, project_onto_triangle(q, triangles[i])));
+            let bound = on_own.map_or(f64::INFINITY, |(_, (d2, _))| d2);
             let mut best = (f64::INFINITY, fan[0], [1.0, 0.0, 0.0]);
             for (i, &f) in fan.iter().enumerate() {
                 let (centre, radius) = balls[i];
@@ -640,7 +641,10 @@ impl<'a> State<'a> {
                 if gap > 0.0 && gap * gap > best.0.min(bound) * (1.0 + 1e-9) {
                     continue;
                 }
-                let (d2, bary) = project_onto_triangle(q, triangles[i]);
+                let (d2, bary) = match on_own {
+                    Some((own, projected)) if own == i => projected,
+                    _ => project_onto_triangle(q, triangles[i]),
+                };
                 if d2 < best.0 {
                     best = (d2, f, bary);
                 }

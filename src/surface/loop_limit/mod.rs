@@ -106,7 +106,7 @@ struct IrregularPatch {
 
 enum FacePatch {
     Regular(RegularPatch),
-    Irregular(std::sync::Arc<IrregularPatch>),
+    Irregular(IrregularPatch),
 }
 
 /// The Loop limit surface over the faces of a control mesh.

@@ -8,7 +8,6 @@ use super::reuse::Trees;
 use super::{FacePatch, IrregularPatch, LoopLimitSurface};
 use crate::mesh::topology::{Topology, NONE};
 use rayon::prelude::*;
-use std::sync::Arc;
 
 /// The face count of a root-net vertex with faces outside the net: more than any net
 /// holds, which is all that its count is read for.
@@ -31,14 +30,12 @@ impl LoopLimitSurface {
         built
             .into_iter()
             .map(|b| match b {
-                Built::Regular(p) => p,
-                Built::Irregular { support, net, cap } => {
-                    FacePatch::Irregular(Arc::new(IrregularPatch {
-                        support,
-                        root: trees.root(net),
-                        cap,
-                    }))
-                }
+                Built::Regular(p) => FacePatch::Regular(p),
+                Built::Irregular { support, net, cap } => FacePatch::Irregular(IrregularPatch {
+                    support,
+                    root: trees.root(net),
+                    cap,
+                }),
             })
             .collect()
     }
@@ -142,12 +139,7 @@ impl LoopLimitSurface {
     /// The patch of a face from its root net (see `face_net`).
     fn patch_of(support: Vec<u32>, net: Net) -> Built {
         if let Some(st) = net.regular_stencil() {
-            return Built::Regular(FacePatch::Regular(RegularPatch::new(
-                &net,
-                &st,
-                true,
-                |s| support[s as usize],
-            )));
+            return Built::Regular(RegularPatch::new(&net, &st, true, |s| support[s as usize]));
         }
         // Deep enough that the node's image is below f64 resolution: near an interior
         // vertex of valence n the limit surface shrinks by the subdominant eigenvalue
@@ -174,7 +166,7 @@ impl LoopLimitSurface {
 
 /// A face's patch before irregular faces of the same shape are given one quadtree.
 enum Built {
-    Regular(FacePatch),
+    Regular(RegularPatch),
     Irregular {
         support: Vec<u32>,
         net: Net,
