@@ -113,6 +113,31 @@ fn a_torus_is_fitted_by_a_genus_one_control_mesh() {
 }
 
 #[test]
+fn isolated_points_beyond_the_tolerance_end_refinement_and_the_rounds_run_on() {
+    // One vertex pushed 0.1 off the torus: the only point a tolerance of 0.02 leaves
+    // beyond. Splitting an edge under it would buy a whole refit for one outlier.
+    let mut mesh = torus(96, 40);
+    let outlier = 1000;
+    let at = mesh.positions[outlier];
+    mesh.positions[outlier] = at * (1.0 + 0.1 / at.length());
+    let mut opts = ObjectOptions::default();
+    opts.refine.tolerance = Some(0.02);
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    eprintln!(
+        "outlier: refinement {:?}, rounds {:?}",
+        fit.refinement, fit.rounds
+    );
+    let first = fit.refinement[0];
+    assert!((1..=3).contains(&first.beyond), "beyond: {}", first.beyond);
+    assert_eq!(fit.refinement.len(), 1, "no refinement round ran");
+    assert_eq!(fit.controls.len(), first.controls);
+    // The fit before refinement ran only the intermediate rounds; the rest ran after.
+    assert!(fit.rounds.len() > opts.refine.intermediate_rounds + 1);
+    assert!(fit.rms < first.rms);
+    assert!(fit.rounds.windows(2).all(|w| w[1].rms < w[0].rms));
+}
+
+#[test]
 fn fertility_keeps_genus_four() {
     let Some(mesh) = load("models/fertility.off") else {
         return;
