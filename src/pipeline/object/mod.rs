@@ -21,6 +21,7 @@ mod layout;
 mod refine;
 mod solve;
 
+use crate::fit::distance::CholeskyPattern;
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
@@ -465,6 +466,7 @@ fn fit_from(
     let mut taken = 0;
     let nearest = opts.surface_samples.then(|| MeshDistance::new(&component));
     let mut sampled_faces = 0;
+    let mut pattern = CholeskyPattern::default();
     while taken < opts.rounds && refusals < MAX_REFUSALS {
         let samples = match &nearest {
             Some(nearest) => {
@@ -484,7 +486,7 @@ fn fit_from(
             samples: &samples,
             sample_tangential: share,
         };
-        let next_feet = round.solve(&feet, controls.clone()).map(|next| {
+        let next_feet = round.solve(&feet, controls.clone(), &mut pattern).map(|next| {
             let mut f = Feet::find(&surface, &next, &data, &feet.params);
             rim.hold(&mut f, &surface, &next, &data);
             (f, next)

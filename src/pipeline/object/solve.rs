@@ -3,7 +3,9 @@
 //! (The scan path has its own versions of these in `pipeline::scan_solve`, private there
 //! and tied to its grid plans; these are the plain sparse forms.)
 
-use crate::fit::distance::{solve_distance, solve_distance_direct, DistanceProblem};
+use crate::fit::distance::{
+    solve_distance, solve_distance_direct_reusing, CholeskyPattern, DistanceProblem,
+};
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
 use crate::mesh::distance::MeshDistance;
@@ -97,7 +99,13 @@ pub(super) struct DistanceRound<'a> {
 }
 
 impl DistanceRound<'_> {
-    pub(super) fn solve(&self, feet: &Feet, start: Vec<DVec3>) -> Option<Vec<DVec3>> {
+    /// The solve, through `pattern`: the rounds of one fit share its symbolic analysis.
+    pub(super) fn solve(
+        &self,
+        feet: &Feet,
+        start: Vec<DVec3>,
+        pattern: &mut CholeskyPattern,
+    ) -> Option<Vec<DVec3>> {
         let s = self.samples;
         let params: Vec<SurfaceParam> = feet.params.iter().chain(&s.params).copied().collect();
         let data: Vec<DVec3> = self.data.iter().chain(&s.targets).copied().collect();
@@ -117,7 +125,7 @@ impl DistanceRound<'_> {
             fairness: Some(self.fairness),
             smoothing: self.smoothing,
         };
-        let x = match solve_distance_direct(&problem) {
+        let x = match solve_distance_direct_reusing(&problem, pattern) {
             Some(x) => x,
             None => solve_distance(&problem, start, self.max_iterations, CG_REL_TOL).0,
         };
