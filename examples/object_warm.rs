@@ -65,7 +65,11 @@ fn vertex_normals(mesh: &TriMesh) -> Vec<DVec3> {
     normals.iter().map(|n| n.normalize_or_zero()).collect()
 }
 
-fn timed(mesh: &TriMesh, warm: Option<&WarmStart>, cfg: &WorkerConfig) -> Option<(f64, PatchOutputs)> {
+fn timed(
+    mesh: &TriMesh,
+    warm: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+) -> Option<(f64, PatchOutputs)> {
     let mut best: Option<(f64, PatchOutputs)> = None;
     for _ in 0..RUNS {
         let t = Instant::now();

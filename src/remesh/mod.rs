@@ -38,6 +38,14 @@ pub enum RemeshError {
     /// The map onto the plane could not be computed or folds.
     #[error("parameterization failed: {0}")]
     Parameterization(#[source] MapFailure),
+    /// No height field, and the disk map squeezes much of the surface (see
+    /// `PlanarMap::undersampled_share`): a lattice over it would leave that part with a
+    /// fraction of its share of the controls.
+    #[error("not disk-like enough: the disk map gives {:.0} % of the surface less than a tenth of its share of the domain", 100.0 * share)]
+    Distorted {
+        /// The share of the surface's area so squeezed.
+        share: f64,
+    },
 }
 
 impl RemeshError {
@@ -48,6 +56,7 @@ impl RemeshError {
             Self::Closed => "closed",
             Self::NotDisk { .. } => "not_disk",
             Self::Parameterization(_) => "parameterization",
+            Self::Distorted { .. } => "distorted",
         }
     }
 }

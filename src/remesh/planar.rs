@@ -175,6 +175,39 @@ pub struct PlanarMap {
     pub folds_warped: usize,
 }
 
+impl PlanarMap {
+    /// The share of the surface's area (over `mesh`'s triangles) that the map gives less
+    /// than `1 / factor` of its share of the plane: where a lattice over the plane puts
+    /// fewer than `1 / factor` of the controls the area would get on an even layout.
+    pub fn undersampled_share(&self, factor: f64) -> f64 {
+        let areas: Vec<(f64, f64)> = self
+            .mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| self.mesh.positions[v as usize]);
+                let [p, q, r] = t.map(|v| self.plane[v as usize]);
+                (
+                    0.5 * (b - a).cross(c - a).length(),
+                    0.5 * (q - p).perp_dot(r - p).abs(),
+                )
+            })
+            .collect();
+        let (total_3d, total_2d) = areas
+            .iter()
+            .fold((0.0, 0.0), |(s, t), (a, b)| (s + a, t + b));
+        if !(total_3d > 0.0 && total_2d > 0.0) {
+            return 0.0;
+        }
+        let squeezed: f64 = areas
+            .iter()
+            .filter(|(a3, a2)| factor * a2 / total_2d < a3 / total_3d)
+            .map(|(a3, _)| a3)
+            .sum();
+        squeezed / total_3d
+    }
+}
+
 /// Longest hole rim closed by ear clipping.
 const MAX_EAR_CLIP: usize = 1000;
 

@@ -14,6 +14,7 @@ use trispline::pipeline::worker::{
     fit_patch, run_input, run_patch, Domain, FittedPatch, WorkerConfig,
 };
 use trispline::pipeline::PipelineError;
+use trispline::remesh::planar::MapMethod;
 use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
@@ -261,6 +262,81 @@ fn dispatch_follows_the_domain() {
     assert_eq!(info.control_topology.boundary_loops, 1);
     let rms = mesh.fit.geometric_rms();
     assert!(rms < 2e-3 * patch.bounds_diagonal(), "RMS {rms}");
+}
+
+/// A test tube: a cylinder of radius 1 and length `length`, open at z = 0 and closed by a
+/// hemisphere. A disk, but no height field over any plane.
+fn test_tube(length: f64, around: usize, rings: usize) -> TriMesh {
+    let cap_rings = rings / 3;
+    let mut positions = Vec::new();
+    for r in 0..rings {
+        let (radius, z) = if r < rings - cap_rings {
+            (1.0, length * r as f64 / (rings - cap_rings) as f64)
+        } else {
+            let a = 0.5 * PI * (r - (rings - cap_rings)) as f64 / cap_rings as f64;
+            (a.cos(), length + a.sin())
+        };
+        for k in 0..around {
+            let t = TAU * (k as f64 + 0.5 * (r % 2) as f64) / around as f64;
+            positions.push(DVec3::new(radius * t.cos(), radius * t.sin(), z));
+        }
+    }
+    let pole = positions.len() as u32;
+    positions.push(DVec3::new(0.0, 0.0, length + 1.0));
+    let at = |r: usize, k: usize| (r * around + k % around) as u32;
+    let mut triangles = Vec::new();
+    for r in 0..rings - 1 {
+        for k in 0..around {
+            // Rings alternate their half-step offset, so the strip's diagonals alternate.
+            let (a, b, c, d) = (at(r, k), at(r, k + 1), at(r + 1, k), at(r + 1, k + 1));
+            if r % 2 == 0 {
+                triangles.extend([[a, d, c], [a, b, d]]);
+            } else {
+                triangles.extend([[a, b, c], [b, d, c]]);
+            }
+        }
+    }
+    for k in 0..around {
+        triangles.push([at(rings - 1, k), at(rings - 1, k + 1), pole]);
+    }
+    TriMesh::new(positions, triangles)
+}
+
+#[test]
+fn a_disk_the_disk_map_squeezes_is_fitted_whole() {
+    // The disk map takes the rim to the unit circle and squeezes the tube towards its
+    // bottom exponentially: a lattice over it would leave most of the tube without controls.
+    let tube = test_tube(3.0, 48, 60);
+    let auto = fit_patch(&tube, None, &config(Domain::Auto, 5.0)).expect("fits");
+    let reason = &auto.object.as_ref().expect("object path").reason;
+    assert!(reason.contains("not disk-like enough"), "{reason}");
+    let grid = fit_patch(&tube, None, &config(Domain::Grid, 5.0)).expect("grid fits");
+    let scan = grid.scan.as_ref().expect("grid path");
+    assert_eq!(scan.mapping.method, MapMethod::MeanValueDisk);
+    let (whole, lattice) = (auto.fit.geometric_rms(), grid.fit.geometric_rms());
+    eprintln!(
+        "test tube: whole {whole:.2e} ({} controls), grid {lattice:.2e} ({} controls)",
+        auto.fit.controls.len(),
+        grid.fit.controls.len()
+    );
+    assert!(auto.fit.controls.len() <= grid.fit.controls.len());
+    assert!(whole < 0.25 * lattice, "whole {whole}, grid {lattice}");
+}
+
+#[test]
+fn camelhead_is_fitted_whole() {
+    let Some(path) = shared_data("models/camelhead.off") else {
+        return;
+    };
+    let mesh = read_mesh_file(&path, &LoadOptions::default())
+        .expect("camelhead reads")
+        .mesh;
+    let fitted = fit_patch(&mesh, None, &config(Domain::Auto, 5.0)).expect("fits");
+    let reason = &fitted.object.as_ref().expect("object path").reason;
+    assert!(reason.contains("not disk-like enough"), "{reason}");
+    // The disk map's grid fit stood at 13 mm RMS (diagonal 1.0); whole, 0.24 mm.
+    let rms = fitted.fit.geometric_rms();
+    assert!(rms < 1e-3 * mesh.bounds_diagonal(), "RMS {rms}");
 }
 
 #[test]

@@ -39,7 +39,7 @@ use corners::rim_corners;
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
-use refine::{refined_mesh, Fitted};
+use refine::{faces_beyond, refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
@@ -48,12 +48,13 @@ use std::time::Instant;
 /// stop.
 const MAX_REFUSALS: usize = 3;
 
-/// A refinement round must split at least one edge per this many controls. A round is a
-/// whole refit, and points beyond the tolerance on so few faces are isolated (outliers,
-/// noise spikes) rather than shape the control mesh misses: on bun_zipper subdivided once
-/// (139k points, 250 um tolerance) three rounds split 1-2 edges each, took 3.8 of the 7.4 s,
-/// and the max moved 257 -> 285 -> 314 -> 270 um.
-const MIN_SPLIT_SHARE: usize = 100;
+/// A refinement round needs at least one control face with points beyond the tolerance,
+/// and one edge to split, per this many controls. A round is a whole refit, and points
+/// beyond the tolerance on so few faces are isolated (outliers, noise spikes) rather than
+/// shape the control mesh misses: on bun_zipper subdivided once (139k points, 250 um
+/// tolerance) three rounds for one or two such points each took 3.8 of the 7.4 s, and the
+/// max moved 257 -> 285 -> 314 -> 270 um.
+const MIN_FACES_BEYOND_SHARE: usize = 100;
 
 /// Controls a hole's rim keeps at least (fewer pull the rim's limit curve inward: it is the
 /// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
@@ -486,11 +487,13 @@ fn fit_from(
             samples: &samples,
             sample_tangential: share,
         };
-        let next_feet = round.solve(&feet, controls.clone(), &mut pattern).map(|next| {
-            let mut f = Feet::find(&surface, &next, &data, &feet.params);
-            rim.hold(&mut f, &surface, &next, &data);
-            (f, next)
-        });
+        let next_feet = round
+            .solve(&feet, controls.clone(), &mut pattern)
+            .map(|next| {
+                let mut f = Feet::find(&surface, &next, &data, &feet.params);
+                rim.hold(&mut f, &surface, &next, &data);
+                (f, next)
+            });
         let before = feet.rms();
         let Some((next_feet, next)) = next_feet.filter(|(f, _)| f.rms() < before) else {
             refusals += 1;
@@ -617,11 +620,14 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             params: &fit.params,
             distances: &fit.distances,
         };
-        let Some(refined) = refined_mesh(&fitted, add, tolerance, &opts.layout) else {
+        if faces_beyond(&fitted, tolerance) * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
+            break;
+        }
+        let Some(refined) = refined_mesh(&fitted, add, &opts.layout) else {
             break;
         };
         let splits = refined.mesh.positions.len() - fit.controls.len();
-        if splits * MIN_SPLIT_SHARE < fit.controls.len() {
+        if splits * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
             break;
         }
         // Only the last fit runs all its rounds: the ones before only show where to refine.

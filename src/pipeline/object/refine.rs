@@ -1,8 +1,13 @@
 //! Adaptive refinement of a fitted object's control mesh (Marinov & Kobbelt 2005's local
-//! refinement): where data points stay beyond the tolerance, the longest edge of each
-//! worst control face is split, the valences are tidied by flips, and the surface is fitted
-//! again on the refined mesh, until the control budget is spent, no point is beyond the
-//! tolerance, or the rounds run out.
+//! refinement): while data points stay beyond the tolerance on more than a few faces, the
+//! longest edge of each control face with the largest squared error is split, the valences
+//! are tidied by flips, and the surface is fitted again on the refined mesh, until the
+//! control budget is spent, no point is beyond the tolerance, or the rounds run out.
+//!
+//! The tolerance says whether to refine, the squared error where: measured on bun_zipper
+//! (5 % controls, 250 um tolerance, 8 rounds), splitting only where points are beyond the
+//! tolerance left the RMS at 66 um against 62 um and did not lower the max (717 um both),
+//! which comes from a few spikes of the data.
 //!
 //! The refined net is laid out at the fitted surface's limit positions (each control
 //! vertex's limit point, each new vertex at the limit point of its edge's midpoint): that
@@ -109,15 +114,25 @@ pub(super) struct Refined {
     pub warm: Vec<DVec3>,
 }
 
-/// The control mesh of `fit` with up to `add` edges split where the error is (see the
-/// module docs) and each data point's landing on it; `None` when no face has a point
-/// beyond the tolerance or the net cannot be built.
-pub(super) fn refined_mesh(
-    fit: &Fitted,
-    add: usize,
-    tolerance: Option<f64>,
-    layout: &LayoutOptions,
-) -> Option<Refined> {
+/// Control faces holding a data point farther than `tolerance` from the surface (every
+/// face with a point off it without one).
+pub(super) fn faces_beyond(fit: &Fitted, tolerance: Option<f64>) -> usize {
+    let tol = tolerance.unwrap_or(0.0);
+    let mut beyond = vec![false; fit.surface.domain_face_count()];
+    for (p, &d) in fit.params.iter().zip(fit.distances) {
+        if d > tol {
+            if let Some(b) = beyond.get_mut(p.face as usize) {
+                *b = true;
+            }
+        }
+    }
+    beyond.iter().filter(|&&b| b).count()
+}
+
+/// The control mesh of `fit` with up to `add` edges split where the squared error is (see
+/// the module docs) and each data point's landing on it; `None` when the fit has no error
+/// or the net cannot be built.
+pub(super) fn refined_mesh(fit: &Fitted, add: usize, layout: &LayoutOptions) -> Option<Refined> {
     let faces = fit.surface.faces();
     let evaluate = fit.surface.evaluator(fit.controls);
     let corner = |f: usize, k: usize| {
@@ -146,13 +161,10 @@ pub(super) fn refined_mesh(
         .map(|(l, c)| l.unwrap_or(*c))
         .collect();
 
-    let tol = tolerance.unwrap_or(0.0);
     let mut error = vec![0.0; faces.len()];
     for (p, &d) in fit.params.iter().zip(fit.distances) {
-        if d > tol {
-            if let Some(e) = error.get_mut(p.face as usize) {
-                *e += d * d;
-            }
+        if let Some(e) = error.get_mut(p.face as usize) {
+            *e += d * d;
         }
     }
     let mut worst: Vec<usize> = (0..faces.len()).filter(|&f| error[f] > 0.0).collect();

@@ -122,6 +122,9 @@ pub(crate) struct ScanOptions {
     pub correction: CorrectionConfig,
     /// The largest component must have at least this many vertices.
     pub min_component_vertices: usize,
+    /// Refuse a disk map that squeezes much of the surface (`RemeshError::Distorted`),
+    /// for a caller that has a better path for it.
+    pub refuse_distorted: bool,
 }
 
 /// Where the parameters live, kept for warm starts and written to surface.json.

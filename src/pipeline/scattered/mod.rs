@@ -62,6 +62,7 @@ pub(crate) fn fit_planar(
         config: fit_cfg.scan,
         correction: fit_cfg.correction,
         min_component_vertices: fit_cfg.components.min_vertices,
+        refuse_distorted: false,
     };
     let previous = previous.filter(|w| w.surface == kind && w.scattered.is_some());
     let scan_warm = previous.map(|w| ScanWarm {

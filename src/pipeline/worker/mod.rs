@@ -178,6 +178,7 @@ pub(crate) fn fit_patch_with(
         config: fit_cfg.scan,
         correction: fit_cfg.correction,
         min_component_vertices: fit_cfg.components.min_vertices,
+        refuse_distorted: auto,
     };
     let warm = previous.map(|w| ScanWarm {
         frame: w.frame,
@@ -195,7 +196,8 @@ pub(crate) fn fit_patch_with(
             source:
                 source @ (RemeshError::Closed
                 | RemeshError::NotDisk { .. }
-                | RemeshError::NotManifold(_)),
+                | RemeshError::NotManifold(_)
+                | RemeshError::Distorted { .. }),
         }) if auto => {
             return object_patch(mesh, any_previous, cfg, budget, source.to_string());
         }
