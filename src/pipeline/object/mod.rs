@@ -612,7 +612,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         if room == 0 {
             break;
         }
-        let add = room.div_ceil(opts.refine.rounds - round);
+        let share = room.div_ceil(opts.refine.rounds - round);
         let fitted = Fitted {
             component: &fit.component,
             surface: &fit.surface,
@@ -620,9 +620,13 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             params: &fit.params,
             distances: &fit.distances,
         };
-        if faces_beyond(&fitted, tolerance) * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
+        // As many splits as faces miss the tolerance (up to the round's share of the room):
+        // the misfit says how much to refine, the squared error where.
+        let beyond = faces_beyond(&fitted, tolerance);
+        if beyond * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
             break;
         }
+        let add = share.min(beyond);
         let Some(refined) = refined_mesh(&fitted, add, &opts.layout) else {
             break;
         };
