@@ -1,7 +1,7 @@
 //! Whole objects against quadric decimation: each model fitted by `pipeline::object` (the
 //! Loop limit surface of a simplified control mesh), compared with the quadric-decimated
-//! mesh of as many vertices as there are control points (the simplification the fit
-//! started from, a plain QEM decimation).
+//! mesh of as many vertices as there are control points: the better of a plain QEM
+//! decimation and one with the simplification's triangle-quality guard.
 //!
 //! Prints per model: data points, control points (and their share), the fit's RMS / max
 //! (data vertices to their foot points on the limit surface), the same measured
@@ -9,7 +9,10 @@
 //! control face edge, through `MeshDistance`), the decimated mesh's RMS / max (data vertices
 //! to it), the ratio of the RMS values (tessellation over decimation), genus and boundary loops, and the stage times.
 //!
-//!     cargo run --release --example object_table [-- DATA_DIR [PCT]]
+//!     cargo run --release --example object_table [-- DATA_DIR [PCT [REFINE_ROUNDS]]]
+//!
+//! `OBJ_MODELS=a,b` keeps the models whose name contains one of the parts; `OBJ_FILES=p,q`
+//! adds mesh files by path.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -53,7 +56,10 @@ fn main() {
         "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b", "stray%"
     );
     let only = std::env::var("OBJ_MODELS").ok();
-    for name in models {
+    // Further models (absolute paths, comma-separated), measured beside the shared ones.
+    let extra = std::env::var("OBJ_FILES").unwrap_or_default();
+    let extra = extra.split(',').filter(|s| !s.is_empty());
+    for name in models.into_iter().chain(extra) {
         if only
             .as_ref()
             .is_some_and(|o| !o.split(',').any(|m| name.contains(m)))
@@ -137,23 +143,32 @@ fn main() {
         let (_, stray) = rms_max(&tess.positions, &fit.component);
         let stray_pct = 100.0 * stray / fit.component.bounds_diagonal();
         let inner_pct = 100.0 * interior_stray(&fit, &tess) / fit.component.bounds_diagonal();
-        // The baseline: plain quadric decimation (no isotropy term) to the control count.
-        let baseline = simplify(
-            &fit.component,
-            &SimplifyOptions {
-                target_vertices: fit.controls.len(),
-                ..Default::default()
-            },
-        );
-        let (qem_rms, qem_max, qem_count) = match baseline {
-            Ok(b) => {
-                let (r, m) = rms_max(&fit.data, &b.mesh);
-                (r, m, b.mesh.positions.len())
+        // The baseline: quadric decimation (no isotropy term) to the control count, the
+        // better of two: with the simplification's triangle-quality guard and without it
+        // (plain Garland-Heckbert, which facets CAD parts exactly where the guard forbids
+        // the long thin triangles that takes).
+        let mut baseline = None;
+        for min_quality in [SimplifyOptions::default().min_quality, 0.0] {
+            let decimated = simplify(
+                &fit.component,
+                &SimplifyOptions {
+                    target_vertices: fit.controls.len(),
+                    min_quality,
+                    ..Default::default()
+                },
+            );
+            match decimated {
+                Ok(b) => {
+                    let (r, m) = rms_max(&fit.data, &b.mesh);
+                    if baseline.is_none_or(|(best, _, _)| r < best) {
+                        baseline = Some((r, m, b.mesh.positions.len()));
+                    }
+                }
+                Err(e) => println!("{name}: baseline decimation failed: {e}"),
             }
-            Err(e) => {
-                println!("{name}: baseline decimation failed: {e}");
-                continue;
-            }
+        }
+        let Some((qem_rms, qem_max, qem_count)) = baseline else {
+            continue;
         };
         let n = fit.data.len();
         let m = fit.controls.len();

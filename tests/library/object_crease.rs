@@ -242,20 +242,27 @@ struct Comparison {
 
 fn compare_with_qem(fit: &ObjectFit) -> Comparison {
     let (rms, max) = rms_max(&fit.data, &tessellation(fit, 8));
-    let qem = simplify(
-        &fit.component,
-        &SimplifyOptions {
-            target_vertices: fit.controls.len(),
-            ..Default::default()
-        },
-    )
-    .expect("the decimation baseline");
-    println!(
-        "  QEM baseline: {} vertices for {} controls",
-        qem.mesh.positions.len(),
-        fit.controls.len()
-    );
-    let (qem_rms, qem_max) = rms_max(&fit.data, &qem.mesh);
+    // The baseline is the better of two decimations: with the simplification's default
+    // triangle-quality guard, and without it (plain Garland-Heckbert). The guard keeps a
+    // control mesh even, but forbids the long thin triangles an exact faceting needs: on
+    // an octagonal prism guarded QEM stands at 4.9e-2 RMS where plain QEM is exact.
+    let (qem_rms, qem_max) = [0.15, 0.0]
+        .into_iter()
+        .map(|min_quality| {
+            let qem = simplify(
+                &fit.component,
+                &SimplifyOptions {
+                    target_vertices: fit.controls.len(),
+                    min_quality,
+                    ..Default::default()
+                },
+            )
+            .expect("the decimation baseline");
+            assert_eq!(qem.mesh.positions.len(), fit.controls.len());
+            rms_max(&fit.data, &qem.mesh)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .expect("two baselines");
     Comparison {
         creases: fit.surface.crease_edges().len(),
         rms,

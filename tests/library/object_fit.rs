@@ -44,24 +44,31 @@ fn distance_to_torus(p: DVec3) -> f64 {
     ((p.x.hypot(p.y) - MAJOR).hypot(p.z) - MINOR).abs()
 }
 
-/// RMS of the data's distances to a plain quadric decimation of the data with as many
-/// vertices as the fit has controls (the mesh a user would otherwise keep).
+/// RMS of the data's distances to a quadric decimation of the data with as many vertices
+/// as the fit has controls (the mesh a user would otherwise keep): the better of the
+/// decimations with and without the simplification's triangle-quality guard.
 fn decimated_rms(fit: &ObjectFit) -> f64 {
-    let decimated = simplify(
-        &fit.component,
-        &SimplifyOptions {
-            target_vertices: fit.controls.len(),
-            ..Default::default()
-        },
-    )
-    .expect("decimated");
-    let md = MeshDistance::new(&decimated.mesh);
-    let sum: f64 = fit
-        .data
-        .iter()
-        .map(|p| md.distance(*p).unwrap_or(f64::MAX).powi(2))
-        .sum();
-    (sum / fit.data.len() as f64).sqrt()
+    [SimplifyOptions::default().min_quality, 0.0]
+        .into_iter()
+        .map(|min_quality| {
+            let decimated = simplify(
+                &fit.component,
+                &SimplifyOptions {
+                    target_vertices: fit.controls.len(),
+                    min_quality,
+                    ..Default::default()
+                },
+            )
+            .expect("decimated");
+            let md = MeshDistance::new(&decimated.mesh);
+            let sum: f64 = fit
+                .data
+                .iter()
+                .map(|p| md.distance(*p).unwrap_or(f64::MAX).powi(2))
+                .sum();
+            (sum / fit.data.len() as f64).sqrt()
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 fn load(relative: &str) -> Option<TriMesh> {
