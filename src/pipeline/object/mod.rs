@@ -630,7 +630,11 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         let Some(refined) = refined_mesh(&fitted, add, &opts.layout) else {
             break;
         };
-        let splits = refined.mesh.positions.len() - fit.controls.len();
+        let splits = refined
+            .mesh
+            .positions
+            .len()
+            .saturating_sub(fit.controls.len());
         if splits * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
             break;
         }

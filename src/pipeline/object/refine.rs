@@ -30,8 +30,10 @@ pub struct RefineOptions {
     /// Share of the control budget the simplification keeps when refinement is on; the
     /// rest is spent by the rounds where the error is.
     pub start_share: f64,
-    /// Distance beyond which a data point asks for refinement; `None`: every point
-    /// counts, so the budget goes where the squared error is largest.
+    /// Distance beyond which a data point misses the budget: a round splits as many
+    /// control faces as hold such points (those with the most squared error), and none
+    /// runs while they are fewer than one per 100 controls. `None`: every point off the
+    /// surface counts, so each round spends its share of the budget.
     pub tolerance: Option<f64>,
     /// Foot-point rounds of the fits between refinements, which only show where to refine
     /// next (the last fit runs all of `ObjectOptions::rounds`).
