@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::{simplify, SimplifyOptions};
+use trispline::mesh::simplify::decimation_baselines;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::{DVec3, TriMesh};
@@ -143,20 +143,10 @@ fn main() {
         let (_, stray) = rms_max(&tess.positions, &fit.component);
         let stray_pct = 100.0 * stray / fit.component.bounds_diagonal();
         let inner_pct = 100.0 * interior_stray(&fit, &tess) / fit.component.bounds_diagonal();
-        // The baseline: quadric decimation (no isotropy term) to the control count, the
-        // better of two: with the simplification's triangle-quality guard and without it
-        // (plain Garland-Heckbert, which facets CAD parts exactly where the guard forbids
-        // the long thin triangles that takes).
+        // The baseline: quadric decimation to the control count, the better of the guarded
+        // and the plain one.
         let mut baseline = None;
-        for min_quality in [SimplifyOptions::default().min_quality, 0.0] {
-            let decimated = simplify(
-                &fit.component,
-                &SimplifyOptions {
-                    target_vertices: fit.controls.len(),
-                    min_quality,
-                    ..Default::default()
-                },
-            );
+        for decimated in decimation_baselines(&fit.component, fit.controls.len()) {
             match decimated {
                 Ok(b) => {
                     let (r, m) = rms_max(&fit.data, &b.mesh);

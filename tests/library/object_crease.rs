@@ -9,7 +9,7 @@ use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::crease::{detect_creases, CreaseOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::{simplify, SimplifyOptions};
+use trispline::mesh::simplify::decimation_baselines;
 use trispline::mesh::topology::Topology;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::pipeline::worker::{run_patch, Domain, WorkerConfig};
@@ -242,22 +242,11 @@ struct Comparison {
 
 fn compare_with_qem(fit: &ObjectFit) -> Comparison {
     let (rms, max) = rms_max(&fit.data, &tessellation(fit, 8));
-    // The baseline is the better of two decimations: with the simplification's default
-    // triangle-quality guard, and without it (plain Garland-Heckbert). The guard keeps a
-    // control mesh even, but forbids the long thin triangles an exact faceting needs: on
-    // an octagonal prism guarded QEM stands at 4.9e-2 RMS where plain QEM is exact.
-    let (qem_rms, qem_max) = [0.15, 0.0]
+    // The baseline is the better of the guarded and the plain decimation.
+    let (qem_rms, qem_max) = decimation_baselines(&fit.component, fit.controls.len())
         .into_iter()
-        .map(|min_quality| {
-            let qem = simplify(
-                &fit.component,
-                &SimplifyOptions {
-                    target_vertices: fit.controls.len(),
-                    min_quality,
-                    ..Default::default()
-                },
-            )
-            .expect("the decimation baseline");
+        .map(|qem| {
+            let qem = qem.expect("the decimation baseline");
             assert_eq!(qem.mesh.positions.len(), fit.controls.len());
             rms_max(&fit.data, &qem.mesh)
         })

@@ -4,7 +4,7 @@
 use glam::DVec3;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::{simplify, SimplifyOptions, SurfaceTopology};
+use trispline::mesh::simplify::{decimation_baselines, SurfaceTopology};
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::TriSurface;
 use trispline::testdata::shared_data;
@@ -48,18 +48,10 @@ fn distance_to_torus(p: DVec3) -> f64 {
 /// as the fit has controls (the mesh a user would otherwise keep): the better of the
 /// decimations with and without the simplification's triangle-quality guard.
 fn decimated_rms(fit: &ObjectFit) -> f64 {
-    [SimplifyOptions::default().min_quality, 0.0]
+    decimation_baselines(&fit.component, fit.controls.len())
         .into_iter()
-        .map(|min_quality| {
-            let decimated = simplify(
-                &fit.component,
-                &SimplifyOptions {
-                    target_vertices: fit.controls.len(),
-                    min_quality,
-                    ..Default::default()
-                },
-            )
-            .expect("decimated");
+        .map(|decimated| {
+            let decimated = decimated.expect("decimated");
             let md = MeshDistance::new(&decimated.mesh);
             let sum: f64 = fit
                 .data
