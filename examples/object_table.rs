@@ -18,7 +18,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::decimation_baselines;
+use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::{DVec3, TriMesh};

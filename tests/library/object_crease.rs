@@ -9,7 +9,7 @@ use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::crease::{detect_creases, CreaseOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::decimation_baselines;
+use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::topology::Topology;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::pipeline::worker::{run_patch, Domain, WorkerConfig};

@@ -4,7 +4,8 @@
 use glam::DVec3;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
-use trispline::mesh::simplify::{decimation_baselines, SurfaceTopology};
+use trispline::mesh::simplify::baseline::decimation_baselines;
+use trispline::mesh::simplify::SurfaceTopology;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::TriSurface;
 use trispline::testdata::shared_data;

@@ -21,7 +21,7 @@
 //! The order is deterministic: costs tie-break on the vertex indices, stale queue entries
 //! are recognised by per-vertex versions (lazy invalidation).
 
-mod baseline;
+pub mod baseline;
 mod crease;
 mod quadric;
 mod summary;
@@ -29,7 +29,6 @@ mod summary;
 use super::distance::project_onto_triangle;
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
-pub use baseline::decimation_baselines;
 use crease::Creases;
 use glam::DVec3;
 use quadric::Quadric;
