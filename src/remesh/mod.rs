@@ -41,10 +41,12 @@ pub enum RemeshError {
     /// No height field, and the disk map squeezes much of the surface (see
     /// `PlanarMap::undersampled_share`): a lattice over it would leave that part with a
     /// fraction of its share of the controls.
-    #[error("not disk-like enough: the disk map gives {:.0} % of the surface less than a tenth of its share of the domain", 100.0 * share)]
+    #[error("not disk-like enough: the disk map gives {:.0} % of the surface less than 1/{factor} of its share of the domain", 100.0 * share)]
     Distorted {
-        /// The share of the surface's area so squeezed.
+        /// The share of the surface's area so squeezed ...
         share: f64,
+        /// ... below this many times less than its share of the domain.
+        factor: f64,
     },
 }
 

@@ -101,7 +101,10 @@ pub(crate) fn prepare(
         let share = map.undersampled_share(SQUEEZE_FACTOR);
         if share > MAX_SQUEEZED_SHARE {
             return Err(PipelineError::NotDiskLike {
-                source: RemeshError::Distorted { share },
+                source: RemeshError::Distorted {
+                    share,
+                    factor: SQUEEZE_FACTOR,
+                },
             });
         }
     }
