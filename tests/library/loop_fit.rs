@@ -2,8 +2,8 @@
 //! input's own coarse net (extraordinary vertices, boundaries) is fitted, not a remeshed
 //! lattice. Known nets are recovered from their own limit surface; the elephant fits.
 
+use crate::shared_mesh;
 use trispline::fit::{Budget, FitStatus, Method};
-use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::detect::Hierarchy;
 use trispline::mesh::inverse::{coarsen, InverseMethod};
 use trispline::mesh::loop_subdiv::subdivide;
@@ -13,7 +13,6 @@ use trispline::pipeline::worker::{run_patch, FitConfig, WorkerConfig};
 use trispline::pipeline::{FitOptions, SurfaceKind};
 use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
-use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
 
 /// An open disc around a valence-5 centre, with a second ring whose vertices have valence
@@ -165,12 +164,9 @@ fn the_exact_path_writes_the_control_faces_and_warm_starts() {
 /// coarse net, which has extraordinary vertices all over.
 #[test]
 fn elephant_fits_on_its_own_coarse_net() {
-    let Some(path) = shared_data("semi_regular/subd2.obj") else {
+    let Some(mesh) = shared_mesh("semi_regular/subd2.obj") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let diag = mesh.bounds_diagonal();
     for (levels, bound) in [(1usize, 2e-3), (2, 4e-3)] {
         let fit = fit_subdivided(&mesh, &options(Method::Cg, levels), None).expect("fits");

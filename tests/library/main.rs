@@ -31,3 +31,14 @@ mod point_clouds;
 mod scan_pipeline;
 mod shown_surface;
 mod step_export;
+
+/// A mesh of the shared data (`None` where `../shared/data` is absent outside CI: the test
+/// then skips), read with the default options; a file that does not read fails the test.
+pub(crate) fn shared_mesh(relative: &str) -> Option<trispline::TriMesh> {
+    let path = trispline::testdata::shared_data(relative)?;
+    Some(
+        trispline::io::read_mesh_file(&path, &trispline::io::LoadOptions::default())
+            .unwrap_or_else(|e| panic!("{relative}: {e}"))
+            .mesh,
+    )
+}

@@ -1,14 +1,13 @@
 //! Whole objects: control meshes by simplification and the Loop limit surface fitted to
 //! every data point (`pipeline::object`), on a generated torus and the shared models.
 
+use crate::shared_mesh;
 use glam::DVec3;
-use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
 use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::TriSurface;
-use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
 const MAJOR: f64 = 1.0;
@@ -62,15 +61,6 @@ fn decimated_rms(fit: &ObjectFit) -> f64 {
             (sum / fit.data.len() as f64).sqrt()
         })
         .fold(f64::INFINITY, f64::min)
-}
-
-fn load(relative: &str) -> Option<TriMesh> {
-    let path = shared_data(relative)?;
-    Some(
-        read_mesh_file(&path, &LoadOptions::default())
-            .unwrap_or_else(|e| panic!("{relative}: {e}"))
-            .mesh,
-    )
 }
 
 fn assert_topology_kept(fit: &ObjectFit) {
@@ -139,7 +129,7 @@ fn isolated_points_beyond_the_tolerance_end_refinement_and_the_rounds_run_on() {
 
 #[test]
 fn fertility_keeps_genus_four() {
-    let Some(mesh) = load("models/fertility.off") else {
+    let Some(mesh) = shared_mesh("models/fertility.off") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
@@ -159,7 +149,7 @@ fn fertility_keeps_genus_four() {
 
 #[test]
 fn bun_zipper_keeps_its_five_holes() {
-    let Some(mesh) = load("models/bun_zipper.ply") else {
+    let Some(mesh) = shared_mesh("models/bun_zipper.ply") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
@@ -213,7 +203,7 @@ fn stray_of_tessellation(fit: &ObjectFit, k: usize) -> f64 {
 
 #[test]
 fn decimated_max_stays_closed() {
-    let Some(mesh) = load("models/decimated-max.obj") else {
+    let Some(mesh) = shared_mesh("models/decimated-max.obj") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
@@ -240,7 +230,7 @@ fn decimated_max_stays_closed() {
 /// few rim points alone. With the boundary curve sampled it stays within 0.5 %.
 #[test]
 fn camelhead_stays_on_its_sparse_rim() {
-    let Some(mesh) = load("models/camelhead.off") else {
+    let Some(mesh) = shared_mesh("models/camelhead.off") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
@@ -261,7 +251,7 @@ fn camelhead_stays_on_its_sparse_rim() {
 
 #[test]
 fn a_broken_bunny_is_cleaned_and_fitted() {
-    let Some(mesh) = load("models/bun_zipper_res4.ply") else {
+    let Some(mesh) = shared_mesh("models/bun_zipper_res4.ply") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");

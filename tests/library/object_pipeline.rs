@@ -4,10 +4,10 @@
 //! previous control mesh. Generated objects (torus, box, holed sphere) plus the shared
 //! models fertility (genus 4) and bun_zipper (5 holes).
 
+use crate::shared_mesh;
 use glam::DVec3;
 use std::f64::consts::{PI, TAU};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
-use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::tessellate_mesh_faces;
 use trispline::pipeline::worker::{
@@ -15,7 +15,6 @@ use trispline::pipeline::worker::{
 };
 use trispline::pipeline::PipelineError;
 use trispline::remesh::planar::MapMethod;
-use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
 /// A torus (radii 1 and 0.35) on an `n x m` grid with alternating diagonals.
@@ -325,12 +324,9 @@ fn a_disk_the_disk_map_squeezes_is_fitted_whole() {
 
 #[test]
 fn camelhead_is_fitted_whole() {
-    let Some(path) = shared_data("models/camelhead.off") else {
+    let Some(mesh) = shared_mesh("models/camelhead.off") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("camelhead reads")
-        .mesh;
     let fitted = fit_patch(&mesh, None, &config(Domain::Auto, 5.0)).expect("fits");
     let reason = &fitted.object.as_ref().expect("object path").reason;
     assert!(reason.contains("not disk-like enough"), "{reason}");
@@ -403,12 +399,9 @@ fn a_new_version_starts_from_the_previous_control_mesh() {
 
 #[test]
 fn fertility_keeps_genus_four() {
-    let Some(path) = shared_data("models/fertility.off") else {
+    let Some(mesh) = shared_mesh("models/fertility.off") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let out = run_patch(&mesh, None, &config(Domain::Auto, 5.0)).expect("fits");
     let t = &out.report["topology"];
     assert_eq!(t["data"]["genus"], 4, "{t}");
@@ -418,12 +411,9 @@ fn fertility_keeps_genus_four() {
 
 #[test]
 fn bun_zipper_keeps_its_five_holes() {
-    let Some(path) = shared_data("models/bun_zipper.ply") else {
+    let Some(mesh) = shared_mesh("models/bun_zipper.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let mut cfg = config(Domain::Auto, 2.0);
     cfg.fit.correction.rounds = 2;
     let fitted = fit_patch(&mesh, None, &cfg).unwrap_or_else(|e: PipelineError| panic!("{e}"));
@@ -445,12 +435,9 @@ fn bun_zipper_keeps_its_five_holes() {
 
 #[test]
 fn broken_bun_zipper_res4_is_repaired_and_fitted_whole() {
-    let Some(path) = shared_data("models/bun_zipper_res4.ply") else {
+    let Some(mesh) = shared_mesh("models/bun_zipper_res4.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     // Non-manifold edges and duplicate faces: the scan path refuses what cleaning leaves,
     // the object path repairs the component's orientation and fits it.
     let fitted = fit_patch(&mesh, None, &config(Domain::Auto, 10.0))

@@ -4,12 +4,13 @@
 //! Micchelli's recurrence for DMS), curvature of both read-back surfaces, and what a DMS
 //! fit of a range scan shows.
 
+use crate::shared_mesh;
 use glam::{DVec2, DVec3};
 use trispline::curvature::planar::DmsPatch;
 use trispline::curvature::regions::{analyze, AnalysisOptions};
 use trispline::curvature::{DerivativeSurface, Triangular};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
-use trispline::io::{read_mesh_bytes, read_mesh_file, Format, LoadOptions};
+use trispline::io::{read_mesh_bytes, Format, LoadOptions};
 use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellated_glb};
@@ -20,7 +21,6 @@ use trispline::pipeline::SurfaceKind;
 use trispline::surface::bpatch::de_boor;
 use trispline::surface::dms::DmsSpline;
 use trispline::surface::SurfaceParam;
-use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
 /// A height field over [-h, h]^2 sampled on an n x n grid, split into triangles.
@@ -268,12 +268,9 @@ fn curvature_reads_both_kinds_back() {
 /// finer): the GLB read back covers the fitted points and stays near the data.
 #[test]
 fn a_dms_fit_of_a_range_scan_is_shown_where_it_was_fitted() {
-    let Some(path) = shared_data("range_scans/bun045_tri.ply") else {
+    let Some(mesh) = shared_mesh("range_scans/bun045_tri.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let mut cfg = WorkerConfig::default();
     cfg.fit.surface = SurfaceKind::Dms;
     let outputs = run_input(&mesh, None, &cfg).expect("fits");

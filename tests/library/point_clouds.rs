@@ -1,11 +1,11 @@
 //! Point clouds in: the `.xyz` / `.pts` / `.pcd` readers and vertices-only PLY, their
 //! typed refusals, and a real scan's points fitted through the scan path as well as its mesh.
 
+use crate::shared_mesh;
 use std::path::Path;
 use trispline::io::{read_mesh_bytes, read_mesh_file, Format, LoadOptions};
 use trispline::pipeline::worker::{run_input, FitConfig, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
-use trispline::testdata::shared_data;
 use trispline::{DVec3, TriMesh};
 
 fn read(bytes: &[u8], format: Format) -> Result<TriMesh, String> {
@@ -240,12 +240,9 @@ fn rms_and_controls(report: &serde_json::Value) -> (f64, usize, usize) {
 /// as the mesh's within 15 %.
 #[test]
 fn a_range_scan_as_a_point_cloud_meets_the_scan_goals_like_its_mesh() {
-    let Some(path) = shared_data("range_scans/bun045_tri.ply") else {
+    let Some(mesh) = shared_mesh("range_scans/bun045_tri.ply") else {
         return;
     };
-    let mesh = read_mesh_file(&path, &LoadOptions::default())
-        .expect("reads")
-        .mesh;
     let dir = tempfile::tempdir().expect("temp dir");
     let (xyz, pcd) = (dir.path().join("bun045.xyz"), dir.path().join("bun045.pcd"));
     std::fs::write(&xyz, xyz_text(&mesh.positions)).expect("xyz");
