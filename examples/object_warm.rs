@@ -5,7 +5,8 @@
 //! of the bounding-box diagonal (a part that changed).
 //!
 //! Prints per model and version 2: wall time cold and warm, their ratio, control points,
-//! geometric RMS, whether the warm start was used, and the warm fit's stages.
+//! geometric RMS and max, whether the warm start was used, the warm fit's stages, and
+//! what its local refit touched (`null`: the whole fit ran from the previous control mesh).
 //!
 //!     cargo run --release --example object_warm [-- MODEL...]
 //!
@@ -98,7 +99,7 @@ fn main() {
             .collect();
     }
     let cfg = WorkerConfig::default();
-    println!("model: data points | cold ms, warm ms, warm/cold | controls cold/warm | rms cold/warm um | warm used | warm stages ms");
+    println!("model: data points | cold ms, warm ms, warm/cold | controls cold/warm | rms cold/warm | max cold/warm | warm used | rounds | warm stages ms | local refit");
     for path in paths {
         let v1 = match read_mesh_file(std::path::Path::new(&path), &LoadOptions::default()) {
             Ok(l) => l.mesh,
@@ -117,29 +118,28 @@ fn main() {
         else {
             continue;
         };
-        let rms = |o: &PatchOutputs| {
-            o.report["final"]["geometric_rms_error"]
-                .as_f64()
-                .unwrap_or(f64::NAN)
-                * 1e6
-        };
+        let stat =
+            |o: &PatchOutputs, key: &str| o.report["final"][key].as_f64().unwrap_or(f64::NAN);
         let name = std::path::Path::new(&path)
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or(path.clone());
         println!(
-            "{name}: {} | {cold_ms:.0}, {warm_ms:.0}, {:.2} | {}/{} | {:.1}/{:.1} | {} | rounds {} | {}",
+            "{name}: {} | {cold_ms:.0}, {warm_ms:.0}, {:.2} | {}/{} | {:.4e}/{:.4e} | {:.4e}/{:.4e} | {} | rounds {} | {} | {}",
             v2.positions.len(),
             warm_ms / cold_ms,
             cold.report["control_points"],
             warm.report["control_points"],
-            rms(&cold),
-            rms(&warm),
+            stat(&cold, "geometric_rms_error"),
+            stat(&warm, "geometric_rms_error"),
+            stat(&cold, "geometric_max_error"),
+            stat(&warm, "geometric_max_error"),
             warm.report["object"]["warm"],
             warm.report["object"]["rounds"]
                 .as_array()
                 .map_or(0, |r| r.len().saturating_sub(1)),
             warm.report["object"]["stages"],
+            warm.report["object"]["local"],
         );
     }
 }

@@ -448,3 +448,82 @@ fn broken_bun_zipper_res4_is_repaired_and_fitted_whole() {
     let rms = fitted.fit.geometric_rms();
     assert!(rms < 0.02 * mesh.bounds_diagonal(), "RMS {rms}");
 }
+
+/// `mesh` with a smooth dent of `depth` along the normal direction of a torus (towards its
+/// core circle) within `radius` of vertex `at`.
+fn dented_torus(mesh: &TriMesh, at: usize, radius: f64, depth: f64) -> TriMesh {
+    let centre = mesh.positions[at];
+    let mut dented = mesh.clone();
+    for p in &mut dented.positions {
+        let r = p.distance(centre) / radius;
+        if r < 1.0 {
+            let core = DVec3::new(p.x, p.y, 0.0).normalize_or_zero();
+            let outward = (*p - core).normalize_or_zero();
+            *p -= outward * depth * (1.0 - r * r).powi(2);
+        }
+    }
+    dented
+}
+
+#[test]
+fn a_version_changed_in_one_place_is_refitted_there_only() {
+    let mesh = torus(240, 80);
+    let cfg = config(Domain::Auto, 5.0);
+    let first = run_patch(&mesh, None, &cfg).expect("fits");
+    let dented = dented_torus(&mesh, 0, 0.15, 0.03);
+    let second = run_patch(&dented, Some(&first.warm), &cfg).expect("fits warm");
+    let cold = run_patch(&dented, None, &cfg).expect("fits cold");
+    let r = &second.report;
+    assert_eq!(r["object"]["warm"]["used"], true, "{}", r["object"]["warm"]);
+    let local = &r["object"]["local"];
+    let m = first.warm.controls.len();
+    let count = |k: &str| local[k].as_u64().unwrap_or(0) as usize;
+    let (free, added) = (count("free_controls"), count("added_controls"));
+    assert!(
+        local["changed_points"].as_u64().unwrap_or(0) > 0 && free > 0 && 4 * free < m,
+        "{local} of {m} controls"
+    );
+    // Every previous control but the freed ones kept its position exactly.
+    let kept = first
+        .warm
+        .controls
+        .iter()
+        .zip(&second.warm.controls)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert_eq!(kept, m - (free - added));
+    let stat = |o: &serde_json::Value, k: &str| o["final"][k].as_f64().unwrap_or(f64::NAN);
+    let (warm_rms, cold_rms) = (
+        stat(r, "geometric_rms_error"),
+        stat(&cold.report, "geometric_rms_error"),
+    );
+    let (warm_max, cold_max) = (
+        stat(r, "geometric_max_error"),
+        stat(&cold.report, "geometric_max_error"),
+    );
+    eprintln!(
+        "warm rms {warm_rms:.3e} max {warm_max:.3e}, cold rms {cold_rms:.3e} max {cold_max:.3e}"
+    );
+    assert!(
+        warm_rms <= 1.5 * cold_rms,
+        "warm {warm_rms} vs cold {cold_rms}"
+    );
+    assert!(
+        warm_max <= 1.5 * cold_max,
+        "warm {warm_max} vs cold {cold_max}"
+    );
+
+    // A change everywhere (the torus grown by 2 %) is no local matter: the whole fit runs
+    // from the previous control mesh.
+    let mut grown = mesh.clone();
+    for p in &mut grown.positions {
+        *p *= 1.02;
+    }
+    let third = run_patch(&grown, Some(&first.warm), &cfg).expect("fits warm");
+    assert_eq!(third.report["object"]["warm"]["used"], true);
+    assert!(
+        third.report["object"]["local"].is_null(),
+        "{}",
+        third.report["object"]["local"]
+    );
+}

@@ -133,9 +133,14 @@ pub(super) fn faces_beyond(fit: &Fitted, tolerance: Option<f64>) -> usize {
 }
 
 /// The control mesh of `fit` with up to `add` edges split where the squared error is (see
-/// the module docs) and each data point's landing on it; `None` when the fit has no error
-/// or the net cannot be built.
-pub(super) fn refined_mesh(fit: &Fitted, add: usize, layout: &LayoutOptions) -> Option<Refined> {
+/// the module docs; only on the faces `only` marks, if given) and each data point's
+/// landing on it; `None` when the fit has no error there or the net cannot be built.
+pub(super) fn refined_mesh(
+    fit: &Fitted,
+    add: usize,
+    layout: &LayoutOptions,
+    only: Option<&[bool]>,
+) -> Option<Refined> {
     let faces = fit.surface.faces();
     let evaluate = fit.surface.evaluator(fit.controls);
     let corner = |f: usize, k: usize| {
@@ -170,7 +175,9 @@ pub(super) fn refined_mesh(fit: &Fitted, add: usize, layout: &LayoutOptions) -> 
             *e += d * d;
         }
     }
-    let mut worst: Vec<usize> = (0..faces.len()).filter(|&f| error[f] > 0.0).collect();
+    let mut worst: Vec<usize> = (0..faces.len())
+        .filter(|&f| error[f] > 0.0 && only.is_none_or(|o| o.get(f) == Some(&true)))
+        .collect();
     if worst.is_empty() {
         return None;
     }

@@ -27,6 +27,7 @@ use crate::mesh::simplify::SurfaceTopology;
 use crate::pipeline::merge::{
     median_edge, scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
+use crate::pipeline::object::LocalOptions;
 use crate::pipeline::object::{fitted_topology, ObjectOptions};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
@@ -34,7 +35,7 @@ use crate::pipeline::worker::{
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
 use glam::DVec3;
-use local::{LastFit, LocalOptions, Previous};
+use local::{LastFit, Previous};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -502,10 +503,10 @@ impl ObjectSession {
             return cold();
         };
         let summary = LocalRefit {
-            controls: fitted.free_controls.clone(),
-            changed_points: fitted.changed_points,
-            moving_points: fitted.moving_points,
-            rounds: fitted.rounds.len() - 1,
+            controls: fitted.1.free_controls.clone(),
+            changed_points: fitted.1.changed_points,
+            moving_points: fitted.1.moving_points,
+            rounds: fitted.1.rounds.len() - 1,
         };
         let budget = worker.fit.budget.resolve(&merged.mesh);
         Ok((last.refitted(&fitted, budget, ms_since(t)), Some(summary)))

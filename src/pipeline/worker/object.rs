@@ -11,8 +11,8 @@ use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_creased_control_mesh, LayoutReport, ObjectFit, ObjectOptions, ObjectTimes,
-    RefineRound, RoundReport,
+    fit_object, fit_on_creased_control_mesh, refit_where_changed, LayoutReport, LocalUpdate,
+    ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RefineRound, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -165,6 +165,8 @@ pub struct ObjectInfo {
     pub layout: LayoutReport,
     /// The fit before refinement and after each refinement round.
     pub refinement: Vec<RefineRound>,
+    /// What a local refit of a new version touched (`None`: a whole fit).
+    pub local: Option<LocalUpdate>,
 }
 
 /// Whether a warm start was used.
@@ -204,9 +206,8 @@ pub(super) fn fit_as_object(
     let object = |source| PipelineError::Object { source };
     let creases = previous.map(|w| w.crease_edges.as_slice()).unwrap_or(&[]);
     let (fit, warm) = match previous.map(|w| warm_start(mesh, w, previous_controls)) {
-        Some(Ok((component, control_mesh, params))) => (
-            fit_on_creased_control_mesh(component, control_mesh, creases, params, &opts)
-                .map_err(object)?,
+        Some(Ok(start)) => (
+            warm_fit(start, previous, creases, &opts).map_err(object)?,
             WarmDecision::Used,
         ),
         Some(Err(why)) => (
@@ -224,19 +225,61 @@ pub(super) fn fit_as_object(
         times: fit.times.clone(),
         layout: fit.layout,
         refinement: fit.refinement.clone(),
+        local: fit.local.clone(),
     };
     let patch = patch_fit(fit, budget, matches!(info.warm, WarmDecision::Used));
     Ok((patch, info))
 }
 
-/// The new version's component, the previous control mesh and each data point's start
-/// parameter (that of the nearest previous data point), or why the previous fit does not
-/// fit the new data.
+/// A new version's fit from the previous control mesh: refitted where the data changed
+/// when that is a small part of it, else the whole fit from there.
+fn warm_fit(
+    start: WarmStartPoint,
+    previous: Option<&ObjectWarm>,
+    creases: &[[u32; 2]],
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
+    let previous_rms = previous.map_or(0.0, |w| w.feet.rms);
+    let WarmStartPoint {
+        component,
+        control_mesh,
+        params,
+        reference,
+    } = start;
+    let local = refit_where_changed(
+        component.clone(),
+        control_mesh.clone(),
+        creases,
+        params.clone(),
+        &reference,
+        previous_rms,
+        opts,
+    )?;
+    match local {
+        Some(fit) => Ok(fit),
+        None => fit_on_creased_control_mesh(component, control_mesh, creases, params, opts),
+    }
+}
+
+/// Where a new version's warm fit starts.
+struct WarmStartPoint {
+    /// The new version's cleaned component.
+    component: TriMesh,
+    /// The previous control mesh at its fitted positions.
+    control_mesh: TriMesh,
+    /// Each data point's start parameter: that of the nearest previous data point ...
+    params: Vec<SurfaceParam>,
+    /// ... which is this one.
+    reference: Vec<DVec3>,
+}
+
+/// Where the new version's warm fit starts, or why the previous fit does not fit the new
+/// data.
 fn warm_start(
     mesh: &TriMesh,
     warm: &ObjectWarm,
     controls: &[DVec3],
-) -> Result<(TriMesh, TriMesh, Vec<SurfaceParam>), String> {
+) -> Result<WarmStartPoint, String> {
     let cleaned = clean(mesh, &CleanOptions::default());
     let component = cleaned_components(&cleaned)
         .into_iter()
@@ -276,9 +319,14 @@ fn warm_start(
     if !faces_ok || warm.feet_faces.len() != before || warm.feet.params.len() != before {
         return Err("the stored control mesh is inconsistent".into());
     }
-    let params = nearest_params(warm, &component.positions);
+    let (params, reference) = nearest_params(warm, &component.positions);
     let control_mesh = TriMesh::new(controls.to_vec(), warm.faces.clone());
-    Ok((component, control_mesh, params))
+    Ok(WarmStartPoint {
+        component,
+        control_mesh,
+        params,
+        reference,
+    })
 }
 
 fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {
@@ -288,9 +336,9 @@ fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {
     )
 }
 
-/// Each point's start parameter: the final parameter of the nearest previous data point
-/// (over a bucket grid with about two previous points per cell).
-fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> Vec<SurfaceParam> {
+/// Each point's start parameter, the final parameter of the nearest previous data point
+/// (over a bucket grid with about two previous points per cell), and that point.
+fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> (Vec<SurfaceParam>, Vec<DVec3>) {
     let old: Vec<DVec3> = warm
         .feet
         .points
@@ -303,13 +351,14 @@ fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> Vec<SurfaceParam> {
         .map(|p| {
             let k = grid.nearest(&old, *p);
             let [u, v] = warm.feet.params[k];
-            SurfaceParam {
+            let param = SurfaceParam {
                 face: warm.feet_faces[k],
                 u: f64::from(u),
                 v: f64::from(v),
-            }
+            };
+            (param, old[k])
         })
-        .collect()
+        .unzip()
 }
 
 /// A uniform bucket grid over 3D points for nearest-point queries.
@@ -498,6 +547,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "rounds": info.rounds,
         "stages": info.times,
         "warm": warm,
+        "local": info.local,
     })
 }
 

@@ -1,0 +1,247 @@
+//! What a whole-object fit takes and gives: its settings, its result and stage times, its
+//! errors, and the limit surface it fits.
+
+use super::layout::{LayoutOptions, LayoutReport};
+use super::refine::{RefineOptions, RefineRound};
+use crate::mesh::clean::CleanOptions;
+use crate::mesh::crease::CreaseOptions;
+use crate::mesh::simplify::{SimplifyError, SimplifyOptions, SurfaceTopology};
+use crate::mesh::topology::TopologyError;
+use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
+use crate::surface::SurfaceParam;
+use crate::TriMesh;
+use glam::DVec3;
+use std::time::Instant;
+
+/// Controls a hole's rim keeps at least (fewer pull the rim's limit curve inward: it is the
+/// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
+const MIN_BOUNDARY_LOOP: usize = 6;
+
+/// The control budget for `n` data points.
+pub(super) fn control_target(n: usize, opts: &ObjectOptions) -> usize {
+    opts.target_controls
+        .unwrap_or((opts.target_controls_pct / 100.0 * n as f64).round() as usize)
+        .max(4)
+        .min(n)
+}
+
+/// Budget, cleaning, simplification and fitting settings of [`fit_object`].
+#[derive(Clone, Debug)]
+pub struct ObjectOptions {
+    /// Control points as a percentage of the data points (when `target_controls` is unset).
+    pub target_controls_pct: f64,
+    /// Control points wanted, overriding the percentage (clamped to 4..=data points).
+    pub target_controls: Option<usize>,
+    /// Cleaning applied before the largest component is kept.
+    pub clean: CleanOptions,
+    /// Guards of the simplification; its `target_vertices` is set from the targets above.
+    pub simplify: SimplifyOptions,
+    /// Which data edges become crease edges of the control mesh (`angle_deg` 0: none).
+    pub crease: CreaseOptions,
+    /// Fairness weight relative to the data: s = smoothing * data points / control points.
+    pub smoothing: f64,
+    /// Foot-point rounds after the first fit (at most).
+    pub rounds: usize,
+    /// Rounds stop once one lowers the RMS by less than this fraction.
+    pub min_gain: f64,
+    /// Share of the point-to-point term beside the point-to-plane one in the rounds.
+    pub tangential: f64,
+    /// The same share for data points within `edge_rings` rings of the data's boundary:
+    /// there the residual runs past the surface's edge, along it, where the point-to-plane
+    /// term does not pull.
+    pub tangential_edge: f64,
+    /// Width, in vertex rings from the data's boundary, of the band using `tangential_edge`.
+    pub edge_rings: usize,
+    /// CG steps where a sparse factorisation fails.
+    pub max_iterations: usize,
+    /// Start the first fit from the data's foot points on the limit surface of the initial
+    /// control mesh instead of their projections onto the control faces.
+    pub limit_start: bool,
+    /// Flips and relaxation of the simplified control mesh before fitting.
+    pub layout: LayoutOptions,
+    /// Adaptive refinement after the first fit.
+    pub refine: RefineOptions,
+    /// Pull sample points of control faces with few foot points to the data (the
+    /// surface-to-data term; without it such patches are held only by the fairness term).
+    pub surface_samples: bool,
+}
+
+impl Default for ObjectOptions {
+    fn default() -> Self {
+        Self {
+            target_controls_pct: 5.0,
+            target_controls: None,
+            clean: CleanOptions::default(),
+            crease: CreaseOptions::default(),
+            simplify: SimplifyOptions {
+                isotropy: 1e-3,
+                min_boundary_loop: MIN_BOUNDARY_LOOP,
+                ..Default::default()
+            },
+            smoothing: 1e-5,
+            // The rounds were stopped while still gaining: on bun_zipper (5 % controls)
+            // the last fit's rounds gained 2.9 % then 1.9 % and stopped at 63.8 um; run on
+            // to a 0.2 % gain they reach 57.9 um (20 rounds), to 0.5 % 59.3 um (13 rounds,
+            // +20 % fit CPU). The daemon's worker caps the rounds at
+            // `fit.correction.rounds` instead of this library default.
+            rounds: 16,
+            min_gain: 0.005,
+            tangential: 0.005,
+            tangential_edge: 0.05,
+            edge_rings: 3,
+            max_iterations: 400,
+            limit_start: true,
+            layout: LayoutOptions::default(),
+            refine: RefineOptions::default(),
+            surface_samples: true,
+        }
+    }
+}
+
+/// Why an object fit failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ObjectError {
+    /// Cleaning left no faces.
+    #[error("the mesh has no faces left after cleaning")]
+    Empty,
+    /// The data component or the control mesh has no half-edge topology.
+    #[error("the cleaned component is not a manifold")]
+    NotManifold(#[source] TopologyError),
+    /// The simplification to a control mesh refused the component.
+    #[error("simplifying to a control mesh failed")]
+    Simplify(#[source] SimplifyError),
+    /// The control mesh does not define a Loop limit surface.
+    #[error("the control mesh has no Loop limit surface")]
+    Surface(#[source] LoopLimitError),
+    /// [`fit_on_control_mesh`] was given a parameter count different from the data's.
+    #[error("{params} initial parameters for {points} data points")]
+    ParamCount {
+        /// Initial parameters given.
+        params: usize,
+        /// Data points (component vertices).
+        points: usize,
+    },
+    /// A least-squares solve produced no finite control points.
+    #[error("the {stage} solve gave no finite control points")]
+    Solve {
+        /// Which solve failed (`"first"`: the initial point fit).
+        stage: &'static str,
+    },
+}
+
+/// Stage times in milliseconds.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct ObjectTimes {
+    /// Cleaning and extracting the largest component.
+    pub clean_ms: f64,
+    /// Simplifying the component to the control mesh.
+    pub simplify_ms: f64,
+    /// Flips and relaxation of the control mesh.
+    pub layout_ms: f64,
+    /// Adaptive refinement: every refined control mesh and its whole fit (the surface,
+    /// first fit and rounds times are those of the fit before refinement).
+    pub refine_ms: f64,
+    /// Topology counts, the limit surface and the fairness operator.
+    pub surface_ms: f64,
+    /// Initial parameters, the first point fit and its foot points.
+    pub first_fit_ms: f64,
+    /// All foot-point/distance rounds, refused ones included.
+    pub rounds_ms: f64,
+    /// The whole fit, end to end.
+    pub total_ms: f64,
+}
+
+/// RMS and max distance of the data to the surface after a stage.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct RoundReport {
+    /// Root mean square distance, in the data's units.
+    pub rms: f64,
+    /// Largest distance, in the data's units.
+    pub max: f64,
+}
+
+/// A fitted object: the surface, its controls, and how well it fits the data.
+pub struct ObjectFit {
+    /// The data points fitted: the vertices of the kept component.
+    pub data: Vec<DVec3>,
+    /// The component itself (data points and their triangles).
+    pub component: TriMesh,
+    /// The control mesh before the final fit: the simplification after the layout stage
+    /// at its initial positions or, after refinement, the refined mesh at the previous
+    /// fit's limit positions.
+    pub simplified: TriMesh,
+    /// The limit surface's structure (faces and evaluation), independent of positions.
+    pub surface: LoopLimitSurface,
+    /// Fitted control point positions, one per control mesh vertex.
+    pub controls: Vec<DVec3>,
+    /// Foot point of every data point on the final surface.
+    pub params: Vec<SurfaceParam>,
+    /// Distance of every data point to its foot point.
+    pub distances: Vec<f64>,
+    /// Root mean square of `distances`.
+    pub rms: f64,
+    /// Largest of `distances`.
+    pub max: f64,
+    /// After the first fit, then after each round.
+    pub rounds: Vec<RoundReport>,
+    /// Topology of the data component.
+    pub data_topology: SurfaceTopology,
+    /// Topology of the control mesh (equal to the data's when simplification kept it).
+    pub control_topology: SurfaceTopology,
+    /// Stage times.
+    pub times: ObjectTimes,
+    /// What the layout stage changed (all zero when it did not run).
+    pub layout: LayoutReport,
+    /// The fit before refinement, then after each refinement round (empty when refinement
+    /// is off).
+    pub refinement: Vec<RefineRound>,
+    /// Control faces the last round sampled for the surface-to-data term inside (faces
+    /// with a quarter no foot point lands on; boundary curve samples not counted).
+    pub sampled_faces: usize,
+    /// What a local refit of a new version touched (`None`: a whole fit).
+    pub local: Option<LocalUpdate>,
+}
+
+impl ObjectFit {
+    /// The control mesh at the fitted positions.
+    pub fn control_mesh(&self) -> TriMesh {
+        TriMesh::new(self.controls.clone(), self.surface.faces().to_vec())
+    }
+}
+
+/// The limit surface of `control_mesh`, taking over the unchanged patches of `previous`.
+pub(super) fn limit_surface(
+    control_mesh: &TriMesh,
+    crease_edges: &[[u32; 2]],
+    previous: Option<&LoopLimitSurface>,
+) -> Result<LoopLimitSurface, ObjectError> {
+    let (count, faces) = (control_mesh.positions.len(), &control_mesh.triangles);
+    match previous {
+        Some(previous) => {
+            LoopLimitSurface::with_creases_reusing(count, faces, crease_edges, previous)
+        }
+        None => LoopLimitSurface::with_creases(count, faces, crease_edges),
+    }
+    .map_err(ObjectError::Surface)
+}
+
+pub(super) fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
+/// What a local refit of a new version touched (see `refit_where_changed`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct LocalUpdate {
+    /// Data points farther from the previous surface than the previous data near them.
+    pub changed_points: usize,
+    /// Controls solved again, new ones included; every other control kept its position.
+    pub free_controls: usize,
+    /// Controls the local refinement added.
+    pub added_controls: usize,
+    /// Points over the patches the free controls move (their feet found again), summed
+    /// over the refits.
+    pub moving_points: usize,
+    /// Squared-distance rounds taken, summed over the refits.
+    pub rounds: usize,
+}
