@@ -447,6 +447,13 @@ fn broken_bun_zipper_res4_is_repaired_and_fitted_whole() {
     // 453 vertices of a bunny: a coarse shape, followed to about 1 % of its size.
     let rms = fitted.fit.geometric_rms();
     assert!(rms < 0.02 * mesh.bounds_diagonal(), "RMS {rms}");
+    // A new version of the same broken file starts from this fit: its component is
+    // repaired as the cold fit's was (a plain cleaning leaves it not manifold).
+    let cfg = config(Domain::Auto, 10.0);
+    let first = run_patch(&mesh, None, &cfg).expect("fits");
+    let again = run_patch(&mesh, Some(&first.warm), &cfg).expect("fits warm");
+    let warm = &again.report["object"]["warm"];
+    assert_eq!(warm["used"], true, "{warm}");
 }
 
 /// `mesh` with a smooth dent of `depth` along the normal direction of a torus (towards its

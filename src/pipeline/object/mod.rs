@@ -60,6 +60,12 @@ const MAX_REFUSALS: usize = 3;
 /// max moved 257 -> 285 -> 314 -> 270 um.
 const MIN_FACES_BEYOND_SHARE: usize = 100;
 
+/// The component of `mesh` [`fit_object`] fits: its cleaned largest component, repaired
+/// to a manifold where cleaning alone leaves it not one; `None` when nothing is left.
+pub fn fitted_component(mesh: &TriMesh, clean: &CleanOptions) -> Option<TriMesh> {
+    largest_component(mesh, clean)
+}
+
 /// The topology of the surface [`fit_object`] fits to `mesh`: its cleaned largest
 /// component's; `None` when nothing is left or it is not manifold.
 pub fn fitted_topology(mesh: &TriMesh, clean: &CleanOptions) -> Option<SurfaceTopology> {

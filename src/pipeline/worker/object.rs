@@ -11,8 +11,8 @@ use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_creased_control_mesh, refit_where_changed, LayoutReport, LocalUpdate,
-    ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RefineRound, RoundReport,
+    fit_object, fit_on_creased_control_mesh, fitted_component, refit_where_changed, LayoutReport,
+    LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RefineRound, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -280,11 +280,9 @@ fn warm_start(
     warm: &ObjectWarm,
     controls: &[DVec3],
 ) -> Result<WarmStartPoint, String> {
-    let cleaned = clean(mesh, &CleanOptions::default());
-    let component = cleaned_components(&cleaned)
-        .into_iter()
-        .next()
-        .ok_or("nothing left after cleaning")?;
+    // The component a cold fit would take: a broken input repaired the same way.
+    let component =
+        fitted_component(mesh, &CleanOptions::default()).ok_or("nothing left after cleaning")?;
     let topology =
         SurfaceTopology::of(&component).map_err(|e| format!("not a manifold component: {e}"))?;
     if (topology.euler, topology.boundary_loops) != (warm.euler, warm.boundary_loops) {
