@@ -534,3 +534,26 @@ fn a_version_changed_in_one_place_is_refitted_there_only() {
         third.report["object"]["local"]
     );
 }
+
+#[test]
+fn a_change_too_shallow_for_any_point_is_found_by_its_faces() {
+    let mesh = torus(240, 80);
+    let cfg = config(Domain::Auto, 5.0);
+    let first = run_patch(&mesh, None, &cfg).expect("fits");
+    let rms = |o: &serde_json::Value| o["final"]["geometric_rms_error"].as_f64().unwrap_or(1.0);
+    let previous = rms(&first.report);
+    // A bump twice the previous RMS high: no point moves by the 3 RMS that marks a
+    // changed point, but the faces under the bump all move the same way.
+    let bumped = dented_torus(&mesh, 0, 0.3, -2.0 * previous);
+    let second = run_patch(&bumped, Some(&first.warm), &cfg).expect("fits warm");
+    let local = &second.report["object"]["local"];
+    let m = first.warm.controls.len();
+    let free = local["free_controls"].as_u64().unwrap_or(0) as usize;
+    assert!(
+        local["changed_points"].as_u64().unwrap_or(0) > 0 && free > 0 && 4 * free < m,
+        "{local} of {m} controls"
+    );
+    let cold = run_patch(&bumped, None, &cfg).expect("fits cold");
+    let (warm, cold) = (rms(&second.report), rms(&cold.report));
+    assert!(warm <= 1.2 * cold, "warm {warm} vs cold {cold}");
+}

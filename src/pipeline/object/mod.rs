@@ -22,6 +22,7 @@ mod local;
 mod model;
 mod refine;
 mod solve;
+mod version;
 
 use crate::fit::distance::CholeskyPattern;
 use crate::fit::engine::umbrella_laplacian_with_creases;
@@ -39,7 +40,6 @@ use corners::rim_corners;
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
-pub use local::refit_where_changed;
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
 use model::{control_target, limit_surface, ms_since};
 pub use model::{LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport};
@@ -47,6 +47,7 @@ use refine::{faces_beyond, refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
+pub use version::refit_where_changed;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
 /// stop.
