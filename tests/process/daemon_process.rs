@@ -1,6 +1,7 @@
 //! The daemon as a process: --once over a folder with versions and a corrupt file, restart
 //! skipping unchanged inputs, warm start of a new version, config errors, SIGTERM.
 
+use crate::daemon_support::events;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -32,14 +33,6 @@ max_vertices = 1000000
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_trispline"))
-}
-
-fn events(out: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(out.join("events.ndjson"))
-        .unwrap_or_default()
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("event lines are JSON"))
-        .collect()
 }
 
 fn fitted_events(out: &Path) -> usize {

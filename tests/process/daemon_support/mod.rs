@@ -155,9 +155,12 @@ pub fn drop_file(dir: &Path, name: &str, bytes: &[u8]) {
     std::fs::rename(&part, dir.join(name)).expect("rename");
 }
 
+/// The event log's whole lines. The daemon may be appending a line while the log is
+/// read: what follows the last newline is that line in part, not an event yet.
 pub fn events(out: &Path) -> Vec<serde_json::Value> {
-    std::fs::read_to_string(out.join("events.ndjson"))
-        .unwrap_or_default()
+    let log = std::fs::read_to_string(out.join("events.ndjson")).unwrap_or_default();
+    let whole = log.rfind('\n').map_or("", |end| &log[..end]);
+    whole
         .lines()
         .map(|l| serde_json::from_str(l).expect("event lines are JSON"))
         .collect()
