@@ -172,12 +172,16 @@ fn changed_points(
         .collect()
 }
 
-/// The standard deviation of `values` estimated from their median absolute deviation.
+/// The standard deviation of `values` estimated from their median absolute deviation (of
+/// the finite ones; 0 without any).
 fn robust_spread(values: &[f64]) -> f64 {
     let median = |v: &mut Vec<f64>| {
+        if v.is_empty() {
+            return 0.0;
+        }
         let k = v.len() / 2;
         v.select_nth_unstable_by(k, f64::total_cmp);
-        v.get(k).copied().unwrap_or(0.0)
+        v[k]
     };
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
     let centre = median(&mut v);
