@@ -122,18 +122,20 @@ pub(crate) fn cluster_config() -> String {
     )
 }
 
-pub(crate) fn spawn_worker(s: &Setup, server: &Server, name: &str) -> Child {
+pub(crate) fn spawn_worker(s: &Setup, server: &Server, name: &str) -> Daemon {
     let log = std::fs::File::create(s._tmp.path().join(format!("{name}.log"))).expect("log");
-    bin()
-        .args(["worker", "--queue", &server.url(), "--name", name])
-        .arg("--out")
-        .arg(&s.out)
-        .arg("--config")
-        .arg(&s.cfg)
-        .stdin(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .expect("worker starts")
+    Daemon(
+        bin()
+            .args(["worker", "--queue", &server.url(), "--name", name])
+            .arg("--out")
+            .arg(&s.out)
+            .arg("--config")
+            .arg(&s.cfg)
+            .stdin(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("worker starts"),
+    )
 }
 
 pub(crate) fn worker_log(s: &Setup, name: &str) -> String {
@@ -189,7 +191,7 @@ fn a_burst_of_100_versions_on_3_workers_fits_each_patch_newest_last_and_loses_no
     };
     let s = setup(&cluster_config());
     let names = ["w1", "w2", "w3"];
-    let workers: Vec<Child> = names.iter().map(|n| spawn_worker(&s, &server, n)).collect();
+    let workers: Vec<Daemon> = names.iter().map(|n| spawn_worker(&s, &server, n)).collect();
     let source = s.spawn(&["--queue", &server.url()]);
     let mut all = Vec::new();
     let mut newest = HashMap::new();
@@ -361,7 +363,7 @@ fn a_server_restart_mid_run_is_ridden_out() {
     };
     let s = setup(&cluster_config());
     let names = ["r1", "r2"];
-    let workers: Vec<Child> = names.iter().map(|n| spawn_worker(&s, &server, n)).collect();
+    let workers: Vec<Daemon> = names.iter().map(|n| spawn_worker(&s, &server, n)).collect();
     let source = s.spawn(&["--queue", &server.url()]);
     let mut all = Vec::new();
     let mut newest = HashMap::new();

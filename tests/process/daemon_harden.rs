@@ -20,13 +20,15 @@ fn a_relative_watch_folder_sees_renamed_in_files() {
     let s = setup(&config(3_000_000, "native", ""));
     let root = s.out.parent().expect("tmp").to_path_buf();
     let log = std::fs::File::create(root.join("daemon.log")).expect("log");
-    let child = bin()
-        .current_dir(&root)
-        .args(["watch", "in", "--out", "out", "--config", "daemon.toml"])
-        .stdin(Stdio::null())
-        .stderr(log)
-        .spawn()
-        .expect("spawns");
+    let child = Daemon::from(
+        bin()
+            .current_dir(&root)
+            .args(["watch", "in", "--out", "out", "--config", "daemon.toml"])
+            .stdin(Stdio::null())
+            .stderr(log)
+            .spawn()
+            .expect("spawns"),
+    );
     assert!(
         wait_until(|| s.log().contains("watching")),
         "started: {}",
@@ -64,13 +66,15 @@ fn pipe_path_records_cannot_reach_outside_the_roots() {
     std::fs::create_dir(&sub).expect("sub");
     std::os::unix::fs::symlink(&victim, sub.join("link.obj")).expect("symlink");
     std::fs::write(sub.join("mine.obj"), patch_obj(12, 3)).expect("inside");
-    let mut child = bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawns");
+    let mut child = Daemon::from(
+        bin()
+            .args(s.args())
+            .args(["--pipe", "-"])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawns"),
+    );
     let mut w = child.stdin.take().expect("stdin");
     let records = [
         ("dotdot", format!("{}/../victim.obj", s.inbox.display())),
@@ -216,13 +220,15 @@ fn a_record_half_received_at_stop_is_reported() {
         config(0, "native", "")
     ));
     let log = std::fs::File::create(s.out.parent().expect("tmp").join("daemon.log")).expect("log");
-    let mut child = bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(Stdio::piped())
-        .stderr(log)
-        .spawn()
-        .expect("spawns");
+    let mut child = Daemon::from(
+        bin()
+            .args(s.args())
+            .args(["--pipe", "-"])
+            .stdin(Stdio::piped())
+            .stderr(log)
+            .spawn()
+            .expect("spawns"),
+    );
     let mut w = child.stdin.take().expect("stdin");
     w.write_all(b"{\"patch\": \"cut\", \"format\": \"obj\", \"bytes\": 100000}\n")
         .expect("header");

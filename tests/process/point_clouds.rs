@@ -109,13 +109,15 @@ fn the_daemon_fits_pcd_clouds_from_its_folder_and_its_pipe() {
     let pts = cloud(30);
     drop_file(&s.inbox, "cloud.pcd", &pcd_bytes(&pts));
     drop_file(&s.inbox, "ball.pcd", &pcd_bytes(&sphere(2000)));
-    let mut child = bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawns");
+    let mut child = Daemon::from(
+        bin()
+            .args(s.args())
+            .args(["--pipe", "-"])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawns"),
+    );
     let mut w = child.stdin.take().expect("stdin");
     let payload = pcd_bytes(&cloud(24));
     write_all(

@@ -222,15 +222,17 @@ impl Setup {
         ]
     }
 
-    pub fn spawn(&self, extra: &[&str]) -> Child {
+    pub fn spawn(&self, extra: &[&str]) -> Daemon {
         let log = std::fs::File::create(self._tmp.path().join("daemon.log")).expect("log file");
-        bin()
-            .args(self.args())
-            .args(extra)
-            .stdin(Stdio::null())
-            .stderr(log)
-            .spawn()
-            .expect("spawns")
+        Daemon(
+            bin()
+                .args(self.args())
+                .args(extra)
+                .stdin(Stdio::null())
+                .stderr(log)
+                .spawn()
+                .expect("spawns"),
+        )
     }
 
     pub fn log(&self) -> String {
@@ -243,6 +245,38 @@ impl Setup {
             .arg("--once")
             .output()
             .expect("runs")
+    }
+}
+
+/// A process a test started, killed when the test lets go of it without having stopped
+/// it: a failed assertion must not leave a daemon or worker running after the tests.
+pub struct Daemon(pub Child);
+
+impl std::ops::Deref for Daemon {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Daemon {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl From<Child> for Daemon {
+    fn from(child: Child) -> Self {
+        Daemon(child)
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
     }
 }
 
@@ -270,7 +304,8 @@ pub fn wait_exit(child: &mut Child) -> Option<std::process::ExitStatus> {
     }
 }
 
-pub fn stop(mut child: Child) -> Option<std::process::ExitStatus> {
+pub fn stop(child: impl Into<Daemon>) -> Option<std::process::ExitStatus> {
+    let mut child = child.into();
     signal(&child, "TERM");
     wait_exit(&mut child)
 }
