@@ -167,6 +167,12 @@ pub fn simplify_with_creases(
 /// its end points when it was queued.
 type Entry = Reverse<(u64, u32, u32, u32, u32)>;
 
+/// The heap is cleared of stale entries once it holds more than this many per live vertex
+/// (a live mesh has about 3 edges per vertex). On bun_zipper subdivided once (140k
+/// vertices to 2.5k) the simplification took 2.4-2.7 s without clearing, 2.1-2.2 s at 8,
+/// 2.0 s at 5, with the same collapses.
+const STALE_HEAP_FACTOR: usize = 5;
+
 struct Candidate {
     keep: u32,
     remove: u32,
@@ -362,8 +368,23 @@ impl<'a> State<'a> {
             for x in self.neighbours(c.keep) {
                 self.push(&mut heap, c.keep, x);
             }
+            // Every collapse leaves the entries of the edges it changed behind in the heap,
+            // unreachable until popped; dropping them in bulk keeps the heap near the
+            // edge count (about 3 per vertex) instead of the pushes so far, and the
+            // sift-downs, which miss the cache, in a smaller array.
+            if heap.len() > STALE_HEAP_FACTOR * self.alive_vertices {
+                heap.retain(|e| self.is_current(e));
+            }
         }
         self.collapses - before
+    }
+
+    /// Whether a heap entry still stands for an edge as it is (both ends alive and not
+    /// collapsed into since it was queued).
+    fn is_current(&self, e: &Entry) -> bool {
+        let Reverse((_, a, b, va, vb)) = *e;
+        let (a, b) = (a as usize, b as usize);
+        self.alive[a] && self.alive[b] && self.version[a] == va && self.version[b] == vb
     }
 
     fn push(&self, heap: &mut BinaryHeap<Entry>, a: u32, b: u32) {
