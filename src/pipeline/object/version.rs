@@ -124,8 +124,8 @@ pub fn refit_where_changed(
 }
 
 /// The points of a new version that changed. Each point's shift is its signed distance to
-/// the previous surface less that of the previous data point nearest to it (`points` =
-/// [new, previous] per point; the previous one's foot is its start parameter). A point has
+/// the previous surface less that of the previous data point nearest to it (`reference`,
+/// whose foot is the point's start parameter in `start`). A point has
 /// changed when its shift exceeds `CHANGE_FACTOR` previous RMS; so has every point of a
 /// control face whose points' mean shift exceeds `FACE_SHIFT_ERRORS` standard errors of
 /// such a mean (from the shifts' spread, a robust one: changed parts are a minority),
@@ -259,10 +259,10 @@ impl Refitted {
     /// Refinement rounds where the update left points beyond the tolerance: changed points,
     /// and points the refits moved the surface away from by more than `change` (from their
     /// `initial` distance, on the previous surface; a smaller push is the noise of points
-    /// near the tolerance, and splitting for it spreads the refit over the object): their
-    /// faces split
-    /// (`refine::refined_mesh` restricted to them), the points over new faces and the
-    /// controls around them refitted; a refit that does not lower the RMS is dropped.
+    /// near the tolerance, and splitting for it spreads the refit over the object). Their
+    /// faces are split (`refine::refined_mesh` restricted to them), and the points over new
+    /// faces and the controls around them refitted; a refit that does not lower the RMS is
+    /// dropped.
     fn refine_where_changed(
         &mut self,
         component: &TriMesh,
