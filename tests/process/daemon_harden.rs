@@ -66,16 +66,7 @@ fn pipe_path_records_cannot_reach_outside_the_roots() {
     std::fs::create_dir(&sub).expect("sub");
     std::os::unix::fs::symlink(&victim, sub.join("link.obj")).expect("symlink");
     std::fs::write(sub.join("mine.obj"), patch_obj(12, 3)).expect("inside");
-    let mut child = Daemon::from(
-        bin()
-            .args(s.args())
-            .args(["--pipe", "-"])
-            .stdin(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawns"),
-    );
-    let mut w = child.stdin.take().expect("stdin");
+    let (mut child, mut w) = s.spawn_pipe();
     let records = [
         ("dotdot", format!("{}/../victim.obj", s.inbox.display())),
         ("absolute", victim.display().to_string()),
@@ -219,17 +210,7 @@ fn a_record_half_received_at_stop_is_reported() {
         "{}\n[log]\nlevel = \"debug\"\n",
         config(0, "native", "")
     ));
-    let log = std::fs::File::create(s.out.parent().expect("tmp").join("daemon.log")).expect("log");
-    let mut child = Daemon::from(
-        bin()
-            .args(s.args())
-            .args(["--pipe", "-"])
-            .stdin(Stdio::piped())
-            .stderr(log)
-            .spawn()
-            .expect("spawns"),
-    );
-    let mut w = child.stdin.take().expect("stdin");
+    let (mut child, mut w) = s.spawn_pipe();
     w.write_all(b"{\"patch\": \"cut\", \"format\": \"obj\", \"bytes\": 100000}\n")
         .expect("header");
     w.write_all(&[b'#'; 1000]).expect("part");

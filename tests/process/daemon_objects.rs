@@ -300,14 +300,7 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_de
 #[test]
 fn pipe_records_with_an_object_and_a_transform_are_scans_of_that_object() {
     let s = setup(&object_config(""));
-    let mut child = crate::daemon_support::bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("spawns");
-    let mut w = child.stdin.take().expect("stdin");
+    let (mut child, mut w) = s.spawn_pipe();
     let cap = cap_ply(12);
     let record = |w: &mut std::process::ChildStdin, extra: &str, patch: &str| {
         let header = format!(

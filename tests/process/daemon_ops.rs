@@ -10,14 +10,7 @@ use std::time::Duration;
 #[test]
 fn sigterm_with_work_in_flight_loses_nothing() {
     let s = setup(&config(0, "native", "").replace("workers = 2", "workers = 1"));
-    let mut child = bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spawns");
-    let mut w = child.stdin.take().expect("stdin");
+    let (mut child, mut w) = s.spawn_pipe();
     let patches: Vec<String> = (0..6).map(|k| format!("rec{k}")).collect();
     for (k, p) in patches.iter().enumerate() {
         let bytes = patch_ply(40, k as u32);

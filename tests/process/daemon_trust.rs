@@ -329,14 +329,7 @@ fn the_systemd_watchdog_gets_keep_alives() {
 fn pipe_paths_are_relative_to_the_watch_folder_and_refusals_name_the_cause() {
     let s = setup(&config(0, "native", ""));
     std::fs::write(s.inbox.join("x.ply"), patch_ply(12, 8)).expect("write");
-    let mut child = bin()
-        .args(s.args())
-        .args(["--pipe", "-"])
-        .stdin(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("spawns");
-    let mut w = child.stdin.take().expect("stdin");
+    let (mut child, mut w) = s.spawn_pipe();
     write_all(
         &mut w,
         b"{\"patch\": \"rel\", \"path\": \"x.ply\"}\n{\"patch\": \"bad/../x\", \"path\": \"bad/../x.ply\"}\n",

@@ -3,7 +3,6 @@
 //! folder and one sent through the pipe.
 
 use crate::daemon_support::*;
-use std::process::Stdio;
 
 /// A scan-like height field sampled as a jittered `n` x `n` cloud (in metres, a 6 cm
 /// square), with a hole, as (x, y, z) triples.
@@ -109,16 +108,7 @@ fn the_daemon_fits_pcd_clouds_from_its_folder_and_its_pipe() {
     let pts = cloud(30);
     drop_file(&s.inbox, "cloud.pcd", &pcd_bytes(&pts));
     drop_file(&s.inbox, "ball.pcd", &pcd_bytes(&sphere(2000)));
-    let mut child = Daemon::from(
-        bin()
-            .args(s.args())
-            .args(["--pipe", "-"])
-            .stdin(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawns"),
-    );
-    let mut w = child.stdin.take().expect("stdin");
+    let (child, mut w) = s.spawn_pipe();
     let payload = pcd_bytes(&cloud(24));
     write_all(
         &mut w,

@@ -4,7 +4,7 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::{Duration, Instant};
 
 pub fn bin() -> Command {
@@ -233,6 +233,23 @@ impl Setup {
                 .spawn()
                 .expect("spawns"),
         )
+    }
+
+    /// A daemon reading records from its standard input (`--pipe -`), and that input;
+    /// its log goes where `spawn`'s does.
+    pub fn spawn_pipe(&self) -> (Daemon, ChildStdin) {
+        let log = std::fs::File::create(self._tmp.path().join("daemon.log")).expect("log file");
+        let mut child = Daemon(
+            bin()
+                .args(self.args())
+                .args(["--pipe", "-"])
+                .stdin(Stdio::piped())
+                .stderr(log)
+                .spawn()
+                .expect("spawns"),
+        );
+        let input = child.stdin.take().expect("stdin");
+        (child, input)
     }
 
     pub fn log(&self) -> String {
