@@ -227,28 +227,26 @@ pub(crate) fn free_controls(
             }
         }
     }
-    let mut free = touched.clone();
-    for f in surface.faces() {
-        if f.iter().any(|&v| touched[v as usize]) {
+    with_neighbours(surface.faces(), &touched)
+}
+
+/// `marked` with every vertex of a face holding a marked vertex: one ring more.
+fn with_neighbours(faces: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
+    let mut grown = marked.to_vec();
+    for f in faces {
+        if f.iter().any(|&v| marked[v as usize]) {
             for &v in f {
-                free[v as usize] = true;
+                grown[v as usize] = true;
             }
         }
     }
-    free
+    grown
 }
 
 /// Per control face, whether its patch depends on a free control: a Loop patch depends on
 /// its corners and their neighbours.
 fn moving_faces(surface: &LoopLimitSurface, free: &[bool]) -> Vec<bool> {
-    let mut near_free = free.to_vec();
-    for f in surface.faces() {
-        if f.iter().any(|&v| free[v as usize]) {
-            for &v in f {
-                near_free[v as usize] = true;
-            }
-        }
-    }
+    let near_free = with_neighbours(surface.faces(), free);
     surface
         .faces()
         .iter()
