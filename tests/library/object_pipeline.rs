@@ -557,3 +557,66 @@ fn a_change_too_shallow_for_any_point_is_found_by_its_faces() {
     let (warm, cold) = (rms(&second.report), rms(&cold.report));
     assert!(warm <= 1.2 * cold, "warm {warm} vs cold {cold}");
 }
+
+/// The part of a torus from `torus(_, m)` before its `rows`-th ring: a tube with two rims.
+fn torus_section(torus: &TriMesh, m: usize, rows: usize) -> TriMesh {
+    let kept: Vec<[u32; 3]> = torus
+        .triangles
+        .iter()
+        .filter(|t| t.iter().all(|&v| (v as usize) / m < rows))
+        .copied()
+        .collect();
+    TriMesh::new(torus.positions[..rows * m].to_vec(), kept)
+}
+
+#[test]
+fn an_object_that_grows_is_extended_over_its_new_ground() {
+    let full = torus(240, 80);
+    let cfg = config(Domain::Mesh, 5.0);
+    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
+    let grown = torus_section(&full, 80, 190);
+    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits warm");
+    let cold = run_patch(&grown, None, &cfg).expect("fits cold");
+    let r = &second.report;
+    assert_eq!(r["object"]["warm"]["used"], true, "{}", r["object"]["warm"]);
+    let local = &r["object"]["local"];
+    let count = |k: &str| local[k].as_u64().unwrap_or(0) as usize;
+    // The 40 new rings hold 3,200 points; the rest of the tube is old ground.
+    assert!(count("new_ground_points") >= 3000, "{local}");
+    let m = first.warm.controls.len();
+    let n = second.warm.controls.len();
+    assert!(
+        n > m && count("added_controls") >= n - m,
+        "{local}: {m} -> {n}"
+    );
+    // The previous controls far from the new ground kept their positions exactly.
+    let kept = first
+        .warm
+        .controls
+        .iter()
+        .zip(&second.warm.controls)
+        .filter(|(a, b)| a == b)
+        .count();
+    assert!(2 * kept > m, "{kept} of {m} previous controls kept");
+    let stat = |o: &serde_json::Value, k: &str| o["final"][k].as_f64().unwrap_or(f64::NAN);
+    let (warm_rms, cold_rms) = (
+        stat(r, "geometric_rms_error"),
+        stat(&cold.report, "geometric_rms_error"),
+    );
+    let (warm_max, cold_max) = (
+        stat(r, "geometric_max_error"),
+        stat(&cold.report, "geometric_max_error"),
+    );
+    eprintln!(
+        "extended rms {warm_rms:.3e} max {warm_max:.3e}, cold rms {cold_rms:.3e} max {cold_max:.3e}, controls {m} -> {n} (cold {})",
+        cold.warm.controls.len()
+    );
+    assert!(
+        warm_rms <= 1.5 * cold_rms,
+        "extended {warm_rms} vs cold {cold_rms}"
+    );
+    assert!(
+        warm_max <= 2.0 * cold_max,
+        "extended {warm_max} vs cold {cold_max}"
+    );
+}

@@ -145,6 +145,20 @@ pub fn simplify_with_creases(
     opts: &SimplifyOptions,
     crease_edges: &[[u32; 2]],
 ) -> Result<Simplified, SimplifyError> {
+    simplify_keeping(mesh, opts, crease_edges, &[])
+}
+
+/// [`simplify_with_creases`] that also keeps every vertex `keep` marks where it is (a
+/// vertex past the end of `keep` is not kept): no collapse removes or moves it, so a face
+/// whose corners are all kept comes out as it went in. Vertices stay in input order, so
+/// kept vertices ahead of every other keep their indices, and so do faces ahead of every
+/// face a collapse touched.
+pub fn simplify_keeping(
+    mesh: &TriMesh,
+    opts: &SimplifyOptions,
+    crease_edges: &[[u32; 2]],
+    keep: &[bool],
+) -> Result<Simplified, SimplifyError> {
     if mesh.triangles.is_empty() {
         return Err(SimplifyError::NoFaces);
     }
@@ -153,6 +167,9 @@ pub fn simplify_with_creases(
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
     let mut state = State::new(mesh, &topo, opts, Creases::new(&topo, crease_edges));
+    for (locked, &kept) in state.locked.iter_mut().zip(keep) {
+        *locked |= kept;
+    }
     let target = opts.target_vertices.max(4);
     // Edges refused in one pass may be allowed after their neighbourhood changed.
     for _ in 0..4 {
@@ -438,9 +455,20 @@ impl<'a> State<'a> {
             return None;
         }
         let q = self.quadric[ai].sum(&self.quadric[bi]);
-        let fixed = if self.locked[ai] || (self.boundary[ai] && !self.boundary[bi]) {
+        // A locked end stays whatever the other is; a locked interior end and a boundary
+        // end would move the boundary inwards or remove the locked vertex: no collapse.
+        let pinned_inside =
+            |l: usize, o: usize| self.locked[l] && !self.boundary[l] && self.boundary[o];
+        if pinned_inside(ai, bi) || pinned_inside(bi, ai) {
+            return None;
+        }
+        let fixed = if self.locked[ai] {
             Some((a, b))
-        } else if self.locked[bi] || (self.boundary[bi] && !self.boundary[ai]) {
+        } else if self.locked[bi] {
+            Some((b, a))
+        } else if self.boundary[ai] && !self.boundary[bi] {
+            Some((a, b))
+        } else if self.boundary[bi] && !self.boundary[ai] {
             Some((b, a))
         } else if self.creases.count(a) > 0 && !self.creases.is_crease(a, b) {
             // Off a chain only a crease vertex with a smooth neighbour may be collapsed

@@ -17,6 +17,7 @@
 
 mod component;
 mod corners;
+mod extend;
 mod layout;
 mod local;
 mod model;
@@ -37,6 +38,7 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
 use corners::rim_corners;
+pub use extend::{extend_over_new_ground, PreviousFit};
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};

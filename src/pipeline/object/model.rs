@@ -244,4 +244,7 @@ pub struct LocalUpdate {
     pub moving_points: usize,
     /// Squared-distance rounds taken, summed over the refits.
     pub rounds: usize,
+    /// Data points on new ground the control mesh was extended over (0: the update kept
+    /// the previous control mesh's extent).
+    pub new_ground_points: usize,
 }

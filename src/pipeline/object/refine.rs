@@ -132,17 +132,10 @@ pub(super) fn faces_beyond(fit: &Fitted, tolerance: Option<f64>) -> usize {
     beyond.iter().filter(|&&b| b).count()
 }
 
-/// The control mesh of `fit` with up to `add` edges split where the squared error is (see
-/// the module docs; only on the faces `only` marks, if given) and each data point's
-/// landing on it; `None` when the fit has no error there or the net cannot be built.
-pub(super) fn refined_mesh(
-    fit: &Fitted,
-    add: usize,
-    layout: &LayoutOptions,
-    only: Option<&[bool]>,
-) -> Option<Refined> {
-    let faces = fit.surface.faces();
-    let evaluate = fit.surface.evaluator(fit.controls);
+/// Each control vertex's limit point on the surface of `controls` (the control itself for
+/// a vertex no face holds): the net through these interpolates the surface.
+pub(super) fn limit_positions(surface: &LoopLimitSurface, controls: &[DVec3]) -> Vec<DVec3> {
+    let evaluate = surface.evaluator(controls);
     let corner = |f: usize, k: usize| {
         let (u, v) = match k {
             0 => (1.0, 0.0),
@@ -155,19 +148,33 @@ pub(super) fn refined_mesh(
             v,
         }
     };
-    let mut limit: Vec<Option<DVec3>> = vec![None; fit.controls.len()];
-    for (f, t) in faces.iter().enumerate() {
+    let mut limit: Vec<Option<DVec3>> = vec![None; controls.len()];
+    for (f, t) in surface.faces().iter().enumerate() {
         for (k, &v) in t.iter().enumerate() {
             if limit[v as usize].is_none() {
                 limit[v as usize] = Some(evaluate(corner(f, k)).position);
             }
         }
     }
-    let limit: Vec<DVec3> = limit
+    limit
         .iter()
-        .zip(fit.controls)
+        .zip(controls)
         .map(|(l, c)| l.unwrap_or(*c))
-        .collect();
+        .collect()
+}
+
+/// The control mesh of `fit` with up to `add` edges split where the squared error is (see
+/// the module docs; only on the faces `only` marks, if given) and each data point's
+/// landing on it; `None` when the fit has no error there or the net cannot be built.
+pub(super) fn refined_mesh(
+    fit: &Fitted,
+    add: usize,
+    layout: &LayoutOptions,
+    only: Option<&[bool]>,
+) -> Option<Refined> {
+    let faces = fit.surface.faces();
+    let evaluate = fit.surface.evaluator(fit.controls);
+    let limit = limit_positions(fit.surface, fit.controls);
 
     let mut error = vec![0.0; faces.len()];
     for (p, &d) in fit.params.iter().zip(fit.distances) {

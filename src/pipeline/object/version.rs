@@ -21,7 +21,7 @@ use std::time::Instant;
 /// A new point has changed when its signed distance to the previous surface differs from
 /// that of the previous data near it by more than this many times the previous fit's RMS:
 /// a rescan's own noise moves a residual by about the RMS, a changed part by far more.
-const CHANGE_FACTOR: f64 = 3.0;
+pub(super) const CHANGE_FACTOR: f64 = 3.0;
 
 /// A control face has changed when its points' mean shift exceeds this many standard
 /// errors of that mean: unchanged data (a rescan's noise) crosses it on about one face in
@@ -131,7 +131,7 @@ pub fn refit_where_changed(
 /// such a mean (from the shifts' spread, a robust one: changed parts are a minority),
 /// which finds a change too shallow for any one point, such as a part moved by less than
 /// the noise.
-fn changed_points(
+pub(super) fn changed_points(
     surface: &LoopLimitSurface,
     controls: &[DVec3],
     [data, reference]: [&[DVec3]; 2],
@@ -191,7 +191,7 @@ fn robust_spread(values: &[f64]) -> f64 {
 }
 
 /// A local refit in progress: the surface, controls and feet so far, and what was touched.
-struct Refitted {
+pub(super) struct Refitted {
     surface: LoopLimitSurface,
     /// The control mesh the last refit started from.
     start_mesh: TriMesh,
@@ -209,7 +209,7 @@ struct Refitted {
 }
 
 impl Refitted {
-    fn new(
+    pub(super) fn new(
         surface: LoopLimitSurface,
         start_mesh: TriMesh,
         first: LocalFit,
@@ -263,7 +263,7 @@ impl Refitted {
     /// faces are split (`refine::refined_mesh` restricted to them), and the points over new
     /// faces and the controls around them refitted; a refit that does not lower the RMS is
     /// dropped.
-    fn refine_where_changed(
+    pub(super) fn refine_where_changed(
         &mut self,
         component: &TriMesh,
         changed: &[usize],
@@ -351,7 +351,7 @@ impl Refitted {
         }
     }
 
-    fn into_fit(
+    pub(super) fn into_fit(
         self,
         component: TriMesh,
         [data_topology, control_topology]: [SurfaceTopology; 2],

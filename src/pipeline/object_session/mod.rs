@@ -10,12 +10,14 @@
 //! `VIEW_SPREAD_DEG`), the worker's `auto` dispatch chooses (a grid over the planar map for
 //! disk-like data, the control mesh once it closes); views from further apart wrap around
 //! the object, and a union that wraps around folds on every plane even while it is a disk,
-//! so the control mesh takes it. The previous surface is offered as the start only when
-//! the merged data covers the same ground (`WARM_MAX_COVERAGE_CHANGE`): a control mesh
-//! fitted before a view arrived has no faces where that view's new ground is, and the
-//! worker's guards (topology, size, bounding box) do not see a view filling in the side of
-//! an object whose box it does not widen. So a change of coverage refits cold, and the
-//! surface of a set of scans does not depend on the order they arrived in.
+//! so the control mesh takes it. When the merged data covers the same ground as before
+//! (`WARM_MAX_COVERAGE_CHANGE`, same topology), the session refits the previous control
+//! mesh locally itself (`local`). Otherwise the previous fit goes to the worker as its warm
+//! start: the worker extends the previous control mesh over new ground that joins its rim
+//! (`object::extend_over_new_ground`: the previous faces kept, the new region simplified
+//! and stitched on, only the controls there and around the seam solved), and fits from
+//! scratch when the new ground cannot be joined. So the surface of a set of scans may
+//! depend on the order they arrived in, within what the fits' own spread allows.
 
 mod local;
 mod measure;
@@ -371,7 +373,7 @@ impl ObjectSession {
         let cold_because = self.why_cold(before.is_some(), coverage_change, &merged);
         let (fitted, local) = match cold_because {
             None => self.refit_locally(&merged, &worker)?,
-            Some(_) => (self.fit_cold(&merged, coverage_change, &mut worker)?, None),
+            Some(_) => (self.fit_cold(&merged, &mut worker)?, None),
         };
         times.fit_ms = ms_since(t);
         let path = if fitted.object.is_some() {
@@ -417,7 +419,7 @@ impl ObjectSession {
             "path": path,
             "view_spread_deg": spread,
             "views_wrap_around": wraps,
-            "warm_offered": local.is_some() || coverage_change <= WARM_MAX_COVERAGE_CHANGE,
+            "warm_offered": !self.opts.cold,
             "coverage_change": coverage_change,
             "updated_region": region,
             "scan_distances": scans,
@@ -474,7 +476,7 @@ impl ObjectSession {
         let t = Instant::now();
         let cold = || -> Result<(FittedPatch, Option<LocalRefit>), SessionError> {
             let mut worker = worker.clone();
-            Ok((self.fit_cold(merged, 0.0, &mut worker)?, None))
+            Ok((self.fit_cold(merged, &mut worker)?, None))
         };
         // `why_cold` let only an object fit through: these fall back for safety alone.
         let Some(last) = self.last.as_ref() else {
@@ -517,13 +519,11 @@ impl ObjectSession {
     fn fit_cold(
         &self,
         merged: &Merged,
-        coverage_change: f64,
         worker: &mut WorkerConfig,
     ) -> Result<FittedPatch, SessionError> {
-        let warm = self
-            .warm
-            .as_ref()
-            .filter(|_| coverage_change <= WARM_MAX_COVERAGE_CHANGE);
+        // The worker extends the previous control mesh over new ground, refits it where
+        // the data changed over the same ground, or fits from scratch.
+        let warm = self.warm.as_ref().filter(|_| !self.opts.cold);
         match fit_patch(&merged.mesh, warm, worker) {
             Ok(f) => Ok(f),
             // Views that wrap around without closing can pass the worker's disk test and

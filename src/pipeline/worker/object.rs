@@ -11,8 +11,9 @@ use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    fit_object, fit_on_creased_control_mesh, fitted_component, refit_where_changed, LayoutReport,
-    LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RefineRound, RoundReport,
+    extend_over_new_ground, fit_object, fit_on_creased_control_mesh, fitted_component,
+    refit_where_changed, LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
+    ObjectTimes, PreviousFit, RefineRound, RoundReport,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -204,16 +205,14 @@ pub(super) fn fit_as_object(
     let mut opts = options(cfg);
     opts.refine.tolerance = Some(budget.tolerance);
     let object = |source| PipelineError::Object { source };
-    let creases = previous.map(|w| w.crease_edges.as_slice()).unwrap_or(&[]);
-    let (fit, warm) = match previous.map(|w| warm_start(mesh, w, previous_controls)) {
-        Some(Ok(start)) => (
-            warm_fit(start, previous, creases, &opts).map_err(object)?,
-            WarmDecision::Used,
-        ),
-        Some(Err(why)) => (
-            fit_object(mesh, &opts).map_err(object)?,
-            WarmDecision::Refused(why),
-        ),
+    let (fit, warm) = match previous {
+        Some(w) => match from_previous(mesh, w, previous_controls, &opts) {
+            Ok(fit) => (fit.map_err(object)?, WarmDecision::Used),
+            Err(why) => (
+                fit_object(mesh, &opts).map_err(object)?,
+                WarmDecision::Refused(why),
+            ),
+        },
         None => (fit_object(mesh, &opts).map_err(object)?, WarmDecision::None),
     };
     let info = ObjectInfo {
@@ -235,11 +234,10 @@ pub(super) fn fit_as_object(
 /// when that is a small part of it, else the whole fit from there.
 fn warm_fit(
     start: WarmStartPoint,
-    previous: Option<&ObjectWarm>,
-    creases: &[[u32; 2]],
+    warm: &ObjectWarm,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
-    let previous_rms = previous.map_or(0.0, |w| w.feet.rms);
+    let creases = &warm.crease_edges;
     let WarmStartPoint {
         component,
         control_mesh,
@@ -252,13 +250,132 @@ fn warm_fit(
         creases,
         params.clone(),
         &reference,
-        previous_rms,
+        warm.feet.rms,
         opts,
     )?;
     match local {
         Some(fit) => Ok(fit),
         None => fit_on_creased_control_mesh(component, control_mesh, creases, params, opts),
     }
+}
+
+/// A point of a new version is on new ground when the nearest previous data point is
+/// farther than this many of the new data's median edge lengths.
+const NEW_GROUND_EDGES: f64 = 1.0;
+
+/// A new version extends the previous control mesh only while at most this share of its
+/// points is on new ground; more is mostly a new object.
+const MAX_NEW_GROUND_SHARE: f64 = 0.6;
+
+/// ... and while the data left at most this share of the previous control faces (a merge
+/// drops rim cells as views are added; a removed scan leaves far more).
+const MAX_FACES_LEFT: f64 = 0.02;
+
+/// A new version fitted from the previous fit: extended over new ground when it covers
+/// more (an object session's new view), else refitted where it changed; `Err` says why
+/// the previous fit does not fit the new data (the whole fit runs).
+fn from_previous(
+    mesh: &TriMesh,
+    warm: &ObjectWarm,
+    controls: &[DVec3],
+    opts: &ObjectOptions,
+) -> Result<Result<ObjectFit, ObjectError>, String> {
+    // The component a cold fit would take: a broken input repaired the same way.
+    let component =
+        fitted_component(mesh, &CleanOptions::default()).ok_or("nothing left after cleaning")?;
+    let faces_ok = warm
+        .faces
+        .iter()
+        .flatten()
+        .all(|&v| (v as usize) < controls.len());
+    let before = warm.feet.points.len();
+    if !faces_ok || warm.feet_faces.len() != before || warm.feet.params.len() != before {
+        return Err("the stored control mesh is inconsistent".into());
+    }
+    let (params, reference) = nearest_params(warm, &component.positions);
+    // New ground lies beyond the previous data, so its nearest previous point is on a rim
+    // face; a point far from the previous data over an inner face is a change of old
+    // ground (a dent), which the local refit takes.
+    let rim = Topology::build(controls.len(), &warm.faces)
+        .map_err(|e| format!("the stored control mesh is not a manifold: {e}"))?
+        .boundary;
+    let on_rim = |p: &SurfaceParam| {
+        warm.faces
+            .get(p.face as usize)
+            .is_some_and(|t| t.iter().any(|&v| rim[v as usize]))
+    };
+    let near = NEW_GROUND_EDGES * crate::pipeline::merge::median_edge(&component);
+    let is_new: Vec<bool> = component
+        .positions
+        .iter()
+        .zip(&reference)
+        .zip(&params)
+        .map(|((p, r), param)| p.distance(*r) > near && on_rim(param))
+        .collect();
+    let start = WarmStartPoint {
+        component,
+        control_mesh: TriMesh::new(controls.to_vec(), warm.faces.clone()),
+        params,
+        reference,
+    };
+    if is_new.contains(&true) {
+        return extend_fit(start, &is_new, warm, opts).map(Ok);
+    }
+    check_same_object(&start.component, warm)?;
+    Ok(warm_fit(start, warm, opts))
+}
+
+/// The new version extended over its new ground (`object::extend_over_new_ground`); `Err`
+/// says why not. Refused as well when the data left a previous control face (a removed
+/// scan): that face would keep a surface no data holds.
+fn extend_fit(
+    start: WarmStartPoint,
+    is_new: &[bool],
+    warm: &ObjectWarm,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, String> {
+    let new = is_new.iter().filter(|&&b| b).count();
+    if new as f64 > MAX_NEW_GROUND_SHARE * is_new.len() as f64 {
+        return Err(format!("{new} of {} points on new ground", is_new.len()));
+    }
+    let mut held_before = vec![false; warm.faces.len()];
+    for &f in &warm.feet_faces {
+        if let Some(h) = held_before.get_mut(f as usize) {
+            *h = true;
+        }
+    }
+    let mut held = vec![false; warm.faces.len()];
+    for (p, _) in start.params.iter().zip(is_new).filter(|(_, &n)| !n) {
+        if let Some(h) = held.get_mut(p.face as usize) {
+            *h = true;
+        }
+    }
+    let left = held_before
+        .iter()
+        .zip(&held)
+        .filter(|(&b, &h)| b && !h)
+        .count();
+    if left as f64 > MAX_FACES_LEFT * held_before.len() as f64 {
+        return Err(format!(
+            "the data left {left} of the previous {} control faces",
+            held_before.len()
+        ));
+    }
+    let previous = PreviousFit {
+        control_mesh: &start.control_mesh,
+        crease_edges: &warm.crease_edges,
+        rms: warm.feet.rms,
+    };
+    extend_over_new_ground(
+        start.component.clone(),
+        previous,
+        start.params.clone(),
+        &start.reference,
+        is_new,
+        opts,
+    )
+    .map_err(|e| e.to_string())?
+    .ok_or_else(|| "the new ground could not be joined to the previous rim".into())
 }
 
 /// Where a new version's warm fit starts.
@@ -273,18 +390,10 @@ struct WarmStartPoint {
     reference: Vec<DVec3>,
 }
 
-/// Where the new version's warm fit starts, or why the previous fit does not fit the new
-/// data.
-fn warm_start(
-    mesh: &TriMesh,
-    warm: &ObjectWarm,
-    controls: &[DVec3],
-) -> Result<WarmStartPoint, String> {
-    // The component a cold fit would take: a broken input repaired the same way.
-    let component =
-        fitted_component(mesh, &CleanOptions::default()).ok_or("nothing left after cleaning")?;
+/// Why the previous fit does not fit a new version over the same ground, if it does not.
+fn check_same_object(component: &TriMesh, warm: &ObjectWarm) -> Result<(), String> {
     let topology =
-        SurfaceTopology::of(&component).map_err(|e| format!("not a manifold component: {e}"))?;
+        SurfaceTopology::of(component).map_err(|e| format!("not a manifold component: {e}"))?;
     if (topology.euler, topology.boundary_loops) != (warm.euler, warm.boundary_loops) {
         return Err(format!(
             "topology changed: Euler characteristic {} -> {}, boundary loops {} -> {}",
@@ -302,29 +411,14 @@ fn warm_start(
         .length()
         .max((bounds[1] - warm.bounds[1]).length());
     // Written so that a NaN box (no points) counts as moved.
-    let box_kept = shift <= WARM_MAX_BOX_SHIFT * diagonal;
-    if !box_kept {
-        return Err(format!(
+    if shift <= WARM_MAX_BOX_SHIFT * diagonal {
+        Ok(())
+    } else {
+        Err(format!(
             "bounding box moved by {:.3} of its diagonal",
             shift / diagonal.max(f64::MIN_POSITIVE)
-        ));
+        ))
     }
-    let faces_ok = warm
-        .faces
-        .iter()
-        .flatten()
-        .all(|&v| (v as usize) < controls.len());
-    if !faces_ok || warm.feet_faces.len() != before || warm.feet.params.len() != before {
-        return Err("the stored control mesh is inconsistent".into());
-    }
-    let (params, reference) = nearest_params(warm, &component.positions);
-    let control_mesh = TriMesh::new(controls.to_vec(), warm.faces.clone());
-    Ok(WarmStartPoint {
-        component,
-        control_mesh,
-        params,
-        reference,
-    })
 }
 
 fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {

@@ -1,0 +1,707 @@
+//! A fitted object extended over new ground (an object session's new view, a new version
+//! that covers more): the previous control mesh is kept face for face, the data beyond it
+//! gets control faces of its own, and only the new controls and those around the seam are
+//! solved (`local`); every other control keeps its position.
+//!
+//! The new region is every data face with a point on new ground. Its seam (its boundary
+//! where older data goes on) lies along the previous rim, so a strip of triangles joins
+//! the seam's vertices to the previous rim vertices nearest to them (at their limit
+//! points, which lie on the previous surface), by arc length along both. The joined mesh
+//! (previous control faces, the region at data resolution, the strip) is simplified with
+//! every previous control vertex kept (`simplify_keeping`): the collapses fold the seam's
+//! vertices onto the rim and thin the region out to the budget's density, with the
+//! simplification's guards (manifold links, normals, triangle quality). The previous
+//! vertices and faces keep their indices, so every old point keeps its foot and the
+//! previous surface's patches are taken over. The region's points land on the new faces
+//! as in a whole fit's simplification.
+//!
+//! Not done: a new region that does not meet the previous rim (an island), or meets two
+//! rim loops in one seam, or a seam whose rim run overlaps another's, is refused (`None`):
+//! the caller fits the whole object instead. Creases are not detected on the new region.
+
+use super::local::{free_controls, refit_around, LocalFeet, LocalOptions};
+use super::model::ObjectOptions;
+use super::model::{control_target, limit_surface, ms_since, ObjectError, ObjectFit};
+use super::refine::limit_positions;
+use super::version::{changed_points, Refitted, CHANGE_FACTOR};
+use crate::mesh::simplify::{simplify_keeping, SimplifyOptions, SurfaceTopology};
+use crate::mesh::topology::{Topology, NONE};
+use crate::surface::SurfaceParam;
+use crate::TriMesh;
+use glam::DVec3;
+use rustc_hash::FxHashMap;
+use std::time::Instant;
+
+/// A seam whose median distance to the previous rim exceeds this many mean rim edges does
+/// not run along the rim: the new region is an island the strip cannot join.
+const MAX_SEAM_GAP_EDGES: f64 = 2.0;
+
+/// Share of a seam's vertices whose nearest rim vertex must lie in the rim run the strip
+/// covers (the rest are corners of the seam near the run's ends).
+const MIN_SEAM_IN_RUN: f64 = 0.8;
+
+/// The previous fit the extension keeps.
+pub struct PreviousFit<'a> {
+    /// Its control mesh at the fitted positions.
+    pub control_mesh: &'a TriMesh,
+    /// Its crease edges.
+    pub crease_edges: &'a [[u32; 2]],
+    /// Its RMS distance (to tell changed old points from noise).
+    pub rms: f64,
+}
+
+/// Extends `previous` over the points `is_new` marks (see the module docs). `params` holds
+/// every old point's start on the previous surface (the foot of the previous data point
+/// nearest to it, `reference`); new points' entries are not read. `None` when there is no
+/// new point or the region cannot be joined to the previous rim.
+pub fn extend_over_new_ground(
+    component: TriMesh,
+    previous: PreviousFit,
+    params: Vec<SurfaceParam>,
+    reference: &[DVec3],
+    is_new: &[bool],
+    opts: &ObjectOptions,
+) -> Result<Option<ObjectFit>, ObjectError> {
+    let start = Instant::now();
+    let n = component.positions.len();
+    if params.len() != n || reference.len() != n || is_new.len() != n {
+        return Err(ObjectError::ParamCount {
+            params: params.len().min(reference.len()).min(is_new.len()),
+            points: n,
+        });
+    }
+    if !is_new.iter().any(|&b| b)
+        || previous.rms.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
+    {
+        return Ok(None);
+    }
+    let old_mesh = previous.control_mesh;
+    let m = old_mesh.positions.len();
+    let old_faces = old_mesh.triangles.len();
+    if params
+        .iter()
+        .zip(is_new)
+        .any(|(p, &new)| !new && p.face as usize >= old_faces)
+    {
+        return Ok(None);
+    }
+    let old_surface = limit_surface(old_mesh, previous.crease_edges, None)?;
+    let t = Instant::now();
+    let Some(joined) = joined_mesh(&component, is_new, old_mesh, &old_surface) else {
+        return Ok(None);
+    };
+    // Points of parts the strip could not join are old ground that changed.
+    let demoted: Vec<usize> = (0..n).filter(|&i| is_new[i] && !joined.is_new[i]).collect();
+    let is_new = &joined.is_new[..];
+    let target = new_controls(joined.region_vertices.len(), opts);
+    let simplify_opts = SimplifyOptions {
+        target_vertices: m + target,
+        ..opts.simplify.clone()
+    };
+    let keep = vec![true; m];
+    let Ok(simplified) =
+        simplify_keeping(&joined.mesh, &simplify_opts, previous.crease_edges, &keep)
+    else {
+        return Ok(None);
+    };
+    // The previous vertices and faces come first in the joined mesh and no collapse
+    // touched them: their indices hold (checked, as the old feet depend on it).
+    let control_mesh = &simplified.mesh;
+    let kept = (0..m).all(|v| simplified.control_of[v] == v as u32)
+        && control_mesh.triangles.len() >= old_faces
+        && control_mesh.triangles[..old_faces] == old_mesh.triangles[..];
+    if !kept {
+        return Ok(None);
+    }
+    let mut controls = control_mesh.positions.clone();
+    controls[..m].copy_from_slice(&old_mesh.positions);
+    let control_mesh = TriMesh::new(controls.clone(), control_mesh.triangles.clone());
+    let mut new_params = params.clone();
+    land_new_points(&joined, &simplified.landing[m..], &mut new_params);
+    let simplify_ms = ms_since(t);
+
+    let t = Instant::now();
+    let topologies = [
+        SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?,
+        SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?,
+    ];
+    let surface = limit_surface(&control_mesh, &simplified.crease_edges, Some(&old_surface))?;
+    let surface_ms = ms_since(t);
+
+    // Old points that moved (a view's samples averaged into old cells) change too, by the
+    // rule of a new version (`version::changed_points`), on the previous surface.
+    let t = Instant::now();
+    let data = &component.positions;
+    let (moved, initial) = moved_on_old_ground(
+        &old_surface,
+        &previous,
+        [data, reference],
+        is_new,
+        &mut new_params,
+    );
+    let mut changed = moved;
+    changed.extend((0..n).filter(|&i| is_new[i]));
+    changed.extend(demoted);
+    changed.sort_unstable();
+    let mut free = free_controls(&surface, &new_params, &changed);
+    for v in (m..controls.len()).chain(joined.rim_run.iter().map(|&v| v as usize)) {
+        free[v] = true;
+    }
+    // The new controls start on the data (the simplification's positions): a first
+    // point-to-point round at the feet on that surface places them, as a whole fit's
+    // first fit does, before the squared-distance rounds.
+    let first_opts = LocalOptions {
+        rounds: 1,
+        tangential: 1.0,
+        ..LocalOptions::of(opts)
+    };
+    let feet = LocalFeet::at(new_params, initial.clone());
+    let placed = refit_around(
+        &surface,
+        &controls,
+        data,
+        feet,
+        changed.len(),
+        &free,
+        &first_opts,
+    );
+    let first_fit_ms = ms_since(t);
+    let t = Instant::now();
+    let feet = LocalFeet::at(placed.params, placed.errors);
+    let fitted = refit_around(
+        &surface,
+        &placed.controls,
+        data,
+        feet,
+        changed.len(),
+        &free,
+        &LocalOptions::of(opts),
+    );
+    let rounds_ms = ms_since(t);
+    let t = Instant::now();
+    let mut state = Refitted::new(surface, control_mesh, fitted, free, opts.refine.tolerance);
+    state.refine_where_changed(
+        &component,
+        &changed,
+        &initial,
+        CHANGE_FACTOR * previous.rms,
+        opts,
+    );
+    let refine_ms = ms_since(t);
+    let new_points = is_new.iter().filter(|&&b| b).count();
+    let mut fit = state.into_fit(component, topologies);
+    if let Some(local) = fit.local.as_mut() {
+        local.added_controls += controls.len() - m;
+        local.new_ground_points = new_points;
+    }
+    fit.times.simplify_ms = simplify_ms;
+    fit.times.surface_ms = surface_ms;
+    fit.times.first_fit_ms = first_fit_ms;
+    fit.times.rounds_ms = rounds_ms;
+    fit.times.refine_ms = refine_ms;
+    fit.times.total_ms = ms_since(start);
+    Ok(Some(fit))
+}
+
+/// The old points that moved against the previous surface (`version::changed_points`) and
+/// every point's distance to that surface (0 for new points); the old points' entries of
+/// `params` become their feet there.
+fn moved_on_old_ground(
+    old_surface: &crate::surface::loop_limit::LoopLimitSurface,
+    previous: &PreviousFit,
+    [data, reference]: [&[DVec3]; 2],
+    is_new: &[bool],
+    params: &mut [SurfaceParam],
+) -> (Vec<usize>, Vec<f64>) {
+    let old: Vec<usize> = (0..data.len()).filter(|&i| !is_new[i]).collect();
+    let pick = |v: &[DVec3]| old.iter().map(|&i| v[i]).collect::<Vec<_>>();
+    let (old_data, old_reference) = (pick(data), pick(reference));
+    let old_start: Vec<SurfaceParam> = old.iter().map(|&i| params[i]).collect();
+    let mut old_feet = LocalFeet::at(old_start.clone(), vec![0.0; old.len()]);
+    let all_old: Vec<usize> = (0..old.len()).collect();
+    let controls = &previous.control_mesh.positions;
+    old_feet.find(old_surface, controls, &old_data, &all_old);
+    let moved = changed_points(
+        old_surface,
+        controls,
+        [&old_data, &old_reference],
+        &old_start,
+        &old_feet,
+        previous.rms,
+    );
+    let mut initial = vec![0.0; data.len()];
+    for (k, &i) in old.iter().enumerate() {
+        initial[i] = old_feet.errors[k];
+        params[i] = old_feet.params[k];
+    }
+    (moved.iter().map(|&k| old[k]).collect(), initial)
+}
+
+/// The new points' parameters: where the simplification landed them (`landing`, from the
+/// first region vertex on).
+fn land_new_points(
+    joined: &Joined,
+    landing: &[crate::mesh::simplify::Landing],
+    params: &mut [SurfaceParam],
+) {
+    for (&v, l) in joined.region_vertices.iter().zip(landing) {
+        if joined.is_new[v as usize] {
+            params[v as usize] = SurfaceParam {
+                face: l.face,
+                u: l.u,
+                v: l.v,
+            };
+        }
+    }
+}
+
+/// Controls for a new region of `vertices` data points: the budget's share of them, less
+/// what the local refinement may add where the fit misses.
+fn new_controls(vertices: usize, opts: &ObjectOptions) -> usize {
+    let all = control_target(vertices, opts);
+    let share = if opts.refine.rounds > 0 && opts.refine.tolerance.is_some() {
+        opts.refine.start_share
+    } else {
+        1.0
+    };
+    ((all as f64 * share).round() as usize).max(4.min(all))
+}
+
+/// The previous control faces, the new region and the strip between them, in one mesh:
+/// vertices `0..m` the previous controls at their limit points, then the region's points.
+struct Joined {
+    mesh: TriMesh,
+    /// The data points of the region, in the joined mesh's order from `m` on.
+    region_vertices: Vec<u32>,
+    /// The previous rim vertices the strip joins.
+    rim_run: Vec<u32>,
+    /// The points still on new ground (less those of parts that could not be joined).
+    is_new: Vec<bool>,
+}
+
+fn joined_mesh(
+    component: &TriMesh,
+    is_new: &[bool],
+    old_mesh: &TriMesh,
+    old_surface: &crate::surface::loop_limit::LoopLimitSurface,
+) -> Option<Joined> {
+    let topo = Topology::from_mesh(component).ok()?;
+    let limit = limit_positions(old_surface, &old_mesh.positions);
+    let old_topo = Topology::from_mesh(old_mesh).ok()?;
+    let rims = Rims::new(&old_topo, &limit);
+    let m = old_mesh.positions.len();
+    let all_new = is_new.iter().filter(|&&b| b).count();
+    let mut is_new = is_new.to_vec();
+    for _ in 0..MAX_DEMOTION_ROUNDS {
+        let in_region = region_faces(component, &topo, &is_new);
+        let seams = seams(&topo, &in_region)?;
+        let mut used = vec![false; m];
+        let mut runs = Vec::with_capacity(seams.len());
+        let mut failed = Vec::new();
+        for seam in &seams {
+            match rims.run_along(seam, &component.positions) {
+                Some(run) if run.vertices.iter().all(|&p| !used[p as usize]) => {
+                    for &p in &run.vertices {
+                        used[p as usize] = true;
+                    }
+                    runs.push(run);
+                }
+                _ => failed.push(seam),
+            }
+        }
+        if failed.is_empty() {
+            return joined(
+                component,
+                &is_new,
+                &in_region,
+                old_mesh,
+                limit,
+                (&seams, runs),
+            );
+        }
+        // A part of the region the strip cannot join (an island inside the old ground, a
+        // second seam on the same rim run) is old ground whose data changed, as long as
+        // it is a small part of the new ground.
+        let demoted = demote(component, &topo, &in_region, &failed, &mut is_new);
+        if demoted as f64 > MAX_DEMOTED_SHARE * all_new as f64 {
+            return None;
+        }
+    }
+    None
+}
+
+/// Rounds of taking unjoinable parts out of the region at most.
+const MAX_DEMOTION_ROUNDS: usize = 4;
+
+/// Share of the new points that may be taken out of the region as unjoinable.
+const MAX_DEMOTED_SHARE: f64 = 0.1;
+
+/// Takes the region's parts around the `failed` seams out of it (their points no longer
+/// new); returns how many new points that took.
+fn demote(
+    component: &TriMesh,
+    topo: &Topology,
+    in_region: &[bool],
+    failed: &[&Seam],
+    is_new: &mut [bool],
+) -> usize {
+    let mut on_seam = vec![false; component.positions.len()];
+    for seam in failed {
+        for &v in &seam.vertices {
+            on_seam[v as usize] = true;
+        }
+    }
+    let mut taken = vec![false; component.triangles.len()];
+    let mut stack: Vec<usize> = (0..component.triangles.len())
+        .filter(|&f| in_region[f] && component.triangles[f].iter().any(|&v| on_seam[v as usize]))
+        .collect();
+    while let Some(f) = stack.pop() {
+        if std::mem::replace(&mut taken[f], true) {
+            continue;
+        }
+        for k in 0..3 {
+            let twin = topo.twin[3 * f + k];
+            if twin != NONE && in_region[twin as usize / 3] && !taken[twin as usize / 3] {
+                stack.push(twin as usize / 3);
+            }
+        }
+    }
+    let mut demoted = 0;
+    for (t, _) in component.triangles.iter().zip(&taken).filter(|(_, &x)| x) {
+        for &v in t {
+            if std::mem::replace(&mut is_new[v as usize], false) {
+                demoted += 1;
+            }
+        }
+    }
+    demoted
+}
+
+/// The joined mesh of a region whose every seam has its rim run.
+fn joined(
+    component: &TriMesh,
+    is_new: &[bool],
+    in_region: &[bool],
+    old_mesh: &TriMesh,
+    limit: Vec<DVec3>,
+    (seams, runs): (&[Seam], Vec<Run>),
+) -> Option<Joined> {
+    let m = old_mesh.positions.len();
+    let mut local = vec![NONE; component.positions.len()];
+    let mut region_vertices = Vec::new();
+    let mut faces = old_mesh.triangles.clone();
+    for (t, _) in component
+        .triangles
+        .iter()
+        .zip(in_region)
+        .filter(|(_, &r)| r)
+    {
+        faces.push(t.map(|v| {
+            if local[v as usize] == NONE {
+                local[v as usize] = region_vertices.len() as u32;
+                region_vertices.push(v);
+            }
+            (m as u32) + local[v as usize]
+        }));
+    }
+    let mut rim_run = Vec::new();
+    for (seam, run) in seams.iter().zip(runs) {
+        let q: Vec<u32> = seam
+            .vertices
+            .iter()
+            .map(|&v| m as u32 + local[v as usize])
+            .collect();
+        let q_at: Vec<DVec3> = seam
+            .vertices
+            .iter()
+            .map(|&v| component.positions[v as usize])
+            .collect();
+        let p_at: Vec<DVec3> = run.vertices.iter().map(|&v| limit[v as usize]).collect();
+        faces.extend(strip(&run.vertices, &p_at, &q, &q_at, seam.closed));
+        rim_run.extend(run.vertices);
+    }
+    let mut positions = limit;
+    positions.extend(
+        region_vertices
+            .iter()
+            .map(|&v| component.positions[v as usize]),
+    );
+    let mesh = TriMesh::new(positions, faces);
+    Topology::from_mesh(&mesh).ok()?;
+    Some(Joined {
+        mesh,
+        region_vertices,
+        rim_run,
+        is_new: is_new.to_vec(),
+    })
+}
+
+/// Rounds of growing the region around its pinches at most.
+const MAX_PINCH_ROUNDS: usize = 8;
+
+/// The faces of the new region: those with a point on new ground, and every face around a
+/// vertex where the region would pinch (meet itself at a vertex only: its boundary could
+/// not be walked, nor the joined mesh be a manifold).
+fn region_faces(component: &TriMesh, topo: &Topology, is_new: &[bool]) -> Vec<bool> {
+    let mut in_region: Vec<bool> = component
+        .triangles
+        .iter()
+        .map(|t| t.iter().any(|&v| is_new[v as usize]))
+        .collect();
+    let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); component.positions.len()];
+    for (f, t) in component.triangles.iter().enumerate() {
+        for &v in t {
+            faces_of[v as usize].push(f as u32);
+        }
+    }
+    for _ in 0..MAX_PINCH_ROUNDS {
+        let mut out = vec![0u8; component.positions.len()];
+        for (f, t) in component.triangles.iter().enumerate() {
+            if !in_region[f] {
+                continue;
+            }
+            for k in 0..3 {
+                let twin = topo.twin[3 * f + k];
+                if twin == NONE || !in_region[twin as usize / 3] {
+                    out[t[k] as usize] = out[t[k] as usize].saturating_add(1);
+                }
+            }
+        }
+        let pinches: Vec<usize> = (0..out.len()).filter(|&v| out[v] > 1).collect();
+        if pinches.is_empty() {
+            break;
+        }
+        for v in pinches {
+            for &f in &faces_of[v] {
+                in_region[f as usize] = true;
+            }
+        }
+    }
+    in_region
+}
+
+/// A run of the region's boundary where older data goes on, in the direction the region's
+/// faces run it; `closed` when it is a whole boundary loop.
+struct Seam {
+    vertices: Vec<u32>,
+    closed: bool,
+}
+
+/// The region's seams; `None` where its boundary pinches (a vertex with two boundary edges
+/// out).
+fn seams(topo: &Topology, in_region: &[bool]) -> Option<Vec<Seam>> {
+    // Per start vertex: the boundary edge of the region out of it and whether it is a seam
+    // edge (an old face beyond it) rather than the data's own rim.
+    let mut next: FxHashMap<u32, (u32, bool)> = FxHashMap::default();
+    for (f, t) in topo.triangles.iter().enumerate() {
+        if !in_region[f] {
+            continue;
+        }
+        for k in 0..3 {
+            let twin = topo.twin[3 * f + k];
+            let seam = twin != NONE && !in_region[twin as usize / 3];
+            if (twin == NONE || seam) && next.insert(t[k], (t[(k + 1) % 3], seam)).is_some() {
+                return None;
+            }
+        }
+    }
+    let mut starts: Vec<u32> = next.keys().copied().collect();
+    starts.sort_unstable();
+    let mut seen = rustc_hash::FxHashSet::default();
+    let mut seams = Vec::new();
+    for start in starts {
+        if seen.contains(&start) {
+            continue;
+        }
+        // The loop through `start`, as (vertex, edge out of it is a seam) pairs.
+        let mut ring = Vec::new();
+        let mut v = start;
+        while seen.insert(v) {
+            let &(w, seam) = next.get(&v)?;
+            ring.push((v, seam));
+            v = w;
+        }
+        if v != start {
+            return None;
+        }
+        let Some(rim_at) = ring.iter().position(|&(_, seam)| !seam) else {
+            seams.push(Seam {
+                vertices: ring.iter().map(|&(v, _)| v).collect(),
+                closed: true,
+            });
+            continue;
+        };
+        // From just after a rim edge, each maximal run of seam edges is a seam.
+        ring.rotate_left(rim_at + 1);
+        let len = ring.len();
+        let mut k = 0;
+        while k < len {
+            if !ring[k].1 {
+                k += 1;
+                continue;
+            }
+            let mut vertices = vec![ring[k].0];
+            while k < len && ring[k].1 {
+                vertices.push(ring[(k + 1) % len].0);
+                k += 1;
+            }
+            seams.push(Seam {
+                vertices,
+                closed: false,
+            });
+        }
+    }
+    Some(seams)
+}
+
+/// The previous control mesh's boundary loops at the limit points.
+struct Rims<'a> {
+    /// Each loop in the direction its faces run it.
+    loops: Vec<Vec<u32>>,
+    /// Per vertex on a loop: (loop, index in it).
+    at: FxHashMap<u32, (usize, usize)>,
+    limit: &'a [DVec3],
+    mean_edge: f64,
+}
+
+/// The rim vertices a strip joins a seam to, in the seam's direction.
+struct Run {
+    vertices: Vec<u32>,
+}
+
+impl<'a> Rims<'a> {
+    fn new(topo: &Topology, limit: &'a [DVec3]) -> Self {
+        let mut next: FxHashMap<u32, u32> = FxHashMap::default();
+        for (f, t) in topo.triangles.iter().enumerate() {
+            for k in 0..3 {
+                if topo.twin[3 * f + k] == NONE {
+                    next.insert(t[k], t[(k + 1) % 3]);
+                }
+            }
+        }
+        let mut starts: Vec<u32> = next.keys().copied().collect();
+        starts.sort_unstable();
+        let mut at = FxHashMap::default();
+        let mut loops = Vec::new();
+        let (mut length, mut edges) = (0.0, 0usize);
+        for start in starts {
+            if at.contains_key(&start) {
+                continue;
+            }
+            let mut ring = Vec::new();
+            let mut v = start;
+            while !at.contains_key(&v) {
+                at.insert(v, (loops.len(), ring.len()));
+                ring.push(v);
+                let Some(&w) = next.get(&v) else { break };
+                length += limit[v as usize].distance(limit[w as usize]);
+                edges += 1;
+                v = w;
+            }
+            loops.push(ring);
+        }
+        Rims {
+            loops,
+            at,
+            limit,
+            mean_edge: length / edges.max(1) as f64,
+        }
+    }
+
+    /// The rim vertices along `seam` (positions `at` its data points): from the one
+    /// nearest the seam's first vertex, against the rim's own direction (the strip's two
+    /// sides run opposite ways), to the one nearest its last; `None` when the seam does
+    /// not run along one rim loop.
+    fn run_along(&self, seam: &Seam, at: &[DVec3]) -> Option<Run> {
+        let nearest: Vec<(u32, f64)> = seam
+            .vertices
+            .iter()
+            .map(|&v| {
+                let p = at[v as usize];
+                self.at
+                    .keys()
+                    .map(|&r| (r, self.limit[r as usize].distance_squared(p)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
+                    .map(|(r, d)| (r, d.sqrt()))
+            })
+            .collect::<Option<_>>()?;
+        let mut gaps: Vec<f64> = nearest.iter().map(|n| n.1).collect();
+        let k = gaps.len() / 2;
+        gaps.select_nth_unstable_by(k, f64::total_cmp);
+        if gaps[k] > MAX_SEAM_GAP_EDGES * self.mean_edge {
+            return None;
+        }
+        let (first_loop, first) = self.at[&nearest[0].0];
+        let ring = &self.loops[first_loop];
+        let len = ring.len();
+        let back = |i: usize| (first + len - i) % len;
+        let offset = |r: u32| -> Option<usize> {
+            let (l, i) = self.at[&r];
+            (l == first_loop).then_some((first + len - i) % len)
+        };
+        let count = if seam.closed {
+            len
+        } else {
+            let last = offset(nearest[nearest.len() - 1].0)?;
+            let inside = nearest
+                .iter()
+                .filter(|n| offset(n.0).is_some_and(|o| o <= last))
+                .count();
+            if (inside as f64) < MIN_SEAM_IN_RUN * nearest.len() as f64 {
+                return None;
+            }
+            last + 1
+        };
+        Some(Run {
+            vertices: (0..count).map(|i| ring[back(i)]).collect(),
+        })
+    }
+}
+
+/// Triangles between the rim run `p` and the seam `q` (both in the seam's direction, with
+/// positions), advancing along whichever is behind by arc length; around a closed seam
+/// both close up.
+fn strip(p: &[u32], p_at: &[DVec3], q: &[u32], q_at: &[DVec3], closed: bool) -> Vec<[u32; 3]> {
+    let wrap = |ids: &[u32], at: &[DVec3]| {
+        let (mut ids, mut at) = (ids.to_vec(), at.to_vec());
+        if closed {
+            ids.push(ids[0]);
+            at.push(at[0]);
+        }
+        (ids, at)
+    };
+    let (p, p_at) = wrap(p, p_at);
+    let (q, q_at) = wrap(q, q_at);
+    let (tp, tq) = (arc_params(&p_at), arc_params(&q_at));
+    let (mut i, mut j) = (0, 0);
+    let mut faces = Vec::with_capacity(p.len() + q.len());
+    while i + 1 < p.len() || j + 1 < q.len() {
+        let advance_q = i + 1 == p.len() || (j + 1 < q.len() && tq[j + 1] <= tp[i + 1]);
+        if advance_q {
+            faces.push([q[j + 1], q[j], p[i]]);
+            j += 1;
+        } else {
+            faces.push([p[i], p[i + 1], q[j]]);
+            i += 1;
+        }
+    }
+    faces
+}
+
+/// Each point's arc length along the polyline, as a share of the whole (all 0 for a
+/// polyline of no length).
+fn arc_params(at: &[DVec3]) -> Vec<f64> {
+    let mut t = Vec::with_capacity(at.len());
+    let mut sum = 0.0;
+    t.push(0.0);
+    for w in at.windows(2) {
+        sum += w[0].distance(w[1]);
+        t.push(sum);
+    }
+    if sum > 0.0 {
+        for x in &mut t {
+            *x /= sum;
+        }
+    }
+    t
+}
