@@ -23,6 +23,8 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
+use rstar::primitives::GeomWithData;
+use rstar::RTree;
 use std::sync::Arc;
 
 /// A surface whose longest boundary loop is shorter than this many square roots of its
@@ -428,8 +430,10 @@ fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {
     )
 }
 
-/// Each point's start parameter, the final parameter of the nearest previous data point
-/// (over a bucket grid with about two previous points per cell), and that point.
+/// Each point's start parameter, the final parameter of the nearest previous data point,
+/// and that point. An R-tree, not a bucket grid: new ground lies far from every previous
+/// point, where a grid search grows ring by ring (a view adding 5,000 points 10-20 mm from
+/// the previous data took 1.8 s that way).
 fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> (Vec<SurfaceParam>, Vec<DVec3>) {
     let old: Vec<DVec3> = warm
         .feet
@@ -437,109 +441,25 @@ fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> (Vec<SurfaceParam>, Ve
         .iter()
         .map(|p| glam::Vec3::from_array(*p).as_dvec3())
         .collect();
-    let grid = PointGrid::new(&old);
+    let tree = RTree::bulk_load(
+        old.iter()
+            .enumerate()
+            .map(|(k, p)| GeomWithData::new(p.to_array(), k))
+            .collect(),
+    );
     points
         .par_iter()
         .map(|p| {
-            let k = grid.nearest(&old, *p);
-            let [u, v] = warm.feet.params[k];
+            let k = tree.nearest_neighbor(&p.to_array()).map_or(0, |n| n.data);
+            let [u, v] = warm.feet.params.get(k).copied().unwrap_or([0.0, 0.0]);
             let param = SurfaceParam {
-                face: warm.feet_faces[k],
+                face: warm.feet_faces.get(k).copied().unwrap_or(0),
                 u: f64::from(u),
                 v: f64::from(v),
             };
-            (param, old[k])
+            (param, old.get(k).copied().unwrap_or(*p))
         })
         .unzip()
-}
-
-/// A uniform bucket grid over 3D points for nearest-point queries.
-struct PointGrid {
-    lo: DVec3,
-    cell: f64,
-    dims: [usize; 3],
-    /// Points of bucket b: `order[start[b]..start[b + 1]]`.
-    start: Vec<u32>,
-    order: Vec<u32>,
-}
-
-impl PointGrid {
-    fn new(points: &[DVec3]) -> Self {
-        let [lo, hi] = bounds_of(points);
-        let extent = (hi - lo).max(DVec3::splat(1e-12));
-        // About two points per occupied cell on a surface: cells of the surface's spacing.
-        let volume_cells = (points.len().max(1) as f64 / 2.0).powf(1.5);
-        let cell = (extent.x * extent.y * extent.z / volume_cells)
-            .cbrt()
-            .max(extent.max_element() / 512.0);
-        let dims = [extent.x, extent.y, extent.z].map(|e| ((e / cell) as usize + 1).min(512));
-        let mut grid = Self {
-            lo,
-            cell,
-            dims,
-            start: vec![0; dims[0] * dims[1] * dims[2] + 1],
-            order: vec![0; points.len()],
-        };
-        let slots: Vec<usize> = points.iter().map(|p| grid.slot(grid.coords(*p))).collect();
-        for &b in &slots {
-            grid.start[b + 1] += 1;
-        }
-        for b in 0..grid.start.len() - 1 {
-            grid.start[b + 1] += grid.start[b];
-        }
-        let mut fill = grid.start.clone();
-        for (k, &b) in slots.iter().enumerate() {
-            grid.order[fill[b] as usize] = k as u32;
-            fill[b] += 1;
-        }
-        grid
-    }
-
-    fn coords(&self, p: DVec3) -> [usize; 3] {
-        let q = ((p - self.lo) / self.cell).max(DVec3::ZERO);
-        let clamp = |x: f64, d: usize| (x as usize).min(d - 1);
-        [
-            clamp(q.x, self.dims[0]),
-            clamp(q.y, self.dims[1]),
-            clamp(q.z, self.dims[2]),
-        ]
-    }
-
-    fn slot(&self, [x, y, z]: [usize; 3]) -> usize {
-        (z * self.dims[1] + y) * self.dims[0] + x
-    }
-
-    /// Index of the nearest point (rings of cells until one more ring cannot hold a nearer
-    /// one); `points` must be those the grid was built on, and not empty.
-    fn nearest(&self, points: &[DVec3], q: DVec3) -> usize {
-        let c = self.coords(q);
-        let mut best = (f64::MAX, 0usize);
-        let reach = self.dims.into_iter().max().unwrap_or(1);
-        for r in 0..reach {
-            let range = |i: usize, d: usize| i.saturating_sub(r)..(i + r + 1).min(d);
-            for z in range(c[2], self.dims[2]) {
-                for y in range(c[1], self.dims[1]) {
-                    for x in range(c[0], self.dims[0]) {
-                        let on_shell = [x, y, z].iter().zip(c).any(|(&a, b)| a.abs_diff(b) == r);
-                        if !on_shell {
-                            continue;
-                        }
-                        let b = self.slot([x, y, z]);
-                        for &k in &self.order[self.start[b] as usize..self.start[b + 1] as usize] {
-                            let d = points[k as usize].distance_squared(q);
-                            if d < best.0 {
-                                best = (d, k as usize);
-                            }
-                        }
-                    }
-                }
-            }
-            if best.0 < f64::MAX && (r as f64 * self.cell).powi(2) >= best.0 {
-                break;
-            }
-        }
-        best.1
-    }
 }
 
 /// The object fit in the form every output reads: a Loop surface on its control mesh.
