@@ -23,22 +23,14 @@ use super::local::{free_controls, refit_around, LocalFeet, LocalOptions};
 use super::model::ObjectOptions;
 use super::model::{control_target, limit_surface, ms_since, ObjectError, ObjectFit};
 use super::refine::limit_positions;
+use super::seam::{region_faces, seams, strip, Rims, Run, Seam};
 use super::version::{changed_points, Refitted, CHANGE_FACTOR};
 use crate::mesh::simplify::{simplify_keeping, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::{Topology, NONE};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
-use rustc_hash::FxHashMap;
 use std::time::Instant;
-
-/// A seam whose median distance to the previous rim exceeds this many mean rim edges does
-/// not run along the rim: the new region is an island the strip cannot join.
-const MAX_SEAM_GAP_EDGES: f64 = 2.0;
-
-/// Share of a seam's vertices whose nearest rim vertex must lie in the rim run the strip
-/// covers (the rest are corners of the seam near the run's ends).
-const MIN_SEAM_IN_RUN: f64 = 0.8;
 
 /// The previous fit the extension keeps.
 pub struct PreviousFit<'a> {
@@ -93,7 +85,7 @@ pub fn extend_over_new_ground(
     // Points of parts the strip could not join are old ground that changed.
     let demoted: Vec<usize> = (0..n).filter(|&i| is_new[i] && !joined.is_new[i]).collect();
     let is_new = &joined.is_new[..];
-    let target = new_controls(joined.region_vertices.len(), opts);
+    let target = new_controls(joined.region_vertices.len(), n, opts);
     let simplify_opts = SimplifyOptions {
         target_vertices: m + target,
         ..opts.simplify.clone()
@@ -255,16 +247,17 @@ fn land_new_points(
     }
 }
 
-/// Controls for a new region of `vertices` data points: the budget's share of them, less
-/// what the local refinement may add where the fit misses.
-fn new_controls(vertices: usize, opts: &ObjectOptions) -> usize {
-    let all = control_target(vertices, opts);
+/// Controls for a new region of `vertices` of the object's `points`: their share of the
+/// whole object's budget (a percentage or an explicit count), less what the local
+/// refinement may add where the fit misses.
+fn new_controls(vertices: usize, points: usize, opts: &ObjectOptions) -> usize {
+    let all = control_target(points, opts) as f64 * vertices as f64 / points.max(1) as f64;
     let share = if opts.refine.rounds > 0 && opts.refine.tolerance.is_some() {
         opts.refine.start_share
     } else {
         1.0
     };
-    ((all as f64 * share).round() as usize).max(4.min(all))
+    ((all * share).round() as usize).max(4)
 }
 
 /// The previous control faces, the new region and the strip between them, in one mesh:
@@ -434,274 +427,4 @@ fn joined(
         rim_run,
         is_new: is_new.to_vec(),
     })
-}
-
-/// Rounds of growing the region around its pinches at most.
-const MAX_PINCH_ROUNDS: usize = 8;
-
-/// The faces of the new region: those with a point on new ground, and every face around a
-/// vertex where the region would pinch (meet itself at a vertex only: its boundary could
-/// not be walked, nor the joined mesh be a manifold).
-fn region_faces(component: &TriMesh, topo: &Topology, is_new: &[bool]) -> Vec<bool> {
-    let mut in_region: Vec<bool> = component
-        .triangles
-        .iter()
-        .map(|t| t.iter().any(|&v| is_new[v as usize]))
-        .collect();
-    let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); component.positions.len()];
-    for (f, t) in component.triangles.iter().enumerate() {
-        for &v in t {
-            faces_of[v as usize].push(f as u32);
-        }
-    }
-    for _ in 0..MAX_PINCH_ROUNDS {
-        let mut out = vec![0u8; component.positions.len()];
-        for (f, t) in component.triangles.iter().enumerate() {
-            if !in_region[f] {
-                continue;
-            }
-            for k in 0..3 {
-                let twin = topo.twin[3 * f + k];
-                if twin == NONE || !in_region[twin as usize / 3] {
-                    out[t[k] as usize] = out[t[k] as usize].saturating_add(1);
-                }
-            }
-        }
-        let pinches: Vec<usize> = (0..out.len()).filter(|&v| out[v] > 1).collect();
-        if pinches.is_empty() {
-            break;
-        }
-        for v in pinches {
-            for &f in &faces_of[v] {
-                in_region[f as usize] = true;
-            }
-        }
-    }
-    in_region
-}
-
-/// A run of the region's boundary where older data goes on, in the direction the region's
-/// faces run it; `closed` when it is a whole boundary loop.
-struct Seam {
-    vertices: Vec<u32>,
-    closed: bool,
-}
-
-/// The region's seams; `None` where its boundary pinches (a vertex with two boundary edges
-/// out).
-fn seams(topo: &Topology, in_region: &[bool]) -> Option<Vec<Seam>> {
-    // Per start vertex: the boundary edge of the region out of it and whether it is a seam
-    // edge (an old face beyond it) rather than the data's own rim.
-    let mut next: FxHashMap<u32, (u32, bool)> = FxHashMap::default();
-    for (f, t) in topo.triangles.iter().enumerate() {
-        if !in_region[f] {
-            continue;
-        }
-        for k in 0..3 {
-            let twin = topo.twin[3 * f + k];
-            let seam = twin != NONE && !in_region[twin as usize / 3];
-            if (twin == NONE || seam) && next.insert(t[k], (t[(k + 1) % 3], seam)).is_some() {
-                return None;
-            }
-        }
-    }
-    let mut starts: Vec<u32> = next.keys().copied().collect();
-    starts.sort_unstable();
-    let mut seen = rustc_hash::FxHashSet::default();
-    let mut seams = Vec::new();
-    for start in starts {
-        if seen.contains(&start) {
-            continue;
-        }
-        // The loop through `start`, as (vertex, edge out of it is a seam) pairs.
-        let mut ring = Vec::new();
-        let mut v = start;
-        while seen.insert(v) {
-            let &(w, seam) = next.get(&v)?;
-            ring.push((v, seam));
-            v = w;
-        }
-        if v != start {
-            return None;
-        }
-        let Some(rim_at) = ring.iter().position(|&(_, seam)| !seam) else {
-            seams.push(Seam {
-                vertices: ring.iter().map(|&(v, _)| v).collect(),
-                closed: true,
-            });
-            continue;
-        };
-        // From just after a rim edge, each maximal run of seam edges is a seam.
-        ring.rotate_left(rim_at + 1);
-        let len = ring.len();
-        let mut k = 0;
-        while k < len {
-            if !ring[k].1 {
-                k += 1;
-                continue;
-            }
-            let mut vertices = vec![ring[k].0];
-            while k < len && ring[k].1 {
-                vertices.push(ring[(k + 1) % len].0);
-                k += 1;
-            }
-            seams.push(Seam {
-                vertices,
-                closed: false,
-            });
-        }
-    }
-    Some(seams)
-}
-
-/// The previous control mesh's boundary loops at the limit points.
-struct Rims<'a> {
-    /// Each loop in the direction its faces run it.
-    loops: Vec<Vec<u32>>,
-    /// Per vertex on a loop: (loop, index in it).
-    at: FxHashMap<u32, (usize, usize)>,
-    limit: &'a [DVec3],
-    mean_edge: f64,
-}
-
-/// The rim vertices a strip joins a seam to, in the seam's direction.
-struct Run {
-    vertices: Vec<u32>,
-}
-
-impl<'a> Rims<'a> {
-    fn new(topo: &Topology, limit: &'a [DVec3]) -> Self {
-        let mut next: FxHashMap<u32, u32> = FxHashMap::default();
-        for (f, t) in topo.triangles.iter().enumerate() {
-            for k in 0..3 {
-                if topo.twin[3 * f + k] == NONE {
-                    next.insert(t[k], t[(k + 1) % 3]);
-                }
-            }
-        }
-        let mut starts: Vec<u32> = next.keys().copied().collect();
-        starts.sort_unstable();
-        let mut at = FxHashMap::default();
-        let mut loops = Vec::new();
-        let (mut length, mut edges) = (0.0, 0usize);
-        for start in starts {
-            if at.contains_key(&start) {
-                continue;
-            }
-            let mut ring = Vec::new();
-            let mut v = start;
-            while !at.contains_key(&v) {
-                at.insert(v, (loops.len(), ring.len()));
-                ring.push(v);
-                let Some(&w) = next.get(&v) else { break };
-                length += limit[v as usize].distance(limit[w as usize]);
-                edges += 1;
-                v = w;
-            }
-            loops.push(ring);
-        }
-        Rims {
-            loops,
-            at,
-            limit,
-            mean_edge: length / edges.max(1) as f64,
-        }
-    }
-
-    /// The rim vertices along `seam` (positions `at` its data points): from the one
-    /// nearest the seam's first vertex, against the rim's own direction (the strip's two
-    /// sides run opposite ways), to the one nearest its last; `None` when the seam does
-    /// not run along one rim loop.
-    fn run_along(&self, seam: &Seam, at: &[DVec3]) -> Option<Run> {
-        let nearest: Vec<(u32, f64)> = seam
-            .vertices
-            .iter()
-            .map(|&v| {
-                let p = at[v as usize];
-                self.at
-                    .keys()
-                    .map(|&r| (r, self.limit[r as usize].distance_squared(p)))
-                    .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
-                    .map(|(r, d)| (r, d.sqrt()))
-            })
-            .collect::<Option<_>>()?;
-        let mut gaps: Vec<f64> = nearest.iter().map(|n| n.1).collect();
-        let k = gaps.len() / 2;
-        gaps.select_nth_unstable_by(k, f64::total_cmp);
-        if gaps[k] > MAX_SEAM_GAP_EDGES * self.mean_edge {
-            return None;
-        }
-        let (first_loop, first) = self.at[&nearest[0].0];
-        let ring = &self.loops[first_loop];
-        let len = ring.len();
-        let back = |i: usize| (first + len - i) % len;
-        let offset = |r: u32| -> Option<usize> {
-            let (l, i) = self.at[&r];
-            (l == first_loop).then_some((first + len - i) % len)
-        };
-        let count = if seam.closed {
-            len
-        } else {
-            let last = offset(nearest[nearest.len() - 1].0)?;
-            let inside = nearest
-                .iter()
-                .filter(|n| offset(n.0).is_some_and(|o| o <= last))
-                .count();
-            if (inside as f64) < MIN_SEAM_IN_RUN * nearest.len() as f64 {
-                return None;
-            }
-            last + 1
-        };
-        Some(Run {
-            vertices: (0..count).map(|i| ring[back(i)]).collect(),
-        })
-    }
-}
-
-/// Triangles between the rim run `p` and the seam `q` (both in the seam's direction, with
-/// positions), advancing along whichever is behind by arc length; around a closed seam
-/// both close up.
-fn strip(p: &[u32], p_at: &[DVec3], q: &[u32], q_at: &[DVec3], closed: bool) -> Vec<[u32; 3]> {
-    let wrap = |ids: &[u32], at: &[DVec3]| {
-        let (mut ids, mut at) = (ids.to_vec(), at.to_vec());
-        if closed {
-            ids.push(ids[0]);
-            at.push(at[0]);
-        }
-        (ids, at)
-    };
-    let (p, p_at) = wrap(p, p_at);
-    let (q, q_at) = wrap(q, q_at);
-    let (tp, tq) = (arc_params(&p_at), arc_params(&q_at));
-    let (mut i, mut j) = (0, 0);
-    let mut faces = Vec::with_capacity(p.len() + q.len());
-    while i + 1 < p.len() || j + 1 < q.len() {
-        let advance_q = i + 1 == p.len() || (j + 1 < q.len() && tq[j + 1] <= tp[i + 1]);
-        if advance_q {
-            faces.push([q[j + 1], q[j], p[i]]);
-            j += 1;
-        } else {
-            faces.push([p[i], p[i + 1], q[j]]);
-            i += 1;
-        }
-    }
-    faces
-}
-
-/// Each point's arc length along the polyline, as a share of the whole (all 0 for a
-/// polyline of no length).
-fn arc_params(at: &[DVec3]) -> Vec<f64> {
-    let mut t = Vec::with_capacity(at.len());
-    let mut sum = 0.0;
-    t.push(0.0);
-    for w in at.windows(2) {
-        sum += w[0].distance(w[1]);
-        t.push(sum);
-    }
-    if sum > 0.0 {
-        for x in &mut t {
-            *x /= sum;
-        }
-    }
-    t
 }

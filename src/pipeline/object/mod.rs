@@ -22,6 +22,7 @@ mod layout;
 mod local;
 mod model;
 mod refine;
+mod seam;
 mod solve;
 mod version;
 
