@@ -43,9 +43,11 @@ pub struct PreviousFit<'a> {
 }
 
 /// Extends `previous` over the points `is_new` marks (see the module docs). `params` holds
-/// every old point's start on the previous surface (the foot of the previous data point
-/// nearest to it, `reference`); new points' entries are not read. `None` when there is no
-/// new point or the region cannot be joined to the previous rim.
+/// every point's start on the previous surface (the foot of the previous data point
+/// nearest to it, `reference`; a new point's is read only if its part of the region cannot
+/// be joined and it counts as old ground that changed). `None` when there is no new point,
+/// a start lies off the previous control faces, or the region cannot be joined to the
+/// previous rim.
 pub fn extend_over_new_ground(
     component: TriMesh,
     previous: PreviousFit,
@@ -70,11 +72,8 @@ pub fn extend_over_new_ground(
     let old_mesh = previous.control_mesh;
     let m = old_mesh.positions.len();
     let old_faces = old_mesh.triangles.len();
-    if params
-        .iter()
-        .zip(is_new)
-        .any(|(p, &new)| !new && p.face as usize >= old_faces)
-    {
+    // Every start is read: points of a part the strip cannot join become old ground.
+    if params.iter().any(|p| p.face as usize >= old_faces) {
         return Ok(None);
     }
     let old_surface = limit_surface(old_mesh, previous.crease_edges, None)?;
