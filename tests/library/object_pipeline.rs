@@ -499,15 +499,8 @@ fn a_version_changed_in_one_place_is_refitted_there_only() {
         .filter(|(a, b)| a == b)
         .count();
     assert_eq!(kept, m - (free - added));
-    let stat = |o: &serde_json::Value, k: &str| o["final"][k].as_f64().unwrap_or(f64::NAN);
-    let (warm_rms, cold_rms) = (
-        stat(r, "geometric_rms_error"),
-        stat(&cold.report, "geometric_rms_error"),
-    );
-    let (warm_max, cold_max) = (
-        stat(r, "geometric_max_error"),
-        stat(&cold.report, "geometric_max_error"),
-    );
+    let [[warm_rms, warm_max], [cold_rms, cold_max]] =
+        [r, &cold.report].map(|o| ["rms", "max"].map(|k| geometric_error(o, k)));
     eprintln!(
         "warm rms {warm_rms:.3e} max {warm_max:.3e}, cold rms {cold_rms:.3e} max {cold_max:.3e}"
     );
@@ -558,6 +551,13 @@ fn a_change_too_shallow_for_any_point_is_found_by_its_faces() {
     assert!(warm <= 1.2 * cold, "warm {warm} vs cold {cold}");
 }
 
+/// The report's final geometric `rms` or `max` error.
+fn geometric_error(report: &serde_json::Value, which: &str) -> f64 {
+    report["final"][format!("geometric_{which}_error")]
+        .as_f64()
+        .unwrap_or(f64::NAN)
+}
+
 /// The part of a torus from `torus(_, m)` before its `rows`-th ring: a tube with two rims.
 fn torus_section(torus: &TriMesh, m: usize, rows: usize) -> TriMesh {
     let kept: Vec<[u32; 3]> = torus
@@ -598,15 +598,8 @@ fn an_object_that_grows_is_extended_over_its_new_ground() {
         .filter(|(a, b)| a == b)
         .count();
     assert!(2 * kept > m, "{kept} of {m} previous controls kept");
-    let stat = |o: &serde_json::Value, k: &str| o["final"][k].as_f64().unwrap_or(f64::NAN);
-    let (warm_rms, cold_rms) = (
-        stat(r, "geometric_rms_error"),
-        stat(&cold.report, "geometric_rms_error"),
-    );
-    let (warm_max, cold_max) = (
-        stat(r, "geometric_max_error"),
-        stat(&cold.report, "geometric_max_error"),
-    );
+    let [[warm_rms, warm_max], [cold_rms, cold_max]] =
+        [r, &cold.report].map(|o| ["rms", "max"].map(|k| geometric_error(o, k)));
     eprintln!(
         "extended rms {warm_rms:.3e} max {warm_max:.3e}, cold rms {cold_rms:.3e} max {cold_max:.3e}, controls {m} -> {n} (cold {})",
         cold.warm.controls.len()

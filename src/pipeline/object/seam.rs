@@ -4,6 +4,7 @@
 //! rim run along each seam, and the strip of triangles between the two.
 
 use crate::mesh::topology::{Topology, NONE};
+use crate::remesh::boundary_loops;
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
@@ -154,34 +155,16 @@ pub(super) struct Run {
 
 impl<'a> Rims<'a> {
     pub(super) fn new(topo: &Topology, limit: &'a [DVec3]) -> Self {
-        let mut next: FxHashMap<u32, u32> = FxHashMap::default();
-        for (f, t) in topo.triangles.iter().enumerate() {
-            for k in 0..3 {
-                if topo.twin[3 * f + k] == NONE {
-                    next.insert(t[k], t[(k + 1) % 3]);
-                }
-            }
-        }
-        let mut starts: Vec<u32> = next.keys().copied().collect();
-        starts.sort_unstable();
+        let loops = boundary_loops(topo);
         let mut at = FxHashMap::default();
-        let mut loops = Vec::new();
         let (mut length, mut edges) = (0.0, 0usize);
-        for start in starts {
-            if at.contains_key(&start) {
-                continue;
-            }
-            let mut ring = Vec::new();
-            let mut v = start;
-            while !at.contains_key(&v) {
-                at.insert(v, (loops.len(), ring.len()));
-                ring.push(v);
-                let Some(&w) = next.get(&v) else { break };
+        for (l, ring) in loops.iter().enumerate() {
+            for (i, &v) in ring.iter().enumerate() {
+                at.insert(v, (l, i));
+                let w = ring[(i + 1) % ring.len()];
                 length += limit[v as usize].distance(limit[w as usize]);
                 edges += 1;
-                v = w;
             }
-            loops.push(ring);
         }
         Rims {
             loops,
