@@ -18,6 +18,9 @@
 //!    distance.
 //! 5. The same scans in the reverse order: the two end surfaces' distance.
 //!
+//! After each update, how many of the surface's tessellation vertices lie over 0.5 mm from
+//! the merged data (a bulge or a bad seam shows there).
+//!
 //! Times are wall and process CPU (user + sys, all threads) per update; every local merge
 //! is checked against a merge from scratch of the same scans.
 //!
@@ -197,6 +200,13 @@ fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
         (None, Some(why)) => format!("whole fit ({why})"),
         (None, None) => "whole fit".into(),
     };
+    // The worker's own account: whether it started from the previous fit (or why not),
+    // and whether it extended it over new ground.
+    let object = &u.outputs.report["object"];
+    let fitted = format!(
+        "{fitted}\n        worker: warm {}  new ground points {}",
+        object["warm"], object["local"]["new_ground_points"]
+    );
     format!(
         "{id:7} {:7.0} ms wall {:7.0} ms cpu (merge {:5.0}, fit {:6.0}, outputs {:5.0}) load {}  path {:6}  views {:3.0} deg  controls {:5}  merged {:6} ({} cells recomputed)  rms {:5.1} um  changed +{} -{} ~{} ={}\n        {fitted}",
         u.times.total_ms,
@@ -231,7 +241,7 @@ fn run(
         match session.add_scan(id, mesh, *t) {
             Ok(u) => {
                 println!("+{}", describe(id, &u, process_cpu_ms() - cpu));
-                check_merge(&session, &opts, u.merged_vertices);
+                check_merge(&session, &opts, &u);
                 last = Some(u.fit);
             }
             Err(e) => {
@@ -250,7 +260,8 @@ fn run(
 }
 
 /// The session's merge against a merge from scratch of the same scans, with its time.
-fn check_merge(session: &ObjectSession, opts: &SessionOptions, vertices: usize) {
+fn check_merge(session: &ObjectSession, opts: &SessionOptions, update: &SessionUpdate) {
+    let vertices = update.merged_vertices;
     let Some(cell) = session.cell() else {
         return;
     };
@@ -267,6 +278,22 @@ fn check_merge(session: &ObjectSession, opts: &SessionOptions, vertices: usize) 
         } else {
             "DIFFERS from the local merge"
         }
+    );
+    // A surface that strays from the data (a bulge over a hole, a badly joined seam)
+    // shows here, where no distance from the data to the surface would.
+    let to_merged = MeshDistance::new(&cold.mesh);
+    let surface = surface_mesh(&update.fit);
+    let far: Vec<f64> = surface
+        .positions
+        .iter()
+        .filter_map(|p| to_merged.distance(*p))
+        .filter(|&d| d > 5e-4)
+        .collect();
+    println!(
+        "        surface vertices over 0.5 mm from the merged data: {} of {} (farthest {:.2} mm)",
+        far.len(),
+        surface.positions.len(),
+        far.iter().fold(0.0f64, |a, &b| a.max(b)) * 1e3
     );
 }
 

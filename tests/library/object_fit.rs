@@ -6,7 +6,7 @@ use glam::DVec3;
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
-use trispline::pipeline::object::{fit_object, ObjectFit, ObjectOptions};
+use trispline::pipeline::object::{farthest_from_data, fit_object, ObjectFit, ObjectOptions};
 use trispline::surface::TriSurface;
 use trispline::TriMesh;
 
@@ -157,7 +157,7 @@ fn bun_zipper_keeps_its_five_holes() {
     assert_eq!(fit.control_topology.boundary_loops, 5);
     assert_eq!(fit.control_topology.genus, 0);
     let diag = fit.component.bounds_diagonal();
-    let stray = stray_of_tessellation(&fit, 6);
+    let stray = farthest_from_data(&fit, 6);
     eprintln!(
         "bun_zipper: {} controls, rms {:.2e} max {:.2e}, decimated rms {:.2e}, stray {:.2e} of diag {diag:.3}, times {:?}, layout {:?}, refinement {:?}",
         fit.controls.len(),
@@ -179,28 +179,6 @@ fn bun_zipper_keeps_its_five_holes() {
     assert!(stray <= 5e-3 * diag, "stray {stray} of diagonal {diag}");
 }
 
-/// The largest distance from the surface, sampled on a lattice of `k` segments per control
-/// face edge, to the data mesh: how far the surface strays from the data (over holes).
-fn stray_of_tessellation(fit: &ObjectFit, k: usize) -> f64 {
-    let evaluate = fit.surface.evaluator(&fit.controls);
-    let md = MeshDistance::new(&fit.component);
-    let mut stray = 0.0f64;
-    for f in 0..fit.surface.domain_face_count() {
-        for j in 0..=k {
-            for i in 0..=k - j {
-                let p = trispline::surface::SurfaceParam {
-                    face: f as u32,
-                    u: i as f64 / k as f64,
-                    v: j as f64 / k as f64,
-                };
-                let d = md.distance(evaluate(p).position).unwrap_or(f64::INFINITY);
-                stray = stray.max(d);
-            }
-        }
-    }
-    stray
-}
-
 #[test]
 fn decimated_max_stays_closed() {
     let Some(mesh) = shared_mesh("models/decimated-max.obj") else {
@@ -210,7 +188,7 @@ fn decimated_max_stays_closed() {
     assert_topology_kept(&fit);
     assert_eq!(fit.control_topology.boundary_loops, 0);
     let diag = mesh.bounds_diagonal();
-    let stray = stray_of_tessellation(&fit, 6);
+    let stray = farthest_from_data(&fit, 6);
     eprintln!(
         "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}, stray {:.3} % of diag",
         fit.controls.len(),
@@ -237,7 +215,7 @@ fn camelhead_stays_on_its_sparse_rim() {
     assert_topology_kept(&fit);
     assert_eq!(fit.control_topology.boundary_loops, 1);
     let diag = fit.component.bounds_diagonal();
-    let stray = stray_of_tessellation(&fit, 6);
+    let stray = farthest_from_data(&fit, 6);
     eprintln!(
         "camelhead: {} controls, rms {:.3e}, decimated rms {:.3e}, stray {:.3} % of diag",
         fit.controls.len(),

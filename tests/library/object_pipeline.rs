@@ -447,13 +447,20 @@ fn broken_bun_zipper_res4_is_repaired_and_fitted_whole() {
     // 453 vertices of a bunny: a coarse shape, followed to about 1 % of its size.
     let rms = fitted.fit.geometric_rms();
     assert!(rms < 0.02 * mesh.bounds_diagonal(), "RMS {rms}");
-    // A new version of the same broken file starts from this fit: its component is
-    // repaired as the cold fit's was (a plain cleaning leaves it not manifold).
+    // A new version of the same broken file may start from this fit: its component is
+    // repaired as the cold fit's was (a plain cleaning leaves it not manifold). Its warm
+    // refit (the whole fit from the previous 45 controls) strays 36 mm from the data where
+    // the previous surface strayed 7 mm, so the stray guard sends it to the whole fit: the
+    // warm start is refused for that, never for the component.
     let cfg = config(Domain::Auto, 10.0);
     let first = run_patch(&mesh, None, &cfg).expect("fits");
     let again = run_patch(&mesh, Some(&first.warm), &cfg).expect("fits warm");
     let warm = &again.report["object"]["warm"];
-    assert_eq!(warm["used"], true, "{warm}");
+    let why = warm["cold_because"].as_str().unwrap_or("");
+    assert!(
+        warm["used"] == true || why.starts_with("the updated surface strays"),
+        "{warm}"
+    );
 }
 
 /// `mesh` with a smooth dent of `depth` along the normal direction of a torus (towards its

@@ -746,4 +746,4 @@ impl<'a> State<'a> {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

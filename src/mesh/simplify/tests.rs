@@ -1,7 +1,7 @@
 use super::*;
 
 /// A torus of `n x m` quads split into triangles (R = 1, r = 0.4).
-fn torus(n: usize, m: usize) -> TriMesh {
+pub(crate) fn torus(n: usize, m: usize) -> TriMesh {
     let mut positions = Vec::new();
     for i in 0..n {
         for j in 0..m {

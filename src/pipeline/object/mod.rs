@@ -24,6 +24,7 @@ mod model;
 mod refine;
 mod seam;
 mod solve;
+mod stray;
 mod version;
 
 use crate::fit::distance::CholeskyPattern;
@@ -50,6 +51,7 @@ use refine::{faces_beyond, refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
+pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds

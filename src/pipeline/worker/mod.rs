@@ -8,6 +8,7 @@ mod cloud;
 mod config;
 mod object;
 mod report;
+mod stray_guard;
 
 pub use config::{
     BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_CREASE_ANGLE_DEG,

@@ -5,6 +5,7 @@
 //! control mesh, and turns an `ObjectFit` into the `PatchFit` every output reads.
 
 use super::config::WorkerConfig;
+use super::stray_guard::stays_on_data;
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
 use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
 use crate::mesh::crease::CreaseOptions;
@@ -208,7 +209,9 @@ pub(super) fn fit_as_object(
     opts.refine.tolerance = Some(budget.tolerance);
     let object = |source| PipelineError::Object { source };
     let (fit, warm) = match previous {
-        Some(w) => match from_previous(mesh, w, previous_controls, &opts) {
+        Some(w) => match from_previous(mesh, w, previous_controls, &opts)
+            .and_then(|fit| stays_on_data(fit, &w.faces, &w.crease_edges, previous_controls))
+        {
             Ok(fit) => (fit.map_err(object)?, WarmDecision::Used),
             Err(why) => (
                 fit_object(mesh, &opts).map_err(object)?,

@@ -1,0 +1,124 @@
+//! The guard on a warm result (a local refit, an extension over new ground): its surface
+//! must not stray from the data where the update moved it. A fit minimises the distance
+//! from the data to the surface, which cannot see a surface bulging where no data is; a
+//! local update keeps its previous faces and joins new ones by strips, so it can bulge
+//! where a fit from scratch, whose control mesh follows the data, would not.
+
+use crate::mesh::distance::MeshDistance;
+use crate::pipeline::object::{farthest_from, ObjectError, ObjectFit};
+use crate::surface::loop_limit::LoopLimitSurface;
+use glam::DVec3;
+
+/// A warm result may stray from its data (the new version) by this share of the data's
+/// bounding-box diagonal, the bound a whole fit is held to (no bulge over holes) ...
+const MAX_STRAY_SHARE: f64 = 0.005;
+
+/// ... or by this many times what the previous surface strays from the same data (a
+/// smooth surface over a coarse data mesh strays by the mesh's chordal error already);
+/// farther, the whole fit runs. The fit's own errors (data to surface) cannot see a bulge.
+const MAX_STRAY_GROWTH: f64 = 1.5;
+
+/// Lattice segments per control face edge the stray check samples.
+const STRAY_SEGMENTS: usize = 3;
+
+/// `fit` unless its surface strays from the data farther than `MAX_STRAY_SHARE` and
+/// `MAX_STRAY_GROWTH` allow (a failed fit passes through: its error is reported as it is).
+/// Only the faces an update can have moved are sampled: those around a control that moved
+/// or is new (a patch depends on the controls of its face's 1-ring).
+pub(super) fn stays_on_data(
+    fit: Result<ObjectFit, ObjectError>,
+    previous_faces: &[[u32; 3]],
+    previous_creases: &[[u32; 2]],
+    previous_controls: &[DVec3],
+) -> Result<Result<ObjectFit, ObjectError>, String> {
+    let Ok(fit) = fit else {
+        return Ok(fit);
+    };
+    let faces = faces_around_moved(&fit, previous_controls);
+    if faces.is_empty() {
+        return Ok(Ok(fit));
+    }
+    let data = MeshDistance::new(&fit.component);
+    let farthest = farthest_from(&fit.surface, &fit.controls, &data, STRAY_SEGMENTS, &faces);
+    let share = MAX_STRAY_SHARE * fit.component.bounds_diagonal();
+    if farthest <= share {
+        return Ok(Ok(fit));
+    }
+    // The previous surface over the faces of the same indices (those it has; an update
+    // keeps the previous faces' indices except where it split faces) and the same data.
+    let before = LoopLimitSurface::with_creases_reusing(
+        previous_controls.len(),
+        previous_faces,
+        previous_creases,
+        &fit.surface,
+    )
+    .map(|s| farthest_from(&s, previous_controls, &data, STRAY_SEGMENTS, &faces))
+    .unwrap_or(0.0);
+    if farthest <= MAX_STRAY_GROWTH * before {
+        return Ok(Ok(fit));
+    }
+    Err(format!(
+        "the updated surface strays {farthest:.3e} from the data (the previous one \
+         {before:.3e} there; at most {share:.3e}, {MAX_STRAY_SHARE} of the bounding-box \
+         diagonal, or {MAX_STRAY_GROWTH} times the previous)"
+    ))
+}
+
+/// The control faces with a vertex next to (or at) a control that is new or moved against
+/// `previous`.
+fn faces_around_moved(fit: &ObjectFit, previous: &[DVec3]) -> Vec<u32> {
+    let faces = fit.surface.faces();
+    let moved: Vec<bool> = (0..fit.controls.len())
+        .map(|v| previous.get(v) != Some(&fit.controls[v]))
+        .collect();
+    let mut near = vec![false; fit.controls.len()];
+    for t in faces
+        .iter()
+        .filter(|t| t.iter().any(|&v| moved[v as usize]))
+    {
+        for &v in t {
+            near[v as usize] = true;
+        }
+    }
+    (0..faces.len() as u32)
+        .filter(|&f| faces[f as usize].iter().any(|&v| near[v as usize]))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::simplify::tests::torus;
+    use crate::pipeline::object::{fit_object, ObjectOptions};
+
+    #[test]
+    fn a_control_moved_off_the_data_is_refused_and_an_untouched_fit_passes() {
+        let mesh = torus(60, 20);
+        let fit = fit_object(&mesh, &ObjectOptions::default()).expect("the torus fits");
+        let faces = fit.surface.faces().to_vec();
+        let creases = fit.surface.crease_edges().to_vec();
+        let previous = fit.controls.clone();
+        let diagonal = mesh.bounds_diagonal();
+        // Nothing moved: nothing to sample, the fit passes.
+        let same = stays_on_data(Ok(fit), &faces, &creases, &previous);
+        let Ok(Ok(mut fit)) = same else {
+            panic!("an unchanged fit is refused");
+        };
+        // One control pushed along z by 5 % of the diagonal: its patches leave the data
+        // by far more than the bound, and the previous surface there did not.
+        fit.controls[0].z += 0.05 * diagonal;
+        let why = match stays_on_data(Ok(fit), &faces, &creases, &previous) {
+            Err(why) => why,
+            Ok(_) => panic!("a surface pushed off its data passes"),
+        };
+        assert!(why.contains("strays"), "{why}");
+        // A push well inside the bound passes.
+        let mut fit = fit_object(&mesh, &ObjectOptions::default()).expect("the torus fits");
+        let previous = fit.controls.clone();
+        fit.controls[0].z += 1e-4 * diagonal;
+        assert!(matches!(
+            stays_on_data(Ok(fit), &faces, &creases, &previous),
+            Ok(Ok(_))
+        ));
+    }
+}
