@@ -147,10 +147,13 @@ pub fn extend_over_new_ground(
         ..LocalOptions::of(opts)
     };
     let feet = LocalFeet::at(new_params, initial.clone());
+    // No surface samples in this round, as in a whole fit's first point fit: pulled
+    // point to point (tangential share 1), a sample drags its patch along the data.
     let placed = refit_around(
         &surface,
         &controls,
         data,
+        None,
         feet,
         changed.len(),
         &free,
@@ -163,6 +166,7 @@ pub fn extend_over_new_ground(
         &surface,
         &placed.controls,
         data,
+        Some(&component),
         feet,
         changed.len(),
         &free,

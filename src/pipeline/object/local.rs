@@ -8,17 +8,21 @@
 //! whose patch depends on a free control (the only ones whose surface moves) enter
 //! squared-distance rounds like the whole-object fit's (point-to-plane with a small
 //! tangential share, the umbrella fairness), with the fixed controls' share of every row
-//! moved to the right-hand side. Not done here: the whole fit's holding of the data's rim
-//! on the surface's boundary curve and its surface-to-data samples, which is why a change
-//! over much of the control mesh goes to the whole fit instead (`version`).
+//! moved to the right-hand side. The whole fit's surface-to-data samples are taken on the
+//! moving faces when the data mesh is given. Not done here: the whole fit's holding of the
+//! data's rim on the surface's boundary curve, which is why a change over much of the
+//! control mesh goes to the whole fit instead (`version`).
 
 use super::model::ObjectOptions;
+use super::solve::{Rim, Samples};
 use crate::fit::distance::{solve_distance_direct, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
+use crate::mesh::distance::MeshDistance;
 use crate::pipeline::geometric::foot_point;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
+use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -130,10 +134,17 @@ fn rms_of(errors: &[f64], points: &[usize]) -> (f64, f64) {
 /// Refits the controls `free` (see [`free_controls`]) of the surface of `controls` to
 /// `data`, every other control kept; `feet` holds every point's foot on that surface
 /// (those of the `changed` points found on it).
+///
+/// With `data_mesh` (the mesh of `data`), every round also pulls the moving faces' parts no
+/// foot point sees to the data mesh (the whole fit's surface-to-data samples, `Samples`,
+/// inside the faces only, see `Rim::without_boundary`): without them a free control next
+/// to a face without data swings that face off the data.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn refit_around(
     surface: &LoopLimitSurface,
     controls: &[DVec3],
     data: &[DVec3],
+    data_mesh: Option<&TriMesh>,
     mut feet: LocalFeet,
     changed: usize,
     free: &[bool],
@@ -143,6 +154,13 @@ pub(crate) fn refit_around(
     let m = surface.control_count();
     let mut controls = controls.to_vec();
     let moving_face = moving_faces(surface, free);
+    let sampling = data_mesh.map(|mesh| {
+        (
+            mesh,
+            MeshDistance::new(mesh),
+            Rim::without_boundary(surface.faces().len()),
+        )
+    });
     let moving: Vec<usize> = (0..n)
         .filter(|&i| moving_face[feet.params[i].face as usize])
         .collect();
@@ -174,7 +192,19 @@ pub(crate) fn refit_around(
         if free_ids.is_empty() {
             break;
         }
-        let Some(solved) = system.solve(data, &moving, &feet, &controls) else {
+        let samples = match &sampling {
+            Some((mesh, nearest, rim)) => Samples::find(
+                surface,
+                &controls,
+                &feet.params,
+                rim,
+                mesh,
+                nearest,
+                Some(&moving_face),
+            ),
+            None => Samples::none(),
+        };
+        let Some(solved) = system.solve(data, &moving, &feet, &samples, &controls) else {
             break;
         };
         let mut next = controls.clone();
@@ -274,6 +304,7 @@ impl System<'_> {
         data: &[DVec3],
         moving: &[usize],
         feet: &LocalFeet,
+        samples: &Samples,
         controls: &[DVec3],
     ) -> Option<Vec<DVec3>> {
         let mut basis = Csr {
@@ -307,6 +338,18 @@ impl System<'_> {
             let mut entries = row.iter().copied().filter(|e| e.1 != 0.0);
             targets.push(push_row(&mut entries, data[i], 1.0, &mut basis));
             normals.push(feet.normals[i]);
+            tangential.push(self.tangential);
+        }
+        for ((&param, &target), &normal) in samples
+            .params
+            .iter()
+            .zip(&samples.targets)
+            .zip(&samples.normals)
+        {
+            self.surface.basis_row(param, &mut row);
+            let mut entries = row.iter().copied().filter(|e| e.1 != 0.0);
+            targets.push(push_row(&mut entries, target, 1.0, &mut basis));
+            normals.push(normal);
             tangential.push(self.tangential);
         }
         // The umbrella rows holding a free control, once per axis: three point-to-plane

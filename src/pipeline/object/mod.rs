@@ -294,9 +294,15 @@ fn fit_from(
     let mut pattern = CholeskyPattern::default();
     while taken < opts.rounds && refusals < MAX_REFUSALS {
         let samples = match &nearest {
-            Some(nearest) => {
-                Samples::find(&surface, &controls, &feet.params, &rim, &component, nearest)
-            }
+            Some(nearest) => Samples::find(
+                &surface,
+                &controls,
+                &feet.params,
+                &rim,
+                &component,
+                nearest,
+                None,
+            ),
             None => Samples::none(),
         };
         sampled_faces = samples.faces;

@@ -162,7 +162,7 @@ const SAMPLE_AT: [(f64, f64); 4] = [
 ///   sample there pulls the curve back onto it; inside it pulls only across the surface.
 ///
 /// Each sample weighs as one data point, so where feet are dense the data decide.
-pub(super) struct Samples {
+pub(crate) struct Samples {
     /// The samples' parameters on the surface.
     pub params: Vec<SurfaceParam>,
     /// Their nearest points on the data mesh.
@@ -194,6 +194,7 @@ impl Samples {
         rim: &Rim,
         data: &TriMesh,
         nearest: &MeshDistance,
+        only: Option<&[bool]>,
     ) -> Samples {
         let nf = surface.domain_face_count();
         let mut count = vec![0usize; nf];
@@ -208,6 +209,9 @@ impl Samples {
         let mut faces = 0;
         let mut params = Vec::new();
         for (f, (&held, &quarters)) in count.iter().zip(&covered).enumerate() {
+            if only.is_some_and(|o| !o.get(f).copied().unwrap_or(false)) {
+                continue;
+            }
             let sparse = held < SAMPLE_AT.len();
             let before = params.len();
             for (q, &(u, v)) in SAMPLE_AT.iter().enumerate() {
@@ -349,7 +353,7 @@ pub(super) fn rms(e: &[f64]) -> f64 {
 /// the limit surface's boundary curve is fitted to the data's boundary. Left free, those
 /// foot points slide inside and nothing stops the surface from running on past the rim
 /// (on bun_zipper by up to 2 % of the diagonal over the holes).
-pub(super) struct Rim {
+pub(crate) struct Rim {
     /// Per control face: which of its edges k (corner k to k + 1) are on the boundary (a
     /// face at a corner of the rim has two).
     edges_of_face: Vec<[bool; 3]>,
@@ -374,6 +378,18 @@ impl Rim {
         Rim {
             edges_of_face,
             points,
+        }
+    }
+
+    /// No boundary edge and no rim point, over `faces` control faces: surface samples
+    /// then take the faces' insides only. A local refit holds no rim points on the
+    /// boundary curve, and boundary samples alone pull the curve towards the nearest data
+    /// with nothing to hold it out (measured on a tube grown by 40 rings: the max error
+    /// 3.8e-3 with them, 2.6e-3 without, against 1.75e-3 from scratch).
+    pub(super) fn without_boundary(faces: usize) -> Rim {
+        Rim {
+            edges_of_face: vec![[false; 3]; faces],
+            points: Vec::new(),
         }
     }
 

@@ -102,6 +102,7 @@ pub(super) fn refit(
         surface,
         previous.controls,
         &matched.data,
+        None,
         feet,
         changed.len(),
         &free,
