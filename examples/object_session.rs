@@ -283,18 +283,22 @@ fn check_merge(session: &ObjectSession, opts: &SessionOptions, update: &SessionU
     // shows here, where no distance from the data to the surface would.
     let to_merged = MeshDistance::new(&cold.mesh);
     let surface = surface_mesh(&update.fit);
-    let far: Vec<f64> = surface
-        .positions
-        .iter()
-        .filter_map(|p| to_merged.distance(*p))
-        .filter(|&d| d > 5e-4)
-        .collect();
+    let far = distances_beyond(&surface.positions, &to_merged, 5e-4);
     println!(
         "        surface vertices over 0.5 mm from the merged data: {} of {} (farthest {:.2} mm)",
         far.len(),
         surface.positions.len(),
         far.iter().fold(0.0f64, |a, &b| a.max(b)) * 1e3
     );
+}
+
+/// The distances from `points` to the mesh of `to` that exceed `limit`.
+fn distances_beyond(points: &[DVec3], to: &MeshDistance, limit: f64) -> Vec<f64> {
+    points
+        .iter()
+        .filter_map(|p| to.distance(*p))
+        .filter(|&d| d > limit)
+        .collect()
 }
 
 /// A new version of bun045, its registration moved by 30 um: locally and from scratch.
@@ -483,18 +487,8 @@ fn merged_coverage(
     if let Ok(path) = std::env::var("OBJ_SESSION_DUMP") {
         let _ = std::fs::write(path, dump);
     }
-    let stray = surface
-        .positions
-        .iter()
-        .filter_map(|p| to_merged.distance(*p))
-        .filter(|&d| d > 5e-4)
-        .count();
-    let zipper_off = merged
-        .positions
-        .iter()
-        .filter_map(|p| to_zipper.distance(*p))
-        .filter(|&d| d > 5e-4)
-        .count();
+    let stray = distances_beyond(&surface.positions, &to_merged, 5e-4).len();
+    let zipper_off = distances_beyond(&merged.positions, &to_zipper, 5e-4).len();
     println!(
         "bun_zipper vertices within 2 mm of the merged mesh: {near}; over 0.5 mm from the surface only: {fit_only}, from both: {both}, from the merged mesh only: {merge_only}"
     );
