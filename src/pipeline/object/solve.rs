@@ -162,7 +162,7 @@ const SAMPLE_AT: [(f64, f64); 4] = [
 ///   sample there pulls the curve back onto it; inside it pulls only across the surface.
 ///
 /// Each sample weighs as one data point, so where feet are dense the data decide.
-pub(crate) struct Samples {
+pub(super) struct Samples {
     /// The samples' parameters on the surface.
     pub params: Vec<SurfaceParam>,
     /// Their nearest points on the data mesh.
@@ -353,7 +353,7 @@ pub(super) fn rms(e: &[f64]) -> f64 {
 /// the limit surface's boundary curve is fitted to the data's boundary. Left free, those
 /// foot points slide inside and nothing stops the surface from running on past the rim
 /// (on bun_zipper by up to 2 % of the diagonal over the holes).
-pub(crate) struct Rim {
+pub(super) struct Rim {
     /// Per control face: which of its edges k (corner k to k + 1) are on the boundary (a
     /// face at a corner of the rim has two).
     edges_of_face: Vec<[bool; 3]>,
