@@ -22,14 +22,16 @@
 //! are recognised by per-vertex versions (lazy invalidation).
 
 pub mod baseline;
+mod carry;
 mod crease;
 mod quadric;
 mod summary;
 
-use super::distance::project_onto_triangle;
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
+use carry::{Fan, Landings};
 use crease::Creases;
+use crossbeam_channel::Sender;
 use glam::DVec3;
 use quadric::Quadric;
 use rayon::prelude::*;
@@ -166,19 +168,35 @@ pub fn simplify_keeping(
     if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
-    let mut state = State::new(mesh, &topo, opts, Creases::new(&topo, crease_edges));
+    let (fans, carried) = crossbeam_channel::bounded(FAN_QUEUE);
+    let creases = Creases::new(&topo, crease_edges);
+    let mut state = State::new(mesh, &topo, opts, creases, fans);
     for (locked, &kept) in state.locked.iter_mut().zip(keep) {
         *locked |= kept;
     }
+    let landings = Landings::new(&mesh.positions, &state.faces, &state.vfaces);
     let target = opts.target_vertices.max(4);
-    // Edges refused in one pass may be allowed after their neighbourhood changed.
-    for _ in 0..4 {
-        if state.alive_vertices <= target || state.run_pass(target) == 0 {
-            break;
+    let (land_face, land_bary) = std::thread::scope(|scope| {
+        let carrier = scope.spawn(move || landings.carry_all(carried));
+        // Edges refused in one pass may be allowed after their neighbourhood changed.
+        for _ in 0..4 {
+            if state.alive_vertices <= target || state.run_pass(target) == 0 {
+                break;
+            }
         }
-    }
-    Ok(state.finish())
+        // The last fan sent: the carrier runs out of fans and returns.
+        state.fans = None;
+        carrier
+            .join()
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    });
+    Ok(state.finish(&land_face, &land_bary))
 }
+
+/// Collapses the collapsing thread may run ahead of the carrying one: enough that neither
+/// waits on the other's short stalls, few enough that the fans queued stay small (a fan is
+/// some hundred bytes).
+const FAN_QUEUE: usize = 4096;
 
 /// Queue entry: cost bits (non-negative f64 order as u64), the edge, and the versions of
 /// its end points when it was queued.
@@ -199,7 +217,6 @@ struct Candidate {
 }
 
 struct State<'a> {
-    input: &'a [DVec3],
     opts: &'a SimplifyOptions,
     cos_turn: f64,
     pos: Vec<DVec3>,
@@ -213,22 +230,13 @@ struct State<'a> {
     alive: Vec<bool>,
     alive_vertices: usize,
     version: Vec<u32>,
-    land_face: Vec<u32>,
-    land_bary: Vec<[f64; 3]>,
-    face_points: Vec<Vec<u32>>,
+    /// Where each collapse's fan goes to be carried (`carry`); `None` once the last went.
+    fans: Option<Sender<Fan>>,
     collapses: usize,
 }
 
 fn face_normal(p: [DVec3; 3]) -> DVec3 {
     (p[1] - p[0]).cross(p[2] - p[0])
-}
-
-/// A ball holding the triangle: its centroid, and the distance to its furthest corner
-/// (a little more, for rounding).
-fn bounding_ball(t: [DVec3; 3]) -> (DVec3, f64) {
-    let centre = (t[0] + t[1] + t[2]) / 3.0;
-    let radius = t.iter().map(|c| c.distance(centre)).fold(0.0, f64::max);
-    (centre, radius * (1.0 + 1e-12))
 }
 
 fn quality(p: [DVec3; 3]) -> f64 {
@@ -247,6 +255,7 @@ impl<'a> State<'a> {
         topo: &Topology,
         opts: &'a SimplifyOptions,
         creases: Creases,
+        fans: Sender<Fan>,
     ) -> Self {
         let nv = mesh.positions.len();
         let nf = mesh.triangles.len();
@@ -280,21 +289,7 @@ impl<'a> State<'a> {
         for (l, c) in locked.iter_mut().zip(crease_corners) {
             *l |= c;
         }
-        let mut land_face = vec![0u32; nv];
-        let mut land_bary = vec![[0.0; 3]; nv];
-        let mut face_points = vec![Vec::new(); nf];
-        for v in 0..nv {
-            let f = vfaces[v][0];
-            let slot = mesh.triangles[f as usize]
-                .iter()
-                .position(|&c| c as usize == v)
-                .unwrap_or(0);
-            land_face[v] = f;
-            land_bary[v][slot] = 1.0;
-            face_points[f as usize].push(v as u32);
-        }
         State {
-            input: &mesh.positions,
             opts,
             cos_turn: opts.max_normal_turn_deg.to_radians().cos(),
             pos,
@@ -308,9 +303,7 @@ impl<'a> State<'a> {
             alive: vec![true; nv],
             alive_vertices: nv,
             version: vec![0; nv],
-            land_face,
-            land_bary,
-            face_points,
+            fans: Some(fans),
             collapses: 0,
         }
     }
@@ -659,53 +652,30 @@ impl<'a> State<'a> {
         self.version[ki] += 1;
         self.version[ri] += 1;
         self.collapses += 1;
-        self.carry_points(k, &affected);
+        self.carry_points(k, affected);
     }
 
-    /// Re-projects the input points of the faces a collapse changed onto the nearest face
-    /// of the new fan around `k` (the first in fan order on a tie). Most points stay on or
-    /// beside the face they were on, so a fan face whose bounding ball lies further from
-    /// the point than that face (or than the nearest face found so far) cannot win and is
-    /// not projected onto: the same faces win as when every fan face is tried.
-    fn carry_points(&mut self, k: u32, affected: &[u32]) {
-        let fan = &self.vfaces[k as usize];
-        let triangles: Vec<[DVec3; 3]> = fan
+    /// Sends the new fan around `k` and the faces whose points move onto it to the
+    /// carrying thread.
+    fn carry_points(&self, k: u32, affected: Vec<u32>) {
+        let Some(fans) = &self.fans else {
+            return;
+        };
+        let faces = self.vfaces[k as usize].clone();
+        let triangles = faces
             .iter()
             .map(|&f| self.faces[f as usize].map(|v| self.pos[v as usize]))
             .collect();
-        let balls: Vec<(DVec3, f64)> = triangles.iter().map(|t| bounding_ball(*t)).collect();
-        let mut points = Vec::new();
-        for &f in affected {
-            points.append(&mut self.face_points[f as usize]);
-        }
-        for p in points {
-            let q = self.input[p as usize];
-            let was_on = fan.iter().position(|&f| f == self.land_face[p as usize]);
-            let on_own = was_on.map(|i| (i, project_onto_triangle(q, triangles[i])));
-            let bound = on_own.map_or(f64::INFINITY, |(_, (d2, _))| d2);
-            let mut best = (f64::INFINITY, fan[0], [1.0, 0.0, 0.0]);
-            for (i, &f) in fan.iter().enumerate() {
-                let (centre, radius) = balls[i];
-                let gap = q.distance(centre) - radius;
-                // The slack covers the rounding of the distances compared.
-                if gap > 0.0 && gap * gap > best.0.min(bound) * (1.0 + 1e-9) {
-                    continue;
-                }
-                let (d2, bary) = match on_own {
-                    Some((own, projected)) if own == i => projected,
-                    _ => project_onto_triangle(q, triangles[i]),
-                };
-                if d2 < best.0 {
-                    best = (d2, f, bary);
-                }
-            }
-            self.land_face[p as usize] = best.1;
-            self.land_bary[p as usize] = best.2;
-            self.face_points[best.1 as usize].push(p);
-        }
+        // A send fails only when the carrier is gone, which only its panic does; the join
+        // passes that on.
+        let _ = fans.send(Fan {
+            faces,
+            triangles,
+            affected,
+        });
     }
 
-    fn finish(self) -> Simplified {
+    fn finish(self, land_face: &[u32], land_bary: &[[f64; 3]]) -> Simplified {
         let mut control_of = vec![REMOVED; self.pos.len()];
         let mut positions = Vec::with_capacity(self.alive_vertices);
         for (v, &alive) in self.alive.iter().enumerate() {
@@ -722,10 +692,9 @@ impl<'a> State<'a> {
                 triangles.push(t.map(|v| control_of[v as usize]));
             }
         }
-        let landing = self
-            .land_face
+        let landing = land_face
             .iter()
-            .zip(&self.land_bary)
+            .zip(land_bary)
             .map(|(&f, b)| Landing {
                 face: face_index[f as usize],
                 u: b[0],
