@@ -76,6 +76,31 @@ pub struct StepStats {
 }
 
 impl StepStats {
+    /// The figures of point errors given as distances.
+    pub(crate) fn from_distances(
+        k: usize,
+        distances: &[f64],
+        tolerance: f64,
+        elapsed_ms: f64,
+    ) -> Self {
+        let n = distances.len().max(1) as f64;
+        let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
+        for &d in distances {
+            max = max.max(d);
+            sum += d;
+            sum2 += d * d;
+            within += usize::from(d <= tolerance);
+        }
+        Self {
+            k,
+            max_error: max,
+            mean_error: sum / n,
+            rms_error: (sum2 / n).sqrt(),
+            within_tolerance_pct: 100.0 * within as f64 / n,
+            elapsed_ms,
+        }
+    }
+
     pub(crate) fn from_residuals(
         k: usize,
         residuals: &[DVec3],

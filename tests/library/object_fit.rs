@@ -3,10 +3,14 @@
 
 use crate::shared_mesh;
 use glam::DVec3;
+use std::time::Instant;
+use trispline::fit::Budget;
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
-use trispline::pipeline::object::{farthest_from_data, fit_object, ObjectFit, ObjectOptions};
+use trispline::pipeline::object::{
+    farthest_from_data, fit_object, ObjectFit, ObjectOptions, RoundStop,
+};
 use trispline::surface::TriSurface;
 use trispline::TriMesh;
 
@@ -125,6 +129,51 @@ fn isolated_points_beyond_the_tolerance_end_refinement_and_the_rounds_run_on() {
     assert!(fit.rounds.len() > opts.refine.intermediate_rounds + 1);
     assert!(fit.rms < first.rms);
     assert!(fit.rounds.windows(2).all(|w| w[1].rms < w[0].rms));
+}
+
+#[test]
+fn the_rounds_and_the_refinement_stop_where_the_budget_holds_or_time_is_up() {
+    let mesh = torus(96, 40);
+    let free = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    // A max-error target the rounds reach part way (the free fit's own history meets it),
+    // so the stop must end them there: fewer rounds, no more controls.
+    let target = free.rounds[free.rounds.len() / 2].max;
+    let budget = Budget {
+        tolerance: target,
+        max_error: Some(target),
+        ..Budget::default()
+    };
+    let opts = ObjectOptions {
+        stop: RoundStop {
+            budget: Some(budget),
+            deadline: None,
+        },
+        ..ObjectOptions::default()
+    };
+    let stopped = fit_object(&mesh, &opts).expect("fitted");
+    eprintln!(
+        "budget stop at max {target:.3e}: {} rounds (free {}), {} controls (free {}), max {:.3e}",
+        stopped.rounds.len(),
+        free.rounds.len(),
+        stopped.controls.len(),
+        free.controls.len(),
+        stopped.max
+    );
+    assert!(stopped.max <= target, "max {} over {target}", stopped.max);
+    assert!(stopped.rounds.len() < free.rounds.len());
+    assert!(stopped.controls.len() <= free.controls.len());
+    // A deadline already past: no round and no refinement after the first fit.
+    let late = ObjectOptions {
+        stop: RoundStop {
+            budget: None,
+            deadline: Some(Instant::now()),
+        },
+        ..ObjectOptions::default()
+    };
+    let capped = fit_object(&mesh, &late).expect("fitted");
+    assert_eq!(capped.rounds.len(), 1, "rounds {:?}", capped.rounds);
+    assert_eq!(capped.refinement.len(), 1);
+    assert!(capped.rms > free.rms);
 }
 
 #[test]

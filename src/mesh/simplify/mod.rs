@@ -29,7 +29,7 @@ mod summary;
 
 use super::topology::{Topology, TopologyError, NONE};
 use super::TriMesh;
-use carry::{Fan, Landings};
+use carry::{Fans, Landings};
 use crease::Creases;
 use crossbeam_channel::Sender;
 use glam::DVec3;
@@ -168,9 +168,9 @@ pub fn simplify_keeping(
     if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
-    let (fans, carried) = crossbeam_channel::bounded(FAN_QUEUE);
+    let (carrier, carried) = crossbeam_channel::bounded(FAN_BATCHES);
     let creases = Creases::new(&topo, crease_edges);
-    let mut state = State::new(mesh, &topo, opts, creases, fans);
+    let mut state = State::new(mesh, &topo, opts, creases, carrier);
     for (locked, &kept) in state.locked.iter_mut().zip(keep) {
         *locked |= kept;
     }
@@ -184,8 +184,7 @@ pub fn simplify_keeping(
                 break;
             }
         }
-        // The last fan sent: the carrier runs out of fans and returns.
-        state.fans = None;
+        state.stop_carrying();
         carrier
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
@@ -193,10 +192,10 @@ pub fn simplify_keeping(
     Ok(state.finish(&land_face, &land_bary))
 }
 
-/// Collapses the collapsing thread may run ahead of the carrying one: enough that neither
-/// waits on the other's short stalls, few enough that the fans queued stay small (a fan is
-/// some hundred bytes).
-const FAN_QUEUE: usize = 4096;
+/// Batches of collapses the collapsing thread may run ahead of the carrying one: enough
+/// that neither waits on the other's short stalls, few enough that the fans queued stay
+/// small (a collapse is some hundred bytes).
+const FAN_BATCHES: usize = 16;
 
 /// Queue entry: cost bits (non-negative f64 order as u64), the edge, and the versions of
 /// its end points when it was queued.
@@ -230,8 +229,10 @@ struct State<'a> {
     alive: Vec<bool>,
     alive_vertices: usize,
     version: Vec<u32>,
-    /// Where each collapse's fan goes to be carried (`carry`); `None` once the last went.
-    fans: Option<Sender<Fan>>,
+    /// Collapses not yet sent to be carried ...
+    fans: Fans,
+    /// ... and where they go (`carry`); `None` once the last went.
+    carrier: Option<Sender<Fans>>,
     collapses: usize,
 }
 
@@ -255,7 +256,7 @@ impl<'a> State<'a> {
         topo: &Topology,
         opts: &'a SimplifyOptions,
         creases: Creases,
-        fans: Sender<Fan>,
+        carrier: Sender<Fans>,
     ) -> Self {
         let nv = mesh.positions.len();
         let nf = mesh.triangles.len();
@@ -303,7 +304,8 @@ impl<'a> State<'a> {
             alive: vec![true; nv],
             alive_vertices: nv,
             version: vec![0; nv],
-            fans: Some(fans),
+            fans: Fans::default(),
+            carrier: Some(carrier),
             collapses: 0,
         }
     }
@@ -652,27 +654,35 @@ impl<'a> State<'a> {
         self.version[ki] += 1;
         self.version[ri] += 1;
         self.collapses += 1;
-        self.carry_points(k, affected);
+        self.carry_points(k, &affected);
     }
 
-    /// Sends the new fan around `k` and the faces whose points move onto it to the
-    /// carrying thread.
-    fn carry_points(&self, k: u32, affected: Vec<u32>) {
-        let Some(fans) = &self.fans else {
-            return;
-        };
-        let faces = self.vfaces[k as usize].clone();
-        let triangles = faces
+    /// Queues the new fan around `k` and the faces whose points move onto it for the
+    /// carrying thread, and sends a full batch.
+    fn carry_points(&mut self, k: u32, affected: &[u32]) {
+        let fan = self.vfaces[k as usize]
             .iter()
-            .map(|&f| self.faces[f as usize].map(|v| self.pos[v as usize]))
-            .collect();
-        // A send fails only when the carrier is gone, which only its panic does; the join
-        // passes that on.
-        let _ = fans.send(Fan {
-            faces,
-            triangles,
-            affected,
-        });
+            .map(|&f| (f, self.faces[f as usize].map(|v| self.pos[v as usize])));
+        self.fans.push(fan, affected);
+        if self.fans.len() >= Fans::BATCH {
+            self.send_fans();
+        }
+    }
+
+    /// Sends the queued fans to the carrying thread.
+    fn send_fans(&mut self) {
+        let batch = std::mem::take(&mut self.fans);
+        if let Some(carrier) = &self.carrier {
+            // A send fails only when the carrier is gone, which only its panic does; the
+            // join passes that on.
+            let _ = carrier.send(batch);
+        }
+    }
+
+    /// Sends the last fans and lets the carrying thread finish.
+    fn stop_carrying(&mut self) {
+        self.send_fans();
+        self.carrier = None;
     }
 
     fn finish(self, land_face: &[u32], land_bary: &[[f64; 3]]) -> Simplified {

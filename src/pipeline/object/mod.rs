@@ -46,7 +46,9 @@ use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
 use model::{control_target, limit_surface, ms_since};
-pub use model::{LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport};
+pub use model::{
+    LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
+};
 use refine::{faces_beyond, refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
@@ -252,24 +254,21 @@ fn fit_from(
     let t = Instant::now();
     let data = component.positions.clone();
     let warm = warm.filter(|w| w.len() == m);
+    let first = FirstFit {
+        surface: &surface,
+        control_mesh: &control_mesh,
+        data: &data,
+        rim: &rim,
+        fairness: &fairness,
+        smoothing,
+    };
     let (mut controls, mut feet) = match warm {
         Some(controls) => {
             let mut feet = Feet::find(&surface, &controls, &data, &params);
             rim.hold(&mut feet, &surface, &controls, &data);
             (controls, feet)
         }
-        None => first_fit(
-            FirstFit {
-                surface: &surface,
-                control_mesh: &control_mesh,
-                data: &data,
-                rim: &rim,
-                fairness: &fairness,
-                smoothing,
-            },
-            params,
-            opts,
-        )?,
+        None => first_fit(first, params, opts)?,
     };
     times.first_fit_ms = ms_since(t);
 
@@ -293,6 +292,9 @@ fn fit_from(
     let mut sampled_faces = 0;
     let mut pattern = CholeskyPattern::default();
     while taken < opts.rounds && refusals < MAX_REFUSALS {
+        if opts.stop.reached(&feet.distances) {
+            break;
+        }
         let samples = match &nearest {
             Some(nearest) => Samples::find(
                 &surface,
@@ -424,7 +426,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     let mut unfinished = true;
     for round in 0..opts.refine.rounds {
         let room = cap.saturating_sub(fit.controls.len());
-        if room == 0 {
+        if room == 0 || opts.stop.reached(&fit.distances) {
             break;
         }
         let share = room.div_ceil(opts.refine.rounds - round);

@@ -3,6 +3,7 @@
 
 use super::layout::{LayoutOptions, LayoutReport};
 use super::refine::{RefineOptions, RefineRound};
+use crate::fit::budget::{Budget, StepStats};
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::{SimplifyError, SimplifyOptions, SurfaceTopology};
@@ -64,6 +65,39 @@ pub struct ObjectOptions {
     /// Pull sample points of control faces with few foot points to the data (the
     /// surface-to-data term; without it such patches are held only by the fairness term).
     pub surface_samples: bool,
+    /// When the rounds and the refinement stop before they converge or run out.
+    pub stop: RoundStop,
+}
+
+/// When a fit's foot-point rounds and refinement rounds stop besides their own
+/// convergence: the targets of the fit's budget hold (the error the user asked for is
+/// reached: further rounds would spend time and, for refinement, controls beyond it), or
+/// its time is up. Checked before every round, never inside one.
+#[derive(Clone, Debug, Default)]
+pub struct RoundStop {
+    /// Targets, and the tolerance behind `within_tolerance_pct`; `None`: no targets.
+    pub budget: Option<Budget>,
+    /// No round starts after this instant.
+    pub deadline: Option<Instant>,
+}
+
+impl RoundStop {
+    /// Whether the budget's targets hold for these distances (never without targets).
+    pub(super) fn targets_hold(&self, distances: &[f64]) -> bool {
+        self.budget
+            .as_ref()
+            .is_some_and(|b| b.met(&StepStats::from_distances(0, distances, b.tolerance, 0.0)))
+    }
+
+    /// Whether the deadline has passed.
+    pub fn out_of_time(&self) -> bool {
+        self.deadline.is_some_and(|d| Instant::now() >= d)
+    }
+
+    /// Whether no further round should start.
+    pub(super) fn reached(&self, distances: &[f64]) -> bool {
+        self.out_of_time() || self.targets_hold(distances)
+    }
 }
 
 impl Default for ObjectOptions {
@@ -94,6 +128,7 @@ impl Default for ObjectOptions {
             layout: LayoutOptions::default(),
             refine: RefineOptions::default(),
             surface_samples: true,
+            stop: RoundStop::default(),
         }
     }
 }

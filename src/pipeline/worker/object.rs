@@ -14,7 +14,7 @@ use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
     extend_over_new_ground, fit_object, fit_on_creased_control_mesh, fitted_component,
     refit_where_changed, LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
-    ObjectTimes, PreviousFit, RefineRound, RoundReport,
+    ObjectTimes, PreviousFit, RefineRound, RoundReport, RoundStop,
 };
 use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
@@ -27,6 +27,7 @@ use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// A surface whose longest boundary loop is shorter than this many square roots of its
 /// area is nearly closed (a disk has 3.5, a range scan's ragged rim more; bun_zipper's
@@ -207,6 +208,13 @@ pub(super) fn fit_as_object(
 ) -> Result<(PatchFit, ObjectInfo), PipelineError> {
     let mut opts = options(cfg);
     opts.refine.tolerance = Some(budget.tolerance);
+    // The rounds stop where the budget holds or its time is up, as a scan's do.
+    opts.stop = RoundStop {
+        budget: Some(budget.clone()),
+        deadline: budget
+            .max_time_ms
+            .map(|ms| Instant::now() + Duration::from_millis(ms)),
+    };
     let object = |source| PipelineError::Object { source };
     let (fit, warm) = match previous {
         Some(w) => match from_previous(mesh, w, previous_controls, &opts)
@@ -231,7 +239,13 @@ pub(super) fn fit_as_object(
         refinement: fit.refinement.clone(),
         local: fit.local.clone(),
     };
-    let patch = patch_fit(fit, budget, matches!(info.warm, WarmDecision::Used));
+    let out_of_time = opts.stop.out_of_time();
+    let patch = patch_fit(
+        fit,
+        budget,
+        matches!(info.warm, WarmDecision::Used),
+        out_of_time,
+    );
     Ok((patch, info))
 }
 
@@ -466,23 +480,17 @@ fn nearest_params(warm: &ObjectWarm, points: &[DVec3]) -> (Vec<SurfaceParam>, Ve
 }
 
 /// The object fit in the form every output reads: a Loop surface on its control mesh.
-fn patch_fit(fit: ObjectFit, budget: &Budget, warm_start: bool) -> PatchFit {
-    let n = fit.distances.len().max(1) as f64;
-    let within = fit
-        .distances
-        .iter()
-        .filter(|&&d| d <= budget.tolerance)
-        .count();
-    let last = StepStats {
-        k: fit.rounds.len().saturating_sub(1),
-        max_error: fit.max,
-        mean_error: fit.distances.iter().sum::<f64>() / n,
-        rms_error: fit.rms,
-        within_tolerance_pct: 100.0 * within as f64 / n,
-        elapsed_ms: fit.times.total_ms,
-    };
+fn patch_fit(fit: ObjectFit, budget: &Budget, warm_start: bool, out_of_time: bool) -> PatchFit {
+    let last = StepStats::from_distances(
+        fit.rounds.len().saturating_sub(1),
+        &fit.distances,
+        budget.tolerance,
+        fit.times.total_ms,
+    );
     let status = if budget.met(&last) {
         FitStatus::Met
+    } else if out_of_time {
+        FitStatus::Capped
     } else {
         FitStatus::Stalled
     };
@@ -501,8 +509,11 @@ fn patch_fit(fit: ObjectFit, budget: &Budget, warm_start: bool) -> PatchFit {
         params: fit.params,
         geometric_errors: fit.distances,
         warm_start,
-        prepare_ms: fit.times.clean_ms + fit.times.simplify_ms + fit.times.surface_ms,
-        fit_ms: fit.times.first_fit_ms + fit.times.rounds_ms,
+        prepare_ms: fit.times.clean_ms
+            + fit.times.simplify_ms
+            + fit.times.layout_ms
+            + fit.times.surface_ms,
+        fit_ms: fit.times.first_fit_ms + fit.times.rounds_ms + fit.times.refine_ms,
     }
 }
 
