@@ -4,13 +4,13 @@
 
 use super::TriMesh;
 use glam::DVec3;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 /// Closest-point queries against a triangle mesh through a uniform grid of buckets.
 pub struct MeshDistance<'a> {
     mesh: &'a TriMesh,
     cell: f64,
-    buckets: HashMap<(i64, i64, i64), Vec<u32>>,
+    buckets: FxHashMap<(i64, i64, i64), Vec<u32>>,
 }
 
 impl<'a> MeshDistance<'a> {
@@ -24,7 +24,7 @@ impl<'a> MeshDistance<'a> {
             .sum::<f64>()
             / mesh.triangles.len().max(1) as f64;
         let cell = (2.0 * mean_edge).max(1e-12);
-        let mut buckets: HashMap<(i64, i64, i64), Vec<u32>> = HashMap::new();
+        let mut buckets: FxHashMap<(i64, i64, i64), Vec<u32>> = FxHashMap::default();
         for (f, t) in mesh.triangles.iter().enumerate() {
             let pts = t.map(|v| p[v as usize]);
             let lo = pts[0].min(pts[1]).min(pts[2]);
@@ -62,41 +62,55 @@ impl<'a> MeshDistance<'a> {
             return None;
         }
         let c = Self::key(self.cell, q);
+        // Where q lies in its cell: the block of cells within r of it holds the ball of
+        // radius r cells plus the smallest of these around q.
+        let inside = q / self.cell - (q / self.cell).floor();
+        let margin = inside.min(DVec3::ONE - inside).min_element() * self.cell;
         let mut best: Option<(f64, Closest)> = None;
-        // Shell r holds every triangle within r cells; once the best distance is inside
-        // the searched radius no farther shell can beat it.
         for r in 0i64.. {
-            for x in c.0 - r..=c.0 + r {
-                for y in c.1 - r..=c.1 + r {
-                    for z in c.2 - r..=c.2 + r {
-                        let on_shell = (x - c.0).abs().max((y - c.1).abs()).max((z - c.2).abs());
-                        if on_shell != r {
-                            continue;
-                        }
-                        for &f in self.buckets.get(&(x, y, z)).map_or(&[][..], |v| v) {
-                            let t = self.mesh.triangles[f as usize];
-                            let p = &self.mesh.positions;
-                            let point = closest_on_triangle(
-                                q,
-                                p[t[0] as usize],
-                                p[t[1] as usize],
-                                p[t[2] as usize],
-                            );
-                            let d = (point - q).length();
-                            if best.as_ref().is_none_or(|(b, _)| d < *b) {
-                                best = Some((d, Closest { point, triangle: f }));
-                            }
-                        }
+            for cell in shell(c, r) {
+                let Some(faces) = self.buckets.get(&cell) else {
+                    continue;
+                };
+                for &f in faces {
+                    let t = self.mesh.triangles[f as usize];
+                    let p = &self.mesh.positions;
+                    let point = closest_on_triangle(
+                        q,
+                        p[t[0] as usize],
+                        p[t[1] as usize],
+                        p[t[2] as usize],
+                    );
+                    let d = (point - q).length();
+                    if best.as_ref().is_none_or(|(b, _)| d < *b) {
+                        best = Some((d, Closest { point, triangle: f }));
                     }
                 }
             }
+            // Every triangle with a point nearer than the block's margin has that point,
+            // and so its bounding box, in a searched cell: no farther shell can beat it.
             let reached = best.as_ref().map_or(f64::MAX, |(d, _)| *d);
-            if reached <= r as f64 * self.cell || r > 10_000 {
+            if reached <= r as f64 * self.cell + margin || r > 10_000 {
                 break;
             }
         }
         best.map(|(_, c)| c)
     }
+}
+
+/// The cells at Chebyshev distance exactly `r` from `c` (only `c` for r = 0).
+fn shell(c: (i64, i64, i64), r: i64) -> impl Iterator<Item = (i64, i64, i64)> {
+    (-r..=r).flat_map(move |dx| {
+        (-r..=r).flat_map(move |dy| {
+            // On a face of the block in x or y every z is on the shell; inside, only the
+            // two z faces are.
+            let full = dx.abs() == r || dy.abs() == r;
+            let step = if full || r == 0 { 1 } else { 2 * r as usize };
+            (-r..=r)
+                .step_by(step)
+                .map(move |dz| (c.0 + dx, c.1 + dy, c.2 + dz))
+        })
+    })
 }
 
 /// The nearest point of a mesh to a query.
@@ -186,9 +200,17 @@ mod tests {
         }
         let mesh = TriMesh::new(positions, triangles);
         let md = MeshDistance::new(&mesh);
-        for k in 0..200 {
+        // Far points (many shells searched) and points just off the surface (the search
+        // ends in the first cells, by the margin of the query inside its cell).
+        let far = (0..200).map(|k| {
             let t = k as f64 * 0.37;
-            let q = DVec3::new(1.4 * t.sin(), 1.3 * (0.7 * t).cos(), 0.5 * (1.3 * t).sin());
+            DVec3::new(1.4 * t.sin(), 1.3 * (0.7 * t).cos(), 0.5 * (1.3 * t).sin())
+        });
+        let near = (0..200).map(|k| {
+            let (x, y) = ((k as f64 * 0.618).fract(), (k as f64 * 0.414).fract());
+            DVec3::new(x, y, 0.2 * (3.0 * x).sin() * y + 0.004 * (k as f64).cos())
+        });
+        for q in far.chain(near) {
             let brute = mesh
                 .triangles
                 .iter()
