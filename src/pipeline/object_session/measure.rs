@@ -50,9 +50,10 @@ pub fn surface_points_at_data(fit: &PatchFit) -> Vec<DVec3> {
 }
 
 /// Points farther than this many mean edge lengths from every vertex of the mesh are
-/// measured to the nearest vertex: the bucket search's cost grows with the fourth power of
-/// the distance (the parts of a scan no surface covers took minutes), and that far out the
-/// nearest vertex is within one edge of the nearest point.
+/// measured to the nearest vertex: the bucket search's cost grows with the cube of the
+/// distance (the parts of a scan no surface covers took minutes when it grew with the
+/// fourth power), and that far out the nearest vertex is within one edge of the nearest
+/// point.
 const FAR_EDGES: f64 = 16.0;
 
 /// Distances of `points` to `mesh` (points with no distance, e.g. non-finite, are left
