@@ -75,6 +75,21 @@ pub struct StepStats {
     pub elapsed_ms: f64,
 }
 
+/// Figures of a set of distances: the largest, their sum, the sum of their squares and
+/// how many are within the tolerance.
+type Sums = (f64, f64, f64, usize);
+
+fn sums(distances: impl Iterator<Item = f64>, tolerance: f64) -> Sums {
+    distances.fold((0.0f64, 0.0, 0.0, 0), |(max, sum, sum2, within), d| {
+        (
+            max.max(d),
+            sum + d,
+            sum2 + d * d,
+            within + usize::from(d <= tolerance),
+        )
+    })
+}
+
 impl StepStats {
     /// The figures of point errors given as distances.
     pub(crate) fn from_distances(
@@ -83,14 +98,12 @@ impl StepStats {
         tolerance: f64,
         elapsed_ms: f64,
     ) -> Self {
-        let n = distances.len().max(1) as f64;
-        let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
-        for &d in distances {
-            max = max.max(d);
-            sum += d;
-            sum2 += d * d;
-            within += usize::from(d <= tolerance);
-        }
+        let s = sums(distances.iter().copied(), tolerance);
+        Self::from_sums(k, distances.len(), s, elapsed_ms)
+    }
+
+    fn from_sums(k: usize, count: usize, (max, sum, sum2, within): Sums, elapsed_ms: f64) -> Self {
+        let n = count.max(1) as f64;
         Self {
             k,
             max_error: max,
@@ -107,18 +120,7 @@ impl StepStats {
         tolerance: f64,
         elapsed_ms: f64,
     ) -> Self {
-        let n = residuals.len().max(1) as f64;
-        let chunk = |rs: &[DVec3]| {
-            let (mut max, mut sum, mut sum2, mut within) = (0.0f64, 0.0, 0.0, 0usize);
-            for r in rs {
-                let d = r.length();
-                max = max.max(d);
-                sum += d;
-                sum2 += d * d;
-                within += usize::from(d <= tolerance);
-            }
-            (max, sum, sum2, within)
-        };
+        let chunk = |rs: &[DVec3]| sums(rs.iter().map(|r| r.length()), tolerance);
         // Fixed chunks summed in order: the same figures whatever the thread count.
         let (max, sum, sum2, within) = if residuals.len() <= STATS_CHUNK {
             chunk(residuals)
@@ -128,14 +130,7 @@ impl StepStats {
                 (a.0.max(p.0), a.1 + p.1, a.2 + p.2, a.3 + p.3)
             })
         };
-        Self {
-            k,
-            max_error: max,
-            mean_error: sum / n,
-            rms_error: (sum2 / n).sqrt(),
-            within_tolerance_pct: 100.0 * within as f64 / n,
-            elapsed_ms,
-        }
+        Self::from_sums(k, residuals.len(), (max, sum, sum2, within), elapsed_ms)
     }
 }
 
