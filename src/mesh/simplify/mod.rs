@@ -176,8 +176,11 @@ pub fn simplify_keeping(
     }
     let landings = Landings::new(&mesh.positions, &state.faces, &state.vfaces);
     let target = opts.target_vertices.max(4);
-    let (land_face, land_bary) = std::thread::scope(|scope| {
+    let simplified = std::thread::scope(|scope| {
         let carrier = scope.spawn(move || landings.carry_all(carried));
+        // Owned here so that a panic drops it, and with it the sender the carrier waits
+        // on, before the scope waits for the carrier.
+        let mut state = state;
         // Edges refused in one pass may be allowed after their neighbourhood changed.
         for _ in 0..4 {
             if state.alive_vertices <= target || state.run_pass(target) == 0 {
@@ -185,11 +188,12 @@ pub fn simplify_keeping(
             }
         }
         state.stop_carrying();
-        carrier
+        let (land_face, land_bary) = carrier
             .join()
-            .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+            .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
+        state.finish(&land_face, &land_bary)
     });
-    Ok(state.finish(&land_face, &land_bary))
+    Ok(simplified)
 }
 
 /// Batches of collapses the collapsing thread may run ahead of the carrying one: enough
