@@ -13,9 +13,9 @@ use glam::DVec3;
 
 /// Collapses as the carrying sees them, a batch at a time (a message per collapse put the
 /// channel's sends, receives and wake-ups at about 4 % of a 139k-point fit's CPU in a
-/// profile; a batch pays them once per 256 collapses): per collapse, the faces around the kept vertex after it, in its face list's order, their
-/// corners' positions then, and the faces it changed or removed, whose points move onto
-/// the fan.
+/// profile; a batch pays them once per 256 collapses): per collapse, the faces around the
+/// kept vertex after it, in its face list's order, their corners' positions then, and the
+/// faces it changed or removed, whose points move onto the fan.
 #[derive(Default)]
 pub(super) struct Fans {
     faces: Vec<u32>,
