@@ -42,16 +42,24 @@ impl Apply for BlockMatrix {
     }
 }
 
+/// What `pcg` ended with.
+struct CgEnd {
+    x: Vec<DVec3>,
+    steps: usize,
+    /// The residual dropped below the asked share of b.
+    converged: bool,
+}
+
 /// Preconditioned conjugate gradients on M x = b from `start` (`precondition(c, r_c)` is
 /// the preconditioner's block of control c applied to the residual there) until the
-/// residual drops by `rel_tol` relative to b or `max_iter` steps; returns x and the steps.
+/// residual drops by `rel_tol` relative to b or `max_iter` steps.
 fn pcg(
     matrix: &impl Apply,
     precondition: impl Fn(usize, DVec3) -> DVec3 + Sync,
     start: Vec<DVec3>,
     max_iter: usize,
     rel_tol: f64,
-) -> (Vec<DVec3>, usize) {
+) -> CgEnd {
     let b = matrix.rhs();
     let precondition_all = |r: &[DVec3], z: &mut Vec<DVec3>| {
         z.clear();
@@ -74,12 +82,20 @@ fn pcg(
     let mut md = vec![DVec3::ZERO; m];
     for k in 0..max_iter {
         if dot(&r, &r) <= stop {
-            return (x, k);
+            return CgEnd {
+                x,
+                steps: k,
+                converged: true,
+            };
         }
         matrix.apply_to(&d, &mut md);
         let dmd = dot(&d, &md);
         if dmd <= 0.0 || !dmd.is_finite() {
-            return (x, k);
+            return CgEnd {
+                x,
+                steps: k,
+                converged: false,
+            };
         }
         let alpha = rz / dmd;
         x.iter_mut().zip(&d).for_each(|(x, d)| *x += *d * alpha);
@@ -90,7 +106,12 @@ fn pcg(
         rz = rz_new;
         d.iter_mut().zip(&z).for_each(|(d, z)| *d = *z + *d * beta);
     }
-    (x, max_iter)
+    let converged = dot(&r, &r) <= stop;
+    CgEnd {
+        x,
+        steps: max_iter,
+        converged,
+    }
 }
 
 /// faer's symbolic Cholesky analysis (fill-reducing ordering, elimination tree,
@@ -121,6 +142,9 @@ pub(crate) struct CholeskyPattern {
     pub analyses: usize,
     /// Factorisations that reused the kept analysis.
     pub reuses: usize,
+    /// Rounds solved by warm-started CG, with no factorisation
+    /// (`fit::distance::solve_distance_round`).
+    pub warm_cg_solves: usize,
 }
 
 impl CholeskyPattern {
@@ -376,8 +400,8 @@ impl ScalarMatrix {
         rel_tol: f64,
     ) -> (Vec<DVec3>, usize) {
         let inv = self.jacobi();
-        let precondition = |c: usize, r: DVec3| r * inv[c];
-        pcg(self, precondition, start, max_iter, rel_tol)
+        let end = pcg(self, |c, r| r * inv[c], start, max_iter, rel_tol);
+        (end.x, end.steps)
     }
 
     /// Sparse Cholesky (fill-reducing ordering) of a `lower_only` assembly.
@@ -413,9 +437,25 @@ impl BlockMatrix {
         max_iter: usize,
         rel_tol: f64,
     ) -> (Vec<DVec3>, usize) {
+        let end = self.block_pcg(start, max_iter, rel_tol);
+        (end.x, end.steps)
+    }
+
+    /// `solve_pcg` when it reaches `rel_tol` within `max_iter` steps with finite controls,
+    /// else `None`.
+    pub(crate) fn solve_pcg_converged(
+        &self,
+        start: Vec<DVec3>,
+        max_iter: usize,
+        rel_tol: f64,
+    ) -> Option<Vec<DVec3>> {
+        let end = self.block_pcg(start, max_iter, rel_tol);
+        (end.converged && end.x.iter().all(|v| v.is_finite())).then_some(end.x)
+    }
+
+    fn block_pcg(&self, start: Vec<DVec3>, max_iter: usize, rel_tol: f64) -> CgEnd {
         let inv = self.block_jacobi();
-        let precondition = |c: usize, r: DVec3| inv[c] * r;
-        pcg(self, precondition, start, max_iter, rel_tol)
+        pcg(self, |c, r| inv[c] * r, start, max_iter, rel_tol)
     }
 
     /// Sparse Cholesky of the 3m x 3m matrix of a `lower_only` assembly.

@@ -4,7 +4,7 @@
 //! and tied to its grid plans; these are the plain sparse forms.)
 
 use crate::fit::distance::{
-    solve_distance, solve_distance_direct_reusing, CholeskyPattern, DistanceProblem,
+    solve_distance, solve_distance_round, CholeskyPattern, DistanceProblem,
 };
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
@@ -125,7 +125,7 @@ impl DistanceRound<'_> {
             fairness: Some(self.fairness),
             smoothing: self.smoothing,
         };
-        let x = match solve_distance_direct_reusing(&problem, pattern) {
+        let x = match solve_distance_round(&problem, pattern, Some(&start)) {
             Some(x) => x,
             None => solve_distance(&problem, start, self.max_iterations, CG_REL_TOL).0,
         };

@@ -13,7 +13,7 @@
 use super::error::ScatteredError;
 use super::info::PlanarStages;
 use crate::fit::distance::{
-    solve_distance, solve_distance_direct_reusing, CholeskyPattern, DistanceProblem,
+    solve_distance, solve_distance_round, CholeskyPattern, DistanceProblem,
 };
 use crate::fit::{Budget, Collocation, FitOutcome, Method};
 use crate::pipeline::scan::{Correction, CorrectionConfig};
@@ -142,7 +142,7 @@ fn distance_solve(
         fairness: Some(fairness),
         smoothing,
     };
-    solve_distance_direct_reusing(&problem, pattern).unwrap_or_else(|| {
+    solve_distance_round(&problem, pattern, Some(controls)).unwrap_or_else(|| {
         solve_distance(
             &problem,
             controls.to_vec(),
