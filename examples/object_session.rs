@@ -203,9 +203,16 @@ fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
     // The worker's own account: whether it started from the previous fit (or why not),
     // and whether it extended it over new ground.
     let object = &u.outputs.report["object"];
+    let stage = |k: &str| object["stages"][k].as_f64().unwrap_or(0.0);
     let fitted = format!(
-        "{fitted}\n        worker: warm {}  new ground points {}",
-        object["warm"], object["local"]["new_ground_points"]
+        "{fitted}\n        worker: warm {}  new ground points {}  stages ms: clean {:.0} simplify {:.0} first {:.0} rounds {:.0} refine {:.0}",
+        object["warm"],
+        object["local"]["new_ground_points"],
+        stage("clean_ms"),
+        stage("simplify_ms"),
+        stage("first_fit_ms"),
+        stage("rounds_ms"),
+        stage("refine_ms"),
     );
     format!(
         "{id:7} {:7.0} ms wall {:7.0} ms cpu (merge {:5.0}, fit {:6.0}, outputs {:5.0}) load {}  path {:6}  views {:3.0} deg  controls {:5}  merged {:6} ({} cells recomputed)  rms {:5.1} um  changed +{} -{} ~{} ={}\n        {fitted}",

@@ -15,7 +15,7 @@
 
 use super::model::ObjectOptions;
 use super::solve::{Rim, Samples};
-use crate::fit::distance::{solve_distance_direct, DistanceProblem};
+use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
 use crate::mesh::distance::MeshDistance;
@@ -188,6 +188,8 @@ pub(crate) fn refit_around(
         fairness_scale: (opts.smoothing * n as f64 / m.max(1) as f64).sqrt(),
         tangential: opts.tangential,
     };
+    // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
+    let mut pattern = CholeskyPattern::default();
     for _ in 0..opts.rounds {
         if free_ids.is_empty() {
             break;
@@ -204,7 +206,8 @@ pub(crate) fn refit_around(
             ),
             None => Samples::none(),
         };
-        let Some(solved) = system.solve(data, &moving, &feet, &samples, &controls) else {
+        let Some(solved) = system.solve(data, &moving, &feet, &samples, &controls, &mut pattern)
+        else {
             break;
         };
         let mut next = controls.clone();
@@ -306,6 +309,7 @@ impl System<'_> {
         feet: &LocalFeet,
         samples: &Samples,
         controls: &[DVec3],
+        pattern: &mut CholeskyPattern,
     ) -> Option<Vec<DVec3>> {
         let mut basis = Csr {
             nrows: 0,
@@ -383,7 +387,14 @@ impl System<'_> {
             fairness: None,
             smoothing: 0.0,
         };
-        let x = solve_distance_direct(&problem)?;
+        let start: Vec<DVec3> = self
+            .column
+            .iter()
+            .zip(controls)
+            .filter(|(c, _)| c.is_some())
+            .map(|(_, p)| *p)
+            .collect();
+        let x = solve_distance_round(&problem, pattern, Some(&start))?;
         (x.len() == self.free_count && x.iter().all(|p| p.is_finite())).then_some(x)
     }
 }
