@@ -141,7 +141,6 @@ impl MergeField {
         let index = PointIndex::build(scans, radius);
         let implicit = Implicit {
             index: &index,
-            scans,
             radius,
             sigma: opts.sigma_cells * cell,
         };

@@ -10,37 +10,69 @@ use rustc_hash::FxHashMap;
 /// of the nearest sample's (about 70 degrees): the far side of a thin part faces away.
 const SAME_SHEET_COS: f64 = 0.35;
 
-/// A bucket grid over the samples of several scans; a bucket holds (scan, sample) pairs.
+/// A bucket grid over the samples of several scans. Each bucket's samples are copied side
+/// by side (position, normal, weight) in one array, in scan and sample order: a query reads
+/// 27 buckets of a few hundred samples each, and through (scan, sample) indices every
+/// sample was a jump into another scan's arrays (in the profile of the bunny session's
+/// merges, `Implicit::at` was their largest cost).
 pub(super) struct PointIndex {
     cell: f64,
-    buckets: FxHashMap<[i32; 3], Vec<(u32, u32)>>,
+    /// A bucket's range in `samples`.
+    buckets: FxHashMap<[i32; 3], (u32, u32)>,
+    samples: Vec<IndexedSample>,
+}
+
+/// One sample as a bucket holds it.
+#[derive(Clone, Copy)]
+pub(super) struct IndexedSample {
+    pub point: DVec3,
+    pub normal: DVec3,
+    pub weight: f64,
 }
 
 impl PointIndex {
     /// Buckets of size `cell` (the largest query radius, so a query reads 27 buckets).
     pub(super) fn build(scans: &[&ScanSamples], cell: f64) -> Self {
-        let mut buckets: FxHashMap<[i32; 3], Vec<(u32, u32)>> = FxHashMap::default();
-        for (s, scan) in scans.iter().enumerate() {
-            for (i, p) in scan.points.iter().enumerate() {
-                buckets
-                    .entry(key(*p, cell))
-                    .or_default()
-                    .push((s as u32, i as u32));
-            }
+        let mut keyed: Vec<([i32; 3], u32, u32)> = scans
+            .iter()
+            .enumerate()
+            .flat_map(|(s, scan)| {
+                scan.points
+                    .iter()
+                    .enumerate()
+                    .map(move |(i, p)| (key(*p, cell), s as u32, i as u32))
+            })
+            .collect();
+        keyed.sort_unstable();
+        let mut buckets: FxHashMap<[i32; 3], (u32, u32)> = FxHashMap::default();
+        let mut samples = Vec::with_capacity(keyed.len());
+        for (k, s, i) in keyed {
+            let scan = scans[s as usize];
+            let at = samples.len() as u32;
+            buckets.entry(k).or_insert((at, at)).1 = at + 1;
+            samples.push(IndexedSample {
+                point: scan.points[i as usize],
+                normal: scan.normals[i as usize],
+                weight: scan.weights[i as usize],
+            });
         }
-        Self { cell, buckets }
+        Self {
+            cell,
+            buckets,
+            samples,
+        }
     }
 
     /// Calls `visit` with every sample in the 27 buckets around `x`.
-    fn around(&self, x: DVec3, mut visit: impl FnMut(u32, u32)) {
+    fn around<'s>(&'s self, x: DVec3, mut visit: impl FnMut(&'s IndexedSample)) {
         let [a, b, c] = key(x, self.cell);
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
-                    if let Some(bucket) = self.buckets.get(&[a + dx, b + dy, c + dz]) {
-                        for &(s, i) in bucket {
-                            visit(s, i);
-                        }
+                    if let Some(&(from, to)) = self.buckets.get(&[a + dx, b + dy, c + dz]) {
+                        self.samples[from as usize..to as usize]
+                            .iter()
+                            .for_each(&mut visit);
                     }
                 }
             }
@@ -68,7 +100,6 @@ pub(super) struct Sample {
 /// The weighted signed distance of the samples within `radius`.
 pub(super) struct Implicit<'a> {
     pub index: &'a PointIndex,
-    pub scans: &'a [&'a ScanSamples],
     pub radius: f64,
     pub sigma: f64,
 }
@@ -140,13 +171,12 @@ impl Implicit<'_> {
     /// radius whose normal is within `SAME_SHEET_COS` of `normal` (the sheet `x` is on).
     fn same_sheet_around(&self, x: DVec3, normal: DVec3, mut visit: impl FnMut(DVec3, f64)) {
         let r2 = self.radius * self.radius;
-        self.index.around(x, |s, i| {
-            let scan = self.scans[s as usize];
-            let d = scan.points[i as usize] - x;
-            if d.length_squared() > r2 || scan.normals[i as usize].dot(normal) < SAME_SHEET_COS {
+        self.index.around(x, |sample| {
+            let d = sample.point - x;
+            if d.length_squared() > r2 || sample.normal.dot(normal) < SAME_SHEET_COS {
                 return;
             }
-            visit(d, scan.weights[i as usize]);
+            visit(d, sample.weight);
         });
     }
 
@@ -154,30 +184,28 @@ impl Implicit<'_> {
     /// vanish).
     pub(super) fn at(&self, x: DVec3) -> Option<Sample> {
         let r2 = self.radius * self.radius;
-        let mut near: Vec<(f64, u32, u32)> = Vec::with_capacity(64);
+        let mut near: Vec<(f64, &IndexedSample)> = Vec::with_capacity(64);
         let mut best = (f64::MAX, 0usize);
-        self.index.around(x, |s, i| {
-            let d2 = self.scans[s as usize].points[i as usize].distance_squared(x);
+        self.index.around(x, |sample| {
+            let d2 = sample.point.distance_squared(x);
             if d2 <= r2 {
                 if d2 < best.0 {
                     best = (d2, near.len());
                 }
-                near.push((d2, s, i));
+                near.push((d2, sample));
             }
         });
-        let &(_, bs, bi) = near.get(best.1)?;
-        let sheet = self.scans[bs as usize].normals[bi as usize];
+        let sheet = near.get(best.1)?.1.normal;
         let inv = 1.0 / (self.sigma * self.sigma);
         let (mut sum_w, mut sum_f, mut sum_n) = (0.0, 0.0, DVec3::ZERO);
-        for &(d2, s, i) in &near {
-            let scan = self.scans[s as usize];
-            let n = scan.normals[i as usize];
+        for &(d2, sample) in &near {
+            let n = sample.normal;
             if n.dot(sheet) < SAME_SHEET_COS {
                 continue;
             }
-            let w = scan.weights[i as usize] * (-d2 * inv).exp();
+            let w = sample.weight * (-d2 * inv).exp();
             sum_w += w;
-            sum_f += w * n.dot(x - scan.points[i as usize]);
+            sum_f += w * n.dot(x - sample.point);
             sum_n += w * n;
         }
         let normal = sum_n.try_normalize()?;
