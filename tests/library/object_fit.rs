@@ -9,7 +9,7 @@ use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
 use trispline::pipeline::object::{
-    farthest_from_data, fit_object, ObjectFit, ObjectOptions, RoundStop,
+    farthest_from_data, fit_object, refit_where_changed, ObjectFit, ObjectOptions, RoundStop,
 };
 use trispline::surface::TriSurface;
 use trispline::TriMesh;
@@ -174,6 +174,63 @@ fn the_rounds_and_the_refinement_stop_where_the_budget_holds_or_time_is_up() {
     assert_eq!(capped.rounds.len(), 1, "rounds {:?}", capped.rounds);
     assert_eq!(capped.refinement.len(), 1);
     assert!(capped.rms > free.rms);
+}
+
+/// A new version refitted locally stops as a whole fit does: with the deadline already
+/// past no round runs and the controls stay where the previous fit left them; without one
+/// the rounds take the bump in.
+#[test]
+fn a_local_refit_takes_no_round_once_time_is_up() {
+    let fit = fit_object(&torus(96, 40), &ObjectOptions::default()).expect("fitted");
+    let mut bumped = fit.component.clone();
+    for p in bumped
+        .positions
+        .iter_mut()
+        .filter(|p| p.x > 1.1 && p.y.abs() < 0.3)
+    {
+        let ring = DVec3::new(p.x, p.y, 0.0).normalize() * MAJOR;
+        *p += (*p - ring).normalize() * 20.0 * fit.rms;
+    }
+    let refit = |opts: &ObjectOptions| {
+        refit_where_changed(
+            bumped.clone(),
+            fit.control_mesh(),
+            fit.surface.crease_edges(),
+            fit.params.clone(),
+            &fit.data,
+            fit.rms,
+            opts,
+        )
+        .expect("refits")
+        .expect("a local change")
+    };
+    let free = refit(&ObjectOptions::default());
+    let late = refit(&ObjectOptions {
+        stop: RoundStop {
+            budget: None,
+            deadline: Some(Instant::now()),
+        },
+        ..ObjectOptions::default()
+    });
+    let moved = |f: &ObjectFit| {
+        f.controls
+            .iter()
+            .zip(&fit.controls)
+            .filter(|(a, b)| a != b)
+            .count()
+    };
+    eprintln!(
+        "local refit: {} rounds, {} controls moved, rms {:.3e}; past deadline: {} rounds, rms {:.3e}",
+        free.rounds.len(),
+        moved(&free),
+        free.rms,
+        late.rounds.len(),
+        late.rms
+    );
+    assert!(free.rounds.len() > 1 && moved(&free) > 0);
+    assert_eq!(late.rounds.len(), 1, "{:?}", late.rounds);
+    assert_eq!(moved(&late), 0);
+    assert!(late.rms > free.rms);
 }
 
 #[test]

@@ -13,7 +13,7 @@
 //! data's rim on the surface's boundary curve, which is why a change over much of the
 //! control mesh goes to the whole fit instead (`version`).
 
-use super::model::ObjectOptions;
+use super::model::{ObjectOptions, RoundStop};
 use super::solve::{Rim, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
@@ -36,6 +36,9 @@ pub(crate) struct LocalOptions {
     pub tangential: f64,
     /// Fairness weight relative to the data (as the whole-object fit's `smoothing`).
     pub smoothing: f64,
+    /// When no further round starts (the whole-object fit's `stop`): a new version refitted
+    /// locally honours the budget and the time limit as a whole fit does.
+    pub stop: RoundStop,
 }
 
 impl LocalOptions {
@@ -46,6 +49,7 @@ impl LocalOptions {
             min_gain: opts.min_gain,
             tangential: opts.tangential,
             smoothing: opts.smoothing,
+            stop: opts.stop.clone(),
         }
     }
 }
@@ -191,7 +195,7 @@ pub(crate) fn refit_around(
     // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
     let mut pattern = CholeskyPattern::default();
     for _ in 0..opts.rounds {
-        if free_ids.is_empty() {
+        if free_ids.is_empty() || opts.stop.reached(&feet.errors) {
             break;
         }
         let samples = match &sampling {

@@ -283,6 +283,9 @@ impl Refitted {
             is_changed[i] = true;
         }
         for _ in 0..opts.refine.rounds {
+            if opts.stop.reached(&self.errors) {
+                break;
+            }
             let mut beyond = vec![false; self.surface.domain_face_count()];
             for (i, (&e, p)) in self.errors.iter().zip(&self.params).enumerate() {
                 if e > tolerance && (is_changed[i] || e - initial[i] > change) {

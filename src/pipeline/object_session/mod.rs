@@ -30,7 +30,7 @@ use crate::pipeline::merge::{
     median_edge, scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
 use crate::pipeline::object::LocalOptions;
-use crate::pipeline::object::{fitted_topology, ObjectOptions};
+use crate::pipeline::object::{fitted_topology, ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
@@ -486,11 +486,19 @@ impl ObjectSession {
             return cold();
         };
         let defaults = ObjectOptions::default();
+        let budget = worker.fit.budget.resolve(&merged.mesh);
+        // As the worker's object fit: no round once the budget holds or its time is up.
         let opts = LocalOptions {
             rounds: worker.fit.correction.rounds.max(1),
             min_gain: defaults.min_gain,
             tangential: defaults.tangential,
             smoothing: worker.fit.scan.smoothing,
+            stop: RoundStop {
+                budget: Some(budget.clone()),
+                deadline: budget
+                    .max_time_ms
+                    .map(|ms| t + std::time::Duration::from_millis(ms)),
+            },
         };
         let previous = Previous {
             surface,
@@ -510,7 +518,6 @@ impl ObjectSession {
             moving_points: fitted.1.moving_points,
             rounds: fitted.1.rounds.len() - 1,
         };
-        let budget = worker.fit.budget.resolve(&merged.mesh);
         Ok((last.refitted(&fitted, budget, ms_since(t)), Some(summary)))
     }
 
