@@ -36,8 +36,9 @@ pub(crate) struct LocalOptions {
     pub tangential: f64,
     /// Fairness weight relative to the data (as the whole-object fit's `smoothing`).
     pub smoothing: f64,
-    /// When no further round starts (the whole-object fit's `stop`): a new version refitted
-    /// locally honours the budget and the time limit as a whole fit does.
+    /// When no round after the first starts (the whole-object fit's `stop`): a new version
+    /// refitted locally honours the budget and the time limit as a whole fit, which always
+    /// takes its first fit, does.
     pub stop: RoundStop,
 }
 
@@ -194,8 +195,10 @@ pub(crate) fn refit_around(
     };
     // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
     let mut pattern = CholeskyPattern::default();
-    for _ in 0..opts.rounds {
-        if free_ids.is_empty() || opts.stop.reached(&feet.errors) {
+    for round in 0..opts.rounds {
+        // The first round is the changed region's first fit, which a whole fit always
+        // takes too; the stop applies from the second.
+        if free_ids.is_empty() || (round > 0 && opts.stop.reached(&feet.errors)) {
             break;
         }
         let samples = match &sampling {
