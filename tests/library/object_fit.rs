@@ -9,7 +9,8 @@ use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
 use trispline::pipeline::object::{
-    farthest_from_data, fit_object, refit_where_changed, ObjectFit, ObjectOptions, RoundStop,
+    extend_over_new_ground, farthest_from_data, fit_object, refit_where_changed, NotExtended,
+    ObjectFit, ObjectOptions, PreviousFit, RoundStop,
 };
 use trispline::surface::TriSurface;
 use trispline::TriMesh;
@@ -226,6 +227,53 @@ fn a_local_refit_takes_no_round_once_time_is_up() {
     assert_eq!(late.rounds.len(), 2, "{:?}", late.rounds);
     assert_eq!(late.controls.len(), fit.controls.len());
     assert!(late.rms > free.rms);
+}
+
+/// New ground the previous control mesh has no rim beside (a patch of a closed object
+/// marked new) cannot be joined: the refusal says which seams failed and why, and how many
+/// new points their parts hold.
+#[test]
+fn new_ground_away_from_any_rim_is_refused_with_its_reason() {
+    let fit = fit_object(&torus(96, 40), &ObjectOptions::default()).expect("fitted");
+    let is_new: Vec<bool> = fit
+        .component
+        .positions
+        .iter()
+        .map(|p| p.x > 1.1 && p.y.abs() < 0.3)
+        .collect();
+    let new_points = is_new.iter().filter(|&&b| b).count();
+    let control_mesh = fit.control_mesh();
+    let previous = PreviousFit {
+        control_mesh: &control_mesh,
+        crease_edges: fit.surface.crease_edges(),
+        rms: fit.rms,
+    };
+    let extended = extend_over_new_ground(
+        fit.component.clone(),
+        previous,
+        fit.params.clone(),
+        &fit.data,
+        &is_new,
+        &ObjectOptions::default(),
+    )
+    .expect("no error");
+    let Err(why) = extended else {
+        panic!("extended over ground no rim joins");
+    };
+    assert_eq!(
+        why,
+        NotExtended::Unjoined {
+            seams: 1,
+            missed: vec![("too far from the previous rim", 1)],
+            demoted: new_points,
+            new_points,
+        }
+    );
+    let text = why.to_string();
+    assert!(
+        text.contains("1 of 1 seams") && text.contains(&format!("{new_points} of {new_points}")),
+        "{text}"
+    );
 }
 
 #[test]

@@ -23,7 +23,7 @@ use super::local::{free_controls, refit_around, LocalFeet, LocalOptions};
 use super::model::ObjectOptions;
 use super::model::{control_target, limit_surface, ms_since, ObjectError, ObjectFit};
 use super::refine::limit_positions;
-use super::seam::{region_faces, seams, strip, Rims, Run, Seam};
+use super::seam::{region_faces, seams, strip, Rims, Run, Seam, SeamMiss};
 use super::version::{changed_points, Refitted, CHANGE_FACTOR};
 use crate::mesh::simplify::{simplify_keeping, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::{Topology, NONE};
@@ -42,12 +42,90 @@ pub struct PreviousFit<'a> {
     pub rms: f64,
 }
 
+/// Why an object was not extended over its new ground (`extend_over_new_ground`); the
+/// caller fits the whole object instead.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum NotExtended {
+    /// No point is on new ground, or the previous fit's RMS is unknown.
+    NothingNew,
+    /// A point's start lies off the previous control faces.
+    StartOffFaces,
+    /// The data, the region's boundary or the joined mesh is not a manifold.
+    NotManifold,
+    /// Seams of the new region have no run along the previous rim, and taking their parts
+    /// to old ground would take more than a tenth of the new points.
+    Unjoined {
+        /// The region's seams.
+        seams: usize,
+        /// Seams without a rim run, by reason.
+        missed: Vec<(&'static str, usize)>,
+        /// New points their parts hold.
+        demoted: usize,
+        /// Points on new ground.
+        new_points: usize,
+    },
+    /// The simplification of the joined mesh failed or changed previous faces.
+    Simplification,
+}
+
+impl std::fmt::Display for NotExtended {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::NothingNew => write!(f, "no new ground to extend over"),
+            Self::StartOffFaces => write!(f, "a point starts off the previous control faces"),
+            Self::NotManifold => write!(f, "the new region or the joined mesh is not a manifold"),
+            Self::Unjoined {
+                seams,
+                missed,
+                demoted,
+                new_points,
+            } => {
+                let count: usize = missed.iter().map(|m| m.1).sum();
+                let why: Vec<String> = missed.iter().map(|(w, n)| format!("{n} {w}")).collect();
+                write!(
+                    f,
+                    "the new ground could not be joined to the previous rim: {count} of {seams} \
+                     seams have no rim run ({}), and their parts hold {demoted} of {new_points} \
+                     new points",
+                    why.join(", ")
+                )
+            }
+            Self::Simplification => {
+                write!(
+                    f,
+                    "the joined mesh's simplification failed or moved previous faces"
+                )
+            }
+        }
+    }
+}
+
+impl NotExtended {
+    fn unjoined(seams: usize, misses: &mut [SeamMiss], demoted: usize, new_points: usize) -> Self {
+        misses.sort_unstable();
+        let mut missed: Vec<(&'static str, usize)> = Vec::new();
+        for m in misses.iter() {
+            match missed.last_mut() {
+                Some(last) if last.0 == m.describe() => last.1 += 1,
+                _ => missed.push((m.describe(), 1)),
+            }
+        }
+        Self::Unjoined {
+            seams,
+            missed,
+            demoted,
+            new_points,
+        }
+    }
+}
+
 /// Extends `previous` over the points `is_new` marks (see the module docs). `params` holds
 /// every point's start on the previous surface (the foot of the previous data point
 /// nearest to it, `reference`; a new point's is read only if its part of the region cannot
-/// be joined and it counts as old ground that changed). `None` when there is no new point,
-/// a start lies off the previous control faces, or the region cannot be joined to the
-/// previous rim.
+/// be joined and it counts as old ground that changed). `Ok(Err(why))` when there is no
+/// new point, a start lies off the previous control faces, or the region cannot be joined
+/// to the previous rim.
 pub fn extend_over_new_ground(
     component: TriMesh,
     previous: PreviousFit,
@@ -55,7 +133,7 @@ pub fn extend_over_new_ground(
     reference: &[DVec3],
     is_new: &[bool],
     opts: &ObjectOptions,
-) -> Result<Option<ObjectFit>, ObjectError> {
+) -> Result<Result<ObjectFit, NotExtended>, ObjectError> {
     let start = Instant::now();
     let n = component.positions.len();
     if params.len() != n || reference.len() != n || is_new.len() != n {
@@ -67,19 +145,20 @@ pub fn extend_over_new_ground(
     if !is_new.iter().any(|&b| b)
         || previous.rms.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
     {
-        return Ok(None);
+        return Ok(Err(NotExtended::NothingNew));
     }
     let old_mesh = previous.control_mesh;
     let m = old_mesh.positions.len();
     let old_faces = old_mesh.triangles.len();
     // Every start is read: points of a part the strip cannot join become old ground.
     if params.iter().any(|p| p.face as usize >= old_faces) {
-        return Ok(None);
+        return Ok(Err(NotExtended::StartOffFaces));
     }
     let old_surface = limit_surface(old_mesh, previous.crease_edges, None)?;
     let t = Instant::now();
-    let Some(joined) = joined_mesh(&component, is_new, old_mesh, &old_surface) else {
-        return Ok(None);
+    let joined = match joined_mesh(&component, is_new, old_mesh, &old_surface) {
+        Ok(joined) => joined,
+        Err(why) => return Ok(Err(why)),
     };
     // Points of parts the strip could not join are old ground that changed.
     let demoted: Vec<usize> = (0..n).filter(|&i| is_new[i] && !joined.is_new[i]).collect();
@@ -93,7 +172,7 @@ pub fn extend_over_new_ground(
     let Ok(simplified) =
         simplify_keeping(&joined.mesh, &simplify_opts, previous.crease_edges, &keep)
     else {
-        return Ok(None);
+        return Ok(Err(NotExtended::Simplification));
     };
     // The previous vertices and faces come first in the joined mesh and no collapse
     // touched them: their indices hold (checked, as the old feet depend on it).
@@ -102,7 +181,7 @@ pub fn extend_over_new_ground(
         && control_mesh.triangles.len() >= old_faces
         && control_mesh.triangles[..old_faces] == old_mesh.triangles[..];
     if !kept {
-        return Ok(None);
+        return Ok(Err(NotExtended::Simplification));
     }
     let mut controls = control_mesh.positions.clone();
     controls[..m].copy_from_slice(&old_mesh.positions);
@@ -195,7 +274,7 @@ pub fn extend_over_new_ground(
     fit.times.rounds_ms = rounds_ms;
     fit.times.refine_ms = refine_ms;
     fit.times.total_ms = ms_since(start);
-    Ok(Some(fit))
+    Ok(Ok(fit))
 }
 
 /// The old points that moved against the previous surface (`version::changed_points`) and
@@ -280,29 +359,34 @@ fn joined_mesh(
     is_new: &[bool],
     old_mesh: &TriMesh,
     old_surface: &crate::surface::loop_limit::LoopLimitSurface,
-) -> Option<Joined> {
-    let topo = Topology::from_mesh(component).ok()?;
+) -> Result<Joined, NotExtended> {
+    let topo = Topology::from_mesh(component).map_err(|_| NotExtended::NotManifold)?;
     let limit = limit_positions(old_surface, &old_mesh.positions);
-    let old_topo = Topology::from_mesh(old_mesh).ok()?;
+    let old_topo = Topology::from_mesh(old_mesh).map_err(|_| NotExtended::NotManifold)?;
     let rims = Rims::new(&old_topo, &limit);
     let m = old_mesh.positions.len();
     let all_new = is_new.iter().filter(|&&b| b).count();
     let mut is_new = is_new.to_vec();
+    let mut refusal = NotExtended::NotManifold;
     for _ in 0..MAX_DEMOTION_ROUNDS {
         let in_region = region_faces(component, &topo, &is_new);
-        let seams = seams(&topo, &in_region)?;
+        let seams = seams(&topo, &in_region).ok_or(NotExtended::NotManifold)?;
         let mut used = vec![false; m];
         let mut runs = Vec::with_capacity(seams.len());
         let mut failed = Vec::new();
+        let mut misses = Vec::new();
         for seam in &seams {
             match rims.run_along(seam, &component.positions) {
-                Some(run) if run.vertices.iter().all(|&p| !used[p as usize]) => {
+                Ok(run) if run.vertices.iter().all(|&p| !used[p as usize]) => {
                     for &p in &run.vertices {
                         used[p as usize] = true;
                     }
                     runs.push(run);
                 }
-                _ => failed.push(seam),
+                found => {
+                    failed.push(seam);
+                    misses.push(found.err().unwrap_or(SeamMiss::SharedRun));
+                }
             }
         }
         if failed.is_empty() {
@@ -313,17 +397,20 @@ fn joined_mesh(
                 old_mesh,
                 limit,
                 (&seams, runs),
-            );
+            )
+            .ok_or(NotExtended::NotManifold);
         }
         // A part of the region the strip cannot join (an island inside the old ground, a
         // second seam on the same rim run) is old ground whose data changed, as long as
         // it is a small part of the new ground.
         let demoted = demote(component, &topo, &in_region, &failed, &mut is_new);
+        let still_new = is_new.iter().filter(|&&b| b).count();
+        refusal = NotExtended::unjoined(seams.len(), &mut misses, all_new - still_new, all_new);
         if demoted as f64 > MAX_DEMOTED_SHARE * all_new as f64 {
-            return None;
+            return Err(refusal);
         }
     }
-    None
+    Err(refusal)
 }
 
 /// Rounds of taking unjoinable parts out of the region at most.

@@ -40,7 +40,7 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
 use corners::rim_corners;
-pub use extend::{extend_over_new_ground, PreviousFit};
+pub use extend::{extend_over_new_ground, NotExtended, PreviousFit};
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};

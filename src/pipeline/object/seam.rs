@@ -148,6 +148,35 @@ pub(super) struct Rims<'a> {
     mean_edge: f64,
 }
 
+/// Why a seam has no rim run (`Rims::run_along`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) enum SeamMiss {
+    /// Its median distance to the previous rim exceeds `MAX_SEAM_GAP_EDGES` mean rim edges
+    /// (or the previous control mesh has no rim).
+    FarFromRim,
+    /// A closed seam nearest to less than `MIN_LOOP_HIT` of its rim loop.
+    PartOfLoop,
+    /// An open seam that ends near another rim loop than the one it starts at.
+    TwoLoops,
+    /// An open seam with less than `MIN_SEAM_IN_RUN` of its vertices nearest to the run
+    /// between its ends.
+    OffRun,
+    /// Its run shares rim vertices with another seam's.
+    SharedRun,
+}
+
+impl SeamMiss {
+    pub(super) fn describe(self) -> &'static str {
+        match self {
+            Self::FarFromRim => "too far from the previous rim",
+            Self::PartOfLoop => "closed along too little of a rim loop",
+            Self::TwoLoops => "between two rim loops",
+            Self::OffRun => "off the rim run between its ends",
+            Self::SharedRun => "on a rim run another seam takes",
+        }
+    }
+}
+
 /// The rim vertices a strip joins a seam to, in the seam's direction.
 pub(super) struct Run {
     pub vertices: Vec<u32>,
@@ -176,9 +205,9 @@ impl<'a> Rims<'a> {
 
     /// The rim vertices along `seam` (positions `at` its data points): from the one
     /// nearest the seam's first vertex, against the rim's own direction (the strip's two
-    /// sides run opposite ways), to the one nearest its last; `None` when the seam does
+    /// sides run opposite ways), to the one nearest its last; why not when the seam does
     /// not run along one rim loop.
-    pub(super) fn run_along(&self, seam: &Seam, at: &[DVec3]) -> Option<Run> {
+    pub(super) fn run_along(&self, seam: &Seam, at: &[DVec3]) -> Result<Run, SeamMiss> {
         let nearest: Vec<(u32, f64)> = seam
             .vertices
             .iter()
@@ -190,12 +219,13 @@ impl<'a> Rims<'a> {
                     .min_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)))
                     .map(|(r, d)| (r, d.sqrt()))
             })
-            .collect::<Option<_>>()?;
+            .collect::<Option<_>>()
+            .ok_or(SeamMiss::FarFromRim)?;
         let mut gaps: Vec<f64> = nearest.iter().map(|n| n.1).collect();
         let k = gaps.len() / 2;
         gaps.select_nth_unstable_by(k, f64::total_cmp);
         if gaps[k] > MAX_SEAM_GAP_EDGES * self.mean_edge {
-            return None;
+            return Err(SeamMiss::FarFromRim);
         }
         let (first_loop, first) = self.at[&nearest[0].0];
         let ring = &self.loops[first_loop];
@@ -214,21 +244,21 @@ impl<'a> Rims<'a> {
             hit.dedup();
             let on_loop = hit.iter().filter(|&&r| offset(r).is_some()).count();
             if (on_loop as f64) < MIN_LOOP_HIT * len as f64 {
-                return None;
+                return Err(SeamMiss::PartOfLoop);
             }
             len
         } else {
-            let last = offset(nearest[nearest.len() - 1].0)?;
+            let last = offset(nearest[nearest.len() - 1].0).ok_or(SeamMiss::TwoLoops)?;
             let inside = nearest
                 .iter()
                 .filter(|n| offset(n.0).is_some_and(|o| o <= last))
                 .count();
             if (inside as f64) < MIN_SEAM_IN_RUN * nearest.len() as f64 {
-                return None;
+                return Err(SeamMiss::OffRun);
             }
             last + 1
         };
-        Some(Run {
+        Ok(Run {
             vertices: (0..count).map(|i| ring[back(i)]).collect(),
         })
     }

@@ -394,7 +394,7 @@ fn extend_fit(
         opts,
     )
     .map_err(|e| e.to_string())?
-    .ok_or_else(|| "the new ground could not be joined to the previous rim".into())
+    .map_err(|why| why.to_string())
 }
 
 /// Where a new version's warm fit starts.
