@@ -82,6 +82,17 @@ pub struct RoundStop {
 }
 
 impl RoundStop {
+    /// The stop of a fit started at `start` under `budget`: its targets, and its
+    /// `max_time_ms` counted from `start`.
+    pub fn of_budget(budget: &Budget, start: Instant) -> Self {
+        Self {
+            budget: Some(budget.clone()),
+            deadline: budget
+                .max_time_ms
+                .map(|ms| start + std::time::Duration::from_millis(ms)),
+        }
+    }
+
     /// Whether the budget's targets hold for these distances (never without targets).
     pub(super) fn targets_hold(&self, distances: &[f64]) -> bool {
         self.budget

@@ -157,22 +157,12 @@ impl LastFit {
         budget: Budget,
         fit_ms: f64,
     ) -> FittedPatch {
-        let n = local.errors.len().max(1) as f64;
-        let max = local.errors.iter().fold(0.0f64, |m, &e| m.max(e));
-        let rms = (local.errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
-        let within = local
-            .errors
-            .iter()
-            .filter(|&&e| e <= budget.tolerance)
-            .count();
-        let last = StepStats {
-            k: local.rounds.len() - 1,
-            max_error: max,
-            mean_error: local.errors.iter().sum::<f64>() / n,
-            rms_error: rms,
-            within_tolerance_pct: 100.0 * within as f64 / n,
-            elapsed_ms: fit_ms,
-        };
+        let last = StepStats::from_distances(
+            local.rounds.len() - 1,
+            &local.errors,
+            budget.tolerance,
+            fit_ms,
+        );
         let status = if budget.met(&last) {
             FitStatus::Met
         } else {

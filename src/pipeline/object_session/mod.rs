@@ -493,12 +493,7 @@ impl ObjectSession {
             min_gain: defaults.min_gain,
             tangential: defaults.tangential,
             smoothing: worker.fit.scan.smoothing,
-            stop: RoundStop {
-                budget: Some(budget.clone()),
-                deadline: budget
-                    .max_time_ms
-                    .map(|ms| t + std::time::Duration::from_millis(ms)),
-            },
+            stop: RoundStop::of_budget(&budget, t),
         };
         let previous = Previous {
             surface,

@@ -27,7 +27,7 @@ use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// A surface whose longest boundary loop is shorter than this many square roots of its
 /// area is nearly closed (a disk has 3.5, a range scan's ragged rim more; bun_zipper's
@@ -209,12 +209,7 @@ pub(super) fn fit_as_object(
     let mut opts = options(cfg);
     opts.refine.tolerance = Some(budget.tolerance);
     // The rounds stop where the budget holds or its time is up, as a scan's do.
-    opts.stop = RoundStop {
-        budget: Some(budget.clone()),
-        deadline: budget
-            .max_time_ms
-            .map(|ms| Instant::now() + Duration::from_millis(ms)),
-    };
+    opts.stop = RoundStop::of_budget(budget, Instant::now());
     let object = |source| PipelineError::Object { source };
     let (fit, warm) = match previous {
         Some(w) => match from_previous(mesh, w, previous_controls, &opts)
