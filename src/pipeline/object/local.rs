@@ -15,6 +15,7 @@
 
 use super::model::{ObjectOptions, RoundStop};
 use super::solve::{Rim, Samples};
+use super::MAX_REFUSALS;
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
@@ -191,16 +192,21 @@ pub(crate) fn refit_around(
         free_count: free_ids.len(),
         laplacian: &laplacian,
         fairness_scale: (opts.smoothing * n as f64 / m.max(1) as f64).sqrt(),
-        tangential: opts.tangential,
     };
     // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
     let mut pattern = CholeskyPattern::default();
-    for round in 0..opts.rounds {
+    // Levenberg-Marquardt on the tangential share, as in a whole fit (`fit_from`): a
+    // round that does not lower the RMS is taken again with four times the share, one
+    // that does halves it again down to `opts.tangential`.
+    let mut share = opts.tangential;
+    let (mut taken, mut refusals, mut tried) = (0, 0, 0);
+    while taken < opts.rounds && refusals < MAX_REFUSALS {
         // The first round is the changed region's first fit, which a whole fit always
         // takes too; the stop applies from the second.
-        if free_ids.is_empty() || (round > 0 && opts.stop.reached(&feet.errors)) {
+        if free_ids.is_empty() || (tried > 0 && opts.stop.reached(&feet.errors)) {
             break;
         }
+        tried += 1;
         let samples = match &sampling {
             Some((mesh, nearest, rim)) => Samples::find(
                 surface,
@@ -213,8 +219,15 @@ pub(crate) fn refit_around(
             ),
             None => Samples::none(),
         };
-        let Some(solved) = system.solve(data, &moving, &feet, &samples, &controls, &mut pattern)
-        else {
+        let solved = system.solve(
+            data,
+            (&moving, &feet),
+            &samples,
+            &controls,
+            share,
+            &mut pattern,
+        );
+        let Some(solved) = solved else {
             break;
         };
         let mut next = controls.clone();
@@ -230,11 +243,15 @@ pub(crate) fn refit_around(
         let before = rounds[rounds.len() - 1].0;
         let (after, max) = rms_of(&trial.errors, &moving);
         if after.is_nan() || after >= before {
-            break;
+            refusals += 1;
+            share *= 4.0;
+            continue;
         }
         controls = next;
         feet = trial;
         rounds.push((after, max));
+        taken += 1;
+        share = (share * 0.5).max(opts.tangential);
         if before - after < opts.min_gain * before {
             break;
         }
@@ -303,7 +320,6 @@ struct System<'a> {
     laplacian: &'a Csr,
     /// sqrt of the fairness weight: the umbrella rows are scaled by it.
     fairness_scale: f64,
-    tangential: f64,
 }
 
 impl System<'_> {
@@ -312,10 +328,10 @@ impl System<'_> {
     fn solve(
         &self,
         data: &[DVec3],
-        moving: &[usize],
-        feet: &LocalFeet,
+        (moving, feet): (&[usize], &LocalFeet),
         samples: &Samples,
         controls: &[DVec3],
+        share: f64,
         pattern: &mut CholeskyPattern,
     ) -> Option<Vec<DVec3>> {
         let mut basis = Csr {
@@ -349,7 +365,7 @@ impl System<'_> {
             let mut entries = row.iter().copied().filter(|e| e.1 != 0.0);
             targets.push(push_row(&mut entries, data[i], 1.0, &mut basis));
             normals.push(feet.normals[i]);
-            tangential.push(self.tangential);
+            tangential.push(share);
         }
         for ((&param, &target), &normal) in samples
             .params
@@ -361,7 +377,7 @@ impl System<'_> {
             let mut entries = row.iter().copied().filter(|e| e.1 != 0.0);
             targets.push(push_row(&mut entries, target, 1.0, &mut basis));
             normals.push(normal);
-            tangential.push(self.tangential);
+            tangential.push(share);
         }
         // The umbrella rows holding a free control, once per axis: three point-to-plane
         // rows along x, y and z weigh |L P|^2 as the whole-object fit's fairness does.

@@ -58,7 +58,7 @@ pub use version::refit_where_changed;
 
 /// Refused rounds (each retried with four times the tangential share) before the rounds
 /// stop.
-const MAX_REFUSALS: usize = 3;
+pub(super) const MAX_REFUSALS: usize = 3;
 
 /// A refinement round needs at least one control face with points beyond the tolerance,
 /// and one edge to split, per this many controls. A round is a whole refit, and points
