@@ -26,7 +26,8 @@
 //!
 //! Beside 3, bun_zipper's vertices are split by whether the merged data already misses
 //! them (the merge's fault) or only the surface does (the fit's). `OBJ_SESSION_MERGE_ONLY=1`
-//! runs only the merge of all scans against bun_zipper (no fit); `OBJ_SESSION_DUMP=FILE`
+//! runs only the merge of all scans against bun_zipper (no fit), `OBJ_SESSION_FORWARD_ONLY=1`
+//! only the updates in arrival order; `OBJ_SESSION_DUMP=FILE`
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
@@ -141,6 +142,10 @@ fn main() {
         return;
     }
     let (forward, mut session) = run(&scans, opts.clone(), "arrival order");
+    // Only the updates in arrival order (a quicker look at their figures).
+    if std::env::var("OBJ_SESSION_FORWARD_ONLY").is_ok() {
+        return;
+    }
     replacement(&scans, &mut session, &opts);
     println!("\n== each scan's points: to the surface vs to bun_zipper");
     let surface = surface_mesh(&forward);

@@ -1,4 +1,7 @@
-//! Scalar helpers for hot loops, shared by the surface evaluators and the planar maps.
+//! Scalar helpers for hot loops, shared by the surface evaluators and the planar maps, and
+//! the local origin of far-off data.
+
+use glam::DVec3;
 
 /// `x.floor()` for |x| < 2^63 without the libm call that `floor` is on baseline x86-64
 /// (no SSE4.1 rounding instruction): every surface evaluation locates its cell.
@@ -20,5 +23,49 @@ pub(crate) fn floor_i64(x: f64) -> i64 {
         t - 1
     } else {
         t
+    }
+}
+
+/// A local origin for `points`: their box's centre rounded to a multiple of the power of two
+/// at or above the box's diagonal. Subtracting it is exact (it is a multiple of every far
+/// coordinate's unit in the last place, and the difference is smaller than the coordinate),
+/// so it moves points without rounding them; it is zero for points whose box lies within
+/// half that power of the origin on every axis, which keeps their arithmetic as it was; and
+/// it brings points from anywhere (a site frame, UTM's millions of metres) within a
+/// diagonal or so of the origin, where sums of squares keep their digits.
+pub(crate) fn local_origin(points: &[DVec3]) -> DVec3 {
+    let Some(&first) = points.first() else {
+        return DVec3::ZERO;
+    };
+    let (lo, hi) = points
+        .iter()
+        .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
+    let diagonal = (hi - lo).length();
+    if !diagonal.is_finite() || diagonal <= 0.0 {
+        return DVec3::ZERO;
+    }
+    let cell = 2f64.powi(diagonal.log2().ceil() as i32);
+    let centre = 0.5 * (lo + hi);
+    (centre / cell).round() * cell
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_local_origin_moves_points_exactly_and_leaves_points_near_the_origin_alone() {
+        let near = [DVec3::new(-0.07, 0.03, 0.01), DVec3::new(0.06, 0.13, 0.05)];
+        assert_eq!(local_origin(&near), DVec3::ZERO);
+        let far: Vec<DVec3> = near
+            .iter()
+            .map(|p| *p + DVec3::new(512_345.678, 4_012_345.5, 101.25))
+            .collect();
+        let origin = local_origin(&far);
+        for p in &far {
+            let local = *p - origin;
+            assert!(local.length() < 1.0, "{local} from {origin}");
+            assert_eq!(local + origin, *p, "not exact");
+        }
     }
 }

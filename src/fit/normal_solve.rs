@@ -78,7 +78,7 @@ fn pcg(
     precondition_all(&r, &mut z);
     let mut d = z.clone();
     let mut rz = dot(&r, &z);
-    let stop = rel_tol * rel_tol * dot(b, b).max(1e-300);
+    let stop = rel_tol * rel_tol * dot_centred(matrix, &x).max(1e-300);
     let mut md = vec![DVec3::ZERO; m];
     for k in 0..max_iter {
         if dot(&r, &r) <= stop {
@@ -112,6 +112,26 @@ fn pcg(
         steps: max_iter,
         converged,
     }
+}
+
+/// |b - M c|^2 for the constant vector c at the local origin of `start`
+/// (`numeric::local_origin`, zero near the origin): the size of the right-hand side in
+/// coordinates around the controls. The stop is relative to it, not to |b|: the rows of a
+/// fit's systems are partitions of unity and fairness rows that vanish on constants, so b
+/// grows with the data's distance from the origin while the solution's shape does not, and
+/// a stop relative to |b| ended the solve early for data far from the origin (a range scan
+/// moved 100 m away: 6 CG steps instead of 77, RMS 149 um instead of 65 um).
+fn dot_centred(matrix: &impl Apply, start: &[DVec3]) -> f64 {
+    let b = matrix.rhs();
+    let origin = crate::numeric::local_origin(start);
+    if origin == DVec3::ZERO {
+        return dot(b, b);
+    }
+    let constant = vec![origin; start.len()];
+    let mut mc = vec![DVec3::ZERO; start.len()];
+    matrix.apply_to(&constant, &mut mc);
+    let centred: Vec<DVec3> = b.iter().zip(&mc).map(|(b, a)| *b - *a).collect();
+    dot(&centred, &centred)
 }
 
 /// faer's symbolic Cholesky analysis (fill-reducing ordering, elimination tree,

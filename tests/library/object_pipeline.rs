@@ -212,6 +212,28 @@ fn torus_goes_the_object_path_and_keeps_its_genus() {
     assert!(out.glb.len() > 1000 && &out.glb[..4] == b"glTF");
 }
 
+/// Data in far-off coordinates (a site or map frame, as UTM puts a part 4000 km from the
+/// origin) fit as well as at the origin, on both paths. Not to the last digit: moving the
+/// points rounds them, and the torus's collapses, with many equal costs, then take other
+/// orders (its far fit refines once more than its fit at the origin).
+#[test]
+fn a_fit_does_not_depend_on_where_the_data_lies() {
+    let offset = DVec3::new(5.0e5, 4.0e6, 1.0e2);
+    for (what, mesh) in [("torus", torus(40, 16)), ("height patch", height_patch())] {
+        let size = mesh.bounds_diagonal();
+        let moved = TriMesh::new(
+            mesh.positions.iter().map(|p| *p + offset * size).collect(),
+            mesh.triangles.clone(),
+        );
+        let cfg = config(Domain::Auto, 10.0);
+        let here = fit_patch(&mesh, None, &cfg).expect("fits");
+        let there = fit_patch(&moved, None, &cfg).expect("fits far off");
+        let (a, b) = (here.fit.geometric_rms(), there.fit.geometric_rms());
+        assert!(b <= 1.1 * a, "{what}: RMS {a} at the origin, {b} far off");
+        assert!(there.fit.controls.len() <= mesh.positions.len() / 10 + 1);
+    }
+}
+
 #[test]
 fn holes_stay_holes() {
     let mesh = holed_sphere();

@@ -13,9 +13,8 @@
 //! data's rim on the surface's boundary curve, which is why a change over much of the
 //! control mesh goes to the whole fit instead (`version`).
 
-use super::model::{ObjectOptions, RoundStop};
+use super::model::{ObjectOptions, RoundStop, MAX_REFUSALS};
 use super::solve::{Rim, Samples};
-use super::MAX_REFUSALS;
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;

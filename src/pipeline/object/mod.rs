@@ -45,7 +45,7 @@ use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
-use model::{control_target, limit_surface, ms_since};
+use model::{control_target, limit_surface, ms_since, MAX_REFUSALS};
 pub use model::{
     LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
 };
@@ -55,10 +55,6 @@ use solve::{point_fit, rows_at, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
-
-/// Refused rounds (each retried with four times the tangential share) before the rounds
-/// stop.
-pub(super) const MAX_REFUSALS: usize = 3;
 
 /// A refinement round needs at least one control face with points beyond the tolerance,
 /// and one edge to split, per this many controls. A round is a whole refit, and points

@@ -14,6 +14,10 @@ use crate::TriMesh;
 use glam::DVec3;
 use std::time::Instant;
 
+/// Refused rounds (each retried with four times the tangential share) before the rounds
+/// of a fit, whole or local, stop.
+pub(super) const MAX_REFUSALS: usize = 3;
+
 /// Controls a hole's rim keeps at least (fewer pull the rim's limit curve inward: it is the
 /// cubic B-spline of the loop, which for a triangle is a small rounded triangle).
 const MIN_BOUNDARY_LOOP: usize = 6;

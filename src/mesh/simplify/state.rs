@@ -1,0 +1,542 @@
+//! The collapse loop of `simplify`: the mesh being collapsed (positions, quadrics, faces
+//! around each vertex, locks), the queue of candidate collapses by quadric cost, and the
+//! guards a collapse must pass.
+
+use super::carry::Fans;
+use super::crease::Creases;
+use super::options::{Landing, Simplified, SimplifyOptions, REMOVED};
+use super::quadric::Quadric;
+use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::TriMesh;
+use crossbeam_channel::Sender;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// Queue entry: cost bits (non-negative f64 order as u64), the edge, and the versions of
+/// its end points when it was queued.
+type Entry = Reverse<(u64, u32, u32, u32, u32)>;
+
+/// The heap is cleared of stale entries once it holds more than this many per live vertex
+/// (a live mesh has about 3 edges per vertex). On bun_zipper subdivided once (140k
+/// vertices to 2.5k) the simplification took 2.4-2.7 s without clearing, 2.1-2.2 s at 8,
+/// 2.0 s at 5, with the same collapses.
+const STALE_HEAP_FACTOR: usize = 5;
+
+struct Candidate {
+    keep: u32,
+    remove: u32,
+    position: DVec3,
+    quadric: Quadric,
+    cost: f64,
+}
+
+pub(super) struct State<'a> {
+    opts: &'a SimplifyOptions,
+    cos_turn: f64,
+    pos: Vec<DVec3>,
+    quadric: Vec<Quadric>,
+    pub(super) faces: Vec<[u32; 3]>,
+    face_alive: Vec<bool>,
+    pub(super) vfaces: Vec<Vec<u32>>,
+    boundary: Vec<bool>,
+    pub(super) locked: Vec<bool>,
+    creases: Creases,
+    alive: Vec<bool>,
+    pub(super) alive_vertices: usize,
+    version: Vec<u32>,
+    /// Collapses not yet sent to be carried ...
+    fans: Fans,
+    /// ... and where they go (`carry`); `None` once the last went.
+    carrier: Option<Sender<Fans>>,
+    collapses: usize,
+}
+
+fn face_normal(p: [DVec3; 3]) -> DVec3 {
+    (p[1] - p[0]).cross(p[2] - p[0])
+}
+
+fn quality(p: [DVec3; 3]) -> f64 {
+    let edges = (p[1] - p[0]).length_squared()
+        + (p[2] - p[1]).length_squared()
+        + (p[0] - p[2]).length_squared();
+    if edges <= 0.0 {
+        return 0.0;
+    }
+    2.0 * 3f64.sqrt() * face_normal(p).length() / edges
+}
+
+impl<'a> State<'a> {
+    pub(super) fn new(
+        mesh: &'a TriMesh,
+        topo: &Topology,
+        opts: &'a SimplifyOptions,
+        creases: Creases,
+        carrier: Sender<Fans>,
+    ) -> Self {
+        let nv = mesh.positions.len();
+        let nf = mesh.triangles.len();
+        let pos = mesh.positions.clone();
+        let mut quadric = vec![Quadric::default(); nv];
+        let mut vfaces: Vec<Vec<u32>> = (0..nv)
+            .map(|v| Vec::with_capacity(topo.face_valence[v] as usize))
+            .collect();
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            let p = t.map(|v| pos[v as usize]);
+            let n = face_normal(p);
+            let area = 0.5 * n.length();
+            let unit = n.normalize_or_zero();
+            let plane = Quadric::plane(unit, p[0], area);
+            for (k, &v) in t.iter().enumerate() {
+                quadric[v as usize].add(&plane);
+                vfaces[v as usize].push(f as u32);
+                if topo.twin[3 * f + k] == NONE {
+                    let (a, b) = (p[k], p[(k + 1) % 3]);
+                    let side = (b - a).cross(unit).normalize_or_zero();
+                    let weight = opts.boundary_weight * (b - a).length_squared();
+                    let constraint = Quadric::plane(side, a, weight);
+                    quadric[v as usize].add(&constraint);
+                    quadric[t[(k + 1) % 3] as usize].add(&constraint);
+                }
+            }
+        }
+        creases.add_planes(&mesh.positions, topo, opts.boundary_weight, &mut quadric);
+        let mut locked = Self::corners(mesh, topo, opts.corner_turn_deg);
+        let crease_corners = creases.corners(&mesh.positions, topo, opts.corner_turn_deg);
+        for (l, c) in locked.iter_mut().zip(crease_corners) {
+            *l |= c;
+        }
+        State {
+            opts,
+            cos_turn: opts.max_normal_turn_deg.to_radians().cos(),
+            pos,
+            quadric,
+            faces: mesh.triangles.clone(),
+            face_alive: vec![true; nf],
+            vfaces,
+            boundary: topo.boundary.clone(),
+            locked,
+            creases,
+            alive: vec![true; nv],
+            alive_vertices: nv,
+            version: vec![0; nv],
+            fans: Fans::default(),
+            carrier: Some(carrier),
+            collapses: 0,
+        }
+    }
+
+    /// Boundary vertices where the boundary turns by more than `turn_deg` (the angle
+    /// between the two boundary edges, seen from inside, is below 180 - turn).
+    fn corners(mesh: &TriMesh, topo: &Topology, turn_deg: f64) -> Vec<bool> {
+        let min_angle = (180.0 - turn_deg).to_radians();
+        (0..mesh.positions.len() as u32)
+            .map(|v| {
+                let ring = topo.ring(v);
+                if !topo.is_boundary(v) || ring.len() < 2 {
+                    return false;
+                }
+                let p = mesh.positions[v as usize];
+                let first = mesh.positions[ring[0] as usize] - p;
+                let last = mesh.positions[ring[ring.len() - 1] as usize] - p;
+                // The interior angle is the sum of the face angles at v.
+                let interior: f64 = ring
+                    .windows(2)
+                    .map(|w| {
+                        let a = mesh.positions[w[0] as usize] - p;
+                        let b = mesh.positions[w[1] as usize] - p;
+                        a.angle_between(b)
+                    })
+                    .sum();
+                first.length() > 0.0 && last.length() > 0.0 && interior < min_angle
+            })
+            .collect()
+    }
+
+    pub(super) fn run_pass(&mut self, target: usize) -> usize {
+        // Every edge's candidate at once, in parallel, heapified in O(n): the entries are
+        // totally ordered (cost, then the edge), so the pop order is that of pushing them
+        // one by one.
+        let this = &*self;
+        let entries: Vec<Entry> = (0..this.faces.len())
+            .into_par_iter()
+            .filter(|&f| this.face_alive[f])
+            .flat_map_iter(|f| {
+                (0..3).filter_map(move |k| {
+                    let (a, b) = (this.faces[f][k], this.faces[f][(k + 1) % 3]);
+                    // Each interior edge once (from the face where it runs upwards); a
+                    // boundary edge may run either way, so it is queued in both cases.
+                    (a < b || !this.edge_is_interior(a, b))
+                        .then(|| this.entry(a, b))
+                        .flatten()
+                })
+            })
+            .collect();
+        let mut heap: BinaryHeap<Entry> = BinaryHeap::from(entries);
+        let before = self.collapses;
+        while self.alive_vertices > target {
+            let Some(Reverse((_, a, b, va, vb))) = heap.pop() else {
+                break;
+            };
+            let (ai, bi) = (a as usize, b as usize);
+            if !self.alive[ai]
+                || !self.alive[bi]
+                || self.version[ai] != va
+                || self.version[bi] != vb
+            {
+                continue;
+            }
+            let Some(c) = self.candidate(a, b) else {
+                continue;
+            };
+            if !self.allowed(&c) {
+                continue;
+            }
+            self.collapse(&c);
+            for x in self.neighbours(c.keep) {
+                self.push(&mut heap, c.keep, x);
+            }
+            // Every collapse leaves the entries of the edges it changed behind in the heap,
+            // unreachable until popped; dropping them in bulk keeps the heap near the
+            // edge count (about 3 per vertex) instead of the pushes so far, and the
+            // sift-downs, which miss the cache, in a smaller array.
+            if heap.len() > STALE_HEAP_FACTOR * self.alive_vertices {
+                heap.retain(|e| self.is_current(e));
+            }
+        }
+        self.collapses - before
+    }
+
+    /// Whether a heap entry still stands for an edge as it is (both ends alive and not
+    /// collapsed into since it was queued).
+    fn is_current(&self, e: &Entry) -> bool {
+        let Reverse((_, a, b, va, vb)) = *e;
+        let (a, b) = (a as usize, b as usize);
+        self.alive[a] && self.alive[b] && self.version[a] == va && self.version[b] == vb
+    }
+
+    fn push(&self, heap: &mut BinaryHeap<Entry>, a: u32, b: u32) {
+        if let Some(e) = self.entry(a, b) {
+            heap.push(e);
+        }
+    }
+
+    fn entry(&self, a: u32, b: u32) -> Option<Entry> {
+        let (a, b) = (a.min(b), a.max(b));
+        let c = self.candidate(a, b)?;
+        let cost = if c.cost.is_finite() { c.cost } else { f64::MAX };
+        Some(Reverse((
+            cost.to_bits(),
+            a,
+            b,
+            self.version[a as usize],
+            self.version[b as usize],
+        )))
+    }
+
+    fn edge_is_interior(&self, a: u32, b: u32) -> bool {
+        self.shared_faces(a, b).len() == 2
+    }
+
+    fn shared_faces(&self, a: u32, b: u32) -> Vec<u32> {
+        self.vfaces[a as usize]
+            .iter()
+            .copied()
+            .filter(|&f| self.faces[f as usize].contains(&b))
+            .collect()
+    }
+
+    fn neighbours(&self, v: u32) -> Vec<u32> {
+        let mut n: Vec<u32> = self.vfaces[v as usize]
+            .iter()
+            .flat_map(|&f| self.faces[f as usize])
+            .filter(|&x| x != v)
+            .collect();
+        n.sort_unstable();
+        n.dedup();
+        n
+    }
+
+    /// Which end stays and where it goes: a locked or boundary end stays in place when the
+    /// other is free or interior (the boundary keeps its shape), otherwise the lower index
+    /// stays and moves to the quadric's minimiser (on the edge where that is singular).
+    fn candidate(&self, a: u32, b: u32) -> Option<Candidate> {
+        let (ai, bi) = (a as usize, b as usize);
+        if self.locked[ai] && self.locked[bi] {
+            return None;
+        }
+        let q = self.quadric[ai].sum(&self.quadric[bi]);
+        // A locked end stays whatever the other is; a locked interior end and a boundary
+        // end would move the boundary inwards or remove the locked vertex: no collapse.
+        let pinned_inside =
+            |l: usize, o: usize| self.locked[l] && !self.boundary[l] && self.boundary[o];
+        if pinned_inside(ai, bi) || pinned_inside(bi, ai) {
+            return None;
+        }
+        let fixed = if self.locked[ai] {
+            Some((a, b))
+        } else if self.locked[bi] {
+            Some((b, a))
+        } else if self.boundary[ai] && !self.boundary[bi] {
+            Some((a, b))
+        } else if self.boundary[bi] && !self.boundary[ai] {
+            Some((b, a))
+        } else if self.creases.count(a) > 0 && !self.creases.is_crease(a, b) {
+            // Off a chain only a crease vertex with a smooth neighbour may be collapsed
+            // (`Creases::allows`): the crease vertex stays.
+            Some((a, b))
+        } else if self.creases.count(b) > 0 && !self.creases.is_crease(a, b) {
+            Some((b, a))
+        } else {
+            None
+        };
+        let (keep, remove, position) = match fixed {
+            Some((k, r)) => (k, r, self.pos[k as usize]),
+            None => {
+                let (pa, pb) = (self.pos[ai], self.pos[bi]);
+                let mid = (pa + pb) * 0.5;
+                let reach = 2.0 * (pa - pb).length();
+                let x = q
+                    .minimiser(mid, reach)
+                    .unwrap_or_else(|| q.segment_minimiser(pa, pb));
+                (a.min(b), a.max(b), x)
+            }
+        };
+        let length2 = (self.pos[ai] - self.pos[bi]).length_squared();
+        Some(Candidate {
+            keep,
+            remove,
+            position,
+            cost: q.error(position) + self.opts.isotropy * length2 * length2,
+            quadric: q,
+        })
+    }
+
+    /// The topological and geometric guards of the module comment.
+    fn allowed(&self, c: &Candidate) -> bool {
+        let (k, r) = (c.keep, c.remove);
+        let (ki, ri) = (k as usize, r as usize);
+        if self.alive_vertices <= 4 {
+            return false;
+        }
+        let shared = self.shared_faces(k, r);
+        let on_boundary = match shared.len() {
+            1 => true,
+            2 => false,
+            _ => return false,
+        };
+        if self.boundary[ki] && self.boundary[ri] && !on_boundary {
+            return false;
+        }
+        if !self.creases.allows(k, r, &self.boundary) {
+            return false;
+        }
+        let mut opposite: Vec<u32> = shared
+            .iter()
+            .flat_map(|&f| self.faces[f as usize])
+            .filter(|&x| x != k && x != r)
+            .collect();
+        opposite.sort_unstable();
+        let nk = self.neighbours(k);
+        let common: Vec<u32> = self
+            .neighbours(r)
+            .into_iter()
+            .filter(|x| nk.binary_search(x).is_ok())
+            .collect();
+        if common != opposite {
+            return false;
+        }
+        if on_boundary && self.boundary_loop_at_most(k, r, self.opts.min_boundary_loop.max(3)) {
+            return false;
+        }
+        if !self.face_counts_allowed(k, r, shared.len(), &opposite) {
+            return false;
+        }
+        self.geometry_allowed(c)
+    }
+
+    fn face_counts_allowed(&self, k: u32, r: u32, shared: usize, opposite: &[u32]) -> bool {
+        let (ki, ri) = (k as usize, r as usize);
+        let merged = self.vfaces[ki].len() + self.vfaces[ri].len() - 2 * shared;
+        let max = self.opts.max_faces_per_vertex;
+        let (lo, hi) = if self.boundary[ki] || self.boundary[ri] {
+            (2, max.saturating_sub(1))
+        } else {
+            (3, max)
+        };
+        if merged < lo || merged > hi {
+            return false;
+        }
+        opposite.iter().all(|&o| {
+            let min = if self.boundary[o as usize] { 2 } else { 3 };
+            self.vfaces[o as usize].len() > min
+        })
+    }
+
+    fn geometry_allowed(&self, c: &Candidate) -> bool {
+        let (k, r) = (c.keep, c.remove);
+        let mut worst_before = f64::INFINITY;
+        let mut worst_after = f64::INFINITY;
+        for &f in self.vfaces[k as usize]
+            .iter()
+            .chain(&self.vfaces[r as usize])
+        {
+            let t = self.faces[f as usize];
+            if t.contains(&k) && t.contains(&r) {
+                continue;
+            }
+            let before = t.map(|v| self.pos[v as usize]);
+            let after = t.map(|v| {
+                if v == k || v == r {
+                    c.position
+                } else {
+                    self.pos[v as usize]
+                }
+            });
+            let (n0, n1) = (face_normal(before), face_normal(after));
+            let (l0, l1) = (n0.length(), n1.length());
+            if l1 <= 0.0 || (l0 > 0.0 && n0.dot(n1) < self.cos_turn * l0 * l1) {
+                return false;
+            }
+            worst_before = worst_before.min(quality(before));
+            worst_after = worst_after.min(quality(after));
+        }
+        worst_after >= self.opts.min_quality.min(worst_before)
+    }
+
+    /// Whether the boundary edge (a, b) lies on a loop of at most `edges` edges.
+    fn boundary_loop_at_most(&self, a: u32, b: u32, edges: usize) -> bool {
+        let (mut prev, mut cur) = (a, b);
+        for _ in 0..edges - 1 {
+            let Some(next) = self.next_on_boundary(cur, prev) else {
+                return false;
+            };
+            if next == a {
+                return true;
+            }
+            (prev, cur) = (cur, next);
+        }
+        false
+    }
+
+    /// The boundary neighbour of `v` other than `prev`.
+    fn next_on_boundary(&self, v: u32, prev: u32) -> Option<u32> {
+        let mut seen: Vec<(u32, u32)> = Vec::with_capacity(16);
+        for &f in &self.vfaces[v as usize] {
+            for x in self.faces[f as usize] {
+                if x == v {
+                    continue;
+                }
+                match seen.iter_mut().find(|(y, _)| *y == x) {
+                    Some(e) => e.1 += 1,
+                    None => seen.push((x, 1)),
+                }
+            }
+        }
+        seen.iter()
+            .find(|&&(x, count)| count == 1 && x != prev)
+            .map(|&(x, _)| x)
+    }
+
+    fn collapse(&mut self, c: &Candidate) {
+        let (k, r) = (c.keep, c.remove);
+        let (ki, ri) = (k as usize, r as usize);
+        let mut affected: Vec<u32> = self.vfaces[ki].clone();
+        affected.extend(self.vfaces[ri].iter().copied().filter(|f| {
+            let t = self.faces[*f as usize];
+            !t.contains(&k)
+        }));
+        for f in self.shared_faces(k, r) {
+            self.face_alive[f as usize] = false;
+            for v in self.faces[f as usize] {
+                self.vfaces[v as usize].retain(|&g| g != f);
+            }
+        }
+        let moved = std::mem::take(&mut self.vfaces[ri]);
+        for f in moved {
+            for v in self.faces[f as usize].iter_mut() {
+                if *v == r {
+                    *v = k;
+                }
+            }
+            self.vfaces[ki].push(f);
+        }
+        self.pos[ki] = c.position;
+        self.quadric[ki] = c.quadric;
+        self.boundary[ki] |= self.boundary[ri];
+        self.creases.merge(k, r);
+        self.alive[ri] = false;
+        self.alive_vertices -= 1;
+        self.version[ki] += 1;
+        self.version[ri] += 1;
+        self.collapses += 1;
+        self.carry_points(k, &affected);
+    }
+
+    /// Queues the new fan around `k` and the faces whose points move onto it for the
+    /// carrying thread, and sends a full batch.
+    fn carry_points(&mut self, k: u32, affected: &[u32]) {
+        let fan = self.vfaces[k as usize]
+            .iter()
+            .map(|&f| (f, self.faces[f as usize].map(|v| self.pos[v as usize])));
+        self.fans.push(fan, affected);
+        if self.fans.len() >= Fans::BATCH {
+            self.send_fans();
+        }
+    }
+
+    /// Sends the queued fans to the carrying thread.
+    fn send_fans(&mut self) {
+        let batch = std::mem::take(&mut self.fans);
+        if let Some(carrier) = &self.carrier {
+            // A send fails only when the carrier is gone, which only its panic does; the
+            // join passes that on.
+            let _ = carrier.send(batch);
+        }
+    }
+
+    /// Sends the last fans and lets the carrying thread finish.
+    pub(super) fn stop_carrying(&mut self) {
+        self.send_fans();
+        self.carrier = None;
+    }
+
+    pub(super) fn finish(self, land_face: &[u32], land_bary: &[[f64; 3]]) -> Simplified {
+        let mut control_of = vec![REMOVED; self.pos.len()];
+        let mut positions = Vec::with_capacity(self.alive_vertices);
+        for (v, &alive) in self.alive.iter().enumerate() {
+            if alive {
+                control_of[v] = positions.len() as u32;
+                positions.push(self.pos[v]);
+            }
+        }
+        let mut face_index = vec![u32::MAX; self.faces.len()];
+        let mut triangles = Vec::new();
+        for (f, t) in self.faces.iter().enumerate() {
+            if self.face_alive[f] {
+                face_index[f] = triangles.len() as u32;
+                triangles.push(t.map(|v| control_of[v as usize]));
+            }
+        }
+        let landing = land_face
+            .iter()
+            .zip(land_bary)
+            .map(|(&f, b)| Landing {
+                face: face_index[f as usize],
+                u: b[0],
+                v: b[1],
+            })
+            .collect();
+        let locked_corners = self.locked.iter().filter(|&&l| l).count();
+        let crease_edges = self.creases.edges(&control_of);
+        Simplified {
+            mesh: TriMesh::new(positions, triangles),
+            control_of,
+            landing,
+            collapses: self.collapses,
+            locked_corners,
+            crease_edges,
+        }
+    }
+}
