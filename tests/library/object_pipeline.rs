@@ -642,3 +642,25 @@ fn an_object_that_grows_is_extended_over_its_new_ground() {
         "extended {warm_max} vs cold {cold_max}"
     );
 }
+
+#[test]
+fn new_ground_with_old_ground_far_off_its_surface_is_fitted_whole() {
+    let full = torus(240, 80);
+    let cfg = config(Domain::Mesh, 5.0);
+    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
+    // The grown section, and old ground far from either rim pushed out by 3 % of the
+    // diagonal: no dent a local refit follows, but another sheet.
+    let mut grown = torus_section(&full, 80, 190);
+    let push = 0.03 * grown.bounds_diagonal();
+    for p in &mut grown.positions[100 * 80..110 * 80] {
+        *p += DVec3::new(p.x, p.y, 0.0).normalize_or_zero() * push;
+    }
+    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits");
+    let warm = &second.report["object"]["warm"];
+    assert_eq!(warm["used"], false, "{warm}");
+    let why = warm["cold_because"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("points lie up to") && why.contains("inner faces"),
+        "{why}"
+    );
+}

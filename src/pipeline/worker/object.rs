@@ -285,6 +285,12 @@ const MAX_NEW_GROUND_SHARE: f64 = 0.6;
 /// drops rim cells as views are added; a removed scan leaves far more).
 const MAX_FACES_LEFT: f64 = 0.02;
 
+/// A new version with new ground is extended only while no point lies farther than this
+/// share of the bounding-box diagonal beyond the previous data over its inner faces (twice
+/// the stray guard's limit, `stray_guard`: a change the refit could follow without
+/// straying, a dent, stays within it).
+const MAX_INNER_CHANGE: f64 = 0.01;
+
 /// A new version fitted from the previous fit: extended over new ground when it covers
 /// more (an object session's new view), else refitted where it changed; `Err` says why
 /// the previous fit does not fit the new data (the whole fit runs).
@@ -333,6 +339,27 @@ fn from_previous(
         reference,
     };
     if is_new.contains(&true) {
+        // A point this far beyond the previous data over its inner faces is no dent but
+        // ground the previous surface passes by (the far side of an ear, seen by a new
+        // view): its start is on the wrong sheet, and the refit would drag the old surface
+        // across, to be refused by the stray guard after the whole extension's cost.
+        let limit = MAX_INNER_CHANGE * start.component.bounds_diagonal();
+        let beyond = start
+            .component
+            .positions
+            .iter()
+            .zip(&start.reference)
+            .zip(&start.params)
+            .map(|((p, r), param)| if on_rim(param) { 0.0 } else { p.distance(*r) })
+            .filter(|&d| d > limit);
+        let (count, farthest) = beyond.fold((0, 0.0f64), |(n, m), d| (n + 1, m.max(d)));
+        if count > 0 {
+            return Err(format!(
+                "{count} points lie up to {farthest:.3e} beyond the previous data over its \
+                 inner faces (more than {limit:.3e}, {MAX_INNER_CHANGE} of the bounding-box \
+                 diagonal): not a local change"
+            ));
+        }
         return extend_fit(start, &is_new, warm, opts).map(Ok);
     }
     check_same_object(&start.component, warm)?;
