@@ -29,8 +29,9 @@ pub(crate) fn floor_i64(x: f64) -> i64 {
 /// A local origin for `points`: their box's centre rounded to a multiple of the power of two
 /// at or above the box's diagonal. Subtracting it is exact (it is a multiple of every far
 /// coordinate's unit in the last place, and the difference is smaller than the coordinate),
-/// so it moves points without rounding them; it is zero for points whose box lies within
-/// half that power of the origin on every axis, which keeps their arithmetic as it was; and
+/// so it moves points without rounding them; it is zero when the box's centre lies within
+/// half that power of the origin on every axis, which keeps such points' arithmetic as it
+/// was; and
 /// it brings points from anywhere (a site frame, UTM's millions of metres) within a
 /// diagonal or so of the origin, where sums of squares keep their digits.
 pub(crate) fn local_origin(points: &[DVec3]) -> DVec3 {

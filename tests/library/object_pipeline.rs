@@ -649,7 +649,7 @@ fn new_ground_with_old_ground_far_off_its_surface_is_fitted_whole() {
     let cfg = config(Domain::Mesh, 5.0);
     let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
     // The grown section, and old ground far from either rim pushed out by 3 % of the
-    // diagonal: no dent a local refit follows, but another sheet.
+    // diagonal: more than a local change.
     let mut grown = torus_section(&full, 80, 190);
     let push = 0.03 * grown.bounds_diagonal();
     for p in &mut grown.positions[100 * 80..110 * 80] {
