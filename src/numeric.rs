@@ -1,5 +1,5 @@
 //! Scalar helpers for hot loops, shared by the surface evaluators and the planar maps, and
-//! the local origin of far-off data.
+//! the bounds and local origin of point sets.
 
 use glam::DVec3;
 
@@ -26,6 +26,16 @@ pub(crate) fn floor_i64(x: f64) -> i64 {
     }
 }
 
+/// The points' axis-aligned bounds (lowest, highest corner), `None` without points.
+pub(crate) fn bounds(points: &[DVec3]) -> Option<(DVec3, DVec3)> {
+    let first = *points.first()?;
+    Some(
+        points
+            .iter()
+            .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
+    )
+}
+
 /// A local origin for `points`: their box's centre rounded to a multiple of the power of two
 /// at or above the box's diagonal. Subtracting it is exact (it is a multiple of every far
 /// coordinate's unit in the last place, and the difference is smaller than the coordinate),
@@ -35,12 +45,9 @@ pub(crate) fn floor_i64(x: f64) -> i64 {
 /// it brings points from anywhere (a site frame, UTM's millions of metres) within a
 /// diagonal or so of the origin, where sums of squares keep their digits.
 pub(crate) fn local_origin(points: &[DVec3]) -> DVec3 {
-    let Some(&first) = points.first() else {
+    let Some((lo, hi)) = bounds(points) else {
         return DVec3::ZERO;
     };
-    let (lo, hi) = points
-        .iter()
-        .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
     let diagonal = (hi - lo).length();
     if !diagonal.is_finite() || diagonal <= 0.0 {
         return DVec3::ZERO;

@@ -45,12 +45,7 @@ impl TriMesh {
 
     /// Axis-aligned bounds, or `None` for a mesh without vertices.
     pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        let first = *self.positions.first()?;
-        Some(
-            self.positions
-                .iter()
-                .fold((first, first), |(lo, hi), p| (lo.min(*p), hi.max(*p))),
-        )
+        crate::numeric::bounds(&self.positions)
     }
 
     /// Length of the bounding-box diagonal (0 for an empty mesh).

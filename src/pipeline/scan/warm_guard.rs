@@ -93,10 +93,7 @@ fn normal_angle_deg(mesh: &TriMesh, frame: &PlaneFrame) -> f64 {
 }
 
 fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
-    points.iter().fold(
-        (DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    )
+    crate::numeric::bounds(points).unwrap_or((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)))
 }
 
 /// Share of `new` points (a spread sample) with no `old` point within

@@ -316,7 +316,8 @@ fn from_previous(
     let (params, reference) = nearest_params(warm, &component.positions);
     // New ground lies beyond the previous data, so its nearest previous point is on a rim
     // face; a point far from the previous data over an inner face is a change of old
-    // ground (a dent), which the local refit takes.
+    // ground (a dent), which the local refit takes, unless it is far more than a dent (see
+    // below).
     let rim = Topology::build(controls.len(), &warm.faces)
         .map_err(|e| format!("the stored control mesh is not a manifold: {e}"))?
         .boundary;
@@ -325,36 +326,31 @@ fn from_previous(
             .get(p.face as usize)
             .is_some_and(|t| t.iter().any(|&v| rim[v as usize]))
     };
-    let near = NEW_GROUND_EDGES * crate::pipeline::merge::median_edge(&component);
-    let is_new: Vec<bool> = component
+    // Each point's distance to the previous data and whether it lies over a rim face.
+    let gaps: Vec<(f64, bool)> = component
         .positions
         .iter()
         .zip(&reference)
         .zip(&params)
-        .map(|((p, r), param)| p.distance(*r) > near && on_rim(param))
+        .map(|((p, r), param)| (p.distance(*r), on_rim(param)))
         .collect();
-    let start = WarmStartPoint {
-        component,
-        control_mesh: TriMesh::new(controls.to_vec(), warm.faces.clone()),
-        params,
-        reference,
-    };
-    if is_new.contains(&true) {
+    let near = NEW_GROUND_EDGES * crate::pipeline::merge::median_edge(&component);
+    let is_new: Vec<bool> = gaps
+        .iter()
+        .map(|&(d, over_rim)| d > near && over_rim)
+        .collect();
+    let has_new = is_new.contains(&true);
+    if has_new {
         // A point this far beyond the previous data over its inner faces is mostly ground
         // the previous surface passes by (the far side of an ear, seen by a new view): its
         // start is on the wrong sheet, and the refit drags the old surface across, to be
         // refused by the stray guard after the whole extension's cost (the bunny's views
         // in reverse order: bun180 took 12.3 s, 7 of them on the refused extension).
-        let limit = MAX_INNER_CHANGE * start.component.bounds_diagonal();
-        let beyond = start
-            .component
-            .positions
+        let limit = MAX_INNER_CHANGE * component.bounds_diagonal();
+        let (count, farthest) = gaps
             .iter()
-            .zip(&start.reference)
-            .zip(&start.params)
-            .map(|((p, r), param)| if on_rim(param) { 0.0 } else { p.distance(*r) })
-            .filter(|&d| d > limit);
-        let (count, farthest) = beyond.fold((0, 0.0f64), |(n, m), d| (n + 1, m.max(d)));
+            .filter(|&&(d, over_rim)| !over_rim && d > limit)
+            .fold((0, 0.0f64), |(n, m), &(d, _)| (n + 1, m.max(d)));
         if count > 0 {
             return Err(format!(
                 "{count} points lie up to {farthest:.3e} beyond the previous data over its \
@@ -362,6 +358,14 @@ fn from_previous(
                  diagonal): not a local change"
             ));
         }
+    }
+    let start = WarmStartPoint {
+        component,
+        control_mesh: TriMesh::new(controls.to_vec(), warm.faces.clone()),
+        params,
+        reference,
+    };
+    if has_new {
         return extend_fit(start, &is_new, warm, opts).map(Ok);
     }
     check_same_object(&start.component, warm)?;
@@ -465,10 +469,9 @@ fn check_same_object(component: &TriMesh, warm: &ObjectWarm) -> Result<(), Strin
 }
 
 fn bounds_of(points: &[DVec3]) -> [DVec3; 2] {
-    points.iter().fold(
-        [DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)],
-        |[lo, hi], p| [lo.min(*p), hi.max(*p)],
-    )
+    let (lo, hi) =
+        crate::numeric::bounds(points).unwrap_or((DVec3::splat(f64::MAX), DVec3::splat(f64::MIN)));
+    [lo, hi]
 }
 
 /// Each point's start parameter, the final parameter of the nearest previous data point,
