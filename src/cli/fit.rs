@@ -348,6 +348,16 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
             100.0 * number(&dropped["share"]),
         ));
     }
+    let stray = &r["object"]["stray"];
+    if stray["within"].as_bool() == Some(false) {
+        line.push_str(&format!(
+            "; the surface strays up to {:.2} % of the bounding-box diagonal from the data \
+            (over {:.2} %: over a hole or a coarse mesh's large triangles; a higher \
+            --target-controls-pct brings it closer)",
+            100.0 * number(&stray["share_of_diagonal"]),
+            100.0 * number(&stray["limit_share"]),
+        ));
+    }
     line
 }
 

@@ -202,6 +202,7 @@ impl LastFit {
             layout: LayoutReport::default(),
             refinement: Vec::new(),
             local: None,
+            stray: None,
         };
         FittedPatch {
             fit,

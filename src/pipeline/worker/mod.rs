@@ -16,6 +16,7 @@ pub use config::{
 };
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
+pub use stray_guard::StrayReport;
 
 use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{

@@ -5,7 +5,7 @@
 //! control mesh, and turns an `ObjectFit` into the `PatchFit` every output reads.
 
 use super::config::WorkerConfig;
-use super::stray_guard::stays_on_data;
+use super::stray_guard::{stays_on_data, StrayReport};
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
 use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
 use crate::mesh::crease::CreaseOptions;
@@ -172,6 +172,9 @@ pub struct ObjectInfo {
     pub refinement: Vec<RefineRound>,
     /// What a local refit of a new version touched (`None`: a whole fit).
     pub local: Option<LocalUpdate>,
+    /// How far the surface strays from the data (`None`: not measured, as on an object
+    /// session's local refit, whose guard measures the faces it moved).
+    pub stray: Option<StrayReport>,
 }
 
 /// Whether a warm start was used.
@@ -233,7 +236,17 @@ pub(super) fn fit_as_object(
         layout: fit.layout,
         refinement: fit.refinement.clone(),
         local: fit.local.clone(),
+        stray: Some(StrayReport::of(&fit)),
     };
+    if let Some(stray) = info.stray.filter(|s| !s.within) {
+        tracing::warn!(
+            "the surface strays {:.3e} from the data, {:.2} % of the bounding-box diagonal \
+             (over {:.2} %): more control points bring it closer",
+            stray.max,
+            100.0 * stray.share_of_diagonal,
+            100.0 * stray.limit_share
+        );
+    }
     let out_of_time = opts.stop.out_of_time();
     let patch = patch_fit(
         fit,
@@ -601,6 +614,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "stages": info.times,
         "warm": warm,
         "local": info.local,
+        "stray": info.stray,
     })
 }
 

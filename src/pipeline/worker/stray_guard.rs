@@ -5,13 +5,13 @@
 //! where a fit from scratch, whose control mesh follows the data, would not.
 
 use crate::mesh::distance::MeshDistance;
-use crate::pipeline::object::{farthest_from, ObjectError, ObjectFit};
+use crate::pipeline::object::{farthest_from, farthest_from_data, ObjectError, ObjectFit};
 use crate::surface::loop_limit::LoopLimitSurface;
 use glam::DVec3;
 
 /// A warm result may stray from its data (the new version) by this share of the data's
 /// bounding-box diagonal, the bound a whole fit is held to (no bulge over holes) ...
-const MAX_STRAY_SHARE: f64 = 0.005;
+pub(super) const MAX_STRAY_SHARE: f64 = 0.005;
 
 /// ... or by this many times what the previous surface strays from the same data (a
 /// smooth surface over a coarse data mesh strays by the mesh's chordal error already);
@@ -20,6 +20,41 @@ const MAX_STRAY_GROWTH: f64 = 1.5;
 
 /// Lattice segments per control face edge the stray check samples.
 const STRAY_SEGMENTS: usize = 3;
+
+/// How far an object's surface strays from its data, in the report: a fit minimises the
+/// distance from the data to the surface, so only this says whether the surface bulges
+/// over a hole or away from a coarse data mesh's large flat triangles.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct StrayReport {
+    /// The largest distance from the surface (sampled on a lattice over each control
+    /// face) to the data mesh.
+    pub max: f64,
+    /// `max` as a share of the data's bounding-box diagonal.
+    pub share_of_diagonal: f64,
+    /// The share a fit is held to.
+    pub limit_share: f64,
+    /// Whether `share_of_diagonal` is within `limit_share`.
+    pub within: bool,
+    /// Segments per control face edge of the sampled lattice.
+    pub lattice_segments: usize,
+}
+
+impl StrayReport {
+    /// The stray of `fit`'s whole surface.
+    pub(super) fn of(fit: &ObjectFit) -> StrayReport {
+        let max = farthest_from_data(fit, STRAY_SEGMENTS);
+        let diagonal = fit.component.bounds_diagonal();
+        let share_of_diagonal = if diagonal > 0.0 { max / diagonal } else { 0.0 };
+        StrayReport {
+            max,
+            share_of_diagonal,
+            limit_share: MAX_STRAY_SHARE,
+            // An infinite or NaN max (a non-finite sample) is not within.
+            within: share_of_diagonal <= MAX_STRAY_SHARE,
+            lattice_segments: STRAY_SEGMENTS,
+        }
+    }
+}
 
 /// `fit` unless its surface strays from the data farther than `MAX_STRAY_SHARE` and
 /// `MAX_STRAY_GROWTH` allow (a failed fit passes through: its error is reported as it is).
