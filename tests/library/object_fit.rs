@@ -103,8 +103,16 @@ fn a_torus_is_fitted_by_a_genus_one_control_mesh() {
     assert!(rms < 6e-4 * MAJOR, "analytic rms {rms}");
     assert!(max < 3e-3 * MAJOR, "analytic max {max}");
     assert!(fit.rms < 0.1 * decimated_rms(&fit));
-    // The rounds only ever lower the RMS.
-    assert!(fit.rounds.windows(2).all(|w| w[1].rms < w[0].rms));
+    assert_rounds_lower_the_rms(&fit);
+}
+
+/// A round is taken when it lowers the two-sided RMS (the data's distances and the
+/// surface samples'), so the data's alone may rise a little in a round that pulls a patch
+/// back onto the data (the outlier torus: 0.2 % once), never much, and fall overall.
+fn assert_rounds_lower_the_rms(fit: &ObjectFit) {
+    let r = &fit.rounds;
+    assert!(r.windows(2).all(|w| w[1].rms < 1.01 * w[0].rms), "{r:?}");
+    assert!(r.len() < 2 || r[r.len() - 1].rms < r[0].rms, "{r:?}");
 }
 
 #[test]
@@ -129,7 +137,7 @@ fn isolated_points_beyond_the_tolerance_end_refinement_and_the_rounds_run_on() {
     // The fit before refinement ran only the intermediate rounds; the rest ran after.
     assert!(fit.rounds.len() > opts.refine.intermediate_rounds + 1);
     assert!(fit.rms < first.rms);
-    assert!(fit.rounds.windows(2).all(|w| w[1].rms < w[0].rms));
+    assert_rounds_lower_the_rms(&fit);
 }
 
 #[test]
@@ -396,4 +404,29 @@ fn a_broken_bunny_is_cleaned_and_fitted() {
     );
     assert!(fit.rms < 2e-2 * diag, "rms {} of diag {diag}", fit.rms);
     assert!(fit.rms < decimated_rms(&fit));
+}
+
+/// With 40 % controls the broken bunny's first point fit bulges where its control faces
+/// hold no data point (17.7 % of the diagonal); the rounds' surface-to-data samples pull
+/// that back only when a round is judged by both sides of the distance, not by the data
+/// points' distances alone, which such a round raises a little.
+#[test]
+fn rounds_pull_a_bulge_back_onto_the_data() {
+    let Some(mesh) = shared_mesh("models/bun_zipper_res4.ply") else {
+        return;
+    };
+    let opts = ObjectOptions {
+        target_controls_pct: 40.0,
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let diag = mesh.bounds_diagonal();
+    let stray = farthest_from_data(&fit, 4);
+    eprintln!(
+        "res4 at 40 %: {} controls, rms {:.2e}, stray {:.2} % of the diagonal",
+        fit.controls.len(),
+        fit.rms,
+        100.0 * stray / diag
+    );
+    assert!(stray < 0.05 * diag, "stray {stray} of diag {diag}");
 }

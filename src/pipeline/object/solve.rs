@@ -133,6 +133,29 @@ impl DistanceRound<'_> {
     }
 }
 
+impl DistanceRound<'_> {
+    /// The round's result `next` with the data's foot points on it (from `start`, the rim
+    /// held by `rim`) and its two-sided RMS (the samples measured to the data by
+    /// `nearest`), when that is below `before`.
+    pub(super) fn judge(
+        &self,
+        next: Vec<DVec3>,
+        start: &[SurfaceParam],
+        rim: &Rim,
+        nearest: Option<&MeshDistance>,
+        before: f64,
+    ) -> Option<(Feet, Vec<DVec3>, f64)> {
+        let mut feet = Feet::find(self.surface, &next, self.data, start);
+        rim.hold(&mut feet, self.surface, &next, self.data);
+        let on_samples = match nearest {
+            Some(nearest) => self.samples.distances_at(self.surface, &next, nearest),
+            None => Vec::new(),
+        };
+        let after = two_sided_rms(&feet.distances, &on_samples);
+        (after < before).then_some((feet, next, after))
+    }
+}
+
 /// Where a control face is sampled, as (u, v): the centres of its quarters (the children
 /// of its midpoint split): the middle one, then those at corners 0, 1 and 2.
 const SAMPLE_AT: [(f64, f64); 4] = [
@@ -170,6 +193,8 @@ pub(super) struct Samples {
     /// The direction of the squared distance's gradient there: the data triangle's
     /// normal, or the direction to the nearest point where that is an edge or a corner.
     pub normals: Vec<DVec3>,
+    /// Their distances to the data on the surface they were found on.
+    pub distances: Vec<f64>,
     /// Control faces sampled.
     pub faces: usize,
 }
@@ -181,8 +206,29 @@ impl Samples {
             params: Vec::new(),
             targets: Vec::new(),
             normals: Vec::new(),
+            distances: Vec::new(),
             faces: 0,
         }
+    }
+
+    /// The samples' distances to the data (`nearest`) on the surface at `controls`
+    /// (infinite where there is none).
+    pub(super) fn distances_at(
+        &self,
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        nearest: &MeshDistance,
+    ) -> Vec<f64> {
+        let evaluate = surface.evaluator(controls);
+        self.params
+            .par_iter()
+            .with_min_len(64)
+            .map(|&p| {
+                nearest
+                    .distance(evaluate(p).position)
+                    .unwrap_or(f64::INFINITY)
+            })
+            .collect()
     }
 
     /// Samples of the surface at `controls` where the data's foot parameters `feet` leave
@@ -241,7 +287,7 @@ impl Samples {
             }
         }
         let evaluate = surface.evaluator(controls);
-        let found: Vec<Option<(SurfaceParam, DVec3, DVec3)>> = params
+        let found: Vec<Option<(SurfaceParam, DVec3, DVec3, f64)>> = params
             .par_iter()
             .with_min_len(64)
             .map(|&param| {
@@ -256,15 +302,16 @@ impl Samples {
                     Some(g) if g.dot(face_normal).abs() < 0.9 => g,
                     _ => face_normal,
                 };
-                Some((param, c.point, n))
+                Some((param, c.point, n, at.distance(c.point)))
             })
             .collect();
         let mut samples = Samples::none();
         samples.faces = faces;
-        for (param, target, n) in found.into_iter().flatten() {
+        for (param, target, n, d) in found.into_iter().flatten() {
             samples.params.push(param);
             samples.targets.push(target);
             samples.normals.push(n);
+            samples.distances.push(d);
         }
         samples
     }
@@ -339,6 +386,14 @@ impl Feet {
     pub(super) fn max(&self) -> f64 {
         self.distances.iter().fold(0.0, |m, &d| m.max(d))
     }
+}
+
+/// The RMS over the data's distances to the surface and the samples' distances to the
+/// data: what a round minimises, both sides of the distance (a round may move the
+/// surface a little farther from the data points to pull a bulge back onto the data).
+pub(super) fn two_sided_rms(data: &[f64], samples: &[f64]) -> f64 {
+    let squares: f64 = data.iter().chain(samples).map(|d| d * d).sum();
+    (squares / (data.len() + samples.len()).max(1) as f64).sqrt()
 }
 
 pub(super) fn rms(e: &[f64]) -> f64 {
