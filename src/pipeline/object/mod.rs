@@ -274,10 +274,10 @@ fn fit_from(
         max: feet.max(),
     }];
     // Levenberg-Marquardt on the tangential share: a round that does not lower the
-    // (two-sided) RMS is taken again with four times the share (the surface slides less per round), a round
-    // that does halves it again down to `opts.tangential`. Controls far from their final
-    // parameterization need long slides that a fixed small share makes unstable and a
-    // fixed large share makes slow.
+    // (two-sided) RMS is taken again with four times the share (the surface slides less
+    // per round), a round that does halves it again down to `opts.tangential`. Controls
+    // far from their final parameterization need long slides that a fixed small share
+    // makes unstable and a fixed large share makes slow.
     let mut share = opts.tangential;
     let near_edge = near_boundary(&component, opts.edge_rings);
     let on_rim = rim.marks(n);

@@ -131,9 +131,7 @@ impl DistanceRound<'_> {
         };
         x.iter().all(|p| p.is_finite()).then_some(x)
     }
-}
 
-impl DistanceRound<'_> {
     /// The round's result `next` with the data's foot points on it (from `start`, the rim
     /// held by `rim`) and its two-sided RMS (the samples measured to the data by
     /// `nearest`), when that is below `before`.

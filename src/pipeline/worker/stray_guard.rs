@@ -11,7 +11,7 @@ use glam::DVec3;
 
 /// A warm result may stray from its data (the new version) by this share of the data's
 /// bounding-box diagonal, the bound a whole fit is held to (no bulge over holes) ...
-pub(super) const MAX_STRAY_SHARE: f64 = 0.005;
+const MAX_STRAY_SHARE: f64 = 0.005;
 
 /// ... or by this many times what the previous surface strays from the same data (a
 /// smooth surface over a coarse data mesh strays by the mesh's chordal error already);
