@@ -41,9 +41,8 @@ pub(crate) fn bounds(points: &[DVec3]) -> Option<(DVec3, DVec3)> {
 /// coordinate's unit in the last place, and the difference is smaller than the coordinate),
 /// so it moves points without rounding them; it is zero when the box's centre lies within
 /// half that power of the origin on every axis, which keeps such points' arithmetic as it
-/// was; and
-/// it brings points from anywhere (a site frame, UTM's millions of metres) within a
-/// diagonal or so of the origin, where sums of squares keep their digits.
+/// was; and it brings points from anywhere (a site frame, UTM's millions of metres) within
+/// a diagonal or so of the origin, where sums of squares keep their digits.
 pub(crate) fn local_origin(points: &[DVec3]) -> DVec3 {
     let Some((lo, hi)) = bounds(points) else {
         return DVec3::ZERO;

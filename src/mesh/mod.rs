@@ -53,3 +53,20 @@ impl TriMesh {
         self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length())
     }
 }
+
+/// Triangle `p`'s normal scaled by twice its area (right-handed in corner order).
+pub fn triangle_area_normal(p: [DVec3; 3]) -> DVec3 {
+    (p[1] - p[0]).cross(p[2] - p[0])
+}
+
+/// `4 sqrt(3) area / sum of squared edges`: 1 for an equilateral triangle, 0 for a
+/// degenerate one.
+pub fn triangle_quality(p: [DVec3; 3]) -> f64 {
+    let edges = (p[1] - p[0]).length_squared()
+        + (p[2] - p[1]).length_squared()
+        + (p[0] - p[2]).length_squared();
+    if edges <= 0.0 {
+        return 0.0;
+    }
+    2.0 * 3f64.sqrt() * triangle_area_normal(p).length() / edges
+}

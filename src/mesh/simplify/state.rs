@@ -7,7 +7,7 @@ use super::crease::Creases;
 use super::options::{Landing, Simplified, SimplifyOptions, REMOVED};
 use super::quadric::Quadric;
 use crate::mesh::topology::{Topology, NONE};
-use crate::mesh::TriMesh;
+use crate::mesh::{triangle_area_normal, triangle_quality, TriMesh};
 use crossbeam_channel::Sender;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -53,20 +53,6 @@ pub(super) struct State<'a> {
     collapses: usize,
 }
 
-fn face_normal(p: [DVec3; 3]) -> DVec3 {
-    (p[1] - p[0]).cross(p[2] - p[0])
-}
-
-fn quality(p: [DVec3; 3]) -> f64 {
-    let edges = (p[1] - p[0]).length_squared()
-        + (p[2] - p[1]).length_squared()
-        + (p[0] - p[2]).length_squared();
-    if edges <= 0.0 {
-        return 0.0;
-    }
-    2.0 * 3f64.sqrt() * face_normal(p).length() / edges
-}
-
 impl<'a> State<'a> {
     pub(super) fn new(
         mesh: &'a TriMesh,
@@ -84,7 +70,7 @@ impl<'a> State<'a> {
             .collect();
         for (f, t) in mesh.triangles.iter().enumerate() {
             let p = t.map(|v| pos[v as usize]);
-            let n = face_normal(p);
+            let n = triangle_area_normal(p);
             let area = 0.5 * n.length();
             let unit = n.normalize_or_zero();
             let plane = Quadric::plane(unit, p[0], area);
@@ -394,13 +380,13 @@ impl<'a> State<'a> {
                     self.pos[v as usize]
                 }
             });
-            let (n0, n1) = (face_normal(before), face_normal(after));
+            let (n0, n1) = (triangle_area_normal(before), triangle_area_normal(after));
             let (l0, l1) = (n0.length(), n1.length());
             if l1 <= 0.0 || (l0 > 0.0 && n0.dot(n1) < self.cos_turn * l0 * l1) {
                 return false;
             }
-            worst_before = worst_before.min(quality(before));
-            worst_after = worst_after.min(quality(after));
+            worst_before = worst_before.min(triangle_quality(before));
+            worst_after = worst_after.min(triangle_quality(after));
         }
         worst_after >= self.opts.min_quality.min(worst_before)
     }

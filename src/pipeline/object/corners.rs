@@ -13,8 +13,9 @@
 //! (a round rim seen through few controls turns sharply in the polygon only, and a noisy
 //! rim vertex in the data only).
 
-use super::layout::{edge_key, normal, quality, Net, MAX_FACES, MIN_FLIP_QUALITY};
+use super::layout::{edge_key, Net, MAX_FACES, MIN_FLIP_QUALITY};
 use crate::mesh::topology::Topology;
+use crate::mesh::{triangle_area_normal, triangle_quality};
 use crate::TriMesh;
 use glam::DVec3;
 
@@ -159,17 +160,20 @@ impl Net<'_> {
                 return None;
             }
             let p = |x: u32| self.pos[x as usize];
-            let (n0, n1) = (normal([p(v), p(b), p(c)]), normal([p(b), p(v), p(d)]));
+            let (n0, n1) = (
+                triangle_area_normal([p(v), p(b), p(c)]),
+                triangle_area_normal([p(b), p(v), p(d)]),
+            );
             if n0.dot(n1) < cos_fold * n0.length() * n1.length() {
                 return None;
             }
             let up = n0 + n1;
             let new = [[p(v), p(d), p(c)], [p(d), p(b), p(c)]];
             let upright = new.iter().all(|&tri| {
-                let n = normal(tri);
+                let n = triangle_area_normal(tri);
                 n.dot(up) > 0.5 * n.length() * up.length()
             });
-            let q = quality(new[0]).min(quality(new[1]));
+            let q = triangle_quality(new[0]).min(triangle_quality(new[1]));
             (upright && q >= MIN_FLIP_QUALITY).then_some(CornerFlip {
                 f,
                 g,

@@ -17,6 +17,7 @@
 
 use crate::mesh::distance::{closest_on_triangle, project_onto_triangle};
 use crate::mesh::topology::Topology;
+use crate::mesh::{triangle_area_normal, triangle_quality};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
@@ -370,14 +371,17 @@ impl<'a> Net<'a> {
             return false;
         }
         let p = |v: u32| self.pos[v as usize];
-        let (n0, n1) = (normal([p(a), p(b), p(c)]), normal([p(b), p(a), p(d)]));
+        let (n0, n1) = (
+            triangle_area_normal([p(a), p(b), p(c)]),
+            triangle_area_normal([p(b), p(a), p(d)]),
+        );
         if n0.dot(n1) < cos_fold * n0.length() * n1.length() {
             return false;
         }
         let up = n0 + n1;
         [[p(a), p(d), p(c)], [p(d), p(b), p(c)]].iter().all(|&tri| {
-            let n = normal(tri);
-            n.dot(up) > 0.5 * n.length() * up.length() && quality(tri) >= MIN_FLIP_QUALITY
+            let n = triangle_area_normal(tri);
+            n.dot(up) > 0.5 * n.length() * up.length() && triangle_quality(tri) >= MIN_FLIP_QUALITY
         })
     }
 
@@ -433,7 +437,7 @@ impl<'a> Net<'a> {
         let (mut weighted, mut area, mut n) = (DVec3::ZERO, 0.0, DVec3::ZERO);
         for &f in fan {
             let tri = self.corners(f);
-            let fn_ = normal(tri);
+            let fn_ = triangle_area_normal(tri);
             let a = 0.5 * fn_.length();
             weighted += a * (tri[0] + tri[1] + tri[2]) / 3.0;
             area += a;
@@ -452,7 +456,7 @@ impl<'a> Net<'a> {
             let before = self.corners(f);
             let after =
                 self.faces[f as usize].map(|x| if x == v { landed } else { self.pos[x as usize] });
-            let (n0, n1) = (normal(before), normal(after));
+            let (n0, n1) = (triangle_area_normal(before), triangle_area_normal(after));
             n0.dot(n1) < cos_turn * n0.length() * n1.length()
         });
         (!turned).then_some(landed)
@@ -521,21 +525,6 @@ impl<'a> Net<'a> {
         creases.sort_unstable();
         (TriMesh::new(self.pos, self.faces), landing, creases)
     }
-}
-
-pub(super) fn normal(p: [DVec3; 3]) -> DVec3 {
-    (p[1] - p[0]).cross(p[2] - p[0])
-}
-
-/// `4 sqrt(3) area / sum of squared edges`: 1 for an equilateral triangle.
-pub(super) fn quality(p: [DVec3; 3]) -> f64 {
-    let edges = (p[1] - p[0]).length_squared()
-        + (p[2] - p[1]).length_squared()
-        + (p[0] - p[2]).length_squared();
-    if edges <= 0.0 {
-        return 0.0;
-    }
-    2.0 * 3f64.sqrt() * normal(p).length() / edges
 }
 
 #[cfg(test)]

@@ -395,10 +395,7 @@ pub(super) fn two_sided_rms(data: &[f64], samples: &[f64]) -> f64 {
 }
 
 pub(super) fn rms(e: &[f64]) -> f64 {
-    if e.is_empty() {
-        return 0.0;
-    }
-    (e.iter().map(|d| d * d).sum::<f64>() / e.len() as f64).sqrt()
+    two_sided_rms(e, &[])
 }
 
 /// The data's rim held on the surface's rim: each data point on the data's boundary keeps
