@@ -39,7 +39,7 @@ pub(crate) fn validate_object(
     o: &ObjectSection,
 ) -> Result<(), (&'static str, String, &'static str)> {
     let m = &o.merge;
-    let rules: [(bool, &'static str, f64, &'static str); 8] = [
+    let rules: [(bool, &'static str, f64, &'static str); 9] = [
         (
             m.cell.is_finite() && (0.0..=1.0).contains(&m.cell),
             "object.merge.cell",
@@ -69,6 +69,12 @@ pub(crate) fn validate_object(
             "object.merge.rim_weight",
             m.rim_weight,
             "must be in (0, 1]",
+        ),
+        (
+            m.fill_spacing_edges == 0.0 || (1.0..=16.0).contains(&m.fill_spacing_edges),
+            "object.merge.fill_spacing_edges",
+            m.fill_spacing_edges,
+            "must be 0 (vertices only) or 1..=16 (never denser than the scan)",
         ),
         (
             (0.1..=8.0).contains(&m.keep_cells),
@@ -116,6 +122,14 @@ mod tests {
             validate_object(&o).err().map(|e| e.0),
             Some("object.merge.cell")
         );
+        for bad in [0.1, f64::NAN, -2.0] {
+            let mut o = ObjectSection::default();
+            o.merge.fill_spacing_edges = bad;
+            assert_eq!(
+                validate_object(&o).err().map(|e| e.0),
+                Some("object.merge.fill_spacing_edges")
+            );
+        }
         let mut o = ObjectSection::default();
         o.merge.rim_overhang_cells = -1.0;
         assert_eq!(

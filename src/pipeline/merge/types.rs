@@ -29,6 +29,12 @@ pub struct MergeOptions {
     /// The weight of a scan's rim vertices (the ramp's start): where a view alone covers
     /// the object its rim still counts.
     pub rim_weight: f64,
+    /// Samples inside a scan's triangles with an edge over this many median edges (a
+    /// range grid's cell diagonal is 1.4: the triangles stretched where the view grazes
+    /// the object), at most that far apart; 0: the scan's vertices only. At 2, every point
+    /// of such a triangle lies within 1.15 edges of a sample, about `keep_cells` at
+    /// `cell_edges`, so the merge keeps its vertices there.
+    pub fill_spacing_edges: f64,
     /// Projections of each vertex onto the zero set.
     pub projections: usize,
     /// A merged vertex is kept only within this many cells of a sample: the surface stops
@@ -56,6 +62,7 @@ impl Default for MergeOptions {
             sigma_cells: 1.0,
             ramp_rings: 6,
             rim_weight: 0.05,
+            fill_spacing_edges: 2.0,
             projections: 2,
             keep_cells: 0.75,
             rim_overhang_cells: 0.0,
@@ -67,7 +74,8 @@ impl Default for MergeOptions {
 /// One scan's oriented samples in the object frame.
 #[derive(Clone, Debug, Default)]
 pub struct ScanSamples {
-    /// The points (the scan's vertices that some triangle uses).
+    /// The points (the scan's vertices that some triangle uses, then points inside its
+    /// stretched triangles).
     pub points: Vec<DVec3>,
     /// Their unit normals (area-weighted face normals; the scan's orientation).
     pub normals: Vec<DVec3>,

@@ -111,6 +111,9 @@ pub(super) fn refit(
     Some((matched.data, fit))
 }
 
+/// A local refit may fit its data at most this much worse (RMS) than the previous fit.
+const MAX_LOCAL_RMS_RISE: f64 = 1.1;
+
 /// The previous update's object fit, kept for the next local refit.
 pub(super) struct LastFit {
     pub fit: PatchFit,
@@ -148,6 +151,11 @@ impl LastFit {
             data_topology: info.data_topology,
             control_topology: info.control_topology,
         })
+    }
+
+    /// Why a local refit is not kept, if it is not (`fits_worse`).
+    pub(super) fn fits_worse(&self, local: &LocalFit) -> Option<String> {
+        fits_worse(&self.fit.geometric_errors, local.rounds.last().map(|r| r.0))
     }
 
     /// The refit's result in the form the worker's outputs read.
@@ -214,5 +222,44 @@ impl LastFit {
             scattered: None,
             planar_shown: None,
         }
+    }
+}
+
+/// Why a local refit whose last round left RMS `after` is not kept, if it is not: it fits
+/// the new data over `MAX_LOCAL_RMS_RISE` times worse than the previous fit (`before`, its
+/// points' distances) fitted its own. An update over the same ground (a scan replaced, its
+/// registration corrected) fits about as well from scratch, so a refit left well above it
+/// did not follow the change (the bunny's bun045 moved 30 um, before the merge sampled
+/// stretched triangles: 40.8 um locally, 35.0 um from scratch, 35.2 um before), and the
+/// whole fit runs.
+fn fits_worse(before: &[f64], after: Option<f64>) -> Option<String> {
+    let before = (before.iter().map(|e| e * e).sum::<f64>() / before.len().max(1) as f64).sqrt();
+    let after = after.unwrap_or(f64::INFINITY);
+    // Written so that a NaN refuses the refit.
+    let as_well = after <= MAX_LOCAL_RMS_RISE * before;
+    (!as_well).then(|| {
+        format!(
+            "the local refit fits the data with RMS {after:.3e}, over {MAX_LOCAL_RMS_RISE} \
+             times the previous fit's {before:.3e}"
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fits_worse;
+
+    #[test]
+    fn a_local_refit_fitting_clearly_worse_than_before_is_not_kept() {
+        let before = [3e-5, -4e-5, 3e-5, 4e-5]; // RMS 3.54e-5
+        assert_eq!(fits_worse(&before, Some(3.6e-5)), None);
+        assert_eq!(fits_worse(&before, Some(2e-5)), None);
+        let why = fits_worse(&before, Some(4.1e-5)).expect("refused");
+        assert!(
+            why.contains("4.100e-5") && why.contains("3.536e-5"),
+            "{why}"
+        );
+        assert!(fits_worse(&before, Some(f64::NAN)).is_some());
+        assert!(fits_worse(&before, None).is_some());
     }
 }

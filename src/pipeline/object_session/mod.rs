@@ -51,6 +51,10 @@ const UNCHANGED_SHARE_OF_CELL: f64 = 1e-3;
 /// the other, which no plane projection of the union keeps unfolded.
 const VIEW_SPREAD_DEG: f64 = 30.0;
 
+/// A local refit kept (with its summary), or why not (`None`: no reason worth reporting,
+/// the whole fit runs as for an update that never tried one).
+type LocalOutcome = Result<(FittedPatch, Option<LocalRefit>), Option<String>>;
+
 /// The previous surface is the start of the next fit only when at most this share of the
 /// merged cells appeared or went (a new version of a scan over the same ground).
 const WARM_MAX_COVERAGE_CHANGE: f64 = 0.05;
@@ -370,10 +374,17 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
-        let cold_because = self.why_cold(before.is_some(), coverage_change, &merged);
-        let (fitted, local) = match cold_because {
+        let mut cold_because = self.why_cold(before.is_some(), coverage_change, &merged);
+        let tried = match cold_because {
             None => self.refit_locally(&merged, &worker)?,
-            Some(_) => (self.fit_cold(&merged, &mut worker)?, None),
+            Some(_) => Err(None),
+        };
+        let (fitted, local) = match tried {
+            Ok(kept) => kept,
+            Err(why) => {
+                cold_because = cold_because.or(why);
+                (self.fit_cold(&merged, &mut worker)?, None)
+            }
         };
         times.fit_ms = ms_since(t);
         let path = if fitted.object.is_some() {
@@ -467,17 +478,14 @@ impl ObjectSession {
     }
 
     /// The local refit of the previous control mesh; from scratch if it finds no data on
-    /// the previous fit's ground.
+    /// the previous fit's ground. `Err(why)`: the refit is not kept, the whole fit runs.
     fn refit_locally(
         &self,
         merged: &Merged,
         worker: &WorkerConfig,
-    ) -> Result<(FittedPatch, Option<LocalRefit>), SessionError> {
+    ) -> Result<LocalOutcome, SessionError> {
         let t = Instant::now();
-        let cold = || -> Result<(FittedPatch, Option<LocalRefit>), SessionError> {
-            let mut worker = worker.clone();
-            Ok((self.fit_cold(merged, &mut worker)?, None))
-        };
+        let cold = || Ok(Err(None));
         // `why_cold` let only an object fit through: these fall back for safety alone.
         let Some(last) = self.last.as_ref() else {
             return cold();
@@ -507,13 +515,19 @@ impl ObjectSession {
         let Some(fitted) = fitted else {
             return cold();
         };
+        if let Some(why) = last.fits_worse(&fitted.1) {
+            return Ok(Err(Some(why)));
+        }
         let summary = LocalRefit {
             controls: fitted.1.free_controls.clone(),
             changed_points: fitted.1.changed_points,
             moving_points: fitted.1.moving_points,
             rounds: fitted.1.rounds.len() - 1,
         };
-        Ok((last.refitted(&fitted, budget, ms_since(t)), Some(summary)))
+        Ok(Ok((
+            last.refitted(&fitted, budget, ms_since(t)),
+            Some(summary),
+        )))
     }
 
     /// The worker's fit of the merged mesh, from the previous surface when the merged
