@@ -229,9 +229,9 @@ impl LastFit {
 /// the new data over `MAX_LOCAL_RMS_RISE` times worse than the previous fit (`before`, its
 /// points' distances) fitted its own. An update over the same ground (a scan replaced, its
 /// registration corrected) fits about as well from scratch, so a refit left well above it
-/// did not follow the change (the bunny's bun045 moved 30 um, before the merge sampled
-/// stretched triangles: 40.8 um locally, 35.0 um from scratch, 35.2 um before), and the
-/// whole fit runs.
+/// did not follow the change (the bunny's bun045 moved 30 um, merged with a trial
+/// weighting of the triangle fill that kept the topology: 40.8 um locally, 35.0 um from
+/// scratch, 35.2 um before), and the whole fit runs.
 fn fits_worse(before: &[f64], after: Option<f64>) -> Option<String> {
     let before = (before.iter().map(|e| e * e).sum::<f64>() / before.len().max(1) as f64).sqrt();
     let after = after.unwrap_or(f64::INFINITY);
