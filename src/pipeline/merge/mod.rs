@@ -3,9 +3,9 @@
 //!
 //! Each scan becomes oriented samples (its vertices in the object frame, their normals, a
 //! weight that ramps up from the scan's rim as VRIP's does, so that where a view ends the
-//! merged surface does not step; and points inside its stretched triangles, `samples`). All samples define one implicit function: at x, the
-//! weighted average over the samples near x of their signed distance along their own
-//! normal, `f(x) = sum w_i n_i.(x - p_i) / sum w_i` (Gaussian weights in the distance,
+//! merged surface does not step; and points inside its stretched triangles, `samples`).
+//! All samples define one implicit function: at x, the weighted average over the samples
+//! near x of their signed distance along their own normal, `f(x) = sum w_i n_i.(x - p_i) / sum w_i` (Gaussian weights in the distance,
 //! only the samples of the sheet the nearest sample is on, so that the two sides of a
 //! thin part do not average; Kolluri's and Alexa et al.'s moving-least-squares surfaces).
 //! Its zero set is extracted by surface nets on a fixed grid of cells (the origin and

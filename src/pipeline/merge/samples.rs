@@ -13,6 +13,7 @@
 
 use super::types::{MergeOptions, ScanSamples};
 use crate::mesh::rigid::RigidTransform;
+use crate::mesh::triangle_area_normal;
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::{FxHashMap, FxHashSet};
@@ -30,8 +31,7 @@ pub fn scan_samples(
     let valid = |t: &&[u32; 3]| t.iter().all(|&v| (v as usize) < n);
     let mut normals = vec![DVec3::ZERO; n];
     for t in mesh.triangles.iter().filter(valid) {
-        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-        let area_normal = (b - a).cross(c - a);
+        let area_normal = triangle_area_normal(t.map(|v| mesh.positions[v as usize]));
         for &v in t {
             normals[v as usize] += area_normal;
         }
@@ -57,7 +57,11 @@ pub fn scan_samples(
             })
         })
         .collect();
-    let mut samples = ScanSamples::default();
+    let mut samples = ScanSamples {
+        spacing: median_edge(mesh),
+        ..ScanSamples::default()
+    };
+    let spacing = samples.spacing;
     let mut push = |c: Corner| {
         samples.points.push(transform.apply(c.point));
         samples.normals.push(transform.apply_vector(c.normal));
@@ -67,8 +71,8 @@ pub fn scan_samples(
         push(*corner);
     }
     if opts.fill_spacing_edges > 0.0 {
-        let spacing = opts.fill_spacing_edges * median_edge(mesh);
-        fill_stretched_triangles(mesh, &corners, spacing, &mut push);
+        let fill_spacing = opts.fill_spacing_edges * spacing;
+        fill_stretched_triangles(mesh, &corners, fill_spacing, &mut push);
     }
     samples
 }

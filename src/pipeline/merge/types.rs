@@ -81,6 +81,8 @@ pub struct ScanSamples {
     pub normals: Vec<DVec3>,
     /// Their weights in (0, 1]: `rim_weight` on the rim, 1 from `ramp_rings` rings in.
     pub weights: Vec<f64>,
+    /// The scan mesh's median edge length, its sampling spacing (0 without edges).
+    pub spacing: f64,
 }
 
 /// The merged data: one vertex per crossed grid cell, triangulated by surface nets.

@@ -155,7 +155,7 @@ impl LastFit {
 
     /// Why a local refit is not kept, if it is not (`fits_worse`).
     pub(super) fn fits_worse(&self, local: &LocalFit) -> Option<String> {
-        fits_worse(&self.fit.geometric_errors, local.rounds.last().map(|r| r.0))
+        fits_worse(self.fit.geometric_rms(), local.rounds.last().map(|r| r.0))
     }
 
     /// The refit's result in the form the worker's outputs read.
@@ -226,14 +226,13 @@ impl LastFit {
 }
 
 /// Why a local refit whose last round left RMS `after` is not kept, if it is not: it fits
-/// the new data over `MAX_LOCAL_RMS_RISE` times worse than the previous fit (`before`, its
-/// points' distances) fitted its own. An update over the same ground (a scan replaced, its
+/// the new data over `MAX_LOCAL_RMS_RISE` times worse than the previous fit (RMS `before`)
+/// fitted its own. An update over the same ground (a scan replaced, its
 /// registration corrected) fits about as well from scratch, so a refit left well above it
 /// did not follow the change (the bunny's bun045 moved 30 um, merged with a trial
 /// weighting of the triangle fill that kept the topology: 40.8 um locally, 35.0 um from
 /// scratch, 35.2 um before), and the whole fit runs.
-fn fits_worse(before: &[f64], after: Option<f64>) -> Option<String> {
-    let before = (before.iter().map(|e| e * e).sum::<f64>() / before.len().max(1) as f64).sqrt();
+fn fits_worse(before: f64, after: Option<f64>) -> Option<String> {
     let after = after.unwrap_or(f64::INFINITY);
     // Written so that a NaN refuses the refit.
     let as_well = after <= MAX_LOCAL_RMS_RISE * before;
@@ -251,15 +250,15 @@ mod tests {
 
     #[test]
     fn a_local_refit_fitting_clearly_worse_than_before_is_not_kept() {
-        let before = [3e-5, -4e-5, 3e-5, 4e-5]; // RMS 3.54e-5
-        assert_eq!(fits_worse(&before, Some(3.6e-5)), None);
-        assert_eq!(fits_worse(&before, Some(2e-5)), None);
-        let why = fits_worse(&before, Some(4.1e-5)).expect("refused");
+        let before = 3.5355339e-5;
+        assert_eq!(fits_worse(before, Some(3.6e-5)), None);
+        assert_eq!(fits_worse(before, Some(2e-5)), None);
+        let why = fits_worse(before, Some(4.1e-5)).expect("refused");
         assert!(
             why.contains("4.100e-5") && why.contains("3.536e-5"),
             "{why}"
         );
-        assert!(fits_worse(&before, Some(f64::NAN)).is_some());
-        assert!(fits_worse(&before, None).is_some());
+        assert!(fits_worse(before, Some(f64::NAN)).is_some());
+        assert!(fits_worse(before, None).is_some());
     }
 }

@@ -27,7 +27,7 @@ pub use measure::{distance_stats, surface_mesh, surface_points_at_data, Distance
 use crate::mesh::rigid::RigidTransform;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::pipeline::merge::{
-    median_edge, scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
+    scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
 use crate::pipeline::object::LocalOptions;
 use crate::pipeline::object::{fitted_topology, ObjectOptions, RoundStop};
@@ -251,7 +251,7 @@ impl ObjectSession {
         let mut staged = Vec::with_capacity(scans.len());
         for &(id, mesh, transform) in scans {
             let samples = scan_samples(mesh, &transform, &self.opts.merge);
-            let spacing = median_edge(mesh);
+            let spacing = samples.spacing;
             if samples.points.is_empty() || spacing <= 0.0 || !spacing.is_finite() {
                 return Err(SessionError::EmptyScan { id: id.into() });
             }
