@@ -27,7 +27,8 @@
 //! Beside 3, bun_zipper's vertices are split by whether the merged data already misses
 //! them (the merge's fault) or only the surface does (the fit's). `OBJ_SESSION_MERGE_ONLY=1`
 //! runs only the merge of all scans against bun_zipper (no fit), `OBJ_SESSION_FORWARD_ONLY=1`
-//! only the updates in arrival order; `OBJ_SESSION_DUMP=FILE`
+//! only the updates in arrival order, `OBJ_SESSION_REPLACE_ONLY=1` those and the new
+//! version of bun045; `OBJ_SESSION_DUMP=FILE`
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
@@ -147,6 +148,9 @@ fn main() {
         return;
     }
     replacement(&scans, &mut session, &opts);
+    if std::env::var("OBJ_SESSION_REPLACE_ONLY").is_ok() {
+        return;
+    }
     println!("\n== each scan's points: to the surface vs to bun_zipper");
     let surface = surface_mesh(&forward);
     let mut ratios = Vec::new();
@@ -339,6 +343,7 @@ fn replacement(scans: &[Scan], session: &mut ObjectSession, opts: &SessionOption
         match s.add_scan(id, mesh, corrected) {
             Ok(u) => {
                 println!("{label:5} {}", describe(id, &u, process_cpu_ms() - cpu));
+                check_merge(s, opts, &u);
                 fits.push(u.fit);
             }
             Err(e) => eprintln!("{label}: {e}"),

@@ -9,16 +9,20 @@
 //! squared-distance rounds like the whole-object fit's (point-to-plane with a small
 //! tangential share, the umbrella fairness), with the fixed controls' share of every row
 //! moved to the right-hand side. The whole fit's surface-to-data samples are taken on the
-//! moving faces when the data mesh is given. Not done here: the whole fit's holding of the
-//! data's rim on the surface's boundary curve, which is why a change over much of the
-//! control mesh goes to the whole fit instead (`version`).
+//! moving faces when the data mesh is given, and with `hold_rim` the moving data's rim is
+//! held on the surface's boundary curve and weighed as in a whole fit (an object session's
+//! refits, where a scan's rim moves with its registration; a new version of an object
+//! refitted by `version` does not hold it, and a change over much of its control mesh
+//! goes to the whole fit instead).
 
 use super::model::{ObjectOptions, RoundStop, MAX_REFUSALS};
-use super::solve::{Rim, Samples};
+
+use super::solve::{near_boundary, FeetMut, Rim, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
 use crate::mesh::distance::MeshDistance;
+use crate::mesh::topology::Topology;
 use crate::pipeline::geometric::foot_point;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
@@ -40,6 +44,14 @@ pub(crate) struct LocalOptions {
     /// refitted locally honours the budget and the time limit as a whole fit, which always
     /// takes its first fit, does.
     pub stop: RoundStop,
+    /// With the data mesh: hold the moving data's rim on the surface's boundary curve and
+    /// weigh the rim and the band next to it as a whole fit does (`tangential_edge`,
+    /// `edge_rings`), so that a refit follows a rim that moved.
+    pub hold_rim: bool,
+    /// Share of the point-to-point term within `edge_rings` rings of the data's rim.
+    pub tangential_edge: f64,
+    /// Width of that band in vertex rings.
+    pub edge_rings: usize,
 }
 
 impl LocalOptions {
@@ -51,6 +63,9 @@ impl LocalOptions {
             tangential: opts.tangential,
             smoothing: opts.smoothing,
             stop: opts.stop.clone(),
+            hold_rim: false,
+            tangential_edge: opts.tangential_edge,
+            edge_rings: opts.edge_rings,
         }
     }
 }
@@ -93,6 +108,66 @@ impl LocalFeet {
             self.params[i] = param;
             self.normals[i] = normal;
             self.errors[i] = distance;
+        }
+    }
+}
+
+/// The data's rim held on the surface's boundary curve in a local refit, and each data
+/// point's class for its point-to-point share.
+struct RimHold {
+    rim: Rim,
+    /// Per data point: 2 on the rim, 1 within the band next to it, 0 elsewhere.
+    class: Vec<u8>,
+}
+
+impl RimHold {
+    fn of(
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        mesh: &TriMesh,
+        rings: usize,
+    ) -> Option<Self> {
+        let control_mesh = TriMesh {
+            positions: controls.to_vec(),
+            triangles: surface.faces().to_vec(),
+        };
+        let twins = Topology::from_mesh(&control_mesh).ok()?.twin;
+        let on_rim = near_boundary(mesh, 0);
+        let band = near_boundary(mesh, rings);
+        let class = on_rim
+            .iter()
+            .zip(&band)
+            .map(|(&r, &b)| if r { 2 } else { u8::from(b) })
+            .collect();
+        Some(Self {
+            rim: Rim::new(&twins, &on_rim),
+            class,
+        })
+    }
+
+    fn hold(
+        &self,
+        feet: &mut LocalFeet,
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        data: &[DVec3],
+        moving: &[bool],
+    ) {
+        let parts = FeetMut {
+            params: &mut feet.params,
+            normals: &mut feet.normals,
+            distances: &mut feet.errors,
+        };
+        self.rim
+            .hold_where(parts, surface, controls, data, Some(moving));
+    }
+
+    /// Point `i`'s point-to-point share in a round of share `share`, as a whole fit's.
+    fn share(&self, i: usize, share: f64, edge_factor: f64) -> f64 {
+        match self.class.get(i) {
+            Some(2) => 1.0,
+            Some(1) => share * edge_factor,
+            _ => share,
         }
     }
 }
@@ -169,7 +244,20 @@ pub(crate) fn refit_around(
     let moving: Vec<usize> = (0..n)
         .filter(|&i| moving_face[feet.params[i].face as usize])
         .collect();
-    feet.find(surface, &controls, data, &moving);
+    let hold = data_mesh
+        .filter(|m| opts.hold_rim && m.positions.len() == n)
+        .and_then(|m| RimHold::of(surface, &controls, m, opts.edge_rings));
+    let mut is_moving = vec![false; n];
+    for &i in &moving {
+        is_moving[i] = true;
+    }
+    let find = |feet: &mut LocalFeet, controls: &[DVec3]| {
+        feet.find(surface, controls, data, &moving);
+        if let Some(h) = &hold {
+            h.hold(feet, surface, controls, data, &is_moving);
+        }
+    };
+    find(&mut feet, &controls);
     let mut rounds = vec![rms_of(&feet.errors, &moving)];
 
     let column: Vec<Option<u32>> = {
@@ -218,12 +306,20 @@ pub(crate) fn refit_around(
             ),
             None => Samples::none(),
         };
+        let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
+        let shares: Vec<f64> = moving
+            .iter()
+            .map(|&i| match &hold {
+                Some(h) => h.share(i, share, edge_factor),
+                None => share,
+            })
+            .collect();
         let solved = system.solve(
             data,
             (&moving, &feet),
             &samples,
             &controls,
-            share,
+            (share, &shares),
             &mut pattern,
         );
         let Some(solved) = solved else {
@@ -238,7 +334,7 @@ pub(crate) fn refit_around(
             normals: feet.normals.clone(),
             errors: feet.errors.clone(),
         };
-        trial.find(surface, &next, data, &moving);
+        find(&mut trial, &next);
         let before = rounds[rounds.len() - 1].0;
         let (after, max) = rms_of(&trial.errors, &moving);
         if after.is_nan() || after >= before {
@@ -330,7 +426,7 @@ impl System<'_> {
         (moving, feet): (&[usize], &LocalFeet),
         samples: &Samples,
         controls: &[DVec3],
-        share: f64,
+        (share, shares): (f64, &[f64]),
         pattern: &mut CholeskyPattern,
     ) -> Option<Vec<DVec3>> {
         let mut basis = Csr {
@@ -359,12 +455,12 @@ impl System<'_> {
             (target - fixed) * scale
         };
         let mut row = Vec::new();
-        for &i in moving {
+        for (&i, &point_share) in moving.iter().zip(shares) {
             self.surface.basis_row(feet.params[i], &mut row);
             let mut entries = row.iter().copied().filter(|e| e.1 != 0.0);
             targets.push(push_row(&mut entries, data[i], 1.0, &mut basis));
             normals.push(feet.normals[i]);
-            tangential.push(share);
+            tangential.push(point_share);
         }
         for ((&param, &target), &normal) in samples
             .params

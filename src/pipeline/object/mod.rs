@@ -51,7 +51,7 @@ pub use model::{
 };
 use refine::{faces_beyond, refined_mesh, Fitted};
 pub use refine::{RefineOptions, RefineRound};
-use solve::{point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
+use solve::{near_boundary, point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
@@ -534,28 +534,4 @@ fn shares(near_edge: &[bool], on_rim: &[bool], share: f64, edge_factor: f64) -> 
             (false, false) => share,
         })
         .collect()
-}
-
-/// Per vertex: whether it lies within `rings` rings of the mesh's boundary.
-fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
-    let Ok(topo) = Topology::from_mesh(mesh) else {
-        return vec![false; mesh.positions.len()];
-    };
-    let mut near = topo.boundary.clone();
-    let mut front: Vec<u32> = (0..mesh.positions.len() as u32)
-        .filter(|&v| near[v as usize])
-        .collect();
-    for _ in 0..rings {
-        let mut next = Vec::new();
-        for &v in &front {
-            for &x in topo.ring(v) {
-                if !near[x as usize] {
-                    near[x as usize] = true;
-                    next.push(x);
-                }
-            }
-        }
-        front = next;
-    }
-    near
 }

@@ -9,6 +9,7 @@ use crate::fit::distance::{
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
 use crate::mesh::distance::MeshDistance;
+use crate::mesh::topology::Topology;
 use crate::pipeline::geometric::foot_point;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
@@ -411,6 +412,13 @@ pub(super) struct Rim {
     points: Vec<usize>,
 }
 
+/// Feet held by their parts (a whole fit's `Feet`, a local refit's `LocalFeet`).
+pub(super) struct FeetMut<'a> {
+    pub params: &'a mut [SurfaceParam],
+    pub normals: &'a mut [DVec3],
+    pub distances: &'a mut [f64],
+}
+
 /// Gauss-Newton steps along a boundary edge.
 const RIM_STEPS: usize = 4;
 
@@ -453,9 +461,31 @@ impl Rim {
         controls: &[DVec3],
         data: &[DVec3],
     ) {
+        let feet = FeetMut {
+            params: &mut feet.params,
+            normals: &mut feet.normals,
+            distances: &mut feet.distances,
+        };
+        self.hold_where(feet, surface, controls, data, None);
+    }
+
+    /// [`Rim::hold`] over the feet given, for the rim points `only` marks (all without).
+    pub(super) fn hold_where(
+        &self,
+        feet: FeetMut,
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        data: &[DVec3],
+        only: Option<&[bool]>,
+    ) {
         let evaluate = surface.evaluator(controls);
-        let held: Vec<Option<(SurfaceParam, DVec3, f64)>> = self
+        let points: Vec<usize> = self
             .points
+            .iter()
+            .copied()
+            .filter(|&p| only.is_none_or(|o| o.get(p) == Some(&true)))
+            .collect();
+        let held: Vec<Option<(SurfaceParam, DVec3, f64)>> = points
             .par_iter()
             .map(|&p| {
                 let param = feet.params[p];
@@ -476,7 +506,7 @@ impl Rim {
                     .map(|(at, n, d)| (at, n.unwrap_or(feet.normals[p]), d))
             })
             .collect();
-        for (&p, h) in self.points.iter().zip(held) {
+        for (&p, h) in points.iter().zip(held) {
             if let Some((param, n, dist)) = h {
                 feet.params[p] = param;
                 feet.normals[p] = n;
@@ -538,4 +568,28 @@ fn hold_on_edge(
     }
     let n = d.du.cross(d.dv).try_normalize();
     Some((at(t), n, (d.position - q).length()))
+}
+
+/// Per vertex: whether it lies within `rings` rings of the mesh's boundary.
+pub(super) fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
+    let Ok(topo) = Topology::from_mesh(mesh) else {
+        return vec![false; mesh.positions.len()];
+    };
+    let mut near = topo.boundary.clone();
+    let mut front: Vec<u32> = (0..mesh.positions.len() as u32)
+        .filter(|&v| near[v as usize])
+        .collect();
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &front {
+            for &x in topo.ring(v) {
+                if !near[x as usize] {
+                    near[x as usize] = true;
+                    next.push(x);
+                }
+            }
+        }
+        front = next;
+    }
+    near
 }

@@ -7,18 +7,27 @@
 //! as the start, a cell that appeared starts from a neighbouring cell's foot point, a cell
 //! that went loses its point. A point whose position changed or appeared is a changed
 //! point of the refit.
+//!
+//! A local refit keeps the control mesh, so it is judged before it is kept: the data's
+//! topology (no handle made or lost, no hole opened), every point on the previous fit's
+//! ground, and the result (RMS, largest error and stray from the data against the
+//! previous fit); otherwise the whole fit runs.
 
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
+use crate::mesh::clean::CleanOptions;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::pipeline::merge::{CellKey, Merged};
 use crate::pipeline::object::{
-    free_controls, refit_around, LayoutReport, LocalFeet, LocalFit, LocalOptions, ObjectTimes,
-    RoundReport,
+    fitted_component, free_controls, refit_around, LayoutReport, LocalFeet, LocalFit, LocalOptions,
+    ObjectTimes, RoundReport,
 };
-use crate::pipeline::worker::{FittedPatch, ObjectInfo, WarmDecision};
+use crate::pipeline::worker::{
+    stray_refusal, FittedPatch, ObjectInfo, WarmDecision, MAX_STRAY_GROWTH, MAX_STRAY_SHARE,
+};
 use crate::pipeline::{PatchFit, SurfaceModel};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::SurfaceParam;
+use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 
@@ -31,6 +40,8 @@ pub(super) struct Previous<'a> {
     pub errors: &'a [f64],
     /// Each previous data point's merge cell.
     pub cells: &'a [CellKey],
+    /// The topology of the data the control mesh was built or last refitted for.
+    pub topology: &'a SurfaceTopology,
 }
 
 /// The new data matched to the previous fit by cell.
@@ -39,6 +50,8 @@ struct Matched {
     params: Vec<SurfaceParam>,
     /// The previous point each point was matched to, `None` for a changed one.
     same_as: Vec<Option<usize>>,
+    /// Points with no previous point in or beside their cell: new ground.
+    left_out: usize,
 }
 
 fn match_data(previous: &Previous, cells: &[CellKey], positions: &[DVec3]) -> Matched {
@@ -52,12 +65,14 @@ fn match_data(previous: &Previous, cells: &[CellKey], positions: &[DVec3]) -> Ma
         data: Vec::with_capacity(positions.len()),
         params: Vec::with_capacity(positions.len()),
         same_as: Vec::with_capacity(positions.len()),
+        left_out: 0,
     };
     for (c, p) in cells.iter().zip(positions) {
         let kept = old.get(c).copied();
         // A new cell with no previous neighbour lies off the ground the control mesh
-        // covers (or on a part the previous fit's cleaning left out): it is left out.
+        // covers: it is left out, and counted.
         let Some(k) = kept.or_else(|| neighbours(*c).find_map(|n| old.get(&n).copied())) else {
+            m.left_out += 1;
             continue;
         };
         m.data.push(*p);
@@ -74,19 +89,85 @@ fn neighbours(c: CellKey) -> impl Iterator<Item = CellKey> {
         .map(move |k| [c[0] + k % 3 - 1, c[1] + (k / 3) % 3 - 1, c[2] + k / 9 - 1])
 }
 
-/// Refits the controls around the data that changed (see the module docs); `None` when no
-/// point of the new merge lies on ground the previous fit covered. Returns the matched data
-/// with the fit.
+/// The data a local refit fits: the merge's cleaned largest part, as the whole fit takes
+/// it (the previous fit's points came from there), with each vertex's merge cell. The
+/// bits cleaning drops (small parts, non-manifold spots of the surface nets) can lie
+/// millimetres off the surface: matched by cell with the rest, they made the bunny's
+/// re-registered bun045 (30 um) start its refit at 85 um RMS, max 3.9 mm (cleaned:
+/// 36 um, 1.5 mm).
+pub(super) struct LocalData {
+    pub cells: Vec<CellKey>,
+    pub mesh: TriMesh,
+    pub topology: SurfaceTopology,
+}
+
+impl LocalData {
+    /// `None` when cleaning leaves nothing, or no manifold surface.
+    pub(super) fn of(merged: &Merged) -> Option<LocalData> {
+        let mesh = fitted_component(&merged.mesh, &CleanOptions::default())?;
+        let topology = SurfaceTopology::of(&mesh).ok()?;
+        let cells = cells_of(&mesh.positions, merged)?;
+        Some(LocalData {
+            cells,
+            mesh,
+            topology,
+        })
+    }
+}
+
+/// Each position's merge cell, read off the merge by position (cleaning keeps the
+/// positions of what it keeps); `None` when one is not a merged vertex.
+fn cells_of(positions: &[DVec3], merged: &Merged) -> Option<Vec<CellKey>> {
+    let bits = |p: &DVec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+    let cell_at: FxHashMap<[u64; 3], CellKey> = merged
+        .mesh
+        .positions
+        .iter()
+        .zip(&merged.cells)
+        .map(|(p, c)| (bits(p), *c))
+        .collect();
+    positions
+        .iter()
+        .map(|p| cell_at.get(&bits(p)).copied())
+        .collect()
+}
+
+/// Why the data's topology now (`now`) rules out a local refit of the control mesh built
+/// for `before`, if it does: a handle made or lost, or a hole opened, which the kept
+/// control mesh would span. A hole the data closed is no reason by itself (the
+/// bunny's small holes at grazing rims close and open with a 30 um shift of one view):
+/// where the kept control mesh still has it, the data there lies off the surface, and the
+/// refit's largest error says so (`largest_error_refusal`).
+fn topology_refusal(before: &SurfaceTopology, now: &SurfaceTopology) -> Option<String> {
+    (now.genus != before.genus || now.boundary_loops > before.boundary_loops).then(|| {
+        format!(
+            "topology changed: genus {}, {} boundary loops (were {}, {})",
+            now.genus, now.boundary_loops, before.genus, before.boundary_loops
+        )
+    })
+}
+
+/// Refits the controls around the data that changed (see the module docs) and returns the
+/// matched data with the fit; why not, when every point of the new data is not on the
+/// previous fit's ground or its topology rules the refit out.
 pub(super) fn refit(
     previous: &Previous,
-    cells: &[CellKey],
-    positions: &[DVec3],
+    data: &LocalData,
     opts: &LocalOptions,
-) -> Option<(Vec<DVec3>, LocalFit)> {
-    let matched = match_data(previous, cells, positions);
+) -> Result<(Vec<DVec3>, LocalFit), String> {
+    if let Some(why) = topology_refusal(previous.topology, &data.topology) {
+        return Err(why);
+    }
+    let matched = match_data(previous, &data.cells, &data.mesh.positions);
+    if matched.left_out > 0 {
+        return Err(format!(
+            "{} points lie on new ground (no previous point within a merge cell)",
+            matched.left_out
+        ));
+    }
     let n = matched.data.len();
     if n == 0 {
-        return None;
+        return Err("no data".into());
     }
     let surface = previous.surface;
     let errors = matched
@@ -102,13 +183,14 @@ pub(super) fn refit(
         surface,
         previous.controls,
         &matched.data,
-        None,
+        // Every matched point is a vertex of the data mesh (none was left out).
+        Some(&data.mesh),
         feet,
         changed.len(),
         &free,
         opts,
     );
-    Some((matched.data, fit))
+    Ok((matched.data, fit))
 }
 
 /// A local refit may fit its data at most this much worse (RMS) than the previous fit.
@@ -131,20 +213,7 @@ impl LastFit {
         if !matches!(fitted.fit.model, SurfaceModel::Mesh(_)) {
             return None;
         }
-        let bits = |p: &DVec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
-        let cell_at: FxHashMap<[u64; 3], CellKey> = merged
-            .mesh
-            .positions
-            .iter()
-            .zip(&merged.cells)
-            .map(|(p, c)| (bits(p), *c))
-            .collect();
-        let cells = fitted
-            .fit
-            .data
-            .iter()
-            .map(|p| cell_at.get(&bits(p)).copied())
-            .collect::<Option<Vec<CellKey>>>()?;
+        let cells = cells_of(&fitted.fit.data, merged)?;
         Some(LastFit {
             fit: fitted.fit.clone(),
             cells,
@@ -153,15 +222,37 @@ impl LastFit {
         })
     }
 
-    /// Why a local refit is not kept, if it is not (`fits_worse`).
-    pub(super) fn fits_worse(&self, local: &LocalFit) -> Option<String> {
+    /// Why a local refit of `surface` to `data` is not kept, if it is not: it fits the
+    /// data clearly worse than the previous fit did (`fits_worse`), leaves a point off the
+    /// surface by more than the stray guard lets the surface leave the data
+    /// (`largest_error_refusal`), or strays from the data (`worker::stray_refusal`).
+    pub(super) fn refusal(
+        &self,
+        surface: &LoopLimitSurface,
+        local: &LocalFit,
+        data: &TriMesh,
+    ) -> Option<String> {
+        let largest = |e: &[f64]| e.iter().copied().fold(0.0, f64::max);
         fits_worse(self.fit.geometric_rms(), local.rounds.last().map(|r| r.0))
+            .or_else(|| {
+                largest_error_refusal(
+                    largest(&self.fit.geometric_errors),
+                    largest(&local.errors),
+                    data.bounds_diagonal(),
+                )
+            })
+            .or_else(|| {
+                stray_refusal(surface, &local.controls, data, &self.fit.controls, || {
+                    Some(surface)
+                })
+            })
     }
 
     /// The refit's result in the form the worker's outputs read.
     pub(super) fn refitted(
         &self,
         (data, local): &(Vec<DVec3>, LocalFit),
+        data_topology: SurfaceTopology,
         budget: Budget,
         fit_ms: f64,
     ) -> FittedPatch {
@@ -195,7 +286,7 @@ impl LastFit {
         let info = ObjectInfo {
             reason: "local refit of the previous control mesh".into(),
             warm: WarmDecision::Used,
-            data_topology: self.data_topology,
+            data_topology,
             control_topology: self.control_topology,
             rounds: local
                 .rounds
@@ -244,9 +335,32 @@ fn fits_worse(before: f64, after: Option<f64>) -> Option<String> {
     })
 }
 
+/// Why a local refit whose largest error is `after` is not kept (the previous fit's was
+/// `before`, the data's bounding-box diagonal is `diagonal`), if it is not: the stray
+/// guard's rule the other way round, data to surface instead of surface to data (over
+/// `MAX_STRAY_SHARE` of the diagonal and over `MAX_STRAY_GROWTH` times the previous).
+/// Data covering a hole the kept control mesh still has (the data's topology may lose
+/// holes, `topology_refusal`) lies off the surface by about the hole's radius.
+fn largest_error_refusal(before: f64, after: f64, diagonal: f64) -> Option<String> {
+    let allowed = (MAX_STRAY_GROWTH * before).max(MAX_STRAY_SHARE * diagonal);
+    // Written so that a NaN refuses the refit.
+    let within = after <= allowed;
+    (!within).then(|| {
+        format!(
+            "the local refit leaves a data point {after:.3e} off the surface (the previous \
+             fit {before:.3e}; at most {allowed:.3e}, {MAX_STRAY_SHARE} of the bounding-box \
+             diagonal or {MAX_STRAY_GROWTH} times the previous)"
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
-    use super::fits_worse;
+    use super::{fits_worse, largest_error_refusal, topology_refusal, LocalData};
+    use crate::mesh::simplify::SurfaceTopology;
+    use crate::pipeline::merge::Merged;
+    use crate::TriMesh;
+    use glam::DVec3;
 
     #[test]
     fn a_local_refit_fitting_clearly_worse_than_before_is_not_kept() {
@@ -260,5 +374,90 @@ mod tests {
         );
         assert!(fits_worse(before, Some(f64::NAN)).is_some());
         assert!(fits_worse(before, None).is_some());
+    }
+
+    #[test]
+    fn a_local_refit_leaving_a_point_far_off_is_not_kept() {
+        let diagonal = 0.25;
+        // Within 1.5 times the previous largest error, or within 0.5 % of the diagonal.
+        assert_eq!(largest_error_refusal(5.6e-4, 8.3e-4, diagonal), None);
+        assert_eq!(largest_error_refusal(1e-4, 1.2e-3, diagonal), None);
+        // Beyond both: data over a hole the kept control mesh still has.
+        let why = largest_error_refusal(5.6e-4, 2.4e-3, diagonal).expect("refused");
+        assert!(why.contains("2.400e-3"), "{why}");
+        assert!(largest_error_refusal(5.6e-4, f64::NAN, diagonal).is_some());
+    }
+
+    fn topology(loops: usize, genus: i64) -> SurfaceTopology {
+        SurfaceTopology {
+            euler: 2 - 2 * genus - loops as i64,
+            boundary_loops: loops,
+            components: 1,
+            genus,
+        }
+    }
+
+    #[test]
+    fn a_local_refit_is_ruled_out_by_a_new_hole_or_handle_not_by_a_closed_hole() {
+        let before = topology(32, 0);
+        // Small holes at grazing rims closed (the bunny's re-registered bun045: 32 -> 29).
+        assert_eq!(topology_refusal(&before, &topology(29, 0)), None);
+        assert_eq!(topology_refusal(&before, &before), None);
+        // A hole opened: the kept control mesh would span it.
+        assert!(topology_refusal(&before, &topology(33, 0)).is_some());
+        // A handle made or lost.
+        assert!(topology_refusal(&before, &topology(32, 1)).is_some());
+        assert!(topology_refusal(&topology(2, 1), &topology(2, 0)).is_some());
+    }
+
+    /// A grid of `n` x `n` vertices in the plane z = 0 with spacing 1, its cells (x, y, 0).
+    fn grid(n: u32) -> (Vec<DVec3>, Vec<[u32; 3]>, Vec<[i32; 3]>) {
+        let mut positions = Vec::new();
+        let mut cells = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                positions.push(DVec3::new(i as f64, j as f64, 0.0));
+                cells.push([i as i32, j as i32, 0]);
+            }
+        }
+        let mut triangles = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = j * n + i;
+                triangles.push([v, v + 1, v + n + 1]);
+                triangles.push([v, v + n + 1, v + n]);
+            }
+        }
+        (positions, triangles, cells)
+    }
+
+    /// A loose bit of the merge beside the object (a cell away) is not matched into a
+    /// local refit: the whole fit's cleaning drops it, so the previous fit never had it.
+    #[test]
+    fn the_local_data_is_the_merges_cleaned_largest_part_with_its_cells() {
+        let (mut positions, mut triangles, mut cells) = grid(6);
+        let loose = positions.len() as u32;
+        positions.extend([
+            DVec3::new(6.0, 0.0, 1.0),
+            DVec3::new(7.0, 0.0, 1.0),
+            DVec3::new(6.0, 1.0, 1.0),
+        ]);
+        cells.extend([[6, 0, 1], [7, 0, 1], [6, 1, 1]]);
+        triangles.push([loose, loose + 1, loose + 2]);
+        let merged = Merged {
+            mesh: TriMesh {
+                positions,
+                triangles,
+            },
+            cells,
+            ..Default::default()
+        };
+        let data = LocalData::of(&merged).expect("a manifold part");
+        assert_eq!(data.mesh.positions.len(), 36);
+        assert_eq!(data.cells.len(), 36);
+        assert_eq!(data.topology.boundary_loops, 1);
+        for (p, c) in data.mesh.positions.iter().zip(&data.cells) {
+            assert_eq!([p.x as i32, p.y as i32, 0], *c);
+        }
     }
 }

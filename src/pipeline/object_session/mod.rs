@@ -11,8 +11,9 @@
 //! disk-like data, the control mesh once it closes); views from further apart wrap around
 //! the object, and a union that wraps around folds on every plane even while it is a disk,
 //! so the control mesh takes it. When the merged data covers the same ground as before
-//! (`WARM_MAX_COVERAGE_CHANGE`, same topology), the session refits the previous control
-//! mesh locally itself (`local`). Otherwise the previous fit goes to the worker as its warm
+//! (`WARM_MAX_COVERAGE_CHANGE`; no handle made or lost, no hole opened), the session
+//! refits the previous control mesh locally itself (`local`), and keeps that refit only
+//! when it fits and stays on the data as well as the previous fit. Otherwise the previous fit goes to the worker as its warm
 //! start: the worker extends the previous control mesh over new ground that joins its rim
 //! (`object::extend_over_new_ground`: the previous faces kept, the new region simplified
 //! and stitched on, only the controls there and around the seam solved), and fits from
@@ -25,19 +26,18 @@ mod measure;
 pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
 
 use crate::mesh::rigid::RigidTransform;
-use crate::mesh::simplify::SurfaceTopology;
 use crate::pipeline::merge::{
     scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
 };
 use crate::pipeline::object::LocalOptions;
-use crate::pipeline::object::{fitted_topology, ObjectOptions, RoundStop};
+use crate::pipeline::object::{ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
 use glam::DVec3;
-use local::{LastFit, Previous};
+use local::{LastFit, LocalData, Previous};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -374,7 +374,7 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
-        let mut cold_because = self.why_cold(before.is_some(), coverage_change, &merged);
+        let mut cold_because = self.why_cold(before.is_some(), coverage_change);
         let tried = match cold_because {
             None => self.refit_locally(&merged, &worker)?,
             Some(_) => Err(None),
@@ -456,13 +456,14 @@ impl ObjectSession {
     }
 
     /// Why this update cannot refit the previous control mesh locally (`None`: it can).
-    fn why_cold(&self, same_grid: bool, coverage_change: f64, merged: &Merged) -> Option<String> {
+    /// The topology and the result are judged by the refit itself (`local`).
+    fn why_cold(&self, same_grid: bool, coverage_change: f64) -> Option<String> {
         if self.opts.cold {
             return Some("cold updates asked for".into());
         }
-        let Some(last) = self.last.as_ref() else {
+        if self.last.is_none() {
             return Some("no previous object fit".into());
-        };
+        }
         if !same_grid {
             return Some("the merge cell changed".into());
         }
@@ -472,13 +473,11 @@ impl ObjectSession {
                 100.0 * coverage_change
             ));
         }
-        // A local refit keeps the control mesh, so it keeps its holes and handles: a view
-        // that closes a hole must rebuild it, however few cells it adds.
-        topology_change(&last.data_topology, merged)
+        None
     }
 
-    /// The local refit of the previous control mesh; from scratch if it finds no data on
-    /// the previous fit's ground. `Err(why)`: the refit is not kept, the whole fit runs.
+    /// The local refit of the previous control mesh of the merge's cleaned largest part.
+    /// `Err(why)`: the refit is not kept, the whole fit runs.
     fn refit_locally(
         &self,
         merged: &Merged,
@@ -502,6 +501,9 @@ impl ObjectSession {
             tangential: defaults.tangential,
             smoothing: worker.fit.scan.smoothing,
             stop: RoundStop::of_budget(&budget, t),
+            hold_rim: true,
+            tangential_edge: defaults.tangential_edge,
+            edge_rings: defaults.edge_rings,
         };
         let previous = Previous {
             surface,
@@ -510,12 +512,17 @@ impl ObjectSession {
             params: &last.fit.params,
             errors: &last.fit.geometric_errors,
             cells: &last.cells,
+            topology: &last.data_topology,
         };
-        let fitted = local::refit(&previous, &merged.cells, &merged.mesh.positions, &opts);
-        let Some(fitted) = fitted else {
-            return cold();
+        let Some(data) = LocalData::of(merged) else {
+            let why = "the merged data's largest part is not a manifold surface";
+            return Ok(Err(Some(why.into())));
         };
-        if let Some(why) = last.fits_worse(&fitted.1) {
+        let fitted = match local::refit(&previous, &data, &opts) {
+            Ok(fitted) => fitted,
+            Err(why) => return Ok(Err(Some(why))),
+        };
+        if let Some(why) = last.refusal(surface, &fitted.1, &data.mesh) {
             return Ok(Err(Some(why)));
         }
         let summary = LocalRefit {
@@ -525,7 +532,7 @@ impl ObjectSession {
             rounds: fitted.1.rounds.len() - 1,
         };
         Ok(Ok((
-            last.refitted(&fitted, budget, ms_since(t)),
+            last.refitted(&fitted, data.topology, budget, ms_since(t)),
             Some(summary),
         )))
     }
@@ -621,21 +628,6 @@ fn view_direction(samples: &ScanSamples) -> Option<DVec3> {
     (sum.length() > 0.2 * total)
         .then(|| sum.normalize())
         .filter(|d| d.is_finite())
-}
-
-/// How the surface the worker would fit to `merged` (its cleaned largest part) differs in
-/// topology from the one the previous fit had, if it does. Only that part counts: the
-/// merge's loose bits and their holes come and go with every update.
-fn topology_change(previous: &SurfaceTopology, merged: &Merged) -> Option<String> {
-    let Some(now) = fitted_topology(&merged.mesh, &ObjectOptions::default().clean) else {
-        return Some("the merged data's largest part is not a manifold surface".into());
-    };
-    (now.boundary_loops != previous.boundary_loops || now.euler != previous.euler).then(|| {
-        format!(
-            "topology changed: {} boundary loops, Euler characteristic {} (were {}, {})",
-            now.boundary_loops, now.euler, previous.boundary_loops, previous.euler
-        )
-    })
 }
 
 /// The largest angle (degrees) between two scans' viewing directions; 180 when a scan has

@@ -17,6 +17,7 @@ pub use config::{
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
 pub use stray_guard::StrayReport;
+pub(crate) use stray_guard::{stray_refusal, MAX_STRAY_GROWTH, MAX_STRAY_SHARE};
 
 use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{

@@ -7,16 +7,18 @@
 use crate::mesh::distance::MeshDistance;
 use crate::pipeline::object::{farthest_from, farthest_from_data, ObjectError, ObjectFit};
 use crate::surface::loop_limit::LoopLimitSurface;
+use crate::TriMesh;
 use glam::DVec3;
+use std::borrow::Borrow;
 
 /// A warm result may stray from its data (the new version) by this share of the data's
 /// bounding-box diagonal, the bound a whole fit is held to (no bulge over holes) ...
-const MAX_STRAY_SHARE: f64 = 0.005;
+pub(crate) const MAX_STRAY_SHARE: f64 = 0.005;
 
 /// ... or by this many times what the previous surface strays from the same data (a
 /// smooth surface over a coarse data mesh strays by the mesh's chordal error already);
 /// farther, the whole fit runs. The fit's own errors (data to surface) cannot see a bulge.
-const MAX_STRAY_GROWTH: f64 = 1.5;
+pub(crate) const MAX_STRAY_GROWTH: f64 = 1.5;
 
 /// Lattice segments per control face edge the stray check samples.
 const STRAY_SEGMENTS: usize = 3;
@@ -69,30 +71,57 @@ pub(super) fn stays_on_data(
     let Ok(fit) = fit else {
         return Ok(fit);
     };
-    let faces = faces_around_moved(&fit, previous_controls);
-    if faces.is_empty() {
-        return Ok(Ok(fit));
-    }
-    let data = MeshDistance::new(&fit.component);
-    let farthest = farthest_from(&fit.surface, &fit.controls, &data, STRAY_SEGMENTS, &faces);
-    let share = MAX_STRAY_SHARE * fit.component.bounds_diagonal();
-    if farthest <= share {
-        return Ok(Ok(fit));
-    }
     // The previous surface over the faces of the same indices (those it has; an update
-    // keeps the previous faces' indices except where it split faces) and the same data.
-    let before = LoopLimitSurface::with_creases_reusing(
-        previous_controls.len(),
-        previous_faces,
-        previous_creases,
+    // keeps the previous faces' indices except where it split faces).
+    let previous = || {
+        LoopLimitSurface::with_creases_reusing(
+            previous_controls.len(),
+            previous_faces,
+            previous_creases,
+            &fit.surface,
+        )
+        .ok()
+    };
+    match stray_refusal(
         &fit.surface,
-    )
-    .map(|s| farthest_from(&s, previous_controls, &data, STRAY_SEGMENTS, &faces))
-    .unwrap_or(0.0);
-    if farthest <= MAX_STRAY_GROWTH * before {
-        return Ok(Ok(fit));
+        &fit.controls,
+        &fit.component,
+        previous_controls,
+        previous,
+    ) {
+        Some(why) => Err(why),
+        None => Ok(Ok(fit)),
     }
-    Err(format!(
+}
+
+/// Why the surface `controls` give `surface` strays from the data mesh farther than
+/// `MAX_STRAY_SHARE` and `MAX_STRAY_GROWTH` allow, if it does, against the previous
+/// surface (`previous_surface`, with `previous_controls`; `None`: it strayed nowhere)
+/// over the same faces (those around a control that moved or is new) and the same data.
+pub(crate) fn stray_refusal<S: Borrow<LoopLimitSurface>>(
+    surface: &LoopLimitSurface,
+    controls: &[DVec3],
+    data_mesh: &TriMesh,
+    previous_controls: &[DVec3],
+    previous_surface: impl FnOnce() -> Option<S>,
+) -> Option<String> {
+    let faces = faces_around_moved(surface.faces(), controls, previous_controls);
+    if faces.is_empty() {
+        return None;
+    }
+    let data = MeshDistance::new(data_mesh);
+    let farthest = farthest_from(surface, controls, &data, STRAY_SEGMENTS, &faces);
+    let share = MAX_STRAY_SHARE * data_mesh.bounds_diagonal();
+    if farthest <= share {
+        return None;
+    }
+    let before = previous_surface()
+        .map(|s| farthest_from(s.borrow(), previous_controls, &data, STRAY_SEGMENTS, &faces))
+        .unwrap_or(0.0);
+    if farthest <= MAX_STRAY_GROWTH * before {
+        return None;
+    }
+    Some(format!(
         "the updated surface strays {farthest:.3e} from the data (the previous one \
          {before:.3e} there; at most {share:.3e}, {MAX_STRAY_SHARE} of the bounding-box \
          diagonal, or {MAX_STRAY_GROWTH} times the previous)"
@@ -101,12 +130,11 @@ pub(super) fn stays_on_data(
 
 /// The control faces with a vertex next to (or at) a control that is new or moved against
 /// `previous`.
-fn faces_around_moved(fit: &ObjectFit, previous: &[DVec3]) -> Vec<u32> {
-    let faces = fit.surface.faces();
-    let moved: Vec<bool> = (0..fit.controls.len())
-        .map(|v| previous.get(v) != Some(&fit.controls[v]))
+fn faces_around_moved(faces: &[[u32; 3]], controls: &[DVec3], previous: &[DVec3]) -> Vec<u32> {
+    let moved: Vec<bool> = (0..controls.len())
+        .map(|v| previous.get(v) != Some(&controls[v]))
         .collect();
-    let mut near = vec![false; fit.controls.len()];
+    let mut near = vec![false; controls.len()];
     for t in faces
         .iter()
         .filter(|t| t.iter().any(|&v| moved[v as usize]))
