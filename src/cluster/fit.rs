@@ -11,6 +11,7 @@ use super::wire::{Completion, JobHeader, PatchRecord};
 use crate::daemon::config::DaemonConfig;
 use crate::daemon::job::{run_job, Job, JobDone, Outcome};
 use crate::daemon::kinds::{rejection_kind, Cause};
+use crate::daemon::object_sessions::ObjectSessions;
 use crate::daemon::state::PatchState;
 use crate::daemon::writer::{Keep, WriterMsg};
 use crate::io::Format;
@@ -255,7 +256,9 @@ fn run(
         cfg: Arc::clone(cfg),
         warm: None,
     };
-    let done: JobDone = run_job(job, &ctx.store);
+    // Objects are not fitted through a queue (`object.folders` is refused with one): no
+    // session to keep.
+    let done: JobDone = run_job(job, &ctx.store, &ObjectSessions::new(0));
     lap(&mut t);
     let by = match &done.outcome {
         Outcome::Fitted { .. } => newer(ctx, subject, seq),

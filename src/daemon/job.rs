@@ -5,6 +5,7 @@ use super::config::DaemonConfig;
 use super::kinds::{rejection_kind, Cause};
 use super::mesh_file::{parse_mesh, read_file_bytes, too_large, Refused};
 use super::object_job::fit_object;
+use super::object_sessions::ObjectSessions;
 pub(crate) use super::open_files::still_changing;
 pub(crate) use super::outcome::{Outcome, Timings};
 use super::scheduler::{Arrival, Input};
@@ -33,7 +34,8 @@ fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
 }
 
-pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
+/// `sessions`: the object sessions kept between updates (`object_sessions`).
+pub(crate) fn run_job(job: Job, store: &StateStore, sessions: &ObjectSessions) -> JobDone {
     let span =
         tracing::info_span!("patch", patch = %job.arrival.id, version = %job.arrival.version);
     let _guard = span.enter();
@@ -42,7 +44,7 @@ pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
         ..Timings::default()
     };
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        fit_one(&job, store, &mut timings)
+        fit_one(&job, (store, sessions), &mut timings)
     }))
     .unwrap_or_else(|payload| {
         let what = payload
@@ -65,7 +67,11 @@ pub(crate) fn run_job(job: Job, store: &StateStore) -> JobDone {
     }
 }
 
-fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
+fn fit_one(
+    job: &Job,
+    (store, sessions): (&StateStore, &ObjectSessions),
+    t: &mut Timings,
+) -> Outcome {
     let a = &job.arrival;
     let limits = &job.cfg.daemon;
     let refused = |r: Refused, input_hash: Option<u64>| Outcome::Rejected {
@@ -78,7 +84,9 @@ fn fit_one(job: &Job, store: &StateStore, t: &mut Timings) -> Outcome {
     let mut read_stamp = None;
     let (bytes, format): (Arc<Vec<u8>>, Format) = match &a.input {
         Input::Inline { data, format } => (Arc::clone(data), *format),
-        Input::Object(folder) => return fit_object(&job.arrival, &job.cfg, folder, store, t),
+        Input::Object(folder) => {
+            return fit_object(&job.arrival, &job.cfg, folder, (store, sessions), t)
+        }
         Input::File(path) => match read_file_bytes(path, limits) {
             Ok(read) => {
                 read_stamp = Some(read.stamp);

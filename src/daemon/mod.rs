@@ -16,6 +16,7 @@ mod mesh_file;
 pub(crate) mod messages;
 mod object_config;
 mod object_job;
+pub(crate) mod object_sessions;
 mod object_store;
 pub(crate) mod offload;
 mod open_files;
@@ -201,7 +202,12 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
             })?;
             job_tx
         }
-        None => start_workers(workers, &store, &tx)?,
+        None => {
+            let sessions = Arc::new(object_sessions::ObjectSessions::new(
+                opts.config.object.kept_sessions,
+            ));
+            start_workers(workers, (&store, &sessions), &tx)?
+        }
     };
     // Before any source starts, so that they are in the inbox ahead of a source's end.
     if !queued {
@@ -312,7 +318,7 @@ fn prepare_folders(opts: DaemonOptions) -> Result<DaemonOptions, DaemonError> {
 /// The worker pool; returns the job queue's sender.
 fn start_workers(
     workers: usize,
-    store: &Arc<StateStore>,
+    (store, sessions): (&Arc<StateStore>, &Arc<object_sessions::ObjectSessions>),
     tx: &Sender<Msg>,
 ) -> Result<Sender<Job>, DaemonError> {
     // Capacity = workers: the scheduler only hands out a job when a worker is free, so this
@@ -320,10 +326,11 @@ fn start_workers(
     let (job_tx, job_rx) = crossbeam_channel::bounded::<Job>(workers);
     for k in 0..workers {
         let (rx, tx, store) = (job_rx.clone(), tx.clone(), Arc::clone(store));
+        let sessions = Arc::clone(sessions);
         spawn(&format!("worker-{k}"), move || {
             for job in rx {
                 if tx
-                    .send(Msg::Fitted(Box::new(job::run_job(job, &store))))
+                    .send(Msg::Fitted(Box::new(job::run_job(job, &store, &sessions))))
                     .is_err()
                 {
                     break;

@@ -15,9 +15,19 @@ pub struct ObjectSection {
     /// per scan point).
     #[serde(default = "yes")]
     pub measure_scans: bool,
+    /// Objects whose session (scans' samples, merge grid, last fit) stays in memory
+    /// between updates, the ones updated last: their next update merges around the scans
+    /// that changed and refits the previous control mesh locally where the ground is the
+    /// same. 0: every update starts over from the folder. Needs a restart.
+    #[serde(default = "kept_sessions")]
+    pub kept_sessions: usize,
     /// `[object.merge]`: the merge of the scans.
     #[serde(default)]
     pub merge: MergeOptions,
+}
+
+fn kept_sessions() -> usize {
+    4
 }
 
 fn yes() -> bool {
@@ -29,6 +39,7 @@ impl Default for ObjectSection {
         Self {
             folders: false,
             measure_scans: true,
+            kept_sessions: kept_sessions(),
             merge: MergeOptions::default(),
         }
     }
@@ -39,7 +50,7 @@ pub(crate) fn validate_object(
     o: &ObjectSection,
 ) -> Result<(), (&'static str, String, &'static str)> {
     let m = &o.merge;
-    let rules: [(bool, &'static str, f64, &'static str); 9] = [
+    let rules: [(bool, &'static str, f64, &'static str); 10] = [
         (
             m.cell.is_finite() && (0.0..=1.0).contains(&m.cell),
             "object.merge.cell",
@@ -93,6 +104,12 @@ pub(crate) fn validate_object(
             "object.merge.ramp_rings / projections",
             m.ramp_rings as f64,
             "ramp_rings <= 64 and projections <= 8",
+        ),
+        (
+            o.kept_sessions <= 64,
+            "object.kept_sessions",
+            o.kept_sessions as f64,
+            "must be 0..=64 (each holds an object's scans and merge grid in memory)",
         ),
     ];
     for (ok, key, value, rule) in rules {

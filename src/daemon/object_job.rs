@@ -23,13 +23,14 @@ use super::config::DaemonConfig;
 use super::ids::{ignored, patch_id};
 use super::kinds::{rejection_kind, Cause};
 use super::mesh_file::{parse_mesh, read_file_bytes, Refused};
+use super::object_sessions::{scan_key, step, KeptSession, ObjectSessions, ScanKey, SessionStep};
 use super::open_files::{open_for_writing, still_changing};
 use super::outcome::{Outcome, ScanRejection, Timings};
 use super::scheduler::Arrival;
 use super::state::{content_hash, StateStore};
 use crate::io::registration::{registration_for, Registration};
 use crate::mesh::rigid::RigidTransform;
-use crate::pipeline::object_session::{ObjectSession, SessionOptions};
+use crate::pipeline::object_session::{ObjectSession, SessionError, SessionOptions, SessionUpdate};
 use crate::pipeline::worker::{InputOutputs, PartOutputs};
 use crate::TriMesh;
 use serde_json::json;
@@ -141,12 +142,65 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
     }
 }
 
+/// The object `id`'s update to `scans` (with their keys): through its kept session when
+/// the change is one step of it, else a fresh session of all of them; the session is kept
+/// for the next update when it succeeds.
+fn update_session(
+    id: &str,
+    cfg: &DaemonConfig,
+    (scans, keys): (&[ReadScan], BTreeMap<String, ScanKey>),
+    config_hash: u64,
+    sessions: &ObjectSessions,
+) -> Result<SessionUpdate, SessionError> {
+    let fresh = || {
+        ObjectSession::new(SessionOptions {
+            merge: cfg.object.merge.clone(),
+            worker: cfg.worker_config(),
+            measure_scans: cfg.object.measure_scans,
+            // Without kept sessions no merge grid or fit is kept for a next update.
+            cold: !sessions.enabled(),
+        })
+    };
+    let staged = |only: Option<&[String]>| -> Vec<(&str, &TriMesh, RigidTransform)> {
+        scans
+            .iter()
+            .filter(|s| only.is_none_or(|ids| ids.contains(&s.id)))
+            .map(|s| (s.id.as_str(), &s.mesh, s.registration.transform))
+            .collect()
+    };
+    let (mut session, step) = match sessions.take(id, config_hash) {
+        Some(kept) => {
+            let step = step(&kept.scans, &keys);
+            (kept.session, step)
+        }
+        None => (fresh(), SessionStep::Fresh),
+    };
+    tracing::debug!(object = %id, ?step, "object update");
+    let update = match &step {
+        SessionStep::Add(ids) => session.add_scans(&staged(Some(ids))),
+        SessionStep::Remove(scan) => session.remove_scan(scan),
+        SessionStep::Fresh => {
+            session = fresh();
+            session.add_scans(&staged(None))
+        }
+    };
+    if update.is_ok() {
+        let kept = KeptSession {
+            session,
+            scans: keys,
+            config_hash,
+        };
+        sessions.put(id, kept);
+    }
+    update
+}
+
 /// Fits the object whose scans are the meshes of `folder` (see the module docs).
 pub(crate) fn fit_object(
     a: &Arrival,
     cfg: &DaemonConfig,
     folder: &Path,
-    store: &StateStore,
+    (store, sessions): (&StateStore, &ObjectSessions),
     t: &mut Timings,
 ) -> Outcome {
     let start = Instant::now();
@@ -170,11 +224,13 @@ pub(crate) fn fit_object(
     let mut rejected = Vec::new();
     // What the fit depends on, in scan-id order: each scan's bytes and transform.
     let mut key = String::new();
+    let mut keys = BTreeMap::new();
     for (id, file) in &listed {
         match read_scan(id, file, cfg) {
             ScanRead::Read(scan, hash) => {
-                let matrix = scan.registration.transform.to_row_major().map(f64::to_bits);
-                key.push_str(&format!("{id}\t{hash:016x}\t{matrix:?}\n"));
+                let scan_key = scan_key(hash, &scan.registration.transform);
+                key.push_str(&format!("{id}\t{hash:016x}\t{:?}\n", scan_key.1));
+                keys.insert(id.clone(), scan_key);
                 scans.push(*scan);
             }
             ScanRead::Rejected(r, hash) => {
@@ -197,6 +253,7 @@ pub(crate) fn fit_object(
         return Outcome::Unchanged { hash };
     }
     if scans.is_empty() && rejected.is_empty() && previous.is_some() {
+        sessions.forget(&a.id);
         return Outcome::Emptied {
             reason: "no scan left in the object folder".into(),
         };
@@ -219,19 +276,8 @@ pub(crate) fn fit_object(
             input_hash: Some(hash),
         };
     }
-    let mut session = ObjectSession::new(SessionOptions {
-        merge: cfg.object.merge.clone(),
-        worker: cfg.worker_config(),
-        measure_scans: cfg.object.measure_scans,
-        // A fresh session per update: no merge grid or fit is kept for a next one.
-        cold: true,
-    });
-    let staged: Vec<(&str, &TriMesh, RigidTransform)> = scans
-        .iter()
-        .map(|s| (s.id.as_str(), &s.mesh, s.registration.transform))
-        .collect();
     let fit_start = Instant::now();
-    let update = session.add_scans(&staged);
+    let update = update_session(&a.id, cfg, (&scans, keys), config_hash, sessions);
     t.fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
     let mut update = match update {
         Ok(u) => u,

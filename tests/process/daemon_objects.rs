@@ -133,8 +133,9 @@ fn registered_scans_dropped_one_by_one_and_a_restart_end_at_the_same_surface() {
         }
         assert!(s.out.join("bunny/surface.glb").is_file());
     }
-    assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
     let uninterrupted = controls(&s.out, "bunny");
+    re_register_bun045(&s, &folder);
+    assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
 
     // Interrupted: two scans, a stop, a restart, the other three.
     let r = setup(&config);
@@ -164,6 +165,48 @@ fn registered_scans_dropped_one_by_one_and_a_restart_end_at_the_same_surface() {
         .fold(0.0, f64::max);
     eprintln!("restarted against uninterrupted: largest control difference {worst:.2e} m");
     assert!(worst < 1e-7, "{worst}");
+}
+
+/// bun045 re-registered 30 um along x by a sidecar `.xf` (it takes precedence over
+/// `bun.conf`): the daemon's kept session refits the previous control mesh locally, as a
+/// corrected registration changes no ground.
+fn re_register_bun045(s: &Setup, folder: &Path) {
+    let registration =
+        trispline::io::registration::registration_for(&folder.join("bun045.ply"), "bun045")
+            .expect("bun.conf names bun045");
+    let mut matrix = registration.transform.to_row_major();
+    matrix[3] += 30e-6;
+    let text: String = matrix
+        .chunks(4)
+        .map(|row| {
+            row.iter()
+                .map(|x| format!("{x:e}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+                + "\n"
+        })
+        .collect();
+    let before = fitted(&s.out, "bunny").len();
+    write_in(&s.inbox.join("bunny"), "bun045.xf", &text);
+    let secs = wait_fitted(s, "bunny", before + 1);
+    let last = fitted(&s.out, "bunny").pop().expect("an event");
+    let report = read_json(&s.out.join("bunny/report.json"));
+    let session = &report["session"];
+    let region = &session["updated_region"];
+    eprintln!(
+        "bun045 re-registered: {secs:.1} s wall, fit {:.0} ms, {} ({}), rms {:.1} um",
+        last["timings"]["fit_ms"],
+        region["fit"],
+        region["cold_because"],
+        report["final"]["geometric_rms_error"]
+            .as_f64()
+            .unwrap_or(f64::NAN)
+            * 1e6,
+    );
+    assert_eq!(scans_of(&last), BUNNY_SCANS, "{last}");
+    let bun045 = &session["files"][1];
+    assert_eq!(bun045["registration"]["from"], "sidecar", "{bun045}");
+    assert_eq!(region["fit"], "local", "{region}");
 }
 
 /// A cap of the unit sphere seen along +x, 1 cm radius, as ASCII PLY.
