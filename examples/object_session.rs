@@ -28,7 +28,7 @@
 //! them (the merge's fault) or only the surface does (the fit's). `OBJ_SESSION_MERGE_ONLY=1`
 //! runs only the merge of all scans against bun_zipper (no fit), `OBJ_SESSION_FORWARD_ONLY=1`
 //! only the updates in arrival order, `OBJ_SESSION_REPLACE_ONLY=1` those and the new
-//! version of bun045; `OBJ_SESSION_DUMP=FILE`
+//! version of bun045, `OBJ_SESSION_REVERSE_ONLY=1` only the updates in reverse order; `OBJ_SESSION_DUMP=FILE`
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
@@ -140,6 +140,11 @@ fn main() {
     }
     if std::env::var("OBJ_SESSION_MERGE_ONLY").is_ok() {
         merge_only(&scans, &opts, &zipper);
+        return;
+    }
+    if std::env::var("OBJ_SESSION_REVERSE_ONLY").is_ok() {
+        let reversed: Vec<_> = scans.iter().rev().cloned().collect();
+        run(&reversed, opts, "reverse order");
         return;
     }
     let (forward, mut session) = run(&scans, opts.clone(), "arrival order");

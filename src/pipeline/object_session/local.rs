@@ -26,10 +26,11 @@ use crate::pipeline::worker::{
 };
 use crate::pipeline::{PatchFit, SurfaceModel};
 use crate::surface::loop_limit::LoopLimitSurface;
-use crate::surface::SurfaceParam;
+use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
+use std::sync::Arc;
 
 /// The previous fit a local refit starts from.
 pub(super) struct Previous<'a> {
@@ -210,12 +211,24 @@ impl LastFit {
     /// data came from; `None` for a fit of another model or a point not from the merge.
     pub(super) fn of(fitted: &FittedPatch, merged: &Merged) -> Option<LastFit> {
         let info = fitted.object.as_ref()?;
-        if !matches!(fitted.fit.model, SurfaceModel::Mesh(_)) {
+        let SurfaceModel::Mesh(surface) = &fitted.fit.model else {
             return None;
-        }
+        };
         let cells = cells_of(&fitted.fit.data, merged)?;
+        // The same surface built afresh: a fitted one holds every quadtree leaf its fit and
+        // tessellation evaluated (the bunny's: about 180 MB against 5 MB, rebuilt in 35
+        // ms), and a kept session holds this until its next update.
+        let fresh = LoopLimitSurface::with_creases(
+            surface.control_count(),
+            surface.faces(),
+            surface.crease_edges(),
+        )
+        .ok()?;
         Some(LastFit {
-            fit: fitted.fit.clone(),
+            fit: PatchFit {
+                model: SurfaceModel::Mesh(Arc::new(fresh)),
+                ..fitted.fit.clone()
+            },
             cells,
             data_topology: info.data_topology,
             control_topology: info.control_topology,
