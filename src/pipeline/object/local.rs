@@ -16,7 +16,6 @@
 //! goes to the whole fit instead).
 
 use super::model::{ObjectOptions, RoundStop, MAX_REFUSALS};
-
 use super::solve::{near_boundary, FeetMut, Rim, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
