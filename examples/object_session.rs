@@ -32,7 +32,8 @@
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
-//! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls).
+//! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls); `OBJ_SESSION_MEASURE=1` measures every scan against the
+//! surface in each update, as the daemon does.
 
 use std::path::{Path, PathBuf};
 use trispline::io::registration::registration_for;
@@ -132,6 +133,9 @@ fn main() {
     if let Some(p) = env("OBJ_SESSION_PCT") {
         opts.worker.fit.scan.target_controls_pct = p;
     }
+    if std::env::var("OBJ_SESSION_MEASURE").is_ok() {
+        opts.measure_scans = true;
+    }
     if let Some(o) = env("OBJ_MERGE_OVERHANG") {
         opts.merge.rim_overhang_cells = o;
     }
@@ -229,12 +233,13 @@ fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
         stage("refine_ms"),
     );
     format!(
-        "{id:7} {:7.0} ms wall {:7.0} ms cpu (merge {:5.0}, fit {:6.0}, outputs {:5.0}) load {}  path {:6}  views {:3.0} deg  controls {:5}  merged {:6} ({} cells recomputed)  rms {:5.1} um  changed +{} -{} ~{} ={}\n        {fitted}",
+        "{id:7} {:7.0} ms wall {:7.0} ms cpu (merge {:5.0}, fit {:6.0}, outputs {:5.0}, measure {:4.0}) load {}  path {:6}  views {:3.0} deg  controls {:5}  merged {:6} ({} cells recomputed)  rms {:5.1} um  changed +{} -{} ~{} ={}\n        {fitted}",
         u.times.total_ms,
         cpu_ms,
         u.times.merge_ms,
         u.times.fit_ms,
         u.times.outputs_ms,
+        u.times.measure_ms,
         load_average(),
         u.path,
         session["view_spread_deg"].as_f64().unwrap_or(f64::NAN),

@@ -59,29 +59,55 @@ const FAR_EDGES: f64 = 16.0;
 /// Distances of `points` to `mesh` (points with no distance, e.g. non-finite, are left
 /// out); points far from it (`FAR_EDGES`) measured to its nearest vertex.
 pub fn distance_stats(points: &[DVec3], mesh: &TriMesh) -> DistanceStats {
-    let query = MeshDistance::new(mesh);
-    let p = &mesh.positions;
-    let mean_edge = mesh
-        .triangles
-        .iter()
-        .map(|t| p[t[0] as usize].distance(p[t[1] as usize]))
-        .sum::<f64>()
-        / mesh.triangles.len().max(1) as f64;
-    let vertices = rstar::RTree::bulk_load(p.iter().map(|v| v.to_array()).collect());
-    let far = FAR_EDGES * mean_edge;
-    let mut d: Vec<f64> = points
-        .par_iter()
-        .with_min_len(256)
-        .filter(|q| q.is_finite())
-        .filter_map(|q| {
-            let nearest = vertices.nearest_neighbor(&q.to_array())?;
-            let to_vertex = q.distance(DVec3::from_array(*nearest));
-            match to_vertex > far {
-                true => Some(to_vertex),
-                false => query.distance(*q),
-            }
-        })
-        .collect();
+    MeshMeasure::new(mesh).stats(points)
+}
+
+/// A mesh's distance queries, built once for many point sets (every scan of an object
+/// against its surface: built per scan, the five bunny scans' measure took 1.05 s).
+pub struct MeshMeasure<'a> {
+    query: MeshDistance<'a>,
+    vertices: rstar::RTree<[f64; 3]>,
+    far: f64,
+}
+
+impl<'a> MeshMeasure<'a> {
+    /// The queries of `mesh`: its triangles, and its vertices for points far off it.
+    pub fn new(mesh: &'a TriMesh) -> Self {
+        let p = &mesh.positions;
+        let mean_edge = mesh
+            .triangles
+            .iter()
+            .map(|t| p[t[0] as usize].distance(p[t[1] as usize]))
+            .sum::<f64>()
+            / mesh.triangles.len().max(1) as f64;
+        Self {
+            query: MeshDistance::new(mesh),
+            vertices: rstar::RTree::bulk_load(p.iter().map(|v| v.to_array()).collect()),
+            far: FAR_EDGES * mean_edge,
+        }
+    }
+
+    /// [`distance_stats`] of `points` to this mesh.
+    pub fn stats(&self, points: &[DVec3]) -> DistanceStats {
+        let d: Vec<f64> = points
+            .par_iter()
+            .with_min_len(256)
+            .filter(|q| q.is_finite())
+            .filter_map(|q| {
+                let nearest = self.vertices.nearest_neighbor(&q.to_array())?;
+                let to_vertex = q.distance(DVec3::from_array(*nearest));
+                match to_vertex > self.far {
+                    true => Some(to_vertex),
+                    false => self.query.distance(*q),
+                }
+            })
+            .collect();
+        summarise(d)
+    }
+}
+
+/// Median, p95, RMS and largest of the distances `d`.
+fn summarise(mut d: Vec<f64>) -> DistanceStats {
     if d.is_empty() {
         return DistanceStats::default();
     }

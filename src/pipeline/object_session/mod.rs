@@ -23,7 +23,9 @@
 mod local;
 mod measure;
 
-pub use measure::{distance_stats, surface_mesh, surface_points_at_data, DistanceStats};
+pub use measure::{
+    distance_stats, surface_mesh, surface_points_at_data, DistanceStats, MeshMeasure,
+};
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{
@@ -568,12 +570,13 @@ impl ObjectSession {
         if !self.opts.measure_scans {
             return Vec::new();
         }
-        let surface = surface_mesh(fit);
+        let mesh = surface_mesh(fit);
+        let surface = MeshMeasure::new(&mesh);
         self.scans
             .iter()
             .map(|(id, s)| ScanDistance {
                 id: id.clone(),
-                stats: distance_stats(&s.samples.points, &surface),
+                stats: surface.stats(&s.samples.points),
             })
             .collect()
     }
