@@ -2,10 +2,10 @@
 //! already covers (a new version of a scan, a corrected registration): the session's side
 //! of `pipeline::object`'s local refit.
 //!
-//! The data points are the merge's vertices, one per grid cell, so the previous fit's
-//! points are matched to the new merge by cell: a kept cell keeps its point's foot point
-//! as the start, a cell that appeared starts from a neighbouring cell's foot point, a cell
-//! that went loses its point. A point whose position changed or appeared is a changed
+//! The data points are the vertices of the merge's cleaned largest part (`LocalData`), one
+//! per grid cell, so the previous fit's points are matched to the new merge by cell: a
+//! kept cell keeps its point's foot point as the start, a cell that appeared starts from a
+//! neighbouring cell's foot point, a cell that went loses its point. A point whose position changed or appeared is a changed
 //! point of the refit.
 //!
 //! A local refit keeps the control mesh, so it is judged before it is kept: the data's
@@ -149,8 +149,9 @@ fn topology_refusal(before: &SurfaceTopology, now: &SurfaceTopology) -> Option<S
 }
 
 /// Refits the controls around the data that changed (see the module docs) and returns the
-/// matched data with the fit; why not, when every point of the new data is not on the
-/// previous fit's ground or its topology rules the refit out.
+/// matched data with the fit; why not when the data's topology rules the refit out or a
+/// point lies off the previous fit's ground. A hole opened and another closed at once
+/// pass the topology count: only the stray guard bounds the surface over the new one.
 pub(super) fn refit(
     previous: &Previous,
     data: &LocalData,
