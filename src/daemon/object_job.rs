@@ -228,9 +228,9 @@ pub(crate) fn fit_object(
     for (id, file) in &listed {
         match read_scan(id, file, cfg) {
             ScanRead::Read(scan, hash) => {
-                let scan_key = scan_key(hash, &scan.registration.transform);
-                key.push_str(&format!("{id}\t{hash:016x}\t{:?}\n", scan_key.1));
-                keys.insert(id.clone(), scan_key);
+                let held = scan_key(hash, &scan.registration.transform);
+                key.push_str(&format!("{id}\t{hash:016x}\t{:?}\n", held.1));
+                keys.insert(id.clone(), held);
                 scans.push(*scan);
             }
             ScanRead::Rejected(r, hash) => {

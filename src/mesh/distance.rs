@@ -9,6 +9,7 @@ use rustc_hash::FxHashMap;
 /// Closest-point queries against a triangle mesh through a uniform grid of buckets.
 pub struct MeshDistance<'a> {
     mesh: &'a TriMesh,
+    mean_edge: f64,
     cell: f64,
     buckets: FxHashMap<(i64, i64, i64), Vec<u32>>,
 }
@@ -40,9 +41,15 @@ impl<'a> MeshDistance<'a> {
         }
         Self {
             mesh,
+            mean_edge,
             cell,
             buckets,
         }
+    }
+
+    /// The mesh's mean edge length (over each triangle's first edge).
+    pub fn mean_edge(&self) -> f64 {
+        self.mean_edge
     }
 
     fn key(cell: f64, p: DVec3) -> (i64, i64, i64) {

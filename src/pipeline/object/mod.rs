@@ -70,12 +70,6 @@ pub fn fitted_component(mesh: &TriMesh, clean: &CleanOptions) -> Option<TriMesh>
     largest_component(mesh, clean)
 }
 
-/// The topology of the surface [`fit_object`] fits to `mesh`: its cleaned largest
-/// component's; `None` when nothing is left or it is not manifold.
-pub fn fitted_topology(mesh: &TriMesh, clean: &CleanOptions) -> Option<SurfaceTopology> {
-    SurfaceTopology::of(&largest_component(mesh, clean)?).ok()
-}
-
 /// Fits the exact Loop limit surface of a simplified control mesh to the largest
 /// component of `mesh`.
 pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, ObjectError> {

@@ -73,17 +73,13 @@ pub struct MeshMeasure<'a> {
 impl<'a> MeshMeasure<'a> {
     /// The queries of `mesh`: its triangles, and its vertices for points far off it.
     pub fn new(mesh: &'a TriMesh) -> Self {
-        let p = &mesh.positions;
-        let mean_edge = mesh
-            .triangles
-            .iter()
-            .map(|t| p[t[0] as usize].distance(p[t[1] as usize]))
-            .sum::<f64>()
-            / mesh.triangles.len().max(1) as f64;
+        let query = MeshDistance::new(mesh);
+        let far = FAR_EDGES * query.mean_edge();
+        let vertices = mesh.positions.iter().map(|v| v.to_array()).collect();
         Self {
-            query: MeshDistance::new(mesh),
-            vertices: rstar::RTree::bulk_load(p.iter().map(|v| v.to_array()).collect()),
-            far: FAR_EDGES * mean_edge,
+            query,
+            vertices: rstar::RTree::bulk_load(vertices),
+            far,
         }
     }
 

@@ -13,8 +13,9 @@
 //! so the control mesh takes it. When the merged data covers the same ground as before
 //! (`WARM_MAX_COVERAGE_CHANGE`; no handle made or lost, no hole opened), the session
 //! refits the previous control mesh locally itself (`local`), and keeps that refit only
-//! when it fits and stays on the data as well as the previous fit. Otherwise the previous fit goes to the worker as its warm
-//! start: the worker extends the previous control mesh over new ground that joins its rim
+//! when it fits and stays on the data as well as the previous fit. Otherwise the previous
+//! fit goes to the worker as its warm start: the worker extends the previous control mesh
+//! over new ground that joins its rim
 //! (`object::extend_over_new_ground`: the previous faces kept, the new region simplified
 //! and stitched on, only the controls there and around the seam solved), and fits from
 //! scratch when the new ground cannot be joined. So the surface of a set of scans may
