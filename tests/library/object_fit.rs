@@ -123,7 +123,13 @@ fn isolated_points_beyond_the_tolerance_end_refinement_and_the_rounds_run_on() {
     let outlier = 1000;
     let at = mesh.positions[outlier];
     mesh.positions[outlier] = at * (1.0 + 0.1 / at.length());
-    let mut opts = ObjectOptions::default();
+    // The surface's bump towards the spike strays from the spike's thin cone of data, so
+    // the stray repair would split there (3 rounds, 4 controls); it is tested elsewhere,
+    // this is the error-driven refinement's rule.
+    let mut opts = ObjectOptions {
+        max_stray_share: None,
+        ..Default::default()
+    };
     opts.refine.tolerance = Some(0.02);
     let fit = fit_object(&mesh, &opts).expect("fitted");
     eprintln!(
@@ -336,28 +342,55 @@ fn bun_zipper_keeps_its_five_holes() {
     assert!(stray <= 5e-3 * diag, "stray {stray} of diagonal {diag}");
 }
 
+/// decimated-max is closed, and a decimation's large flat triangles leave a smooth
+/// surface of 5 % controls 0.83 % of the diagonal off them between their corners (the
+/// data-to-surface error cannot see it). The stray repair splits the faces that stray and
+/// fits again, a few controls past the budget, until the surface is within 0.5 %.
 #[test]
-fn decimated_max_stays_closed() {
+fn decimated_max_stays_closed_and_within_half_a_percent_of_its_data() {
     let Some(mesh) = shared_mesh("models/decimated-max.obj") else {
         return;
     };
     let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
     assert_topology_kept(&fit);
     assert_eq!(fit.control_topology.boundary_loops, 0);
-    let diag = mesh.bounds_diagonal();
-    let stray = farthest_from_data(&fit, 6);
+    let diag = fit.component.bounds_diagonal();
+    // Measured on a finer lattice than the repair's (6 segments per edge).
+    let stray = farthest_from_data(&fit, 8);
+    let unrepaired = fit_object(
+        &mesh,
+        &ObjectOptions {
+            max_stray_share: None,
+            ..Default::default()
+        },
+    )
+    .expect("fitted");
+    let stray_before = farthest_from_data(&unrepaired, 8);
+    let target = unrepaired.controls.len();
     eprintln!(
-        "decimated-max: {} controls, rms {:.2e} max {:.2e} (diag {diag:.3}), decimated rms {:.2e}, stray {:.3} % of diag",
+        "decimated-max: {} controls (budget {target}), rms {:.2e} max {:.2e} (diag {diag:.3}), \
+         decimated rms {:.2e}, stray {:.3} % of diag (without the repair {:.3} %, rms {:.2e}), \
+         refinement {:?}",
         fit.controls.len(),
         fit.rms,
         fit.max,
         decimated_rms(&fit),
-        100.0 * stray / diag
+        100.0 * stray / diag,
+        100.0 * stray_before / diag,
+        unrepaired.rms,
+        fit.refinement
     );
     assert!(fit.rms < 2e-3 * diag);
-    // The stray (0.85 % of the diagonal, 1.03 % before the surface-to-data samples on
-    // uncovered quarters) is not asserted: it is still over the 0.5 % goal, on interior
-    // faces whose quarters all hold feet, between a decimated mesh's large flat triangles.
+    assert!(
+        stray_before > 5e-3 * diag,
+        "the case no longer needs a repair"
+    );
+    assert!(stray <= 5e-3 * diag, "stray {stray} of diagonal {diag}");
+    assert!(fit.refinement.iter().any(|r| r.stray_repair));
+    assert!(fit.controls.len() > target);
+    assert!(fit.controls.len() as f64 <= 1.1 * target as f64 + 1.0);
+    assert!(fit.rms <= unrepaired.rms);
+    assert_eq!(fit.stray.map(|s| s <= 5e-3 * diag), Some(true));
 }
 
 /// camelhead's surface ran 0.58 % of the diagonal past its sparse rim, at boundary controls

@@ -71,7 +71,21 @@ pub struct ObjectOptions {
     pub surface_samples: bool,
     /// When the rounds and the refinement stop before they converge or run out.
     pub stop: RoundStop,
+    /// The farthest the surface may stray from the data, as a share of its bounding-box
+    /// diagonal: beyond it, faces are split where it strays and the object fitted again,
+    /// past the control budget if need be (`None`: no repair).
+    pub max_stray_share: Option<f64>,
 }
+
+/// The share of the data's bounding-box diagonal a whole fit's surface is held to from
+/// the data (no bulge over holes): the stray repair's bound, the report's and the warm
+/// results' guard.
+pub const STRAY_LIMIT_SHARE: f64 = 0.005;
+
+/// Lattice segments per control face edge on which the stray is measured for the repair
+/// and the report: finer than the control faces' own corners, so a bulge between them
+/// shows, as in the written tessellation.
+pub const STRAY_LATTICE_SEGMENTS: usize = 6;
 
 /// When a fit's foot-point rounds and refinement rounds stop besides their own
 /// convergence: the targets of the fit's budget hold (the error the user asked for is
@@ -144,6 +158,7 @@ impl Default for ObjectOptions {
             refine: RefineOptions::default(),
             surface_samples: true,
             stop: RoundStop::default(),
+            max_stray_share: Some(STRAY_LIMIT_SHARE),
         }
     }
 }
@@ -251,6 +266,9 @@ pub struct ObjectFit {
     pub sampled_faces: usize,
     /// What a local refit of a new version touched (`None`: a whole fit).
     pub local: Option<LocalUpdate>,
+    /// How far the surface strays from the data, when the fit measured it (the stray
+    /// repair does, on a lattice of `STRAY_LATTICE_SEGMENTS` per control face edge).
+    pub stray: Option<f64>,
 }
 
 impl ObjectFit {

@@ -68,6 +68,9 @@ pub struct RefineRound {
     pub max: f64,
     /// Data points beyond the tolerance (all points with distance > 0 without one).
     pub beyond: usize,
+    /// Whether the round split faces where the surface strayed from the data (beyond the
+    /// budget) rather than where the data's error was.
+    pub stray_repair: bool,
 }
 
 impl RefineRound {
@@ -85,6 +88,7 @@ impl RefineRound {
             rms,
             max,
             beyond: distances.iter().filter(|&&d| d > tol).count(),
+            stray_repair: false,
         }
     }
 }
@@ -163,14 +167,25 @@ pub(super) fn limit_positions(surface: &LoopLimitSurface, controls: &[DVec3]) ->
         .collect()
 }
 
-/// The control mesh of `fit` with up to `add` edges split where the squared error is (see
-/// the module docs; only on the faces `only` marks, if given) and each data point's
-/// landing on it; `None` when the fit has no error there or the net cannot be built.
+/// Which control faces a refinement splits, and in which order.
+#[derive(Clone, Copy)]
+pub(super) enum Splits<'a> {
+    /// Every face with data error, the largest squared error first.
+    ByError,
+    /// The faces marked, with data error, the largest squared error first.
+    Marked(&'a [bool]),
+    /// The faces with a positive rank, data on them or not, the highest rank first.
+    Ranked(&'a [f64]),
+}
+
+/// The control mesh of `fit` with up to `add` edges split on the faces `splits` picks
+/// (see the module docs) and each data point's landing on it; `None` when no face is
+/// picked or the net cannot be built.
 pub(super) fn refined_mesh(
     fit: &Fitted,
     add: usize,
     layout: &LayoutOptions,
-    only: Option<&[bool]>,
+    splits: Splits,
 ) -> Option<Refined> {
     let faces = fit.surface.faces();
     let evaluate = fit.surface.evaluator(fit.controls);
@@ -182,13 +197,20 @@ pub(super) fn refined_mesh(
             *e += d * d;
         }
     }
-    let mut worst: Vec<usize> = (0..faces.len())
-        .filter(|&f| error[f] > 0.0 && only.is_none_or(|o| o.get(f) == Some(&true)))
-        .collect();
+    let rank = match splits {
+        Splits::Ranked(rank) => rank,
+        _ => &error,
+    };
+    let picked = |f: usize| match splits {
+        Splits::ByError => error[f] > 0.0,
+        Splits::Marked(marks) => error[f] > 0.0 && marks.get(f) == Some(&true),
+        Splits::Ranked(rank) => rank.get(f).is_some_and(|&r| r > 0.0),
+    };
+    let mut worst: Vec<usize> = (0..faces.len()).filter(|&f| picked(f)).collect();
     if worst.is_empty() {
         return None;
     }
-    worst.sort_by(|&a, &b| error[b].total_cmp(&error[a]).then(a.cmp(&b)));
+    worst.sort_by(|&a, &b| rank[b].total_cmp(&rank[a]).then(a.cmp(&b)));
     let control = TriMesh::new(limit.clone(), faces.to_vec());
     let mut net = Net::new(
         fit.component,

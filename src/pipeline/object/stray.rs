@@ -33,14 +33,31 @@ pub fn farthest_from(
     segments: usize,
     faces: &[u32],
 ) -> f64 {
+    face_strays(surface, controls, data, segments, faces)
+        .into_iter()
+        .fold(0.0, f64::max)
+}
+
+/// Per face of `faces`, the largest distance from its lattice of `segments` segments per
+/// edge to the data mesh (0 for indices past the surface's faces, infinite where a sample
+/// is not finite or the data mesh is empty).
+pub fn face_strays(
+    surface: &LoopLimitSurface,
+    controls: &[DVec3],
+    data: &MeshDistance,
+    segments: usize,
+    faces: &[u32],
+) -> Vec<f64> {
     let k = segments.max(1);
     let evaluate = surface.evaluator(controls);
     let count = surface.domain_face_count() as u32;
     faces
         .par_iter()
         .with_min_len(64)
-        .filter(|&&f| f < count)
         .map(|&f| {
+            if f >= count {
+                return 0.0;
+            }
             let mut farthest = 0.0f64;
             for j in 0..=k {
                 for i in 0..=k - j {
@@ -55,5 +72,5 @@ pub fn farthest_from(
             }
             farthest
         })
-        .reduce(|| 0.0, f64::max)
+        .collect()
 }

@@ -7,7 +7,7 @@ use super::model::{
     control_target, limit_surface, ms_since, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
     RoundReport,
 };
-use super::refine::{refined_mesh, Fitted, RefineRound};
+use super::refine::{refined_mesh, Fitted, RefineRound, Splits};
 use super::solve::rms;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::surface::loop_limit::LoopLimitSurface;
@@ -307,7 +307,8 @@ impl Refitted {
                 params: &self.params,
                 distances: &self.errors,
             };
-            let Some(refined) = refined_mesh(&fitted, add, &opts.layout, Some(&beyond)) else {
+            let Some(refined) = refined_mesh(&fitted, add, &opts.layout, Splits::Marked(&beyond))
+            else {
                 break;
             };
             let Ok(surface) = limit_surface(&refined.mesh, &refined.creases, Some(&self.surface))
@@ -381,6 +382,7 @@ impl Refitted {
             refinement: self.refinement,
             sampled_faces: 0,
             local: Some(update),
+            stray: None,
         }
     }
 }

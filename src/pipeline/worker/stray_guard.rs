@@ -5,7 +5,9 @@
 //! where a fit from scratch, whose control mesh follows the data, would not.
 
 use crate::mesh::distance::MeshDistance;
-use crate::pipeline::object::{farthest_from, farthest_from_data, ObjectError, ObjectFit};
+use crate::pipeline::object::{
+    farthest_from, farthest_from_data, ObjectError, ObjectFit, STRAY_LATTICE_SEGMENTS,
+};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::TriMesh;
 use glam::DVec3;
@@ -13,14 +15,15 @@ use std::borrow::Borrow;
 
 /// A warm result may stray from its data (the new version) by this share of the data's
 /// bounding-box diagonal, the bound a whole fit is held to (no bulge over holes) ...
-pub(crate) const MAX_STRAY_SHARE: f64 = 0.005;
+pub(crate) const MAX_STRAY_SHARE: f64 = crate::pipeline::object::STRAY_LIMIT_SHARE;
 
 /// ... or by this many times what the previous surface strays from the same data (a
 /// smooth surface over a coarse data mesh strays by the mesh's chordal error already);
 /// farther, the whole fit runs. The fit's own errors (data to surface) cannot see a bulge.
 pub(crate) const MAX_STRAY_GROWTH: f64 = 1.5;
 
-/// Lattice segments per control face edge the stray check samples.
+/// Lattice segments per control face edge the stray check of a warm result samples
+/// (coarser than the report's: it runs on every warm update, and compares like with like).
 const STRAY_SEGMENTS: usize = 3;
 
 /// How far an object's surface strays from its data, in the report: a fit minimises the
@@ -42,9 +45,12 @@ pub struct StrayReport {
 }
 
 impl StrayReport {
-    /// The stray of `fit`'s whole surface.
+    /// The stray of `fit`'s whole surface: the fit's own measure when it took one (the
+    /// stray repair of a whole fit), on the same lattice otherwise.
     pub(super) fn of(fit: &ObjectFit) -> StrayReport {
-        let max = farthest_from_data(fit, STRAY_SEGMENTS);
+        let max = fit
+            .stray
+            .unwrap_or_else(|| farthest_from_data(fit, STRAY_LATTICE_SEGMENTS));
         let diagonal = fit.component.bounds_diagonal();
         let share_of_diagonal = if diagonal > 0.0 { max / diagonal } else { 0.0 };
         StrayReport {
@@ -53,7 +59,7 @@ impl StrayReport {
             limit_share: MAX_STRAY_SHARE,
             // An infinite or NaN max (a non-finite sample) is not within.
             within: share_of_diagonal <= MAX_STRAY_SHARE,
-            lattice_segments: STRAY_SEGMENTS,
+            lattice_segments: STRAY_LATTICE_SEGMENTS,
         }
     }
 }
