@@ -345,7 +345,8 @@ fn bun_zipper_keeps_its_five_holes() {
 /// decimated-max is closed, and a decimation's large flat triangles leave a smooth
 /// surface of 5 % controls 0.83 % of the diagonal off them between their corners (the
 /// data-to-surface error cannot see it). The stray repair splits the faces that stray and
-/// fits again, a few controls past the budget, until the surface is within 0.5 %.
+/// refits the controls around them, a few controls past the budget, until the surface is
+/// within 0.5 % (measured: 0.45 % at 278 controls for 264, RMS 0.417 against 0.429).
 #[test]
 fn decimated_max_stays_closed_and_within_half_a_percent_of_its_data() {
     let Some(mesh) = shared_mesh("models/decimated-max.obj") else {

@@ -263,13 +263,17 @@ fn two_arrival_orders_end_at_the_same_surface() {
                 .expect("update");
             let report = &update.outputs.report;
             eprintln!(
-                "v{k}: {} controls {} rms {:.2e} merge {} topology {} rounds {}",
+                "v{k}: {} controls {} rms {:.2e} merge {} topology {} rounds {} refinement {} stray {} warm {} local {}",
                 update.path,
                 update.fit.controls.len(),
                 update.fit.geometric_rms(),
                 report["session"]["merge"],
                 report["topology"],
-                report["object"]["rounds"]
+                report["object"]["rounds"],
+                report["object"]["refinement"],
+                report["object"]["stray"],
+                report["object"]["warm"],
+                report["session"]["updated_region"]["fit"],
             );
             last = Some(update);
         }

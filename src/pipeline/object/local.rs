@@ -382,7 +382,7 @@ pub(crate) fn free_controls(
 }
 
 /// `marked` with every vertex of a face holding a marked vertex: one ring more.
-fn with_neighbours(faces: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
+pub(super) fn with_neighbours(faces: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
     let mut grown = marked.to_vec();
     for f in faces {
         if f.iter().any(|&v| marked[v as usize]) {

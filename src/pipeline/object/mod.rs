@@ -22,6 +22,7 @@ mod layout;
 mod local;
 mod model;
 mod refine;
+mod repair;
 mod seam;
 mod solve;
 mod stray;
@@ -36,7 +37,7 @@ use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::{simplify_with_creases, Simplified, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::Topology;
 use crate::surface::loop_limit::LoopLimitSurface;
-use crate::surface::{SurfaceParam, TriSurface};
+use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
 use corners::rim_corners;
@@ -50,11 +51,10 @@ pub use model::{
     LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
     STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
 };
-use refine::{faces_beyond, refined_mesh, Fitted, Splits};
+use refine::{faces_beyond, refined_mesh, Splits};
 pub use refine::{RefineOptions, RefineRound};
 use solve::{near_boundary, point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
-use stray::face_strays;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
 
@@ -65,13 +65,6 @@ pub use version::refit_where_changed;
 /// tolerance) three rounds for one or two such points each took 3.8 of the 7.4 s, and the
 /// max moved 257 -> 285 -> 314 -> 270 um.
 const MIN_FACES_BEYOND_SHARE: usize = 100;
-
-/// Stray repair rounds at most (`keep_near_data`; on decimated-max at 5 % controls the
-/// daemon's 8 foot-point rounds needed 5, the library's 16 two), ...
-const STRAY_REPAIR_ROUNDS: usize = 5;
-
-/// ... and the controls they may add beyond the budget, as a share of it.
-const STRAY_REPAIR_EXTRA: f64 = 0.1;
 
 /// The component of `mesh` [`fit_object`] fits: its cleaned largest component, repaired
 /// to a manifold where cleaning alone leaves it not one; `None` when nothing is left.
@@ -166,7 +159,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     if refining {
         fit = refine_fit(fit, target, opts);
     }
-    let mut fit = keep_near_data(fit, target, opts);
+    let mut fit = repair::keep_near_data(fit, target, opts);
     fit.layout = layout;
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
@@ -430,13 +423,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
             break;
         }
         let share = room.div_ceil(opts.refine.rounds - round);
-        let fitted = Fitted {
-            component: &fit.component,
-            surface: &fit.surface,
-            controls: &fit.controls,
-            params: &fit.params,
-            distances: &fit.distances,
-        };
+        let fitted = fit.fitted();
         // As many splits as faces miss the tolerance (up to the round's share of the room):
         // the misfit says how much to refine, the squared error where.
         let beyond = faces_beyond(&fitted, tolerance);
@@ -516,114 +503,6 @@ fn finish_rounds(fit: ObjectFit, opts: &ObjectOptions) -> ObjectFit {
         }
         _ => fit,
     }
-}
-
-/// Stray repair after the fit: while the surface strays farther than
-/// `opts.max_stray_share` of the diagonal from the data (a bulge over a hole, or a patch
-/// too coarse for a coarse data mesh's large flat triangles, which the data-to-surface
-/// error cannot see), the longest edges of the faces that stray are split, the farthest
-/// first, and the object is fitted again from the fitted controls (a fit from a new point
-/// fit moved the surface elsewhere: decimated-max's second round strayed farther), adding
-/// at most `STRAY_REPAIR_EXTRA` of the controls beyond the budget in all. A round that does not bring the surface nearer is
-/// dropped and ends the repair. The bound is the promise to the user; the control
-/// budget gives way to it, and `refinement` says so (`stray_repair`).
-fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions) -> ObjectFit {
-    let Some(share) = opts.max_stray_share else {
-        return fit;
-    };
-    let t = Instant::now();
-    let limit = share * fit.component.bounds_diagonal();
-    // A broken mesh's holes can force more controls than the target (each boundary loop
-    // keeps a few): the extra share counts from where the fit is.
-    let start = target.max(fit.controls.len());
-    let cap = start + (STRAY_REPAIR_EXTRA * start as f64).ceil() as usize;
-    // Its own copy: `fit` is replaced round by round.
-    let data = fit.component.clone();
-    let nearest = MeshDistance::new(&data);
-    let strays_of = |f: &ObjectFit| {
-        let faces: Vec<u32> = (0..f.surface.domain_face_count() as u32).collect();
-        face_strays(
-            &f.surface,
-            &f.controls,
-            &nearest,
-            STRAY_LATTICE_SEGMENTS,
-            &faces,
-        )
-    };
-    let farthest_of = |s: &[f64]| s.iter().copied().fold(0.0, f64::max);
-    let mut strays = strays_of(&fit);
-    let mut fit = fit;
-    // A refit moves the whole surface a little, so a round can stray farther elsewhere:
-    // the rounds go on from each refit, and the nearest surface is kept.
-    let mut best: Option<(ObjectFit, Vec<f64>)> = None;
-    for _ in 0..STRAY_REPAIR_ROUNDS {
-        let farthest = farthest_of(&strays);
-        let room = cap.saturating_sub(fit.controls.len());
-        let late = opts.stop.deadline.is_some_and(|d| Instant::now() >= d);
-        if farthest <= limit || room == 0 || late {
-            break;
-        }
-        let over: Vec<f64> = strays
-            .iter()
-            .map(|&s| if s > limit { s } else { 0.0 })
-            .collect();
-        let add = room.min(over.iter().filter(|&&s| s > 0.0).count());
-        let fitted = Fitted {
-            component: &fit.component,
-            surface: &fit.surface,
-            controls: &fit.controls,
-            params: &fit.params,
-            distances: &fit.distances,
-        };
-        let Some(refined) = refined_mesh(&fitted, add, &opts.layout, Splits::Ranked(&over)) else {
-            break;
-        };
-        let Ok(next) = fit_from(
-            fit.component.clone(),
-            refined.mesh,
-            &refined.creases,
-            refined.params,
-            Start {
-                warm: Some(refined.warm),
-                previous: Some(&fit.surface),
-            },
-            opts,
-        ) else {
-            break;
-        };
-        let next_strays = strays_of(&next);
-        let mut round = RefineRound::of(
-            next.controls.len(),
-            next.rms,
-            next.max,
-            &next.distances,
-            opts.refine.tolerance,
-        );
-        round.stray_repair = true;
-        let mut refinement = fit.refinement.clone();
-        refinement.push(round);
-        let (times, layout) = (fit.times.clone(), fit.layout);
-        let previous = std::mem::replace(
-            &mut fit,
-            ObjectFit {
-                times,
-                layout,
-                refinement,
-                ..next
-            },
-        );
-        let previous_strays = std::mem::replace(&mut strays, next_strays);
-        if best.as_ref().is_none_or(|(_, s)| farthest_of(s) > farthest) {
-            best = Some((previous, previous_strays));
-        }
-    }
-    if let Some((kept, kept_strays)) = best.filter(|(_, s)| farthest_of(s) < farthest_of(&strays)) {
-        fit = kept;
-        strays = kept_strays;
-    }
-    fit.stray = Some(strays.iter().copied().fold(0.0, f64::max));
-    fit.times.refine_ms += ms_since(t);
-    fit
 }
 
 /// The options of a fit that only shows where to refine.

@@ -2,7 +2,7 @@
 //! errors, and the limit surface it fits.
 
 use super::layout::{LayoutOptions, LayoutReport};
-use super::refine::{RefineOptions, RefineRound};
+use super::refine::{Fitted, RefineOptions, RefineRound};
 use crate::fit::budget::{Budget, StepStats};
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::CreaseOptions;
@@ -72,8 +72,8 @@ pub struct ObjectOptions {
     /// When the rounds and the refinement stop before they converge or run out.
     pub stop: RoundStop,
     /// The farthest the surface may stray from the data, as a share of its bounding-box
-    /// diagonal: beyond it, faces are split where it strays and the object fitted again,
-    /// past the control budget if need be (`None`: no repair).
+    /// diagonal: beyond it, faces are split where it strays and the controls around them
+    /// refitted, past the control budget if need be (`None`: no repair).
     pub max_stray_share: Option<f64>,
 }
 
@@ -272,6 +272,17 @@ pub struct ObjectFit {
 }
 
 impl ObjectFit {
+    /// What refinement reads of the fit.
+    pub(super) fn fitted(&self) -> Fitted<'_> {
+        Fitted {
+            component: &self.component,
+            surface: &self.surface,
+            controls: &self.controls,
+            params: &self.params,
+            distances: &self.distances,
+        }
+    }
+
     /// The control mesh at the fitted positions.
     pub fn control_mesh(&self) -> TriMesh {
         TriMesh::new(self.controls.clone(), self.surface.faces().to_vec())

@@ -21,6 +21,7 @@ use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
+use rustc_hash::FxHashSet;
 
 /// Refinement settings.
 #[derive(Clone, Debug)]
@@ -268,6 +269,22 @@ pub(super) fn refined_mesh(
         creases,
         warm,
     })
+}
+
+/// Per face of `refined`, whether `previous` lacks it (the faces a refinement made), by
+/// their corners in any order.
+pub(super) fn new_faces(previous: &LoopLimitSurface, refined: &LoopLimitSurface) -> Vec<bool> {
+    let sorted = |f: &[u32; 3]| {
+        let mut f = *f;
+        f.sort_unstable();
+        f
+    };
+    let old: FxHashSet<[u32; 3]> = previous.faces().iter().map(sorted).collect();
+    refined
+        .faces()
+        .iter()
+        .map(|f| !old.contains(&sorted(f)))
+        .collect()
 }
 
 /// Loop's odd (edge) rule for edge (a, b) of `net` at the positions `at`: 3/8 of each end

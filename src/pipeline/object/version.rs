@@ -7,7 +7,7 @@ use super::model::{
     control_target, limit_surface, ms_since, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
     RoundReport,
 };
-use super::refine::{refined_mesh, Fitted, RefineRound, Splits};
+use super::refine::{new_faces, refined_mesh, Fitted, RefineRound, Splits};
 use super::solve::rms;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::surface::loop_limit::LoopLimitSurface;
@@ -15,7 +15,6 @@ use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
-use rustc_hash::FxHashSet;
 use std::time::Instant;
 
 /// A new point has changed when its signed distance to the previous surface differs from
@@ -315,17 +314,7 @@ impl Refitted {
             else {
                 break;
             };
-            let sorted = |f: &[u32; 3]| {
-                let mut f = *f;
-                f.sort_unstable();
-                f
-            };
-            let old: FxHashSet<[u32; 3]> = self.surface.faces().iter().map(sorted).collect();
-            let new_face: Vec<bool> = surface
-                .faces()
-                .iter()
-                .map(|f| !old.contains(&sorted(f)))
-                .collect();
+            let new_face = new_faces(&self.surface, &surface);
             let touched: Vec<usize> = (0..data.len())
                 .filter(|&i| new_face[refined.params[i].face as usize])
                 .collect();
