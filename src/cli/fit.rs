@@ -349,6 +349,12 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         ));
     }
     let stray = &r["object"]["stray"];
+    if let Some(added) = stray_repair_controls(&r["object"]["refinement"]) {
+        line.push_str(&format!(
+            "; {added} control points added where the surface strayed from the data (the \
+            stray repair, over the target)"
+        ));
+    }
     if stray["within"].as_bool() == Some(false) {
         line.push_str(&format!(
             "; the surface strays up to {:.2} % of the bounding-box diagonal from the data \
@@ -359,6 +365,16 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         ));
     }
     line
+}
+
+/// Control points the stray repair's rounds added (report.json `object.refinement`), when
+/// any round it took was kept.
+fn stray_repair_controls(refinement: &serde_json::Value) -> Option<u64> {
+    let rounds = refinement.as_array()?;
+    let repaired = |r: &&serde_json::Value| r["stray_repair"].as_bool() == Some(true);
+    let before = rounds.iter().rev().find(|r| !repaired(r))?["controls"].as_u64()?;
+    let after = rounds.last().filter(repaired)?["controls"].as_u64()?;
+    (after > before).then(|| after - before)
 }
 
 /// Where a fit's mesh came from, for its report.

@@ -201,4 +201,18 @@ fn fit_says_when_the_surface_strays_from_the_data() {
         "{refinement:?}"
     );
     assert!(!line.contains("strays"), "{line}");
+    let added = report["object"]["control_points"].as_u64().unwrap_or(0)
+        - refinement
+            .iter()
+            .rev()
+            .find(|r| r["stray_repair"] != true)
+            .and_then(|r| r["controls"].as_u64())
+            .unwrap_or(0);
+    assert!(added > 0, "{refinement:?}");
+    assert!(
+        line.contains(&format!(
+            "{added} control points added where the surface strayed"
+        )),
+        "{line}"
+    );
 }
