@@ -111,7 +111,7 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
         fit = kept;
         strays = kept_strays;
     }
-    fit.stray = Some(strays.iter().copied().fold(0.0, f64::max));
+    fit.stray = Some(farthest_of(&strays));
     fit.times.refine_ms += ms_since(t);
     fit
 }
