@@ -15,7 +15,8 @@
 //! refitted by `version` does not hold it, and a change over much of its control mesh
 //! goes to the whole fit instead).
 
-use super::model::{ObjectOptions, RoundStop, MAX_REFUSALS};
+use super::model::{limit_surface, ObjectOptions, RoundStop, MAX_REFUSALS};
+use super::refine::{new_faces, Refined};
 use super::solve::{near_boundary, FeetMut, Rim, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
@@ -381,8 +382,69 @@ pub(crate) fn free_controls(
     with_neighbours(surface.faces(), &touched)
 }
 
+/// A refined control mesh's surface and the local refit on it (`refit_refined`).
+pub(super) struct RefinedRefit {
+    /// The refined mesh's limit surface.
+    pub surface: LoopLimitSurface,
+    /// The controls the refit solved.
+    pub free: Vec<bool>,
+    /// The refit.
+    pub fit: LocalFit,
+}
+
+/// The surface of `refined` (a refinement of the surface `previous`, whose data points
+/// had the distances `errors`), with the controls around its new faces refitted to the
+/// vertices of `component` from `refined.warm`, every other control kept: the feet of the
+/// points on new faces are found again, and the controls their rows reach, plus a ring,
+/// are freed. With `free_new_faces`, the new faces' own controls and a ring are freed
+/// too, so a new face without data is held as well. `None` when the surface cannot be
+/// built.
+pub(super) fn refit_refined(
+    previous: &LoopLimitSurface,
+    refined: &Refined,
+    component: &TriMesh,
+    errors: &[f64],
+    free_new_faces: bool,
+    opts: &LocalOptions,
+) -> Option<RefinedRefit> {
+    let data = &component.positions;
+    let surface = limit_surface(&refined.mesh, &refined.creases, Some(previous)).ok()?;
+    let new_face = new_faces(previous, &surface);
+    let touched: Vec<usize> = (0..data.len())
+        .filter(|&i| new_face[refined.params[i].face as usize])
+        .collect();
+    let mut feet = LocalFeet::at(refined.params.clone(), errors.to_vec());
+    feet.find(&surface, &refined.warm, data, &touched);
+    let mut free = free_controls(&surface, &feet.params, &touched);
+    if free_new_faces {
+        let mut corners = vec![false; free.len()];
+        for (f, _) in surface.faces().iter().zip(&new_face).filter(|(_, &n)| n) {
+            for &v in f {
+                corners[v as usize] = true;
+            }
+        }
+        for (free, corner) in free
+            .iter_mut()
+            .zip(with_neighbours(surface.faces(), &corners))
+        {
+            *free |= corner;
+        }
+    }
+    let fit = refit_around(
+        &surface,
+        &refined.warm,
+        data,
+        Some(component),
+        feet,
+        touched.len(),
+        &free,
+        opts,
+    );
+    Some(RefinedRefit { surface, free, fit })
+}
+
 /// `marked` with every vertex of a face holding a marked vertex: one ring more.
-pub(super) fn with_neighbours(faces: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
+fn with_neighbours(faces: &[[u32; 3]], marked: &[bool]) -> Vec<bool> {
     let mut grown = marked.to_vec();
     for f in faces {
         if f.iter().any(|&v| marked[v as usize]) {

@@ -1,10 +1,10 @@
 //! The stray repair of a whole fit: where the surface strays from its data farther than
 //! the bound, its faces are split and the controls around them refitted.
 
-use super::local::{free_controls, refit_around, with_neighbours, LocalFeet, LocalOptions};
+use super::local::{refit_refined, LocalOptions, RefinedRefit};
 use super::model::STRAY_LATTICE_SEGMENTS;
-use super::model::{limit_surface, ms_since, ObjectFit, ObjectOptions};
-use super::refine::{new_faces, refined_mesh, RefineRound, Refined, Splits};
+use super::model::{ms_since, ObjectFit, ObjectOptions};
+use super::refine::{refined_mesh, RefineRound, Refined, Splits};
 use super::solve::rms;
 use super::stray::face_strays;
 use crate::mesh::distance::MeshDistance;
@@ -90,18 +90,9 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
             opts.refine.tolerance,
         );
         round.stray_repair = true;
-        let mut refinement = fit.refinement.clone();
-        refinement.push(round);
-        let (times, layout) = (fit.times.clone(), fit.layout);
-        let previous = std::mem::replace(
-            &mut fit,
-            ObjectFit {
-                times,
-                layout,
-                refinement,
-                ..next
-            },
-        );
+        let mut next = next;
+        next.refinement.push(round);
+        let previous = std::mem::replace(&mut fit, next);
         let previous_strays = std::mem::replace(&mut strays, next_strays);
         if best.as_ref().is_none_or(|(_, s)| farthest_of(s) > farthest) {
             best = Some((previous, previous_strays));
@@ -117,39 +108,21 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
 }
 
 /// `fit` on the `refined` control mesh, with only the controls around its new faces
-/// refitted (and their data points' feet found again), every other control kept.
+/// refitted (`local::refit_refined`, the new faces' own controls too), every other control
+/// kept; its report but the figures is `fit`'s.
 fn repaired_locally(fit: &ObjectFit, refined: Refined, opts: &ObjectOptions) -> Option<ObjectFit> {
-    let surface = limit_surface(&refined.mesh, &refined.creases, Some(&fit.surface)).ok()?;
-    let new_face = new_faces(&fit.surface, &surface);
-    let touched: Vec<usize> = (0..fit.data.len())
-        .filter(|&i| new_face[refined.params[i].face as usize])
-        .collect();
-    let mut feet = LocalFeet::at(refined.params, fit.distances.clone());
-    feet.find(&surface, &refined.warm, &fit.data, &touched);
-    // A new face without data is held by its own controls too.
-    let mut free = free_controls(&surface, &feet.params, &touched);
-    let mut corners = vec![false; free.len()];
-    for (f, _) in surface.faces().iter().zip(&new_face).filter(|(_, &n)| n) {
-        for &v in f {
-            corners[v as usize] = true;
-        }
-    }
-    for (free, corner) in free
-        .iter_mut()
-        .zip(with_neighbours(surface.faces(), &corners))
-    {
-        *free |= corner;
-    }
-    let local = refit_around(
-        &surface,
-        &refined.warm,
-        &fit.data,
-        Some(&fit.component),
-        feet,
-        touched.len(),
-        &free,
+    let RefinedRefit {
+        surface,
+        fit: local,
+        ..
+    } = refit_refined(
+        &fit.surface,
+        &refined,
+        &fit.component,
+        &fit.distances,
+        true,
         &LocalOptions::of(opts),
-    );
+    )?;
     let (rms, max) = (
         rms(&local.errors),
         local.errors.iter().copied().fold(0.0, f64::max),

@@ -2,12 +2,14 @@
 //! against the previous fit, the local refit around them (`local`), and local refinement
 //! where the update leaves points beyond the tolerance.
 
-use super::local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
+use super::local::{
+    free_controls, refit_around, refit_refined, LocalFeet, LocalFit, LocalOptions, RefinedRefit,
+};
 use super::model::{
     control_target, limit_surface, ms_since, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
     RoundReport,
 };
-use super::refine::{new_faces, refined_mesh, Fitted, RefineRound, Splits};
+use super::refine::{refined_mesh, Fitted, RefineRound, Splits};
 use super::solve::rms;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::surface::loop_limit::LoopLimitSurface;
@@ -310,27 +312,21 @@ impl Refitted {
             else {
                 break;
             };
-            let Ok(surface) = limit_surface(&refined.mesh, &refined.creases, Some(&self.surface))
+            let Some(RefinedRefit {
+                surface,
+                free,
+                fit: next,
+            }) = refit_refined(
+                &self.surface,
+                &refined,
+                component,
+                &self.errors,
+                false,
+                &local_opts,
+            )
             else {
                 break;
             };
-            let new_face = new_faces(&self.surface, &surface);
-            let touched: Vec<usize> = (0..data.len())
-                .filter(|&i| new_face[refined.params[i].face as usize])
-                .collect();
-            let mut feet = LocalFeet::at(refined.params, self.errors.clone());
-            feet.find(&surface, &refined.warm, data, &touched);
-            let free = free_controls(&surface, &feet.params, &touched);
-            let next = refit_around(
-                &surface,
-                &refined.warm,
-                data,
-                Some(component),
-                feet,
-                touched.len(),
-                &free,
-                &local_opts,
-            );
             let (after, before) = (rms(&next.errors), rms(&self.errors));
             if after.partial_cmp(&before) != Some(std::cmp::Ordering::Less) {
                 break;
