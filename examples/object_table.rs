@@ -52,7 +52,7 @@ fn main() {
         "generated: bumpy blob",
     ];
     println!(
-        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | {:>7} | times ms: read clean simplify layout surface first rounds (rounds) refine | fit cpu | irregular before/after, rim corners, sampled faces, refinement controls:rms",
+        "{:<22} {:>7} {:>6} {:>5} | {:>9} {:>9} | {:>9} {:>9} | {:>6} {:>9} {:>9} | {:>6} | {:>2} {:>2} | {:>7} | times ms: read clean simplify layout surface first rounds (rounds) refine | fit cpu | irregular before/after, rim corners, crease edges, sampled faces, refinement controls:rms",
         "model", "data", "ctrl", "%", "fit rms", "fit max", "tess rms", "tess max", "qem V", "qem rms", "qem max", "ratio", "g", "b", "stray%"
     );
     let only = std::env::var("OBJ_MODELS").ok();
@@ -126,6 +126,15 @@ fn main() {
         if let Some(l) = env("OBJ_LIMIT_START") {
             opts.limit_start = l != 0.0;
         }
+        if let Some(a) = env("OBJ_CREASE_DEG") {
+            opts.crease.angle_deg = a;
+        }
+        if let Some(r) = env("OBJ_CREASE_RATIO") {
+            opts.crease.relative_ratio = r;
+        }
+        if let Some(r) = env("OBJ_CREASE_MIN_EDGES") {
+            opts.crease.min_edges = r as usize;
+        }
         if let Some(r) = env("OBJ_RELAX_STEPS") {
             opts.layout.relax_steps = r as usize;
         }
@@ -167,7 +176,7 @@ fn main() {
             diagnose(&fit, tess_rms);
         }
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} s{} {}",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} k{} s{} {}",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -197,6 +206,7 @@ fn main() {
             fit.layout.irregular_before,
             fit.layout.irregular_after,
             fit.layout.corners,
+            fit.surface.crease_edges().len(),
             fit.sampled_faces,
             fit.refinement
                 .iter()
@@ -472,6 +482,12 @@ fn diagnose(fit: &ObjectFit, tess_rms: f64) {
         fit.rms
     );
     stray_faces(fit, &tessellation_at(fit, TESS));
+    if let Some(stray) = fit.stray {
+        println!(
+            "  the fit's own stray measure: {:.3}% of the diagonal",
+            100.0 * stray / fit.component.bounds_diagonal()
+        );
+    }
     let rounds: Vec<String> = fit
         .rounds
         .iter()

@@ -9,7 +9,7 @@ use crate::pipeline::scan::{BezierLayout, Correction, CorrectionConfig, ScanConf
 use crate::pipeline::scattered::{BPatchConfig, DmsConfig};
 use crate::pipeline::worker::{
     run_input_with, BudgetConfig, ComponentsConfig, Domain, FitConfig, PatchOutputs, WorkerConfig,
-    DEFAULT_CREASE_ANGLE_DEG, DEFAULT_TESSELLATION,
+    DEFAULT_CREASE_ANGLE_DEG, DEFAULT_CREASE_RELATIVE_RATIO, DEFAULT_TESSELLATION,
 };
 use crate::pipeline::SurfaceKind;
 use anyhow::Context;
@@ -159,6 +159,10 @@ pub struct FitArgs {
     /// sharp crease edges of the surface (0: none).
     #[arg(long, default_value_t = DEFAULT_CREASE_ANGLE_DEG)]
     pub crease_angle_deg: f64,
+    /// Whole objects: a shallower data edge (over 15 degrees) is a crease too where it turns
+    /// this many times as much as the edges beside it, in a feature line of its own (0: off).
+    #[arg(long, default_value_t = DEFAULT_CREASE_RELATIVE_RATIO)]
+    pub crease_relative_ratio: f64,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
@@ -208,6 +212,7 @@ impl FitArgs {
                 tangential_edge: self.correction_tangential_edge,
             },
             crease_angle_deg: self.crease_angle_deg,
+            crease_relative_ratio: self.crease_relative_ratio,
             components: ComponentsConfig {
                 mode: self.components,
                 min_vertices: self.min_component_vertices,

@@ -496,6 +496,13 @@ fn validate_fit(f: &FitConfig) -> Check {
         f.crease_angle_deg,
         "must be in [0, 180) (0: no creases)",
     )?;
+    check(
+        f.crease_relative_ratio == 0.0
+            || (f.crease_relative_ratio > 1.0 && f.crease_relative_ratio.is_finite()),
+        "fit.crease_relative_ratio",
+        f.crease_relative_ratio,
+        "must be 0 (off) or a finite number above 1",
+    )?;
     validate_scan(&f.scan)?;
     validate_correction(&f.correction)?;
     validate_planar(f)?;

@@ -1,4 +1,5 @@
-//! Sharp edges in whole-object fits: generated CAD-like parts (a box, a capped cylinder)
+//! Sharp edges in whole-object fits: generated CAD-like parts (a box, a capped cylinder,
+//! a box with a shallow gable roof)
 //! keep their edges as crease edges of the Loop limit surface, and compare with the
 //! quadric-decimated mesh of as many vertices; smooth shared models get few or no creases.
 
@@ -407,4 +408,92 @@ fn surface_json_and_the_report_carry_the_creases_and_warm_starts_keep_them() {
     let off = run_patch(&mesh, None, &cfg).expect("fits");
     assert_eq!(off.surface["crease_edges"], serde_json::json!([]));
     assert_eq!(off.report["object"]["crease_edges"], 0);
+}
+
+/// A box whose top is a gable roof: two planes pitched by `pitch_deg` meeting at a ridge
+/// over the middle of its x extent (the ridge turns by twice the pitch, the eaves by 90
+/// degrees less the pitch).
+fn gabled_box(size: DVec3, spacing: f64, pitch_deg: f64) -> TriMesh {
+    let mut mesh = box_mesh(size, spacing);
+    let slope = pitch_deg.to_radians().tan();
+    let half = 0.5 * size.x;
+    for p in &mut mesh.positions {
+        if (p.y - size.y).abs() < 1e-12 {
+            p.y += slope * (half - (p.x - half).abs());
+        }
+    }
+    mesh
+}
+
+#[test]
+fn a_shallow_roof_ridge_stays_sharp_by_the_relative_rule() {
+    let size = DVec3::new(0.1, 0.06, 0.08);
+    // The ridge turns by 40 degrees, under the 60-degree angle; the eaves by 70.
+    let mesh = gabled_box(size, 0.0025, 20.0);
+    let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    let c = compare_with_qem(&fit);
+    let on_ridge = |v: u32| {
+        let p = fit.controls[v as usize];
+        (p.x - 0.5 * size.x).abs() < 1e-3 && p.y > size.y + 1e-3
+    };
+    let ridge: Vec<usize> = fit
+        .surface
+        .crease_edges()
+        .iter()
+        .enumerate()
+        .filter(|(_, &[a, b])| on_ridge(a) && on_ridge(b))
+        .map(|(k, _)| k)
+        .collect();
+    let angles = crease_normal_angles(&fit);
+    let worst = ridge
+        .iter()
+        .map(|&k| (angles[k] - 40.0).abs())
+        .fold(0.0f64, f64::max);
+    let angle_only = fit_object(
+        &mesh,
+        &ObjectOptions {
+            crease: CreaseOptions {
+                relative_ratio: 0.0,
+                ..CreaseOptions::default()
+            },
+            ..ObjectOptions::default()
+        },
+    )
+    .expect("fitted");
+    let a = compare_with_qem(&angle_only);
+    println!(
+        "gabled box {} points, {} controls, {} crease edges ({} on the ridge, worst |angle - 40| \
+         {worst:.2} deg): rms {:.3e} max {:.3e}; angle rule only: {} crease edges, rms {:.3e} \
+         max {:.3e}; QEM rms {:.3e} max {:.3e}",
+        fit.data.len(),
+        fit.controls.len(),
+        c.creases,
+        ridge.len(),
+        c.rms,
+        c.max,
+        a.creases,
+        a.rms,
+        a.max,
+        c.qem_rms,
+        c.qem_max
+    );
+    assert!(
+        ridge.len() >= 4,
+        "the ridge is a crease ({} edges)",
+        ridge.len()
+    );
+    assert!(
+        worst < 3.0,
+        "normals across the ridge {worst} degrees off 40"
+    );
+    // The part is polyhedral, so the decimation is exact (its RMS is rounding): the
+    // comparison is with the diagonal and with the angle rule alone.
+    let diag = size.length();
+    assert!(c.max < 1e-4 * diag, "max {} of diagonal {diag}", c.max);
+    assert!(
+        c.rms < 0.5 * a.rms,
+        "rms {} vs {} with the angle only",
+        c.rms,
+        a.rms
+    );
 }

@@ -96,6 +96,11 @@ pub struct FitConfig {
     /// their normals) become crease edges of the surface; 0 turns creases off.
     #[serde(default = "default_crease_angle_deg")]
     pub crease_angle_deg: f64,
+    /// Whole objects: a shallower data edge (over 15 degrees) is a crease too where it turns
+    /// this many times as much as the edges beside it, in a feature line of its own
+    /// (`mesh::crease`); 0 turns this rule off.
+    #[serde(default = "default_crease_relative_ratio")]
+    pub crease_relative_ratio: f64,
 }
 
 fn default_min_levels() -> usize {
@@ -108,6 +113,13 @@ pub const DEFAULT_CREASE_ANGLE_DEG: f64 = 60.0;
 
 fn default_crease_angle_deg() -> f64 {
     DEFAULT_CREASE_ANGLE_DEG
+}
+
+/// See `mesh::crease` for why 6.
+pub const DEFAULT_CREASE_RELATIVE_RATIO: f64 = 6.0;
+
+fn default_crease_relative_ratio() -> f64 {
+    DEFAULT_CREASE_RELATIVE_RATIO
 }
 
 impl Default for FitConfig {
@@ -126,6 +138,7 @@ impl Default for FitConfig {
             dms: DmsConfig::default(),
             bpatch: BPatchConfig::default(),
             crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
+            crease_relative_ratio: DEFAULT_CREASE_RELATIVE_RATIO,
         }
     }
 }

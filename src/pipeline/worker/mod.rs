@@ -12,7 +12,7 @@ mod stray_guard;
 
 pub use config::{
     BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_CREASE_ANGLE_DEG,
-    DEFAULT_TESSELLATION,
+    DEFAULT_CREASE_RELATIVE_RATIO, DEFAULT_TESSELLATION,
 };
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};

@@ -192,6 +192,7 @@ fn options(cfg: &WorkerConfig) -> ObjectOptions {
         target_controls_pct: cfg.fit.scan.target_controls_pct,
         crease: CreaseOptions {
             angle_deg: cfg.fit.crease_angle_deg,
+            relative_ratio: cfg.fit.crease_relative_ratio,
             ..CreaseOptions::default()
         },
         smoothing: cfg.fit.scan.smoothing,
