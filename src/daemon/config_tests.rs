@@ -148,3 +148,25 @@ fn sub_table_ranges_are_named_by_their_whole_key() {
     let e = DaemonConfig::parse(&text, "t.toml").expect_err("refused");
     assert!(e.to_string().contains("output.tessellation"), "{e}");
 }
+
+#[test]
+fn crease_relative_ratio_is_off_or_above_one() {
+    let with = |ratio: &str| {
+        DEFAULT_CONFIG.replace(
+            "crease_relative_ratio = 6.0",
+            &format!("crease_relative_ratio = {ratio}"),
+        )
+    };
+    assert_eq!(
+        DaemonConfig::parse(&with("0.0"), "c.toml")
+            .expect("off")
+            .fit
+            .crease_relative_ratio,
+        0.0
+    );
+    assert!(DaemonConfig::parse(&with("3.5"), "c.toml").is_ok());
+    let e = DaemonConfig::parse(&with("0.5"), "c.toml")
+        .expect_err("refused")
+        .to_string();
+    assert!(e.contains("fit.crease_relative_ratio"), "{e}");
+}
