@@ -396,8 +396,8 @@ pub(super) struct RefinedRefit {
 /// had the distances `errors`), with the controls around its new faces refitted to the
 /// vertices of `component` from `refined.warm`, every other control kept: the feet of the
 /// points on new faces are found again, and the controls their rows reach, plus a ring,
-/// are freed. With `free_new_faces` (the stray repair), the points on every face at a new
-/// face's corners are found again too, and the new faces' own controls and a ring are
+/// are freed. With `free_new_faces` (the stray repair), the points on every face with a
+/// corner within a ring of a new face's corners are found again too, and the new faces' own controls and a ring are
 /// freed, so a new face without data is held as well. `None` when the surface cannot be
 /// built.
 pub(super) fn refit_refined(
@@ -412,10 +412,11 @@ pub(super) fn refit_refined(
     let surface = limit_surface(&refined.mesh, &refined.creases, Some(previous)).ok()?;
     let mut new_face = new_faces(previous, &surface);
     // A split raises the valence of its edge's far corners and the flips after it change
-    // more: the patch of every face at a new face's corners changes too, and a repair
-    // that refits only the points on the new faces leaves the points there on their old
-    // feet (cheburashka, 16 rounds: each repair round 0.35-1.4 % worse in RMS, refused;
-    // with them decimated-max, chin_tri and cheburashka all end nearer their data).
+    // more, and a Loop patch depends on its corners' rings: the patch of every face with
+    // a corner within a ring of a new face's corners changes too. A repair that refits
+    // only the points on the new faces leaves the points there on their old feet
+    // (cheburashka, 16 rounds: each repair round 0.35-1.4 % worse in RMS, refused; with
+    // them decimated-max, chin_tri and cheburashka all end nearer their data).
     if free_new_faces {
         let mut corners = vec![false; refined.mesh.positions.len()];
         for (f, _) in surface.faces().iter().zip(&new_face).filter(|(_, &n)| n) {
