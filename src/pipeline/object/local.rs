@@ -397,9 +397,9 @@ pub(super) struct RefinedRefit {
 /// vertices of `component` from `refined.warm`, every other control kept: the feet of the
 /// points on new faces are found again, and the controls their rows reach, plus a ring,
 /// are freed. With `free_new_faces` (the stray repair), the points on every face with a
-/// corner within a ring of a new face's corners are found again too, and the new faces' own controls and a ring are
-/// freed, so a new face without data is held as well. `None` when the surface cannot be
-/// built.
+/// corner within a ring of a new face's corners are found again too, and those faces'
+/// controls and a ring are freed, so a new face without data is held as well. `None`
+/// when the surface cannot be built.
 pub(super) fn refit_refined(
     previous: &LoopLimitSurface,
     refined: &Refined,
@@ -418,16 +418,8 @@ pub(super) fn refit_refined(
     // (cheburashka, 16 rounds: each repair round 0.35-1.4 % worse in RMS, refused; with
     // them decimated-max, chin_tri and cheburashka all end nearer their data).
     if free_new_faces {
-        let mut corners = vec![false; refined.mesh.positions.len()];
-        for (f, _) in surface.faces().iter().zip(&new_face).filter(|(_, &n)| n) {
-            for &v in f {
-                corners[v as usize] = true;
-            }
-        }
-        let near = with_neighbours(surface.faces(), &corners);
-        for (n, f) in new_face.iter_mut().zip(surface.faces()) {
-            *n |= f.iter().any(|&v| near[v as usize]);
-        }
+        let corners = corners_of(surface.faces(), &new_face, refined.mesh.positions.len());
+        new_face = moving_faces(&surface, &corners);
     }
     let touched: Vec<usize> = (0..data.len())
         .filter(|&i| new_face[refined.params[i].face as usize])
@@ -436,12 +428,7 @@ pub(super) fn refit_refined(
     feet.find(&surface, &refined.warm, data, &touched);
     let mut free = free_controls(&surface, &feet.params, &touched);
     if free_new_faces {
-        let mut corners = vec![false; free.len()];
-        for (f, _) in surface.faces().iter().zip(&new_face).filter(|(_, &n)| n) {
-            for &v in f {
-                corners[v as usize] = true;
-            }
-        }
+        let corners = corners_of(surface.faces(), &new_face, free.len());
         for (free, corner) in free
             .iter_mut()
             .zip(with_neighbours(surface.faces(), &corners))
@@ -460,6 +447,17 @@ pub(super) fn refit_refined(
         opts,
     );
     Some(RefinedRefit { surface, free, fit })
+}
+
+/// Per vertex (of `vertex_count`), whether it is a corner of a face `marked`.
+fn corners_of(faces: &[[u32; 3]], marked: &[bool], vertex_count: usize) -> Vec<bool> {
+    let mut corners = vec![false; vertex_count];
+    for (f, _) in faces.iter().zip(marked).filter(|(_, &m)| m) {
+        for &v in f {
+            corners[v as usize] = true;
+        }
+    }
+    corners
 }
 
 /// `marked` with every vertex of a face holding a marked vertex: one ring more.

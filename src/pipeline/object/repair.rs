@@ -53,7 +53,13 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
     };
     let farthest_of = |s: &[f64]| s.iter().copied().fold(0.0, f64::max);
     let mut strays = strays_of(&fit);
-    let start_rms = fit.rms;
+    // Nearer the data, never a worse fit of it beyond what a foot-point round may leave
+    // ungained (`min_gain`: the rounds stop there, so the fit is no more converged than
+    // that): on the sphere session's open views a round nearer the data but 7 % worse in
+    // RMS left a control mesh the later warm updates could not mend (the final surface
+    // 165 um off the sphere, 83 um before), while a fully converged fit (cheburashka, 16
+    // rounds) is refitted locally 0.35 % worse.
+    let worst_rms = fit.rms * (1.0 + opts.min_gain.max(0.0));
     let mut fit = fit;
     // A refit moves the whole surface a little, so a round can stray farther elsewhere:
     // the rounds go on from each refit, and the nearest surface is kept.
@@ -75,13 +81,6 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
             break;
         };
         let next = repaired_locally(&fit, refined, opts);
-        // Nearer the data, never a worse fit of it beyond what a foot-point round may leave
-        // ungained (`min_gain`: the rounds stop there, so the fit is no more converged than
-        // that): on the sphere session's open views a round nearer the data but 7 % worse
-        // in RMS left a control mesh the later warm updates could not mend (the final
-        // surface 165 um off the sphere, 83 um before), while a fully converged fit
-        // (cheburashka, 16 rounds) is refitted locally 0.35 % worse.
-        let worst_rms = start_rms * (1.0 + opts.min_gain.max(0.0));
         let Some(next) = next.filter(|n| n.rms <= worst_rms) else {
             break;
         };
