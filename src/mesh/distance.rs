@@ -76,6 +76,14 @@ impl<'a> MeshDistance<'a> {
         let mut best: Option<(f64, Closest)> = None;
         for r in 0i64.. {
             for cell in shell(c, r) {
+                // A cell no nearer than the best point found holds no nearer point (a
+                // triangle is in every cell its box meets, so in the cell of its point
+                // nearest q): most queries of a surface near its data end in the first
+                // cell and a few of its 26 neighbours.
+                let reached = best.as_ref().map_or(f64::INFINITY, |(d, _)| *d);
+                if self.gap_to_cell(q, cell) > reached * (1.0 + 1e-9) {
+                    continue;
+                }
                 let Some(faces) = self.buckets.get(&cell) else {
                     continue;
                 };
@@ -102,6 +110,15 @@ impl<'a> MeshDistance<'a> {
             }
         }
         best.map(|(_, c)| c)
+    }
+}
+
+impl MeshDistance<'_> {
+    /// Distance from `q` to the box of `cell`.
+    fn gap_to_cell(&self, q: DVec3, cell: (i64, i64, i64)) -> f64 {
+        let lo = DVec3::new(cell.0 as f64, cell.1 as f64, cell.2 as f64) * self.cell;
+        let hi = lo + DVec3::splat(self.cell);
+        (lo - q).max(q - hi).max(DVec3::ZERO).length()
     }
 }
 
