@@ -478,21 +478,10 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
     fit
 }
 
-/// `fit`'s remaining foot-point rounds: the rounds go on from its controls and foot points
-/// on the same control mesh (every patch taken over) up to `opts.rounds` in all, the ones
-/// `fit` took counted; `fit` itself when none is left, or when they fail or do not lower
-/// the RMS. Running all of `opts.rounds` again gave the 139k-point noisy bunny 10 rounds
-/// where the daemon asks for 8, the last two 0.4 % each at 180 ms each.
+/// `fit`'s remaining foot-point rounds: the rounds run again from its controls and foot
+/// points on the same control mesh (every patch taken over) with all of `opts.rounds`;
+/// `fit` itself when that fails or does not lower the RMS.
 fn finish_rounds(fit: ObjectFit, opts: &ObjectOptions) -> ObjectFit {
-    let taken = fit.rounds.len().saturating_sub(1);
-    let left = opts.rounds.saturating_sub(taken);
-    if left == 0 {
-        return fit;
-    }
-    let opts = &ObjectOptions {
-        rounds: left,
-        ..opts.clone()
-    };
     let finished = fit_from(
         fit.component.clone(),
         fit.control_mesh(),
