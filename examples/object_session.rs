@@ -204,6 +204,31 @@ fn load_average() -> String {
         .unwrap_or_else(|_| "?".into())
 }
 
+/// The whole fit's refinement rounds, `controls:rms(beyond)` each (`-` for none): each
+/// is a whole refit, so they are where an update's fit time goes.
+fn refinement_line(rounds: &serde_json::Value) -> String {
+    let Some(rounds) = rounds.as_array().filter(|r| !r.is_empty()) else {
+        return "-".into();
+    };
+    rounds
+        .iter()
+        .map(|r| {
+            let repair = if r["stray_repair"] == true {
+                " repair"
+            } else {
+                ""
+            };
+            format!(
+                "{}:{:.1}({}){repair}",
+                r["controls"],
+                r["rms"].as_f64().unwrap_or(f64::NAN) * 1e6,
+                r["beyond"]
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 /// One update's line: times (wall and CPU), path, how it was fitted, the merged region.
 fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
     let session = &u.outputs.report["session"];
@@ -223,7 +248,8 @@ fn describe(id: &str, u: &SessionUpdate, cpu_ms: f64) -> String {
     let object = &u.outputs.report["object"];
     let stage = |k: &str| object["stages"][k].as_f64().unwrap_or(0.0);
     let fitted = format!(
-        "{fitted}\n        worker: warm {}  new ground points {}  stages ms: clean {:.0} simplify {:.0} first {:.0} rounds {:.0} refine {:.0}",
+        "{fitted}\n        refinement (controls:rms um, beyond the tolerance) {}\n        worker: warm {}  new ground points {}  stages ms: clean {:.0} simplify {:.0} first {:.0} rounds {:.0} refine {:.0}",
+        refinement_line(&object["refinement"]),
         object["warm"],
         object["local"]["new_ground_points"],
         stage("clean_ms"),
