@@ -187,7 +187,7 @@ impl Net<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::surface::SurfaceParam;
+    use crate::pipeline::object::layout::tests::landed_on_own_faces;
 
     /// A flat 3 x 3 grid on [0, 2]^2, each square split by its rising diagonal: the
     /// corners (0, 0) and (2, 2) have two faces, (2, 0) and (0, 2) one. Vertex j * 3 + i
@@ -207,23 +207,6 @@ mod tests {
         TriMesh::new(positions, triangles)
     }
 
-    /// Each vertex landed on the first face it is a corner of.
-    fn landing(mesh: &TriMesh) -> Vec<SurfaceParam> {
-        (0..mesh.positions.len() as u32)
-            .map(|p| {
-                let face = mesh.triangles.iter().position(|t| t.contains(&p));
-                let face = face.unwrap_or(0);
-                let slot = mesh.triangles[face].iter().position(|&c| c == p);
-                let slot = slot.unwrap_or(0);
-                SurfaceParam {
-                    face: face as u32,
-                    u: f64::from(u8::from(slot == 0)),
-                    v: f64::from(u8::from(slot == 1)),
-                }
-            })
-            .collect()
-    }
-
     #[test]
     fn the_four_right_angles_of_a_square_rim_are_corners() {
         let mesh = grid();
@@ -241,7 +224,7 @@ mod tests {
     #[test]
     fn a_vertex_of_one_face_not_wanted_as_a_corner_gets_a_second() {
         let mesh = grid();
-        let land = landing(&mesh);
+        let land = landed_on_own_faces(&mesh);
         let Some(mut net) = Net::new(&mesh, mesh.clone(), &land, &[]) else {
             panic!("the grid is a manifold");
         };
@@ -256,7 +239,7 @@ mod tests {
     #[test]
     fn a_corner_is_left_with_one_face_and_keeps_it_through_splits() {
         let mesh = grid();
-        let land = landing(&mesh);
+        let land = landed_on_own_faces(&mesh);
         let Some(mut net) = Net::new(&mesh, mesh.clone(), &land, &[]) else {
             panic!("the grid is a manifold");
         };

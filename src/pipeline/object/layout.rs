@@ -533,4 +533,4 @@ impl<'a> Net<'a> {
 
 #[cfg(test)]
 #[path = "layout_tests.rs"]
-mod tests;
+pub(super) mod tests;

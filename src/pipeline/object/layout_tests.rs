@@ -16,22 +16,9 @@ fn disc_with_a_flipped_spoke() -> (TriMesh, TriMesh, Vec<SurfaceParam>) {
     let mut bad = fan.clone();
     bad[0] = [0, 1, 3];
     bad[1] = [1, 2, 3];
-    let landing: Vec<SurfaceParam> = (0..7u32)
-        .map(|p| {
-            let face = bad.iter().position(|t| t.contains(&p)).unwrap_or(0);
-            let slot = bad[face].iter().position(|&c| c == p).unwrap_or(0);
-            SurfaceParam {
-                face: face as u32,
-                u: f64::from(u8::from(slot == 0)),
-                v: f64::from(u8::from(slot == 1)),
-            }
-        })
-        .collect();
-    (
-        TriMesh::new(positions.clone(), fan),
-        TriMesh::new(positions, bad),
-        landing,
-    )
+    let bad = TriMesh::new(positions.clone(), bad);
+    let landing = landed_on_own_faces(&bad);
+    (TriMesh::new(positions, fan), bad, landing)
 }
 
 fn has_edge(mesh: &TriMesh, a: u32, b: u32) -> bool {
@@ -72,8 +59,8 @@ fn flips_make_the_centre_regular_and_keep_every_point_landed() {
     }
 }
 
-/// Each vertex of `mesh` landed on a face it is a corner of.
-fn landed_on_own_faces(mesh: &TriMesh) -> Vec<SurfaceParam> {
+/// Each vertex of `mesh` landed on the first face it is a corner of.
+pub(in crate::pipeline::object) fn landed_on_own_faces(mesh: &TriMesh) -> Vec<SurfaceParam> {
     (0..mesh.positions.len() as u32)
         .map(|p| {
             let face = mesh
