@@ -186,18 +186,22 @@ pub(crate) fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVe
 /// closest point.
 pub(crate) fn project_onto_triangle(p: DVec3, tri: [DVec3; 3]) -> (f64, [f64; 3]) {
     let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
+    ((q - p).length_squared(), barycentric_on(q, tri))
+}
+
+/// The barycentric weights of `q`, a point on triangle `tri`, clamped to the triangle.
+pub(crate) fn barycentric_on(q: DVec3, tri: [DVec3; 3]) -> [f64; 3] {
     let (e0, e1, e2) = (tri[1] - tri[0], tri[2] - tri[0], q - tri[0]);
     let (d00, d01, d11) = (e0.dot(e0), e0.dot(e1), e1.dot(e1));
     let (d20, d21) = (e2.dot(e0), e2.dot(e1));
     let denom = d00 * d11 - d01 * d01;
-    let bary = if denom > 0.0 {
+    if denom > 0.0 {
         let b1 = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
         let b2 = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - b1);
         [1.0 - b1 - b2, b1, b2]
     } else {
         [1.0, 0.0, 0.0]
-    };
-    ((q - p).length_squared(), bary)
+    }
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@
 //! carrying in line gives, bit for bit, and the two halves of the work, each about half of
 //! a simplification, overlap on two cores.
 
-use crate::mesh::distance::project_onto_triangle;
+use crate::mesh::distance::{barycentric_on, closest_on_triangle};
 use crossbeam_channel::Receiver;
 use glam::DVec3;
 
@@ -64,6 +64,9 @@ pub(super) struct Landings<'a> {
     pub face: Vec<u32>,
     pub bary: Vec<[f64; 3]>,
     face_points: Vec<Vec<u32>>,
+    /// A collapse's fan balls and moving points, kept between collapses (buffers only).
+    balls: Vec<(DVec3, f64)>,
+    moving: Vec<u32>,
 }
 
 /// A ball holding the triangle: its centroid, and the distance to its furthest corner
@@ -98,6 +101,8 @@ impl<'a> Landings<'a> {
             face,
             bary,
             face_points,
+            balls: Vec::new(),
+            moving: Vec::new(),
         }
     }
 
@@ -120,35 +125,50 @@ impl<'a> Landings<'a> {
         let Some(&first) = faces.first() else {
             return;
         };
-        let balls: Vec<(DVec3, f64)> = triangles.iter().map(|t| bounding_ball(*t)).collect();
-        let mut points = Vec::new();
+        let mut balls = std::mem::take(&mut self.balls);
+        balls.clear();
+        balls.extend(triangles.iter().map(|t| bounding_ball(*t)));
+        let mut points = std::mem::take(&mut self.moving);
+        points.clear();
         for &f in affected {
             points.append(&mut self.face_points[f as usize]);
         }
-        for p in points {
+        // Only distances decide the face: the barycentric weights are taken on the
+        // winner alone, from the same closest point.
+        let closest = |q: DVec3, t: [DVec3; 3]| {
+            let on = closest_on_triangle(q, t[0], t[1], t[2]);
+            ((on - q).length_squared(), on)
+        };
+        for &p in &points {
             let q = self.input[p as usize];
             let was_on = faces.iter().position(|&f| f == self.face[p as usize]);
-            let on_own = was_on.map(|i| (i, project_onto_triangle(q, triangles[i])));
+            let on_own = was_on.map(|i| (i, closest(q, triangles[i])));
             let bound = on_own.map_or(f64::INFINITY, |(_, (d2, _))| d2);
-            let mut best = (f64::INFINITY, first, [1.0, 0.0, 0.0]);
-            for (i, &f) in faces.iter().enumerate() {
-                let (centre, radius) = balls[i];
+            let mut best = (f64::INFINITY, 0, q);
+            for (i, &(centre, radius)) in balls.iter().enumerate() {
                 let gap = q.distance(centre) - radius;
                 // The slack covers the rounding of the distances compared.
                 if gap > 0.0 && gap * gap > best.0.min(bound) * (1.0 + 1e-9) {
                     continue;
                 }
-                let (d2, bary) = match on_own {
+                let (d2, on) = match on_own {
                     Some((own, projected)) if own == i => projected,
-                    _ => project_onto_triangle(q, triangles[i]),
+                    _ => closest(q, triangles[i]),
                 };
                 if d2 < best.0 {
-                    best = (d2, f, bary);
+                    best = (d2, i, on);
                 }
             }
-            self.face[p as usize] = best.1;
-            self.bary[p as usize] = best.2;
-            self.face_points[best.1 as usize].push(p);
+            let (face, bary) = if best.0.is_finite() {
+                (faces[best.1], barycentric_on(best.2, triangles[best.1]))
+            } else {
+                (first, [1.0, 0.0, 0.0])
+            };
+            self.face[p as usize] = face;
+            self.bary[p as usize] = bary;
+            self.face_points[face as usize].push(p);
         }
+        self.balls = balls;
+        self.moving = points;
     }
 }
