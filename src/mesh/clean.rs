@@ -1,6 +1,8 @@
-//! Repairs: weld, drop degenerate and duplicate faces, split non-manifold edges and pinch
+//! Repairs: weld, drop degenerate and duplicate faces and zero-thickness sheets, split non-manifold edges and pinch
 //! vertices into manifold fans, orient each component consistently, drop unused vertices.
 
+use super::edge_table::EdgeTable;
+use super::repeats::repeated_faces;
 use super::stats::UnionFind;
 use super::TriMesh;
 use glam::DVec3;
@@ -21,8 +23,12 @@ pub struct CleanReport {
     pub welded_vertices: usize,
     /// Faces with an out-of-range index, a repeated vertex (after welding) or zero area, removed.
     pub degenerate_faces_removed: usize,
-    /// Faces repeating another's vertices removed.
+    /// Faces repeating another's vertices in the same orientation removed (and the other
+    /// side of a lone double-sided sheet, one side of which stays).
     pub duplicate_faces_removed: usize,
+    /// Faces removed as both sides of a sheet of zero thickness hanging off the surface
+    /// (a face and its reverse: `mesh::repeats`).
+    pub sheet_faces_removed: usize,
     /// Edges with more than two faces, split apart.
     pub non_manifold_edges_split: usize,
     /// Vertices whose faces formed several fans, split into one per fan.
@@ -80,32 +86,44 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
         }
         faces.push(t);
     }
-    // Duplicate faces (the same three vertices): the first in face order stays.
-    let duplicate = duplicate_faces(&faces, nv);
-    let before = faces.len();
+    // Faces repeating another's vertices: duplicates, and sheets of zero thickness.
+    let repeats = repeated_faces(&faces, nv);
     let mut k = 0;
     faces.retain(|_| {
         k += 1;
-        !duplicate[k - 1]
+        !repeats.dropped[k - 1]
     });
-    report.duplicate_faces_removed = before - faces.len();
-    // Non-manifold edges: the first two faces keep the edge; every further face gets its
-    // own copies of the edge's endpoints (the pinch split below then tidies the fans).
-    // Edges come sorted by their endpoints, the faces of each in face order.
+    report.duplicate_faces_removed = repeats.duplicates;
+    report.sheet_faces_removed = repeats.sheet_faces;
+    // Non-manifold edges. Where the faces around one of the edge's ends form fans (joined
+    // through manifold edges) that hold at most two of the edge's faces each, the pinch
+    // split below parts them: two closed sheets touching along the edge stay closed.
+    // Otherwise the first two faces keep the edge and every further face gets its own
+    // copies of the edge's endpoints (and a hole there). Edges come sorted by their
+    // endpoints, the faces of each in face order.
     let incidence = EdgeTable::new(&faces, positions.len());
+    let mut around: Option<Incidence> = None;
     for e in 0..incidence.len() {
         let hs = incidence.halves(e);
         if hs.len() <= 2 {
             continue;
         }
         report.non_manifold_edges_split += 1;
-        for &h in &hs[2..] {
-            let f = h as usize / 3;
+        let around = around.get_or_insert_with(|| Incidence::new(&faces, positions.len()));
+        let on_edge: Vec<u32> = hs.iter().map(|&h| h / 3).collect();
+        if incidence
+            .ends(e)
+            .into_iter()
+            .any(|end| fans_part(end, &on_edge, around, &faces))
+        {
+            continue;
+        }
+        for &f in &on_edge[2..] {
             for end in incidence.ends(e) {
                 let copy = positions.len() as u32;
                 positions.push(positions[end as usize]);
                 origin.push(origin[end as usize]);
-                for v in faces[f].iter_mut() {
+                for v in faces[f as usize].iter_mut() {
                     if *v == end {
                         *v = copy;
                     }
@@ -175,46 +193,6 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
         face_component,
         report,
     }
-}
-
-/// Which faces repeat the vertex set of an earlier face. Faces are grouped by their lowest
-/// vertex (a counting sort, no hashing) and each small group sorted by the other two.
-fn duplicate_faces(faces: &[[u32; 3]], vertex_count: usize) -> Vec<bool> {
-    let sorted = |t: &[u32; 3]| {
-        let mut key = *t;
-        key.sort_unstable();
-        key
-    };
-    let mut start = vec![0u32; vertex_count + 1];
-    for t in faces {
-        start[sorted(t)[0] as usize + 1] += 1;
-    }
-    for v in 0..vertex_count {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut entries = vec![(0u32, 0u32, 0u32); faces.len()];
-    for (f, t) in faces.iter().enumerate() {
-        let key = sorted(t);
-        let slot = &mut fill[key[0] as usize];
-        entries[*slot as usize] = (key[1], key[2], f as u32);
-        *slot += 1;
-    }
-    drop(fill);
-    let mut duplicate = vec![false; faces.len()];
-    for v in 0..vertex_count {
-        let group = &mut entries[start[v] as usize..start[v + 1] as usize];
-        if group.len() < 2 {
-            continue;
-        }
-        group.sort_unstable();
-        for k in 1..group.len() {
-            if (group[k].0, group[k].1) == (group[k - 1].0, group[k - 1].1) {
-                duplicate[group[k].2 as usize] = true;
-            }
-        }
-    }
-    duplicate
 }
 
 /// Representative of each vertex after welding (the lowest index of its cluster).
@@ -326,41 +304,52 @@ fn orient(
     flipped
 }
 
-/// Gives every fan of faces around a vertex after the first its own copy of the vertex.
-///
-/// Two faces around `v` are joined when they share a neighbour `w` that no other face
-/// around `v` has: the edge (v, w) is then manifold. Every face on an edge (v, w) is a face
-/// around `v`, and only the processing of `v` itself moves faces off `v`, so counting among
-/// the faces around `v` sees the same edge counts as a global table would, without one.
-fn split_pinches(
-    faces: &mut [[u32; 3]],
-    positions: &mut Vec<DVec3>,
-    origin: &mut Vec<u32>,
-) -> usize {
-    let nv = positions.len();
-    // Faces around each vertex, as one flat array with offsets.
-    let mut start = vec![0u32; nv + 1];
-    for t in faces.iter() {
-        for &v in t {
-            start[v as usize + 1] += 1;
+/// The faces around each vertex, as one flat array with offsets.
+struct Incidence {
+    start: Vec<u32>,
+    faces: Vec<u32>,
+}
+
+impl Incidence {
+    fn new(faces: &[[u32; 3]], vertex_count: usize) -> Self {
+        let mut start = vec![0u32; vertex_count + 1];
+        for t in faces {
+            for &v in t {
+                start[v as usize + 1] += 1;
+            }
+        }
+        for v in 0..vertex_count {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut incident = vec![0u32; start[vertex_count] as usize];
+        for (f, t) in faces.iter().enumerate() {
+            for &v in t {
+                incident[fill[v as usize] as usize] = f as u32;
+                fill[v as usize] += 1;
+            }
+        }
+        Self {
+            start,
+            faces: incident,
         }
     }
-    for v in 0..nv {
-        start[v + 1] += start[v];
+
+    fn around(&self, v: u32) -> &[u32] {
+        &self.faces[self.start[v as usize] as usize..self.start[v as usize + 1] as usize]
     }
-    let mut fill = start.clone();
-    let mut incident = vec![0u32; start[nv] as usize];
-    for (f, t) in faces.iter().enumerate() {
-        for &v in t {
-            incident[fill[v as usize] as usize] = f as u32;
-            fill[v as usize] += 1;
-        }
-    }
-    drop(fill);
-    // Which faces around each vertex leave its first fan: worked out for all vertices at
-    // once on the faces as they are. Splitting a vertex w cannot change another vertex v's
-    // fans: two faces around v joined through w share the edge (v, w), so they are joined
-    // at w too (through v) and keep the same copy of w.
+}
+
+/// The fans of the faces `fs` around `v`: `parent` ends holding, per face of `fs`, its
+/// fan's root (a local index). Two faces around `v` are joined when they share a
+/// neighbour `w` that no other face around `v` has: the edge (v, w) is then manifold.
+fn fan_roots(
+    v: u32,
+    fs: &[u32],
+    faces: &[[u32; 3]],
+    others: &mut Vec<(u32, u32)>,
+    parent: &mut Vec<u32>,
+) {
     let find = |parent: &mut [u32], mut x: u32| {
         while parent[x as usize] != x {
             parent[x as usize] = parent[parent[x as usize] as usize];
@@ -368,6 +357,83 @@ fn split_pinches(
         }
         x
     };
+    others.clear();
+    for (i, &f) in fs.iter().enumerate() {
+        for &w in &faces[f as usize] {
+            if w != v {
+                others.push((w, i as u32));
+            }
+        }
+    }
+    others.sort_unstable();
+    parent.clear();
+    parent.extend(0..fs.len() as u32);
+    for same in others.chunk_by(|a, b| a.0 == b.0) {
+        if let [x, y] = same {
+            let (a, b) = (find(parent, x.1), find(parent, y.1));
+            parent[a.max(b) as usize] = a.min(b);
+        }
+    }
+    for i in 0..fs.len() as u32 {
+        let root = find(parent, i);
+        parent[i as usize] = root;
+    }
+}
+
+/// Whether the fans around `end` (an end of a non-manifold edge) hold at most two of the
+/// edge's faces `on_edge` each, so that giving each fan its own copy of `end` parts them.
+fn fans_part(end: u32, on_edge: &[u32], around: &Incidence, faces: &[[u32; 3]]) -> bool {
+    // Faces an earlier edge's copies moved off `end` are no longer around it.
+    let fs: Vec<u32> = around
+        .around(end)
+        .iter()
+        .copied()
+        .filter(|&f| faces[f as usize].contains(&end))
+        .collect();
+    let (mut others, mut parent) = (Vec::new(), Vec::new());
+    fan_roots(end, &fs, faces, &mut others, &mut parent);
+    // Per face on the edge: its fan, and whether it runs from `end` along the edge.
+    let mut fans: Vec<(u32, bool)> = on_edge
+        .iter()
+        .filter_map(|&f| {
+            let t = faces[f as usize];
+            let k = t.iter().position(|&v| v == end)?;
+            let leaves = on_edge_ends_contain(t[(k + 1) % 3], on_edge, faces);
+            fs.iter().position(|&g| g == f).map(|i| (parent[i], leaves))
+        })
+        .collect();
+    fans.sort_unstable();
+    // A fan keeping two of the faces must hold them the two ways round (consistently
+    // oriented), or the split leaves an edge no orientation can mend.
+    fans.len() == on_edge.len()
+        && fans.chunk_by(|a, b| a.0 == b.0).all(|fan| match fan {
+            [_] => true,
+            [x, y] => x.1 != y.1,
+            _ => false,
+        })
+}
+
+/// Whether `v` is an end of the edge all faces of `on_edge` share (other than the end
+/// asked about): the face then runs along the edge from that end.
+fn on_edge_ends_contain(v: u32, on_edge: &[u32], faces: &[[u32; 3]]) -> bool {
+    on_edge.iter().all(|&f| faces[f as usize].contains(&v))
+}
+
+/// Gives every fan of faces around a vertex after the first its own copy of the vertex
+/// (`fan_roots`). Every face on an edge (v, w) is a face around `v`, and only the
+/// processing of `v` itself moves faces off `v`, so counting among the faces around `v`
+/// sees the same edge counts as a global table would, without one.
+fn split_pinches(
+    faces: &mut [[u32; 3]],
+    positions: &mut Vec<DVec3>,
+    origin: &mut Vec<u32>,
+) -> usize {
+    let nv = positions.len();
+    let incidence = Incidence::new(faces, nv);
+    // Which faces around each vertex leave its first fan: worked out for all vertices at
+    // once on the faces as they are. Splitting a vertex w cannot change another vertex v's
+    // fans: two faces around v joined through w share the edge (v, w), so they are joined
+    // at w too (through v) and keep the same copy of w.
     let faces_now: &[[u32; 3]] = faces;
     // Per pinch vertex: (local face index, fan root) of each face outside the first fan.
     let pinches: Vec<(u32, Vec<(u32, u32)>)> = (0..nv as u32)
@@ -376,37 +442,15 @@ fn split_pinches(
         .map_init(
             || (Vec::<(u32, u32)>::new(), Vec::<u32>::new()),
             |(others, parent), v| {
-                let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
+                let fs = incidence.around(v);
                 if fs.len() < 2 {
                     return None;
                 }
-                others.clear();
-                for (i, &f) in fs.iter().enumerate() {
-                    for &w in &faces_now[f as usize] {
-                        if w != v {
-                            others.push((w, i as u32));
-                        }
-                    }
-                }
-                others.sort_unstable();
-                parent.clear();
-                parent.extend(0..fs.len() as u32);
-                let mut k = 0;
-                while k < others.len() {
-                    let mut e = k + 1;
-                    while e < others.len() && others[e].0 == others[k].0 {
-                        e += 1;
-                    }
-                    if e - k == 2 {
-                        let (a, b) = (find(parent, others[k].1), find(parent, others[k + 1].1));
-                        parent[a.max(b) as usize] = a.min(b);
-                    }
-                    k = e;
-                }
-                let first_root = find(parent, 0);
+                fan_roots(v, fs, faces_now, others, parent);
+                let first_root = parent[0];
                 let moved: Vec<(u32, u32)> = (0..fs.len() as u32)
                     .filter_map(|i| {
-                        let root = find(parent, i);
+                        let root = parent[i as usize];
                         (root != first_root).then_some((i, root))
                     })
                     .collect();
@@ -418,7 +462,7 @@ fn split_pinches(
     let mut copies: Vec<(u32, u32)> = Vec::new();
     for (v, moved) in &pinches {
         let v = *v;
-        let fs = &incident[start[v as usize] as usize..start[v as usize + 1] as usize];
+        let fs = incidence.around(v);
         copies.clear();
         for &(i, root) in moved {
             let copy = match copies.iter().find(|c| c.0 == root) {
@@ -439,96 +483,4 @@ fn split_pinches(
         }
     }
     pinches.len()
-}
-
-/// The undirected edges of a triangle list and the faces on each, built without hashing:
-/// half-edges are bucketed by their lower endpoint and each (small) bucket sorted. Edge
-/// ids follow the (lower, higher) endpoint order; each edge's faces come in face order.
-/// Cleaning runs on every input and must stay a small share of a fit.
-pub(crate) struct EdgeTable {
-    /// Half-edge count (3 per face; half-edge `3 f + k` runs from corner k of face f).
-    halfedges: usize,
-    /// Half-edges of edge e: `half[start[e]..start[e + 1]]` (face `h / 3`).
-    start: Vec<u32>,
-    half: Vec<u32>,
-    ends: Vec<[u32; 2]>,
-}
-
-impl EdgeTable {
-    /// Every index in `faces` must be below `vertex_count`.
-    pub(crate) fn new(faces: &[[u32; 3]], vertex_count: usize) -> Self {
-        let nh = faces.len() * 3;
-        let mut bucket = vec![0u32; vertex_count + 1];
-        for t in faces {
-            for k in 0..3 {
-                bucket[t[k].min(t[(k + 1) % 3]) as usize + 1] += 1;
-            }
-        }
-        for v in 0..vertex_count {
-            bucket[v + 1] += bucket[v];
-        }
-        // (higher endpoint, half-edge), grouped by lower endpoint.
-        let mut entries = vec![(0u32, 0u32); nh];
-        let mut fill = bucket.clone();
-        for (f, t) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                let lo = a.min(b) as usize;
-                entries[fill[lo] as usize] = (a.max(b), (3 * f + k) as u32);
-                fill[lo] += 1;
-            }
-        }
-        drop(fill);
-        // Edges number between nh / 2 and nh (boundary edges have one half-edge): sized for
-        // the most, as pages never written cost nothing, where growing would copy.
-        let mut start = Vec::with_capacity(nh + 1);
-        let mut half = Vec::with_capacity(nh);
-        let mut ends = Vec::with_capacity(nh);
-        for v in 0..vertex_count {
-            let group = &mut entries[bucket[v] as usize..bucket[v + 1] as usize];
-            // Half-edges were filled in order, so this keeps face order within an edge.
-            group.sort_unstable();
-            for (k, &(hi, h)) in group.iter().enumerate() {
-                if k == 0 || group[k - 1].0 != hi {
-                    start.push(half.len() as u32);
-                    ends.push([v as u32, hi]);
-                }
-                half.push(h);
-            }
-        }
-        start.push(half.len() as u32);
-        Self {
-            halfedges: nh,
-            start,
-            half,
-            ends,
-        }
-    }
-
-    pub(crate) fn len(&self) -> usize {
-        self.ends.len()
-    }
-
-    /// The half-edges on edge e, in face order (half-edge h belongs to face h / 3).
-    pub(crate) fn halves(&self, e: usize) -> &[u32] {
-        &self.half[self.start[e] as usize..self.start[e + 1] as usize]
-    }
-
-    /// For every half-edge, the other face of its edge when the edge has exactly two
-    /// faces, else `u32::MAX`.
-    fn manifold_neighbours(&self) -> Vec<u32> {
-        let mut nbr = vec![u32::MAX; self.halfedges];
-        for e in 0..self.len() {
-            if let &[h, g] = self.halves(e) {
-                nbr[h as usize] = g / 3;
-                nbr[g as usize] = h / 3;
-            }
-        }
-        nbr
-    }
-
-    /// Lower endpoint first.
-    pub(crate) fn ends(&self, e: usize) -> [u32; 2] {
-        self.ends[e]
-    }
 }

@@ -8,6 +8,8 @@ use trispline::mesh::topology::Topology;
 use trispline::testdata::shared_data;
 use trispline::TriMesh;
 
+use crate::mesh_roundtrip::octahedron;
+
 fn p(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, y, z)
 }
@@ -83,6 +85,95 @@ fn duplicates_degenerates_and_orientation() {
         (q(t[1]) - q(t[0])).cross(q(t[2]) - q(t[0])).z.signum()
     };
     assert_eq!(n(c.mesh.triangles[0]), n(c.mesh.triangles[1]));
+}
+
+#[test]
+fn a_zero_thickness_fin_goes_and_leaves_the_body_closed() {
+    // A fin of two coinciding faces, one the other's reverse, standing on the edge (+x, +z):
+    // the flat remains of a thin part a volumetric reconstruction collapsed. Keeping one
+    // side of it gives that edge three faces.
+    let mut m = octahedron();
+    m.positions.push(p(1.5, 0.2, 1.5));
+    m.triangles.push([0, 4, 6]);
+    m.triangles.push([4, 0, 6]);
+    let c = clean(&m, &CleanOptions::default());
+    assert_eq!(c.report.sheet_faces_removed, 2);
+    assert_eq!(c.report.duplicate_faces_removed, 0);
+    assert_eq!(c.report.non_manifold_edges_split, 0);
+    assert_eq!(c.mesh.triangles.len(), 8);
+    assert_eq!(c.mesh.positions.len(), 6);
+    let topo = Topology::from_mesh(&c.mesh).expect("manifold");
+    assert!(topo.boundary.iter().all(|&b| !b), "the body stays closed");
+}
+
+#[test]
+fn a_lone_double_sided_sheet_keeps_one_side() {
+    // A square exported double-sided for rendering: both sides of each triangle. Nothing
+    // surrounds it, so one side stays (dropping both would leave nothing).
+    let corners = vec![p(0., 0., 0.), p(1., 0., 0.), p(1., 1., 0.), p(0., 1., 0.)];
+    let m = TriMesh::new(corners, vec![[0, 1, 2], [0, 2, 3], [2, 1, 0], [3, 2, 0]]);
+    let c = clean(&m, &CleanOptions::default());
+    assert_eq!(c.report.sheet_faces_removed, 0);
+    assert_eq!(c.report.duplicate_faces_removed, 2);
+    assert_eq!(c.mesh.triangles.len(), 2);
+    let topo = Topology::from_mesh(&c.mesh).expect("manifold");
+    assert_eq!(topo.boundary.iter().filter(|&&b| b).count(), 4);
+}
+
+#[test]
+fn the_face_between_two_touching_bodies_goes() {
+    // Two tetrahedra on one base triangle, one above and one below, each closed with its
+    // own copy of the base in its own orientation: a membrane inside their union. Both
+    // copies go, and the six side faces close one surface (a bipyramid).
+    let m = TriMesh::new(
+        vec![
+            p(0., 0., 0.),
+            p(1., 0., 0.),
+            p(0., 1., 0.),
+            p(0.3, 0.3, 1.),
+            p(0.3, 0.3, -1.),
+        ],
+        vec![
+            [0, 2, 1],
+            [0, 1, 3],
+            [1, 2, 3],
+            [2, 0, 3],
+            [0, 1, 2],
+            [1, 0, 4],
+            [2, 1, 4],
+            [0, 2, 4],
+        ],
+    );
+    let c = clean(&m, &CleanOptions::default());
+    assert_eq!(c.report.sheet_faces_removed, 2);
+    assert_eq!(c.report.non_manifold_edges_split, 0);
+    assert_eq!(c.mesh.triangles.len(), 6);
+    let topo = Topology::from_mesh(&c.mesh).expect("manifold");
+    assert!(topo.boundary.iter().all(|&b| !b), "the union is closed");
+}
+
+#[test]
+fn two_closed_bodies_touching_along_an_edge_are_parted_without_holes() {
+    // Two octahedra meeting along one edge (the first's +x..+z is the second's -x..-z):
+    // four faces on that edge, two of each body. Each body's fans around the edge's ends
+    // hold its own two faces, so both ends are split and both bodies stay closed.
+    let a = octahedron();
+    let shifted = a.positions.iter().map(|q| *q + p(1., 0., 1.));
+    let mut positions = a.positions.clone();
+    positions.extend(shifted);
+    let mut triangles = a.triangles.clone();
+    triangles.extend(a.triangles.iter().map(|t| t.map(|v| v + 6)));
+    let c = clean(
+        &TriMesh::new(positions, triangles),
+        &CleanOptions::default(),
+    );
+    assert_eq!(c.report.welded_vertices, 2);
+    assert_eq!(c.report.non_manifold_edges_split, 1);
+    assert_eq!(c.report.pinch_vertices_split, 2);
+    assert_eq!(c.mesh.triangles.len(), 16);
+    assert_eq!(c.mesh.positions.len(), 12);
+    let topo = Topology::from_mesh(&c.mesh).expect("manifold");
+    assert!(topo.boundary.iter().all(|&b| !b), "both bodies stay closed");
 }
 
 #[test]

@@ -27,7 +27,8 @@ fn tetrahedron() -> TriMesh {
     )
 }
 
-fn octahedron() -> TriMesh {
+/// An octahedron, outward oriented: +x, -x, +y, -y, +z, -z.
+pub(crate) fn octahedron() -> TriMesh {
     let p = vec![
         DVec3::X,
         -DVec3::X,

@@ -2,7 +2,8 @@
 //! surface of their own. Range scans come in 8–28 pieces, most of them a few stray triangles
 //! at silhouettes; a fit of such a sliver is noise, so pieces are kept by size.
 
-use crate::mesh::clean::{Cleaned, EdgeTable};
+use crate::mesh::clean::Cleaned;
+use crate::mesh::edge_table::EdgeTable;
 use crate::mesh::stats::UnionFind;
 use crate::pipeline::names::named;
 use crate::TriMesh;

@@ -7,8 +7,9 @@
 use super::config::WorkerConfig;
 use super::stray_guard::{stays_on_data, StrayReport};
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
-use crate::mesh::clean::{clean, CleanOptions, EdgeTable};
+use crate::mesh::clean::{clean, CleanOptions};
 use crate::mesh::crease::CreaseOptions;
+use crate::mesh::edge_table::EdgeTable;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
