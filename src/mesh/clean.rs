@@ -1,5 +1,6 @@
-//! Repairs: weld, drop degenerate and duplicate faces and zero-thickness sheets, split non-manifold edges and pinch
-//! vertices into manifold fans, orient each component consistently, drop unused vertices.
+//! Repairs: weld, drop degenerate and duplicate faces and zero-thickness sheets, split
+//! non-manifold edges and pinch vertices into manifold fans, orient each component
+//! consistently, drop unused vertices.
 
 use super::edge_table::EdgeTable;
 use super::repeats::repeated_faces;
@@ -111,11 +112,8 @@ pub fn clean(input: &TriMesh, opts: &CleanOptions) -> Cleaned {
         report.non_manifold_edges_split += 1;
         let around = around.get_or_insert_with(|| Incidence::new(&faces, positions.len()));
         let on_edge: Vec<u32> = hs.iter().map(|&h| h / 3).collect();
-        if incidence
-            .ends(e)
-            .into_iter()
-            .any(|end| fans_part(end, &on_edge, around, &faces))
-        {
+        let [a, b] = incidence.ends(e);
+        if fans_part(a, b, &on_edge, around, &faces) || fans_part(b, a, &on_edge, around, &faces) {
             continue;
         }
         for &f in &on_edge[2..] {
@@ -380,9 +378,16 @@ fn fan_roots(
     }
 }
 
-/// Whether the fans around `end` (an end of a non-manifold edge) hold at most two of the
-/// edge's faces `on_edge` each, so that giving each fan its own copy of `end` parts them.
-fn fans_part(end: u32, on_edge: &[u32], around: &Incidence, faces: &[[u32; 3]]) -> bool {
+/// Whether the fans around `end`, an end of the non-manifold edge to `other`, hold at most
+/// two of the edge's faces `on_edge` each, the two ways round, so that giving each fan its
+/// own copy of `end` parts them into manifold edges.
+fn fans_part(
+    end: u32,
+    other: u32,
+    on_edge: &[u32],
+    around: &Incidence,
+    faces: &[[u32; 3]],
+) -> bool {
     // Faces an earlier edge's copies moved off `end` are no longer around it.
     let fs: Vec<u32> = around
         .around(end)
@@ -392,31 +397,25 @@ fn fans_part(end: u32, on_edge: &[u32], around: &Incidence, faces: &[[u32; 3]]) 
         .collect();
     let (mut others, mut parent) = (Vec::new(), Vec::new());
     fan_roots(end, &fs, faces, &mut others, &mut parent);
-    // Per face on the edge: its fan, and whether it runs from `end` along the edge.
+    // Per face on the edge: its fan, and whether it runs from `end` to `other`.
     let mut fans: Vec<(u32, bool)> = on_edge
         .iter()
         .filter_map(|&f| {
             let t = faces[f as usize];
             let k = t.iter().position(|&v| v == end)?;
-            let leaves = on_edge_ends_contain(t[(k + 1) % 3], on_edge, faces);
-            fs.iter().position(|&g| g == f).map(|i| (parent[i], leaves))
+            let i = fs.iter().position(|&g| g == f)?;
+            Some((parent[i], t[(k + 1) % 3] == other))
         })
         .collect();
     fans.sort_unstable();
     // A fan keeping two of the faces must hold them the two ways round (consistently
     // oriented), or the split leaves an edge no orientation can mend.
     fans.len() == on_edge.len()
-        && fans.chunk_by(|a, b| a.0 == b.0).all(|fan| match fan {
+        && fans.chunk_by(|x, y| x.0 == y.0).all(|fan| match fan {
             [_] => true,
             [x, y] => x.1 != y.1,
             _ => false,
         })
-}
-
-/// Whether `v` is an end of the edge all faces of `on_edge` share (other than the end
-/// asked about): the face then runs along the edge from that end.
-fn on_edge_ends_contain(v: u32, on_edge: &[u32], faces: &[[u32; 3]]) -> bool {
-    on_edge.iter().all(|&f| faces[f as usize].contains(&v))
 }
 
 /// Gives every fan of faces around a vertex after the first its own copy of the vertex
