@@ -162,6 +162,27 @@ fn daemon_fits_a_torus_dropped_into_its_folder_then_warm() {
 /// the summary line say so. decimated-max at the default 5 % strayed 0.59 % before the
 /// repair (0.47 % after, 279 controls for 264); repaired, it is within the bound, its
 /// refinement says the repair ran, and the line says nothing.
+/// bun_zipper_res4 holds faces repeated with the reverse orientation (zero-thickness
+/// sheets) and non-manifold edges: the report says what cleaning did about them.
+#[test]
+fn the_report_says_what_cleaning_changed() {
+    let Some(broken) = trispline::testdata::shared_data("models/bun_zipper_res4.ply") else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tmp");
+    run(bin().arg("fit").arg(&broken).arg("--out").arg(tmp.path()));
+    let cleaning = read_json(&tmp.path().join("report.json"))["object"]["cleaning"].clone();
+    let count = |k: &str| cleaning[k].as_u64().unwrap_or(0);
+    assert!(count("sheet_faces_removed") > 0, "{cleaning}");
+    assert_eq!(
+        count("sheet_faces_removed") % 2,
+        0,
+        "sheets go both sides: {cleaning}"
+    );
+    assert!(count("non_manifold_edges_split") > 0, "{cleaning}");
+    assert!(count("pinch_vertices_split") > 0, "{cleaning}");
+}
+
 #[test]
 fn fit_says_when_the_surface_strays_from_the_data() {
     let (Some(broken), Some(coarse_input)) = (

@@ -2,7 +2,7 @@
 //! orientable where cleaning could not (a non-orientable strip keeps edges that two faces
 //! run the same way: one of those faces goes, and the rest is cleaned again).
 
-use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::clean::{clean, CleanOptions, CleanReport};
 use crate::mesh::topology::Topology;
 use crate::TriMesh;
 use rustc_hash::FxHashSet;
@@ -10,10 +10,13 @@ use rustc_hash::FxHashSet;
 /// Repair passes before the input is given up as not manifold.
 const REPAIR_PASSES: usize = 8;
 
-/// The largest manifold, oriented component of `mesh` (see the module comment), or `None`
-/// if nothing is left.
-pub(super) fn largest_component(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
-    let mut part = largest_cleaned(mesh, opts)?;
+/// The largest manifold, oriented component of `mesh` (see the module comment) and what
+/// the first cleaning pass changed, or `None` if nothing is left.
+pub(super) fn largest_component(
+    mesh: &TriMesh,
+    opts: &CleanOptions,
+) -> Option<(TriMesh, CleanReport)> {
+    let (mut part, report) = largest_cleaned(mesh, opts)?;
     for _ in 0..REPAIR_PASSES {
         if Topology::from_mesh(&part).is_ok() {
             break;
@@ -22,9 +25,9 @@ pub(super) fn largest_component(mesh: &TriMesh, opts: &CleanOptions) -> Option<T
         if kept.triangles.len() == part.triangles.len() {
             break;
         }
-        part = largest_cleaned(&kept, opts)?;
+        part = largest_cleaned(&kept, opts)?.0;
     }
-    Some(part)
+    Some((part, report))
 }
 
 /// Drops every face that runs a directed edge an earlier face already runs.
@@ -45,8 +48,8 @@ fn without_repeated_directed_edges(mesh: &TriMesh) -> TriMesh {
 }
 
 /// The cleaned mesh's largest edge-connected component (most faces; the lowest label on a
-/// tie), its vertices in cleaned order.
-fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
+/// tie), its vertices in cleaned order, and what cleaning changed.
+fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<(TriMesh, CleanReport)> {
     let cleaned = clean(mesh, opts);
     let labels = &cleaned.face_component;
     let mut counts = vec![0usize; cleaned.mesh.triangles.len()];
@@ -80,5 +83,5 @@ fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<TriMesh> {
     for t in &mut triangles {
         *t = t.map(|v| index[v as usize]);
     }
-    Some(TriMesh::new(positions, triangles))
+    Some((TriMesh::new(positions, triangles), cleaned.report))
 }

@@ -69,7 +69,7 @@ const MIN_FACES_BEYOND_SHARE: usize = 100;
 /// The component of `mesh` [`fit_object`] fits: its cleaned largest component, repaired
 /// to a manifold where cleaning alone leaves it not one; `None` when nothing is left.
 pub fn fitted_component(mesh: &TriMesh, clean: &CleanOptions) -> Option<TriMesh> {
-    largest_component(mesh, clean)
+    largest_component(mesh, clean).map(|(component, _)| component)
 }
 
 /// Fits the exact Loop limit surface of a simplified control mesh to the largest
@@ -77,7 +77,7 @@ pub fn fitted_component(mesh: &TriMesh, clean: &CleanOptions) -> Option<TriMesh>
 pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, ObjectError> {
     let start = Instant::now();
     let mut times = ObjectTimes::default();
-    let component = largest_component(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
+    let (component, cleaning) = largest_component(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
     times.clean_ms = ms_since(start);
 
     let t = Instant::now();
@@ -161,6 +161,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     }
     let mut fit = repair::keep_near_data(fit, target, opts);
     fit.layout = layout;
+    fit.cleaning = Some(cleaning);
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
     fit.times.layout_ms = times.layout_ms;
@@ -359,6 +360,7 @@ fn fit_from(
         refinement: Vec::new(),
         local: None,
         stray: None,
+        cleaning: None,
     })
 }
 

@@ -4,7 +4,7 @@
 use super::layout::{LayoutOptions, LayoutReport};
 use super::refine::{Fitted, RefineOptions, RefineRound};
 use crate::fit::budget::{Budget, StepStats};
-use crate::mesh::clean::CleanOptions;
+use crate::mesh::clean::{CleanOptions, CleanReport};
 use crate::mesh::crease::CreaseOptions;
 use crate::mesh::simplify::{SimplifyError, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::TopologyError;
@@ -269,6 +269,9 @@ pub struct ObjectFit {
     /// How far the surface strays from the data, when the fit measured it (the stray
     /// repair does, on a lattice of `STRAY_LATTICE_SEGMENTS` per control face edge).
     pub stray: Option<f64>,
+    /// What cleaning changed in the input before the fit (its first pass; `None` where
+    /// the fit was given data already cleaned, as the rounds and refits of a fit are).
+    pub cleaning: Option<CleanReport>,
 }
 
 impl ObjectFit {

@@ -149,5 +149,6 @@ fn repaired_locally(fit: &ObjectFit, refined: Refined, opts: &ObjectOptions) -> 
         sampled_faces: fit.sampled_faces,
         local: None,
         stray: None,
+        cleaning: fit.cleaning.clone(),
     })
 }

@@ -368,6 +368,7 @@ impl Refitted {
             sampled_faces: 0,
             local: Some(update),
             stray: None,
+            cleaning: None,
         }
     }
 }

@@ -316,6 +316,7 @@ impl LastFit {
             refinement: Vec::new(),
             local: None,
             stray: None,
+            cleaning: None,
         };
         FittedPatch {
             fit,

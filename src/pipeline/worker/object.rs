@@ -7,7 +7,7 @@
 use super::config::WorkerConfig;
 use super::stray_guard::{stays_on_data, StrayReport};
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
-use crate::mesh::clean::{clean, CleanOptions};
+use crate::mesh::clean::{clean, CleanOptions, CleanReport};
 use crate::mesh::crease::CreaseOptions;
 use crate::mesh::edge_table::EdgeTable;
 use crate::mesh::simplify::SurfaceTopology;
@@ -176,6 +176,9 @@ pub struct ObjectInfo {
     /// How far the surface strays from the data (`None`: not measured, as on an object
     /// session's local refit, whose guard measures the faces it moved).
     pub stray: Option<StrayReport>,
+    /// What cleaning changed in the input (`None` on a warm refit, which cleans the new
+    /// version only to match it to the previous one).
+    pub cleaning: Option<CleanReport>,
 }
 
 /// Whether a warm start was used.
@@ -239,6 +242,7 @@ pub(super) fn fit_as_object(
         refinement: fit.refinement.clone(),
         local: fit.local.clone(),
         stray: Some(StrayReport::of(&fit)),
+        cleaning: fit.cleaning.clone(),
     };
     if let Some(stray) = info.stray.filter(|s| !s.within) {
         tracing::warn!(
@@ -617,6 +621,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "warm": warm,
         "local": info.local,
         "stray": info.stray,
+        "cleaning": info.cleaning,
     })
 }
 
