@@ -225,12 +225,7 @@ fn fit_from(
     let mut times = ObjectTimes::default();
     let t = Instant::now();
     let n = component.positions.len();
-    if params.len() != n {
-        return Err(ObjectError::ParamCount {
-            params: params.len(),
-            points: n,
-        });
-    }
+    one_param_per_point(&params, n)?;
     let data_topology = SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?;
     let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
     let surface = limit_surface(&control_mesh, crease_edges, previous)?;
@@ -361,6 +356,17 @@ fn fit_from(
         local: None,
         stray: None,
         cleaning: None,
+    })
+}
+
+/// A fit needs one initial parameter per data point.
+fn one_param_per_point(params: &[SurfaceParam], points: usize) -> Result<(), ObjectError> {
+    if params.len() == points {
+        return Ok(());
+    }
+    Err(ObjectError::ParamCount {
+        params: params.len(),
+        points,
     })
 }
 
