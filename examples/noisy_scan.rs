@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use trispline::io::writers::ply_bytes;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::loop_subdiv::subdivide;
-use trispline::{DVec3, TriMesh};
+use trispline::TriMesh;
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -36,18 +36,6 @@ impl Gaussian {
     }
 }
 
-fn vertex_normals(mesh: &TriMesh) -> Vec<DVec3> {
-    let mut normals = vec![DVec3::ZERO; mesh.positions.len()];
-    for t in &mesh.triangles {
-        let p = t.map(|v| mesh.positions[v as usize]);
-        let n = (p[1] - p[0]).cross(p[2] - p[0]);
-        for v in t {
-            normals[*v as usize] += n;
-        }
-    }
-    normals.iter().map(|n| n.normalize_or_zero()).collect()
-}
-
 fn main() -> Res<()> {
     let mut args = std::env::args().skip(1);
     let out = PathBuf::from(args.next().ok_or("usage: noisy_scan OUT.ply [SOURCE]")?);
@@ -57,7 +45,7 @@ fn main() -> Res<()> {
         .unwrap_or_else(|| PathBuf::from("../shared/data/models/bun_zipper.ply"));
     let mesh = read_mesh_file(&source, &LoadOptions::default())?.mesh;
     let fine = subdivide(&mesh, 1)?;
-    let normals = vertex_normals(&fine);
+    let normals = fine.vertex_normals();
     let mut noise = Gaussian(0x9e37_79b9_7f4a_7c15);
     let positions = fine
         .positions

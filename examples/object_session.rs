@@ -447,7 +447,7 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
     // Inside the data's rim: scan points all around the vertex in its tangent plane (no
     // angular gap of half a turn). A vertex within 1 mm of a scan point but beyond the
     // scans' rim lies where the surface, stopping at the rim, cannot be.
-    let normals = vertex_normals(zipper);
+    let normals = zipper.vertex_normals();
     let (mut inside, mut inside_within, mut inside_max) = (0, 0, 0.0f64);
     for (p, n) in zipper.positions.iter().zip(&normals) {
         let around = near(*p);
@@ -466,18 +466,6 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
         100.0 * inside_within as f64 / inside.max(1) as f64,
         inside_max * 1e3
     );
-}
-
-/// Area-weighted vertex normals.
-fn vertex_normals(mesh: &TriMesh) -> Vec<DVec3> {
-    let mut normals = vec![DVec3::ZERO; mesh.positions.len()];
-    for t in &mesh.triangles {
-        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-        for v in t {
-            normals[*v as usize] += (b - a).cross(c - a);
-        }
-    }
-    normals.iter().map(|n| n.normalize_or_zero()).collect()
 }
 
 /// Whether `points` surround `p` in the plane of `normal`: their directions from `p`

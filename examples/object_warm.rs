@@ -35,7 +35,7 @@ fn second_version(mesh: &TriMesh) -> TriMesh {
     let centre = mesh.positions[mesh.positions.len() / 3];
     let radius = 0.05 * diagonal;
     let depth = 0.005 * diagonal;
-    let normals = vertex_normals(mesh);
+    let normals = mesh.vertex_normals();
     let positions = mesh
         .positions
         .iter()
@@ -51,19 +51,6 @@ fn second_version(mesh: &TriMesh) -> TriMesh {
         })
         .collect();
     TriMesh::new(positions, mesh.triangles.clone())
-}
-
-/// Area-weighted vertex normals.
-fn vertex_normals(mesh: &TriMesh) -> Vec<DVec3> {
-    let mut normals = vec![DVec3::ZERO; mesh.positions.len()];
-    for t in &mesh.triangles {
-        let p = t.map(|v| mesh.positions[v as usize]);
-        let n = (p[1] - p[0]).cross(p[2] - p[0]);
-        for v in t {
-            normals[*v as usize] += n;
-        }
-    }
-    normals.iter().map(|n| n.normalize_or_zero()).collect()
 }
 
 fn timed(

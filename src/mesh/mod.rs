@@ -54,6 +54,33 @@ impl TriMesh {
     pub fn bounds_diagonal(&self) -> f64 {
         self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length())
     }
+
+    /// Per vertex, the sum of its faces' area normals (`triangle_area_normal`: weighted by
+    /// twice their areas; zero where it has no face with area). Faces with an index out of
+    /// range are skipped.
+    pub fn area_normal_sums(&self) -> Vec<DVec3> {
+        let n = self.positions.len();
+        let mut sums = vec![DVec3::ZERO; n];
+        for t in self
+            .triangles
+            .iter()
+            .filter(|t| t.iter().all(|&v| (v as usize) < n))
+        {
+            let area_normal = triangle_area_normal(t.map(|v| self.positions[v as usize]));
+            for &v in t {
+                sums[v as usize] += area_normal;
+            }
+        }
+        sums
+    }
+
+    /// Area-weighted unit vertex normals (zero where `area_normal_sums` is).
+    pub fn vertex_normals(&self) -> Vec<DVec3> {
+        self.area_normal_sums()
+            .iter()
+            .map(|n| n.normalize_or_zero())
+            .collect()
+    }
 }
 
 /// Triangle `p`'s normal scaled by twice its area (right-handed in corner order).

@@ -13,7 +13,6 @@
 
 use super::types::{MergeOptions, ScanSamples};
 use crate::mesh::rigid::RigidTransform;
-use crate::mesh::triangle_area_normal;
 use crate::TriMesh;
 use glam::DVec3;
 use rustc_hash::{FxHashMap, FxHashSet};
@@ -28,14 +27,7 @@ pub fn scan_samples(
     opts: &MergeOptions,
 ) -> ScanSamples {
     let n = mesh.positions.len();
-    let valid = |t: &&[u32; 3]| t.iter().all(|&v| (v as usize) < n);
-    let mut normals = vec![DVec3::ZERO; n];
-    for t in mesh.triangles.iter().filter(valid) {
-        let area_normal = triangle_area_normal(t.map(|v| mesh.positions[v as usize]));
-        for &v in t {
-            normals[v as usize] += area_normal;
-        }
-    }
+    let normals = mesh.area_normal_sums();
     // At least 1: the rim itself is known (for the fill) even without a ramp.
     let rings = rings_from_rim(mesh, opts.ramp_rings.max(1));
     let corners: Vec<Option<Corner>> = (0..n)
