@@ -532,6 +532,18 @@ fn diagnose(fit: &ObjectFit, tess_rms: f64) {
     }
     let irregular = |i: usize| !fit.surface.is_regular_face(fit.params[i].face as usize);
     println!("  on irregular patches: {}", share_where(&irregular));
+    let mut on_crease = vec![false; fit.controls.len()];
+    for &[a, b] in fit.surface.crease_edges() {
+        on_crease[a as usize] = true;
+        on_crease[b as usize] = true;
+    }
+    let faces = fit.surface.faces();
+    let creased = |i: usize| {
+        faces[fit.params[i].face as usize]
+            .iter()
+            .any(|&v| on_crease[v as usize])
+    };
+    println!("  on faces with a crease vertex: {}", share_where(&creased));
     let mut sorted = sq.clone();
     sorted.sort_by(|a, b| b.total_cmp(a));
     let top = |f: f64| {

@@ -117,6 +117,37 @@ pub fn detect_creases(mesh: &TriMesh, topo: &Topology, opts: &CreaseOptions) -> 
 /// are connected through a shared vertex, except at a vertex where only they meet and the
 /// line turns by more than `KINK_DEG` (see `KINK_DEG`).
 fn in_large_sets(edges: Vec<[u32; 2]>, positions: &[DVec3], min_edges: usize) -> Vec<[u32; 2]> {
+    let roots = line_roots(&edges, positions);
+    let mut size = vec![0usize; edges.len()];
+    for &r in &roots {
+        size[r as usize] += 1;
+    }
+    edges
+        .into_iter()
+        .zip(&roots)
+        .filter(|(_, &r)| size[r as usize] >= min_edges)
+        .map(|(e, _)| e)
+        .collect()
+}
+
+/// `edges` grouped into the connected sets `detect_creases` keeps or drops whole (see
+/// `in_large_sets`), each set's edges in the order given.
+pub fn crease_sets(edges: &[[u32; 2]], positions: &[DVec3]) -> Vec<Vec<[u32; 2]>> {
+    let roots = line_roots(edges, positions);
+    let mut slot = vec![usize::MAX; edges.len()];
+    let mut sets: Vec<Vec<[u32; 2]>> = Vec::new();
+    for (e, &r) in edges.iter().zip(&roots) {
+        if slot[r as usize] == usize::MAX {
+            slot[r as usize] = sets.len();
+            sets.push(Vec::new());
+        }
+        sets[slot[r as usize]].push(*e);
+    }
+    sets
+}
+
+/// Per edge of `edges`, the index of one edge of its set (see `in_large_sets`).
+fn line_roots(edges: &[[u32; 2]], positions: &[DVec3]) -> Vec<u32> {
     let mut at: Vec<Vec<u32>> = vec![Vec::new(); positions.len()];
     for (k, &[a, b]) in edges.iter().enumerate() {
         for v in [a, b] {
@@ -152,18 +183,8 @@ fn in_large_sets(edges: Vec<[u32; 2]>, positions: &[DVec3], min_edges: usize) ->
             }
         }
     }
-    let roots: Vec<u32> = (0..edges.len() as u32)
+    (0..edges.len() as u32)
         .map(|e| root(&mut parent, e))
-        .collect();
-    let mut size = vec![0usize; edges.len()];
-    for &r in &roots {
-        size[r as usize] += 1;
-    }
-    edges
-        .into_iter()
-        .zip(&roots)
-        .filter(|(_, &r)| size[r as usize] >= min_edges)
-        .map(|(e, _)| e)
         .collect()
 }
 

@@ -464,8 +464,10 @@ fn a_broken_bunny_is_cleaned_and_fitted() {
     assert_topology_kept(&fit);
     let diag = mesh.bounds_diagonal();
     assert!(fit.distances.iter().all(|d| d.is_finite()));
-    // 453 vertices: 5 % is a couple of dozen controls (its holes keep more), so only a
-    // coarse fit, but one nearer the data than the decimated mesh of as many vertices.
+    // 445 vertices: 5 % is a couple of dozen controls (its holes keep more: 28), so only
+    // a coarse fit, but one far nearer the data than the decimated mesh of as many
+    // vertices. (Its sharp edges are a fragmented net, no crease: tagged, they took the
+    // control mesh to 53 vertices, and the ratio to the decimated mesh was 0.55.)
     let (tessellated, decimated) = (tessellation_rms(&fit, 8), decimated_rms(&fit));
     eprintln!(
         "res4: {} points, {} controls, rms {:.2e} (diag {diag:.3}), to the tessellation \
@@ -474,8 +476,11 @@ fn a_broken_bunny_is_cleaned_and_fitted() {
         fit.controls.len(),
         fit.rms,
     );
-    assert!(fit.rms < 2e-2 * diag, "rms {} of diag {diag}", fit.rms);
-    assert!(tessellated < decimated, "{tessellated} vs {decimated}");
+    assert!(fit.rms < 3e-2 * diag, "rms {} of diag {diag}", fit.rms);
+    assert!(
+        tessellated < 0.5 * decimated,
+        "{tessellated} vs {decimated}"
+    );
 }
 
 /// With 40 % controls the broken bunny's first point fit bulges where its control faces

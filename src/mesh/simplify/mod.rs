@@ -55,6 +55,18 @@ pub fn simplify_with_creases(
     simplify_keeping(mesh, opts, crease_edges, &[])
 }
 
+/// The vertices of `mesh` the simplification keeps in place for `crease_edges` (crease
+/// corners, chain ends, sharp turns along a chain, creases meeting the boundary): a
+/// control mesh that carries these creases has at least as many vertices.
+pub fn fixed_crease_vertices(
+    mesh: &TriMesh,
+    topo: &Topology,
+    crease_edges: &[[u32; 2]],
+    opts: &SimplifyOptions,
+) -> Vec<bool> {
+    Creases::new(topo, crease_edges).corners(&mesh.positions, topo, opts.corner_turn_deg)
+}
+
 /// [`simplify_with_creases`] that also keeps every vertex `keep` marks where it is (a
 /// vertex past the end of `keep` is not kept): no collapse removes or moves it, so a face
 /// whose corners are all kept comes out as it went in. Vertices stay in input order, so
