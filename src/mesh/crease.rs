@@ -509,7 +509,8 @@ mod tests {
             in_large_sets(edges, &positions, 12).len()
         };
         assert_eq!(sets(&[0.0; 20]), 20, "a straight line");
-        // A hexagon's sides turn by 60 degrees: a coarse round edge, still one line.
+        // Turning by 55 degrees at every vertex (under a hexagon's 60): a coarse round
+        // edge, still one line.
         let hexagonal: Vec<f64> = (0..20).map(|k| if k == 0 { 0.0 } else { 55.0 }).collect();
         assert_eq!(sets(&hexagonal), 20);
         // Turning back and forth by 90 degrees: cut at every vertex, nothing is left.
