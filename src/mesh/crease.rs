@@ -38,6 +38,7 @@
 //! The rule does not find right angles at a box's corners (two of the faces' other edges
 //! are creases there): the angle does.
 
+use super::stats::UnionFind;
 use super::topology::{Topology, NONE};
 use super::TriMesh;
 use glam::DVec3;
@@ -117,58 +118,45 @@ pub fn detect_creases(mesh: &TriMesh, topo: &Topology, opts: &CreaseOptions) -> 
 /// are connected through a shared vertex, except at a vertex where only they meet and the
 /// line turns by more than `KINK_DEG` (see `KINK_DEG`).
 fn in_large_sets(edges: Vec<[u32; 2]>, positions: &[DVec3], min_edges: usize) -> Vec<[u32; 2]> {
-    let roots = line_roots(&edges, positions);
-    let mut size = vec![0usize; edges.len()];
-    for &r in &roots {
-        size[r as usize] += 1;
-    }
-    edges
+    crease_sets(&edges, positions)
         .into_iter()
-        .zip(&roots)
-        .filter(|(_, &r)| size[r as usize] >= min_edges)
-        .map(|(e, _)| e)
+        .filter(|set| set.len() >= min_edges)
+        .flatten()
         .collect()
 }
 
 /// `edges` grouped into the connected sets `detect_creases` keeps or drops whole (see
 /// `in_large_sets`), each set's edges in the order given.
 pub fn crease_sets(edges: &[[u32; 2]], positions: &[DVec3]) -> Vec<Vec<[u32; 2]>> {
-    let roots = line_roots(edges, positions);
+    let mut lines = joined_lines(edges, positions);
     let mut slot = vec![usize::MAX; edges.len()];
     let mut sets: Vec<Vec<[u32; 2]>> = Vec::new();
-    for (e, &r) in edges.iter().zip(&roots) {
-        if slot[r as usize] == usize::MAX {
-            slot[r as usize] = sets.len();
+    for (k, e) in edges.iter().enumerate() {
+        let root = lines.find(k);
+        if slot[root] == usize::MAX {
+            slot[root] = sets.len();
             sets.push(Vec::new());
         }
-        sets[slot[r as usize]].push(*e);
+        sets[slot[root]].push(*e);
     }
     sets
 }
 
-/// Per edge of `edges`, the index of one edge of its set (see `in_large_sets`).
-fn line_roots(edges: &[[u32; 2]], positions: &[DVec3]) -> Vec<u32> {
-    let mut at: Vec<Vec<u32>> = vec![Vec::new(); positions.len()];
+/// The edges of `edges` (by index) joined into sets as `in_large_sets` says.
+fn joined_lines(edges: &[[u32; 2]], positions: &[DVec3]) -> UnionFind {
+    let mut at: Vec<Vec<usize>> = vec![Vec::new(); positions.len()];
     for (k, &[a, b]) in edges.iter().enumerate() {
         for v in [a, b] {
             if let Some(list) = at.get_mut(v as usize) {
-                list.push(k as u32);
+                list.push(k);
             }
         }
     }
-    let mut parent: Vec<u32> = (0..edges.len() as u32).collect();
-    fn root(parent: &mut [u32], mut e: u32) -> u32 {
-        while parent[e as usize] != e {
-            let up = parent[parent[e as usize] as usize];
-            parent[e as usize] = up;
-            e = up;
-        }
-        e
-    }
+    let mut lines = UnionFind::new(edges.len());
     for (v, incident) in at.iter().enumerate() {
         if let [e, f] = incident[..] {
-            let far = |k: u32| {
-                let [a, b] = edges[k as usize];
+            let far = |k: usize| {
+                let [a, b] = edges[k];
                 positions[(a ^ b ^ v as u32) as usize]
             };
             let p = positions[v];
@@ -177,15 +165,10 @@ fn line_roots(edges: &[[u32; 2]], positions: &[DVec3]) -> Vec<u32> {
             }
         }
         for pair in incident.windows(2) {
-            let (ra, rb) = (root(&mut parent, pair[0]), root(&mut parent, pair[1]));
-            if ra != rb {
-                parent[ra.max(rb) as usize] = ra.min(rb);
-            }
+            lines.union(pair[0], pair[1]);
         }
     }
-    (0..edges.len() as u32)
-        .map(|e| root(&mut parent, e))
-        .collect()
+    lines
 }
 
 /// A line of sharp edges turning by more than this at a vertex where no third sharp edge
