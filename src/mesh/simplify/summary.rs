@@ -20,7 +20,11 @@ pub struct SurfaceTopology {
 impl SurfaceTopology {
     /// Counts the topology of `mesh`; fails where no half-edge topology can be built.
     pub fn of(mesh: &TriMesh) -> Result<SurfaceTopology, TopologyError> {
-        let topo = Topology::from_mesh(mesh)?;
+        Ok(Self::of_built(mesh, &Topology::from_mesh(mesh)?))
+    }
+
+    /// [`SurfaceTopology::of`] from the mesh's half-edge topology, built already.
+    pub fn of_built(mesh: &TriMesh, topo: &Topology) -> SurfaceTopology {
         let used: Vec<u32> = (0..mesh.positions.len() as u32)
             .filter(|&v| topo.face_valence[v as usize] > 0)
             .collect();
@@ -67,11 +71,11 @@ impl SurfaceTopology {
             components += 1;
         }
         let components = components as usize;
-        Ok(SurfaceTopology {
+        SurfaceTopology {
             euler,
             boundary_loops,
             components,
             genus: (2 * components as i64 - euler - boundary_loops as i64) / 2,
-        })
+        }
     }
 }

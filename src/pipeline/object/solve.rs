@@ -575,8 +575,13 @@ pub(super) fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
     let Ok(topo) = Topology::from_mesh(mesh) else {
         return vec![false; mesh.positions.len()];
     };
+    near_boundary_in(&topo, rings)
+}
+
+/// [`near_boundary`] on the mesh's half-edge topology, built already.
+pub(super) fn near_boundary_in(topo: &Topology, rings: usize) -> Vec<bool> {
     let mut near = topo.boundary.clone();
-    let mut front: Vec<u32> = (0..mesh.positions.len() as u32)
+    let mut front: Vec<u32> = (0..near.len() as u32)
         .filter(|&v| near[v as usize])
         .collect();
     for _ in 0..rings {
