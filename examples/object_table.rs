@@ -488,6 +488,7 @@ fn diagnose(fit: &ObjectFit, tess_rms: f64) {
             100.0 * stray / fit.component.bounds_diagonal()
         );
     }
+    facet_sagitta(&fit.component);
     let rounds: Vec<String> = fit
         .rounds
         .iter()
@@ -659,4 +660,37 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
         x[r] = (b[r] - s) / a[r][r];
     }
     Some(x)
+}
+
+/// How far any smooth surface through the data's vertices must leave its flat facets:
+/// per data edge, the sagitta of the circular arc between its ends that meets their
+/// vertex normals, L / 2 tan(theta / 4). The stray (surface to data mesh) of a coarse mesh
+/// measures its facets as much as the fit; across a crease the estimate means nothing.
+fn facet_sagitta(data: &TriMesh) {
+    let normals = data.vertex_normals();
+    let p = &data.positions;
+    let mut sagitta: Vec<f64> = data
+        .triangles
+        .iter()
+        .flat_map(|t| (0..3).map(move |k| (t[k] as usize, t[(k + 1) % 3] as usize)))
+        .map(|(a, b)| {
+            let theta = normals[a].dot(normals[b]).clamp(-1.0, 1.0).acos().min(3.0);
+            0.5 * p[a].distance(p[b]) * (0.25 * theta).tan()
+        })
+        .collect();
+    if sagitta.is_empty() {
+        return;
+    }
+    sagitta.sort_by(f64::total_cmp);
+    let pct = |q: f64| {
+        let k = ((sagitta.len() - 1) as f64 * q).round() as usize;
+        100.0 * sagitta[k] / data.bounds_diagonal()
+    };
+    println!(
+        "  data facets: edge sagitta between vertex normals, % of the diagonal: max {:.3}, p99.9 {:.3}, p99 {:.3}, median {:.4}",
+        pct(1.0),
+        pct(0.999),
+        pct(0.99),
+        pct(0.5)
+    );
 }
