@@ -25,6 +25,7 @@ pub mod output;
 pub mod scan;
 pub mod scattered;
 pub mod subdivided;
+mod welded_lattice;
 pub mod worker;
 
 pub use collocation::collocation;

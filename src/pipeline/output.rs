@@ -3,6 +3,7 @@
 
 pub use super::coverage::Coverage;
 use super::scan::ScanFit;
+use super::welded_lattice::welded_lattices;
 use super::{PatchFit, SurfaceKind, SurfaceModel};
 use crate::io::glb::{glb_bytes_with_extras, GlbAttributes, ERROR_RAMP};
 use crate::remesh::param::ring_cells;
@@ -262,13 +263,14 @@ fn face_lattices(
 }
 
 /// A control-mesh surface tessellated with `per_face` segments per control-face side,
-/// untrimmed (a whole object's boundary loops are the control mesh's own). Other models
-/// get `tessellate` with that many segments in all.
+/// untrimmed (a whole object's boundary loops are the control mesh's own), its vertices
+/// shared between faces except across creases (`welded_lattice`): one connected mesh, as
+/// the surface is. Other models get `tessellate` with that many segments in all.
 pub fn tessellate_mesh_faces(f: &PatchFit, per_face: usize) -> Tessellation {
     let SurfaceModel::Mesh(m) = &f.model else {
         return tessellate(f, per_face, None);
     };
-    let (params, triangles) = face_lattices(0..m.faces().len(), per_face);
+    let (params, triangles) = welded_lattices(m.faces(), m.crease_edges(), per_face);
     let evaluate = f.model.as_surface().evaluator(&f.controls);
     let evals: Vec<Derivatives> = params.par_iter().map(|p| evaluate(*p)).collect();
     Tessellation::from_evaluations(&evals, params, triangles)
