@@ -38,6 +38,31 @@ pub const STANFORD_SCANS: [&str; 10] = [
     "range_scans/registered/chin.ply",
 ];
 
+/// The octahedron with vertices +x, -x, +y, -y, +z, -z (in that order), faces
+/// counter-clockwise seen from outside: the smallest closed mesh with vertices of valence 4
+/// and an edge loop (0-2-1-3) around its middle.
+pub fn octahedron() -> (Vec<DVec3>, Vec<[u32; 3]>) {
+    let vertices = vec![
+        DVec3::X,
+        -DVec3::X,
+        DVec3::Y,
+        -DVec3::Y,
+        DVec3::Z,
+        -DVec3::Z,
+    ];
+    let faces = vec![
+        [0, 2, 4],
+        [2, 1, 4],
+        [1, 3, 4],
+        [3, 0, 4],
+        [2, 0, 5],
+        [1, 2, 5],
+        [3, 1, 5],
+        [0, 3, 5],
+    ];
+    (vertices, faces)
+}
+
 /// The regular icosahedron with vertices (0, +-1, +-t) and their cyclic permutations (t the
 /// golden ratio), faces counter-clockwise seen from outside: the closed valence-5 mesh the
 /// Loop tests, benches and generated shapes start from.

@@ -156,16 +156,7 @@ mod tests {
 
     /// The octahedron's eight faces, outward.
     fn octahedron() -> Vec<[u32; 3]> {
-        vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ]
+        crate::testdata::octahedron().1
     }
 
     /// Uses of each directed edge.

@@ -29,24 +29,7 @@ fn tetrahedron() -> TriMesh {
 
 /// An octahedron, outward oriented: +x, -x, +y, -y, +z, -z.
 pub(crate) fn octahedron() -> TriMesh {
-    let p = vec![
-        DVec3::X,
-        -DVec3::X,
-        DVec3::Y,
-        -DVec3::Y,
-        DVec3::Z,
-        -DVec3::Z,
-    ];
-    let t = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
+    let (p, t) = trispline::testdata::octahedron();
     TriMesh::new(p, t)
 }
 
