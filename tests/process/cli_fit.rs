@@ -100,26 +100,8 @@ fn refuses_unsupported_inputs_with_status_2() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("out");
     // A closed octahedron has no subdivision connectivity and is no disk to remesh.
-    let oct = TriMesh::new(
-        vec![
-            DVec3::X,
-            -DVec3::X,
-            DVec3::Y,
-            -DVec3::Y,
-            DVec3::Z,
-            -DVec3::Z,
-        ],
-        vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ],
-    );
+    let (positions, faces) = trispline::testdata::octahedron();
+    let oct = TriMesh::new(positions, faces);
     let closed = dir.path().join("closed.obj");
     write_obj(&closed, &oct).expect("write");
     let o = trispline(&[
