@@ -34,6 +34,19 @@ pub(crate) struct Loop {
     pub(crate) watchdog: sdnotify::Watchdog,
 }
 
+/// The newer version waiting for `arrival`'s patch, when that makes its `fitted` result
+/// not worth writing. Never for objects: an object's fit is of its folder as read, and its
+/// kept session already holds those scans; unwritten, the state would lag the session, so
+/// the next update would find no step from the session yet a change against the state,
+/// and start the object over.
+fn superseded_by(sched: &Scheduler, arrival: &Arrival, fitted: bool) -> Option<String> {
+    match &arrival.input {
+        Input::Object(_) => None,
+        _ if fitted => sched.has_newer(&arrival.id, &arrival.key),
+        _ => None,
+    }
+}
+
 /// The sources still open and whether stdin ended (which ends the daemon once idle).
 #[derive(Default)]
 pub(crate) struct Sources {
@@ -162,12 +175,8 @@ impl Loop {
                     self.retry_later(&done.arrival, reason);
                     return;
                 }
-                let stale = match &done.outcome {
-                    Outcome::Fitted { .. } => {
-                        self.sched.has_newer(&done.arrival.id, &done.arrival.key)
-                    }
-                    _ => None,
-                };
+                let fitted = matches!(done.outcome, Outcome::Fitted { .. });
+                let stale = superseded_by(&self.sched, &done.arrival, fitted);
                 match (stale, done.outcome) {
                     (Some(by), Outcome::Fitted { outputs, .. }) => {
                         // A newer version waits: writing this one would only publish a
@@ -311,4 +320,49 @@ pub(crate) fn reload_config(
         }
     }
     sdnotify::notify(sdnotify::State::Ready);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::daemon::object_store::object_arrival;
+    use crate::daemon::scheduler::VersionKey;
+    use std::path::PathBuf;
+    use std::time::SystemTime;
+
+    fn file(id: &str, name: &str) -> Arrival {
+        Arrival {
+            id: id.into(),
+            input: Input::File(PathBuf::from(name)),
+            key: VersionKey {
+                time: SystemTime::now(),
+                tie: name.into(),
+            },
+            version: name.into(),
+            label: name.into(),
+            detected: Instant::now(),
+        }
+    }
+
+    #[test]
+    fn a_patch_fit_with_a_newer_version_waiting_is_stale_but_an_object_fit_never_is() {
+        let mut sched = Scheduler::default();
+        let running = file("ear", "ear@1");
+        sched.add(running.clone());
+        let started = sched.next_ready().expect("ear@1 starts");
+        sched.add(file("ear", "ear@2"));
+        assert_eq!(superseded_by(&sched, &started, true), Some("ear@2".into()));
+        // A rejection is written whatever waits.
+        assert_eq!(superseded_by(&sched, &started, false), None);
+
+        let folder = PathBuf::from("inbox/bunny");
+        let update = |what: &str| {
+            object_arrival("bunny".into(), folder.clone(), what.into(), "bunny".into())
+        };
+        sched.add(update("bun000.ply"));
+        let started = sched.next_ready().expect("the object's update starts");
+        sched.add(update("bun045.xf"));
+        assert!(sched.has_newer("bunny", &started.key).is_some());
+        assert_eq!(superseded_by(&sched, &started, true), None);
+    }
 }

@@ -97,18 +97,32 @@ pub(crate) fn relative_patch_id(root: &Path, path: &Path) -> Option<String> {
 
 /// Names that are still being written or are not meshes.
 pub(crate) fn ignored(path: &Path) -> bool {
+    partial_name(path) || Format::from_path(path).is_none()
+}
+
+/// Names that writers give a file before its rename to the real name (hidden, `.tmp`,
+/// `.part`), or no usable name at all.
+pub(crate) fn partial_name(path: &Path) -> bool {
     let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
         return true;
     };
-    name.starts_with('.')
-        || name.ends_with(".tmp")
-        || name.ends_with(".part")
-        || Format::from_path(path).is_none()
+    name.starts_with('.') || name.ends_with(".tmp") || name.ends_with(".part")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn names_before_their_rename_are_partial_and_meshes_otherwise_taken() {
+        for name in [".bun045.xf", "bun045.xf.tmp", "scan.ply.part", ".scan.ply"] {
+            assert!(partial_name(Path::new(name)), "{name}");
+            assert!(ignored(Path::new(name)), "{name}");
+        }
+        assert!(!partial_name(Path::new("bun045.xf")));
+        assert!(ignored(Path::new("bun045.xf")), "no mesh");
+        assert!(!ignored(Path::new("in/bun045.ply")));
+    }
 
     #[test]
     fn patch_ids_are_safe_and_distinct() {

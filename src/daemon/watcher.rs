@@ -8,6 +8,7 @@
 //! scheduler over an unbounded channel: this thread never waits for fitting.
 
 use super::config::WatcherKind;
+use super::ids::partial_name;
 use super::kinds::{rejection_kind, Cause};
 use super::messages::{ignored, relative_patch_id, Msg, Source};
 use super::open_files::open_for_writing;
@@ -538,11 +539,14 @@ impl FolderWatcher {
     }
 
     /// Whether the watcher hands the file on: meshes, and registration files of objects.
+    /// A registration file under a partial name (`.bun045.xf` before its rename) is not
+    /// one yet: no scan reads it, and taking it would queue updates of the object that
+    /// the rename supersedes.
     fn takes(&self, path: &Path) -> bool {
         let registration = path
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("xf") || e.eq_ignore_ascii_case("conf"));
-        !ignored(path) || (registration && self.object_of(path).is_some())
+        !ignored(path) || (registration && !partial_name(path) && self.object_of(path).is_some())
     }
 
     /// Files handed on before that are gone: a change of the objects they were in.
