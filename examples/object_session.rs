@@ -69,6 +69,7 @@ fn row(stats: &DistanceStats) -> String {
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

@@ -31,6 +31,7 @@ const TESS: usize = 8;
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

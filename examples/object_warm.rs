@@ -78,6 +78,7 @@ fn timed(
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let mut paths: Vec<String> = std::env::args().skip(1).collect();
     if paths.is_empty() {
         paths = ["bun_zipper.ply", "fertility.off", "decimated-max.obj"]

@@ -33,6 +33,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

@@ -28,6 +28,7 @@ const NEAR: f64 = 1e-3;
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let root = std::env::args()
         .nth(1)
         .map(PathBuf::from)

@@ -44,6 +44,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
     trispline::allocator::keep_freed_memory();
+    trispline::allocator::small_pages_only();
     let path = std::env::args()
         .nth(1)
         .unwrap_or_else(|| "../shared/data/range_scans/bun000_tri.ply".into());
