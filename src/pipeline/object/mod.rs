@@ -17,6 +17,7 @@
 
 mod component;
 mod corners;
+mod data_side;
 mod extend;
 mod layout;
 mod local;
@@ -33,7 +34,6 @@ use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{crease_sets, detect_creases};
-use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::{
     fixed_crease_vertices, simplify_with_creases, Simplified, SimplifyOptions, SurfaceTopology,
 };
@@ -43,6 +43,7 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use component::largest_component;
 use corners::rim_corners;
+use data_side::DataSide;
 pub use extend::{extend_over_new_ground, NotExtended, PreviousFit};
 use glam::DVec3;
 use layout::improve_layout;
@@ -55,9 +56,7 @@ pub use model::{
 };
 use refine::{faces_beyond, refined_mesh, Splits};
 pub use refine::{RefineOptions, RefineRound};
-use solve::{
-    near_boundary_in, point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples,
-};
+use solve::{point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
@@ -161,12 +160,16 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         opts.clone()
     };
-    let mut fit =
-        fit_on_creased_control_mesh(component, control_mesh, &crease_edges, params, &first_opts)?;
+    let side = match data_topo {
+        Some(topo) => DataSide::of_built(&component, topo, opts),
+        None => DataSide::new(&component, opts)?,
+    };
+    let first = FitStart::new(control_mesh, &crease_edges, params);
+    let mut fit = fit_from(&side, first, &first_opts)?;
     if refining {
-        fit = refine_fit(fit, target, opts);
+        fit = refine_fit(fit, target, opts, &side);
     }
-    let mut fit = repair::keep_near_data(fit, target, opts);
+    let mut fit = repair::keep_near_data(fit, target, opts, &side);
     fit.layout = layout;
     fit.cleaning = Some(cleaning);
     fit.times.clean_ms = times.clean_ms;
@@ -231,19 +234,21 @@ pub fn fit_on_creased_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
+    let side = DataSide::new(&component, opts)?;
     fit_from(
-        component,
-        control_mesh,
-        crease_edges,
-        params,
-        Start::default(),
+        &side,
+        FitStart::new(control_mesh, crease_edges, params),
         opts,
     )
 }
 
-/// What a fit may start from besides the control mesh.
-#[derive(Default)]
-struct Start<'a> {
+/// What a fit starts from: the control mesh, its creases, the data points' parameters on
+/// it, and maybe more.
+struct FitStart<'a> {
+    control_mesh: TriMesh,
+    crease_edges: &'a [[u32; 2]],
+    /// One per data point, on the control faces.
+    params: Vec<SurfaceParam>,
     /// Control positions to start the rounds from (one per control mesh vertex), the
     /// first point fit skipped.
     warm: Option<Vec<DVec3>>,
@@ -251,30 +256,43 @@ struct Start<'a> {
     previous: Option<&'a LoopLimitSurface>,
 }
 
-/// [`fit_on_creased_control_mesh`] from `start`.
+impl<'a> FitStart<'a> {
+    fn new(control_mesh: TriMesh, crease_edges: &'a [[u32; 2]], params: Vec<SurfaceParam>) -> Self {
+        Self {
+            control_mesh,
+            crease_edges,
+            params,
+            warm: None,
+            previous: None,
+        }
+    }
+}
+
+/// [`fit_on_creased_control_mesh`] from `start`, on the data of `side`.
 fn fit_from(
-    component: TriMesh,
-    control_mesh: TriMesh,
-    crease_edges: &[[u32; 2]],
-    params: Vec<SurfaceParam>,
-    start_from: Start,
+    side: &DataSide,
+    start_from: FitStart,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
-    let Start { warm, previous } = start_from;
+    let FitStart {
+        control_mesh,
+        crease_edges,
+        params,
+        warm,
+        previous,
+    } = start_from;
     let start = Instant::now();
     let mut times = ObjectTimes::default();
     let t = Instant::now();
+    let component = side.mesh;
     let n = component.positions.len();
     one_param_per_point(&params, n)?;
-    // The data's half-edge topology, built once for its numbers, its rim and the band
-    // next to the rim (on 135k points each build takes some 30 ms).
-    let data_topo = Topology::from_mesh(&component).map_err(ObjectError::NotManifold)?;
-    let data_topology = SurfaceTopology::of_built(&component, &data_topo);
+    let data_topology = side.topology;
     let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
     let surface = limit_surface(&control_mesh, crease_edges, previous)?;
     let m = control_mesh.positions.len();
     let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let rim = Rim::new(&control_topo.twin, &near_boundary_in(&data_topo, 0));
+    let rim = Rim::new(&control_topo.twin, &side.on_rim);
     let fairness = Collocation::new(umbrella_laplacian_with_creases(
         m,
         &control_mesh.triangles,
@@ -315,13 +333,12 @@ fn fit_from(
     // far from their final parameterization need long slides that a fixed small share
     // makes unstable and a fixed large share makes slow.
     let mut share = opts.tangential;
-    let near_edge = near_boundary_in(&data_topo, opts.edge_rings);
-    drop(data_topo);
+    let near_edge = side.near_edge(opts.edge_rings);
     let on_rim = rim.marks(n);
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
     let mut refusals = 0;
     let mut taken = 0;
-    let nearest = opts.surface_samples.then(|| MeshDistance::new(&component));
+    let nearest = opts.surface_samples.then(|| side.nearest());
     let mut sampled_faces = 0;
     let mut pattern = CholeskyPattern::default();
     while taken < opts.rounds && refusals < MAX_REFUSALS {
@@ -334,7 +351,7 @@ fn fit_from(
                 &controls,
                 &feet.params,
                 &rim,
-                &component,
+                component,
                 nearest,
                 None,
             ),
@@ -359,7 +376,7 @@ fn fit_from(
         let before = two_sided_rms(&feet.distances, &samples.distances);
         let next_feet = round
             .solve(&feet, controls.clone(), &mut pattern)
-            .and_then(|next| round.judge(next, &feet.params, &rim, nearest.as_ref(), before));
+            .and_then(|next| round.judge(next, &feet.params, &rim, nearest, before));
         let Some((next_feet, next, after)) = next_feet else {
             refusals += 1;
             share *= 4.0;
@@ -377,13 +394,12 @@ fn fit_from(
             break;
         }
     }
-    drop(nearest);
     times.rounds_ms = ms_since(t);
     times.total_ms = ms_since(start);
     Ok(ObjectFit {
         sampled_faces,
         data,
-        component,
+        component: component.clone(),
         simplified: control_mesh,
         rms: feet.rms(),
         max: feet.max(),
@@ -458,7 +474,7 @@ fn first_fit(
 /// Refinement rounds after the first fit (see `refine`): each refines the control mesh
 /// where the error is and fits again; a round that fails or does not lower the RMS ends
 /// them, its fit dropped.
-fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
+fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions, side: &DataSide) -> ObjectFit {
     let t = Instant::now();
     let tolerance = opts.refine.tolerance;
     let first_times = first.times.clone();
@@ -501,17 +517,12 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         } else {
             intermediate(opts)
         };
-        let Ok(next) = fit_from(
-            fit.component.clone(),
-            refined.mesh,
-            &refined.creases,
-            refined.params,
-            Start {
-                warm: opts.refine.warm.then_some(refined.warm),
-                previous: Some(&fit.surface),
-            },
-            &round_opts,
-        ) else {
+        let start = FitStart {
+            warm: opts.refine.warm.then_some(refined.warm),
+            previous: Some(&fit.surface),
+            ..FitStart::new(refined.mesh, &refined.creases, refined.params)
+        };
+        let Ok(next) = fit_from(side, start, &round_opts) else {
             break;
         };
         stages.push(round_of(&next));
@@ -522,7 +533,7 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
         unfinished = !last;
     }
     if unfinished {
-        fit = finish_rounds(fit, opts);
+        fit = finish_rounds(fit, opts, side);
     }
     fit.times = first_times;
     fit.times.refine_ms = ms_since(t);
@@ -533,18 +544,17 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions) -> ObjectFit {
 /// `fit`'s remaining foot-point rounds: the rounds run again from its controls and foot
 /// points on the same control mesh (every patch taken over) with all of `opts.rounds`;
 /// `fit` itself when that fails or does not lower the RMS.
-fn finish_rounds(fit: ObjectFit, opts: &ObjectOptions) -> ObjectFit {
-    let finished = fit_from(
-        fit.component.clone(),
-        fit.control_mesh(),
-        fit.surface.crease_edges(),
-        fit.params.clone(),
-        Start {
-            warm: Some(fit.controls.clone()),
-            previous: Some(&fit.surface),
-        },
-        opts,
-    );
+fn finish_rounds(fit: ObjectFit, opts: &ObjectOptions, side: &DataSide) -> ObjectFit {
+    let start = FitStart {
+        warm: Some(fit.controls.clone()),
+        previous: Some(&fit.surface),
+        ..FitStart::new(
+            fit.control_mesh(),
+            fit.surface.crease_edges(),
+            fit.params.clone(),
+        )
+    };
+    let finished = fit_from(side, start, opts);
     match finished {
         Ok(mut next) if next.rms < fit.rms => {
             let mut rounds = fit.rounds;

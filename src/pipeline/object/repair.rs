@@ -1,13 +1,13 @@
 //! The stray repair of a whole fit: where the surface strays from its data farther than
 //! the bound, its faces are split and the controls around them refitted.
 
+use super::data_side::DataSide;
 use super::local::{refit_refined, LocalOptions, RefinedRefit};
 use super::model::STRAY_LATTICE_SEGMENTS;
 use super::model::{ms_since, ObjectFit, ObjectOptions};
 use super::refine::{refined_mesh, RefineRound, Refined, Splits};
 use super::solve::rms;
 use super::stray::face_strays;
-use crate::mesh::distance::MeshDistance;
 use crate::surface::TriSurface;
 use std::time::Instant;
 
@@ -28,7 +28,12 @@ const STRAY_REPAIR_EXTRA: f64 = 0.1;
 /// whole object instead reached the bound too, at 1.6-1.8x the CPU of the fit before on
 /// decimated-max and chin_tri (the local refit: 1.1-1.6x). The bound is a promise to the
 /// user; the control budget gives way to it, and `refinement` says so (`stray_repair`).
-pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions) -> ObjectFit {
+pub(super) fn keep_near_data(
+    fit: ObjectFit,
+    target: usize,
+    opts: &ObjectOptions,
+    side: &DataSide,
+) -> ObjectFit {
     let Some(share) = opts.max_stray_share else {
         return fit;
     };
@@ -38,15 +43,13 @@ pub(super) fn keep_near_data(fit: ObjectFit, target: usize, opts: &ObjectOptions
     // keeps a few): the extra share counts from where the fit is.
     let start = target.max(fit.controls.len());
     let cap = start + (STRAY_REPAIR_EXTRA * start as f64).ceil() as usize;
-    // Its own copy: `fit` is replaced round by round.
-    let data = fit.component.clone();
-    let nearest = MeshDistance::new(&data);
+    let nearest = side.nearest();
     let strays_of = |f: &ObjectFit| {
         let faces: Vec<u32> = (0..f.surface.domain_face_count() as u32).collect();
         face_strays(
             &f.surface,
             &f.controls,
-            &nearest,
+            nearest,
             STRAY_LATTICE_SEGMENTS,
             &faces,
         )
