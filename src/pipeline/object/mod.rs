@@ -160,12 +160,16 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         opts.clone()
     };
+    let t = Instant::now();
     let side = match data_topo {
         Some(topo) => DataSide::of_built(&component, topo, opts),
         None => DataSide::new(&component, opts)?,
     };
+    let side_ms = ms_since(t);
     let first = FitStart::new(control_mesh, &crease_edges, params);
     let mut fit = fit_from(&side, first, &first_opts)?;
+    // The data side is built for every fit: reported with the first fit's own setup.
+    fit.times.surface_ms += side_ms;
     if refining {
         fit = refine_fit(fit, target, opts, &side);
     }
