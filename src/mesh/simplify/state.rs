@@ -9,10 +9,10 @@ use super::quadric::Quadric;
 use crate::mesh::topology::{Topology, NONE};
 use crate::mesh::{triangle_area_normal, triangle_quality, TriMesh};
 use crossbeam_channel::Sender;
+use dary_heap::QuaternaryHeap;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 /// Queue entry: the cost bits (non-negative f64 order as u64) and the edge in one key,
 /// and the versions of its end points when it was queued. Entries are ordered by the key
@@ -204,7 +204,11 @@ impl<'a> State<'a> {
                 })
             })
             .collect();
-        let mut heap: BinaryHeap<Entry> = BinaryHeap::from(entries);
+        // Four children per node: half the levels of a binary heap, each level's children
+        // in one or two cache lines. On 135k points (some 400k entries, most pops missing
+        // the cache) the pops went from 6.1 to 2.4 % of a fit's samples, the
+        // simplification from 1.24 to 1.14 s (medians of 6), the same collapses.
+        let mut heap: QuaternaryHeap<Entry> = QuaternaryHeap::from(entries);
         let before = self.collapses;
         let mut scratch = Scratch::default();
         while self.alive_vertices > target {
@@ -248,7 +252,7 @@ impl<'a> State<'a> {
             && self.version[b] == e.versions[1]
     }
 
-    fn push(&self, heap: &mut BinaryHeap<Entry>, a: u32, b: u32) {
+    fn push(&self, heap: &mut QuaternaryHeap<Entry>, a: u32, b: u32) {
         if let Some(e) = self.entry(a, b) {
             heap.push(e);
         }
