@@ -28,6 +28,7 @@ const STRAY_REPAIR_EXTRA: f64 = 0.1;
 /// whole object instead reached the bound too, at 1.6-1.8x the CPU of the fit before on
 /// decimated-max and chin_tri (the local refit: 1.1-1.6x). The bound is a promise to the
 /// user; the control budget gives way to it, and `refinement` says so (`stray_repair`).
+/// `side` is the data `fit` was fitted to.
 pub(super) fn keep_near_data(
     fit: ObjectFit,
     target: usize,
