@@ -270,7 +270,7 @@ pub fn tessellate_mesh_faces(f: &PatchFit, per_face: usize) -> Tessellation {
     let SurfaceModel::Mesh(m) = &f.model else {
         return tessellate(f, per_face, None);
     };
-    let (params, triangles) = welded_lattices(m.faces(), m.crease_edges(), per_face);
+    let (params, triangles) = welded_lattices(m.topology(), m.crease_edges(), per_face);
     let evaluate = f.model.as_surface().evaluator(&f.controls);
     let evals: Vec<Derivatives> = params.par_iter().map(|p| evaluate(*p)).collect();
     Tessellation::from_evaluations(&evals, params, triangles)

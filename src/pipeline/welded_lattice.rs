@@ -9,6 +9,7 @@
 //! side has its own normal. (A crease line's free end is a dart, smooth: one vertex.)
 
 use crate::mesh::stats::UnionFind;
+use crate::mesh::topology::{Topology, NONE};
 use crate::surface::bezier::{lattice_points, lattice_triangles};
 use crate::surface::SurfaceParam;
 use rustc_hash::{FxHashMap, FxHashSet};
@@ -33,33 +34,23 @@ struct Sectors {
 }
 
 impl Sectors {
-    fn new(faces: &[[u32; 3]], crease: &FxHashSet<(u32, u32)>) -> Self {
-        let edge = |a: u32, b: u32| (a.min(b), a.max(b));
+    fn new(topo: &Topology, is_crease: impl Fn(u32, u32) -> bool) -> Self {
+        let faces = &topo.triangles;
         let mut pairs = UnionFind::new(3 * faces.len());
-        // Per undirected edge, the first face met and its corner indices of the edge.
-        let mut first: FxHashMap<(u32, u32), (usize, usize, usize)> = FxHashMap::default();
-        for (f, t) in faces.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                if crease.contains(&edge(a, b)) {
-                    continue;
-                }
-                match first.get(&edge(a, b)) {
-                    // The twin runs b -> a: its corner of b and of a.
-                    Some(&(g, ga, gb)) => {
-                        let (of_a, of_b) = if faces[g][ga] == a {
-                            (ga, gb)
-                        } else {
-                            (gb, ga)
-                        };
-                        pairs.union(3 * f + k, 3 * g + of_a);
-                        pairs.union(3 * f + (k + 1) % 3, 3 * g + of_b);
-                    }
-                    None => {
-                        first.insert(edge(a, b), (f, k, (k + 1) % 3));
-                    }
-                }
+        for (h, &twin) in topo.twin.iter().enumerate() {
+            // Each interior edge once, from its lower half-edge.
+            if twin == NONE || (twin as usize) < h {
+                continue;
             }
+            // Half-edge h = 3f + k runs corner k -> k + 1 of face f; its twin 3g + m runs
+            // corner m -> m + 1 of face g the other way.
+            let (f, k) = (h / 3, h % 3);
+            let (g, m) = (twin as usize / 3, twin as usize % 3);
+            if is_crease(faces[f][k], faces[f][(k + 1) % 3]) {
+                continue;
+            }
+            pairs.union(3 * f + k, 3 * g + (m + 1) % 3);
+            pairs.union(3 * f + (k + 1) % 3, 3 * g + m);
         }
         Self { pairs }
     }
@@ -69,20 +60,21 @@ impl Sectors {
     }
 }
 
-/// The parameters and triangles of `faces` each tessellated by the lattice of `n`
-/// segments per side (counter-clockwise in the face's (u, v), as the faces), vertices
-/// shared as the module docs say. Corner 0 of a face is (u, v) = (1, 0), corner 1 is
+/// The parameters and triangles of the faces of `topo` (a control mesh's half-edge
+/// topology) each tessellated by the lattice of `n` segments per side (counter-clockwise
+/// in the face's (u, v), as the faces), vertices shared as the module docs say. Corner 0 of a face is (u, v) = (1, 0), corner 1 is
 /// (0, 1), corner 2 is (0, 0); a shared vertex keeps the parameter of the first face
 /// that reaches it.
 pub fn welded_lattices(
-    faces: &[[u32; 3]],
+    topo: &Topology,
     creases: &[[u32; 2]],
     n: usize,
 ) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
     let n = n.max(1);
+    let faces = &topo.triangles;
     let edge = |a: u32, b: u32| (a.min(b), a.max(b));
     let crease: FxHashSet<(u32, u32)> = creases.iter().map(|c| edge(c[0], c[1])).collect();
-    let mut sectors = Sectors::new(faces, &crease);
+    let mut sectors = Sectors::new(topo, |a, b| crease.contains(&edge(a, b)));
     let local = lattice_points(n);
     let local_triangles = lattice_triangles(n);
     let mut ids: FxHashMap<Key, u32> = FxHashMap::default();
@@ -154,9 +146,10 @@ mod tests {
     use super::*;
     use std::collections::HashMap;
 
-    /// The octahedron's eight faces, outward.
-    fn octahedron() -> Vec<[u32; 3]> {
-        crate::testdata::octahedron().1
+    /// The octahedron's half-edge topology (eight faces, outward).
+    fn octahedron() -> Topology {
+        let (vertices, faces) = crate::testdata::octahedron();
+        Topology::build(vertices.len(), &faces).expect("a manifold octahedron")
     }
 
     /// Uses of each directed edge.
@@ -172,9 +165,9 @@ mod tests {
 
     #[test]
     fn a_closed_control_mesh_gives_one_closed_oriented_surface() {
-        let faces = octahedron();
+        let topo = octahedron();
         for n in [1, 2, 5, 12] {
-            let (params, triangles) = welded_lattices(&faces, &[], n);
+            let (params, triangles) = welded_lattices(&topo, &[], n);
             // V + E (n - 1) + F (n - 1)(n - 2) / 2 vertices: each point once.
             let expected = 6 + 12 * (n - 1) + 8 * (n - 1) * n.saturating_sub(2) / 2;
             assert_eq!(params.len(), expected, "n = {n}");
@@ -193,11 +186,12 @@ mod tests {
 
     #[test]
     fn crease_edges_keep_a_vertex_per_side() {
-        let faces = octahedron();
+        let topo = octahedron();
+        let faces = &topo.triangles;
         let n = 4;
-        let (welded, _) = welded_lattices(&faces, &[], n);
+        let (welded, _) = welded_lattices(&topo, &[], n);
         let open_edges = |creases: &[[u32; 2]]| {
-            let (params, triangles) = welded_lattices(&faces, creases, n);
+            let (params, triangles) = welded_lattices(&topo, creases, n);
             let uses = directed(&triangles);
             let open: Vec<(u32, u32)> = uses
                 .keys()

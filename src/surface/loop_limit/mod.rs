@@ -250,6 +250,11 @@ impl LoopLimitSurface {
         &self.topo.triangles
     }
 
+    /// The control mesh's half-edge topology.
+    pub fn topology(&self) -> &Topology {
+        &self.topo
+    }
+
     /// Whether a face is a single box-spline patch (all corners regular), evaluated
     /// without subdivision.
     pub fn is_regular_face(&self, face: usize) -> bool {
