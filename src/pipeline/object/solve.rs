@@ -26,7 +26,12 @@ pub(super) fn rows_at(surface: &LoopLimitSurface, params: &[SurfaceParam]) -> Cs
         .par_chunks(2048)
         .map(|chunk| {
             let mut row = Vec::new();
-            let (mut lens, mut cols, mut vals) = (Vec::with_capacity(chunk.len()), vec![], vec![]);
+            // A regular patch has 12 columns; an irregular one more, which grows the arrays.
+            let (mut lens, mut cols, mut vals) = (
+                Vec::with_capacity(chunk.len()),
+                Vec::with_capacity(12 * chunk.len()),
+                Vec::with_capacity(12 * chunk.len()),
+            );
             for p in chunk {
                 surface.basis_row(*p, &mut row);
                 let before = cols.len();
@@ -39,11 +44,15 @@ pub(super) fn rows_at(surface: &LoopLimitSurface, params: &[SurfaceParam]) -> Cs
             (lens, cols, vals)
         })
         .collect();
+    // Sized exactly: grown by doubling, the two arrays of a 557k-point fit held up to
+    // twice their entries at the peak of the fit's memory.
+    let entries: usize = parts.iter().map(|p| p.1.len()).sum();
     let mut m = Csr {
         nrows: params.len(),
         ncols: surface.control_count(),
         row_ptr: Vec::with_capacity(params.len() + 1),
-        ..Default::default()
+        col_idx: Vec::with_capacity(entries),
+        values: Vec::with_capacity(entries),
     };
     m.row_ptr.push(0);
     let mut end = 0;
