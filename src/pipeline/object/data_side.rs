@@ -1,4 +1,4 @@
-//! What every fit of one data mesh reads of it besides its points (its half-edge topology,
+//! What every fit of one data mesh reads of it besides its points (its topology summary,
 //! rim, the band next to the rim, the nearest-point index), built once for all the fits
 //! of a whole-object fit (the first, each refinement round's, the finishing rounds, the
 //! stray repair) instead of once per fit.
