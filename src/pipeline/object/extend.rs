@@ -26,7 +26,7 @@ use super::refine::limit_positions;
 use super::seam::{region_faces, seams, strip, Rims, Run, Seam, SeamMiss};
 use super::version::{changed_points, Refitted, CHANGE_FACTOR};
 use crate::mesh::simplify::{simplify_keeping, SimplifyOptions, SurfaceTopology};
-use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::topology::{Topology, TopologyError, NONE};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
@@ -51,8 +51,16 @@ pub enum NotExtended {
     NothingNew,
     /// A point's start lies off the previous control faces.
     StartOffFaces,
-    /// The data, the region's boundary or the joined mesh is not a manifold.
-    NotManifold,
+    /// A mesh the extension walks is not a manifold: the data, the previous control
+    /// mesh, the new region's boundary or the joined mesh (`part`), with the walk's own
+    /// reason where it gives one (a pinch vertex of the joined mesh: a strip that meets
+    /// the previous faces at a vertex only).
+    NotManifold {
+        /// Which mesh.
+        part: &'static str,
+        /// Why, where the walk says.
+        detail: Option<String>,
+    },
     /// Seams of the new region have no run along the previous rim, and taking their parts
     /// to old ground would take more than a tenth of the new points.
     Unjoined {
@@ -74,7 +82,13 @@ impl std::fmt::Display for NotExtended {
         match self {
             Self::NothingNew => write!(f, "no new ground to extend over"),
             Self::StartOffFaces => write!(f, "a point starts off the previous control faces"),
-            Self::NotManifold => write!(f, "the new region or the joined mesh is not a manifold"),
+            Self::NotManifold { part, detail } => {
+                write!(f, "{part} is not a manifold")?;
+                match detail {
+                    Some(d) => write!(f, ": {d}"),
+                    None => Ok(()),
+                }
+            }
             Self::Unjoined {
                 seams,
                 missed,
@@ -360,17 +374,24 @@ fn joined_mesh(
     old_mesh: &TriMesh,
     old_surface: &crate::surface::loop_limit::LoopLimitSurface,
 ) -> Result<Joined, NotExtended> {
-    let topo = Topology::from_mesh(component).map_err(|_| NotExtended::NotManifold)?;
+    let topo = Topology::from_mesh(component).map_err(|e| not_manifold("the data", e))?;
     let limit = limit_positions(old_surface, &old_mesh.positions);
-    let old_topo = Topology::from_mesh(old_mesh).map_err(|_| NotExtended::NotManifold)?;
+    let old_topo =
+        Topology::from_mesh(old_mesh).map_err(|e| not_manifold("the previous control mesh", e))?;
     let rims = Rims::new(&old_topo, &limit);
     let m = old_mesh.positions.len();
     let all_new = is_new.iter().filter(|&&b| b).count();
     let mut is_new = is_new.to_vec();
-    let mut refusal = NotExtended::NotManifold;
+    let mut refusal = NotExtended::NotManifold {
+        part: "the new region",
+        detail: None,
+    };
     for _ in 0..MAX_DEMOTION_ROUNDS {
         let in_region = region_faces(component, &topo, &is_new);
-        let seams = seams(&topo, &in_region).ok_or(NotExtended::NotManifold)?;
+        let seams = seams(&topo, &in_region).ok_or(NotExtended::NotManifold {
+            part: "the new region's boundary",
+            detail: Some("it meets itself at a vertex".into()),
+        })?;
         let mut used = vec![false; m];
         let mut runs = Vec::with_capacity(seams.len());
         let mut failed = Vec::new();
@@ -398,7 +419,7 @@ fn joined_mesh(
                 limit,
                 (&seams, runs),
             )
-            .ok_or(NotExtended::NotManifold);
+            .map_err(|e| not_manifold("the joined mesh", e));
         }
         // A part of the region the strip cannot join (an island inside the old ground, a
         // second seam on the same rim run) is old ground whose data changed, as long as
@@ -411,6 +432,13 @@ fn joined_mesh(
         }
     }
     Err(refusal)
+}
+
+fn not_manifold(part: &'static str, e: TopologyError) -> NotExtended {
+    NotExtended::NotManifold {
+        part,
+        detail: Some(e.to_string()),
+    }
 }
 
 /// Rounds of taking unjoinable parts out of the region at most.
@@ -468,7 +496,7 @@ fn joined(
     old_mesh: &TriMesh,
     limit: Vec<DVec3>,
     (seams, runs): (&[Seam], Vec<Run>),
-) -> Option<Joined> {
+) -> Result<Joined, TopologyError> {
     let m = old_mesh.positions.len();
     let mut local = vec![NONE; component.positions.len()];
     let mut region_vertices = Vec::new();
@@ -510,8 +538,8 @@ fn joined(
             .map(|&v| component.positions[v as usize]),
     );
     let mesh = TriMesh::new(positions, faces);
-    Topology::from_mesh(&mesh).ok()?;
-    Some(Joined {
+    Topology::from_mesh(&mesh)?;
+    Ok(Joined {
         mesh,
         region_vertices,
         rim_run,
