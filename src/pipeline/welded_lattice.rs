@@ -62,9 +62,9 @@ impl Sectors {
 
 /// The parameters and triangles of the faces of `topo` (a control mesh's half-edge
 /// topology) each tessellated by the lattice of `n` segments per side (counter-clockwise
-/// in the face's (u, v), as the faces), vertices shared as the module docs say. Corner 0 of a face is (u, v) = (1, 0), corner 1 is
-/// (0, 1), corner 2 is (0, 0); a shared vertex keeps the parameter of the first face
-/// that reaches it.
+/// in the face's (u, v), as the faces), vertices shared as the module docs say. Corner 0
+/// of a face is (u, v) = (1, 0), corner 1 is (0, 1), corner 2 is (0, 0); a shared vertex
+/// keeps the parameter of the first face that reaches it.
 pub fn welded_lattices(
     topo: &Topology,
     creases: &[[u32; 2]],
