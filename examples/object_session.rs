@@ -16,7 +16,9 @@
 //!    (merge around the scan, refit of the controls around it) beside the same update
 //!    from scratch (`SessionOptions::cold`), their times and RMS and the two surfaces'
 //!    distance.
-//! 5. The same scans in the reverse order: the two end surfaces' distance.
+//! 5. Folder changes as one update of the kept session: nothing changed (a rejected scan
+//!    came), and bun000 renamed.
+//! 6. The same scans in the reverse order: the two end surfaces' distance.
 //!
 //! After each update, how many of the surface's tessellation vertices lie over 0.5 mm from
 //! the merged data (a bulge or a bad seam shows there).
@@ -158,6 +160,7 @@ fn main() {
         return;
     }
     replacement(&scans, &mut session, &opts);
+    folder_changes(&scans, &mut session);
     if std::env::var("OBJ_SESSION_REPLACE_ONLY").is_ok() {
         return;
     }
@@ -394,6 +397,27 @@ fn replacement(scans: &[Scan], session: &mut ObjectSession, opts: &SessionOption
             um(d.p95),
             um(d.max)
         );
+    }
+}
+
+/// Folder changes a daemon passes to its kept session as one update: nothing changed but
+/// the outputs are wanted again (a rejected scan came or went), and a scan renamed.
+fn folder_changes(scans: &[Scan], session: &mut ObjectSession) {
+    let Some((id, mesh, t, _)) = scans.iter().find(|s| s.0 == "bun000") else {
+        return;
+    };
+    println!("\n== folder changes, each one update of the kept session");
+    let renamed = format!("{id}_renamed");
+    let renamed_scan = [(renamed.as_str(), mesh, *t)];
+    for (label, added, removed) in [
+        ("unchanged", &renamed_scan[..0], &[][..]),
+        ("renamed", &renamed_scan[..], &[*id][..]),
+    ] {
+        let cpu = process_cpu_ms();
+        match session.change_scans(added, removed) {
+            Ok(u) => println!("{label:9} {}", describe(id, &u, process_cpu_ms() - cpu)),
+            Err(e) => eprintln!("{label}: {e}"),
+        }
     }
 }
 

@@ -142,9 +142,9 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
     }
 }
 
-/// The object `id`'s update to `scans` (with their keys): through its kept session when
-/// the change is one step of it, else a fresh session of all of them; the session is kept
-/// for the next update when it succeeds.
+/// The object `id`'s update to `scans` (with their keys): one update of its kept session
+/// when one is kept (under the same config), else a fresh session of all of them; the
+/// session is kept for the next update when it succeeds.
 fn update_session(
     id: &str,
     cfg: &DaemonConfig,
@@ -177,8 +177,10 @@ fn update_session(
     };
     tracing::debug!(object = %id, ?step, "object update");
     let update = match &step {
-        SessionStep::Add(ids) => session.add_scans(&staged(Some(ids))),
-        SessionStep::Remove(scan) => session.remove_scan(scan),
+        SessionStep::Update { added, removed } => {
+            let removed: Vec<&str> = removed.iter().map(String::as_str).collect();
+            session.change_scans(&staged(Some(added)), &removed)
+        }
         SessionStep::Fresh => {
             session = fresh();
             session.add_scans(&staged(None))

@@ -84,13 +84,15 @@ impl ObjectSessions {
 /// How an update applies a folder's scans to a kept session.
 #[derive(Debug, PartialEq, Eq)]
 pub(crate) enum SessionStep {
-    /// Add these scans (new ids, or new versions of ids the session holds), one fit.
-    Add(Vec<String>),
-    /// Remove this scan, one fit.
-    Remove(String),
-    /// Start a fresh session from all the scans: no session kept, or a change a single
-    /// session update does not express (scans added and removed at once, nothing changed
-    /// but the outputs are wanted again).
+    /// One update of the kept session: these scans added (new ids, or new versions of ids
+    /// it holds) and these removed. Both empty when no usable scan changed but the outputs
+    /// are wanted again (a rejected scan came or went, an output is missing): the kept fit
+    /// comes out again without a fit from scratch.
+    Update {
+        added: Vec<String>,
+        removed: Vec<String>,
+    },
+    /// Start a fresh session from all the scans: no session kept.
     Fresh,
 }
 
@@ -99,17 +101,17 @@ pub(crate) fn step(
     kept: &BTreeMap<String, ScanKey>,
     now: &BTreeMap<String, ScanKey>,
 ) -> SessionStep {
-    let added: Vec<String> = now
+    let added = now
         .iter()
         .filter(|(id, key)| kept.get(*id) != Some(key))
         .map(|(id, _)| id.clone())
         .collect();
-    let removed: Vec<&String> = kept.keys().filter(|id| !now.contains_key(*id)).collect();
-    match (added.is_empty(), removed.as_slice()) {
-        (false, []) => SessionStep::Add(added),
-        (true, [id]) => SessionStep::Remove((*id).clone()),
-        _ => SessionStep::Fresh,
-    }
+    let removed = kept
+        .keys()
+        .filter(|id| !now.contains_key(*id))
+        .cloned()
+        .collect();
+    SessionStep::Update { added, removed }
 }
 
 #[cfg(test)]
@@ -124,33 +126,34 @@ mod tests {
     }
 
     #[test]
-    fn a_folder_change_becomes_one_session_step_or_a_fresh_start() {
+    fn a_folder_change_becomes_one_session_update() {
         let kept = keys(&[("a", 1), ("b", 2)]);
+        let update = |added: &[&str], removed: &[&str]| SessionStep::Update {
+            added: added.iter().map(|s| s.to_string()).collect(),
+            removed: removed.iter().map(|s| s.to_string()).collect(),
+        };
         // A new scan, and a new version of one.
         assert_eq!(
             step(&kept, &keys(&[("a", 1), ("b", 2), ("c", 3)])),
-            SessionStep::Add(vec!["c".into()])
+            update(&["c"], &[])
         );
         assert_eq!(
             step(&kept, &keys(&[("a", 1), ("b", 5)])),
-            SessionStep::Add(vec!["b".into()])
+            update(&["b"], &[])
         );
         // A new transform is a new version too.
         let mut moved = kept.clone();
         moved.insert("a".into(), (1, [7; 16]));
-        assert_eq!(step(&kept, &moved), SessionStep::Add(vec!["a".into()]));
-        // One scan gone.
-        assert_eq!(
-            step(&kept, &keys(&[("b", 2)])),
-            SessionStep::Remove("a".into())
-        );
-        // Gone and added at once, two gone, or nothing changed.
+        assert_eq!(step(&kept, &moved), update(&["a"], &[]));
+        // One scan gone, gone and added at once (a scan renamed), two gone, or nothing
+        // changed.
+        assert_eq!(step(&kept, &keys(&[("b", 2)])), update(&[], &["a"]));
         assert_eq!(
             step(&kept, &keys(&[("b", 2), ("c", 3)])),
-            SessionStep::Fresh
+            update(&["c"], &["a"])
         );
-        assert_eq!(step(&kept, &keys(&[])), SessionStep::Fresh);
-        assert_eq!(step(&kept, &kept), SessionStep::Fresh);
+        assert_eq!(step(&kept, &keys(&[])), update(&[], &["a", "b"]));
+        assert_eq!(step(&kept, &kept), update(&[], &[]));
     }
 
     #[test]

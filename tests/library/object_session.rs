@@ -169,6 +169,7 @@ fn a_session_goes_from_a_disk_to_a_closed_object_and_follows_replace_and_remove(
         ..Default::default()
     });
     let mut paths = Vec::new();
+    let mut last_controls = None;
     for (k, axis) in AXES.iter().enumerate() {
         let update = session
             .add_scan(
@@ -192,6 +193,7 @@ fn a_session_goes_from_a_disk_to_a_closed_object_and_follows_replace_and_remove(
             assert!(s.stats.median < 1e-4, "{}: {:?}", s.id, s.stats);
         }
         if k == AXES.len() - 1 {
+            last_controls = Some(update.fit.controls.clone());
             let topology = &update.outputs.report["topology"]["data"];
             assert_eq!(topology["boundary_loops"], 0, "{topology}");
             assert!(update.fit.geometric_rms() < 3e-5);
@@ -200,6 +202,33 @@ fn a_session_goes_from_a_disk_to_a_closed_object_and_follows_replace_and_remove(
     }
     assert_eq!(paths[0], "scan");
     assert_eq!(paths[5], "object");
+    let closed = last_controls.expect("six views");
+    // Nothing changed (a daemon's update when only a rejected scan came or went): the
+    // same surface again from the local refit, over no changed point.
+    let again = session.change_scans(&[], &[]).expect("no change");
+    let region = &again.outputs.report["session"]["updated_region"];
+    assert_eq!(region["fit"], "local", "{region}");
+    assert_eq!(region["local_refit"]["changed_points"], 0, "{region}");
+    assert_eq!(again.fit.controls, closed);
+    assert_eq!(again.recomputed_cells, 0, "nothing merged again");
+    // A view renamed: one update, removed and added at once; the merge is the same.
+    let renamed = session
+        .change_scans(
+            &[("w4", &view(AXES[4], 30, 0.0), RigidTransform::IDENTITY)],
+            &["v4"],
+        )
+        .expect("rename");
+    let ids: Vec<&String> = session.scans().keys().collect();
+    assert_eq!(ids, ["v0", "v1", "v2", "v3", "v5", "w4"]);
+    assert_eq!(
+        renamed.change.added + renamed.change.removed,
+        0,
+        "{:?}",
+        renamed.change
+    );
+    assert!(renamed.recomputed_cells > 0);
+    let region = &renamed.outputs.report["session"]["updated_region"];
+    assert_eq!(region["fit"], "local", "{region}");
     // A new version of a view moved 0.5 mm out replaces the old one.
     let replaced = session
         .add_scan("v0", &view(DVec3::X, 30, 5e-4), RigidTransform::IDENTITY)

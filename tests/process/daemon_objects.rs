@@ -283,6 +283,7 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_de
     let b = &session["files"][1];
     assert_eq!(b["registration"]["from"], "sidecar", "{b}");
     // A .conf that names c.ply with a bad number: c is refused, never taken as identity.
+    let fits_before = fitted(&s.out, "ball").len();
     write_in(&object, "scans.conf", "bmesh c.ply 0 0 0 0 0 x 1\n");
     write_in(&object, "c.ply", &cap);
     let rejected = |e: &serde_json::Value| {
@@ -304,6 +305,14 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_de
     );
     let last = fitted(&s.out, "ball").pop().expect("fitted");
     assert_eq!(scans_of(&last), ["a", "b"], "{last}");
+    // The surface of a and b comes out again with the refusal, from the kept session's
+    // local refit over no changed point, not from a fit from scratch.
+    assert!(wait_until_long(
+        || fitted(&s.out, "ball").len() > fits_before
+    ));
+    let region = &read_json(&s.out.join("ball/report.json"))["session"]["updated_region"];
+    assert_eq!(region["fit"], "local", "{region}");
+    assert_eq!(region["local_refit"]["changed_points"], 0, "{region}");
     // Deleting a scan removes its points.
     let before = fitted(&s.out, "ball").len();
     std::fs::remove_file(object.join("a.ply")).expect("remove");

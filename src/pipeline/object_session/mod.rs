@@ -23,15 +23,14 @@
 
 mod local;
 mod measure;
+mod views;
 
 pub use measure::{
     distance_stats, surface_mesh, surface_points_at_data, DistanceStats, MeshMeasure,
 };
 
 use crate::mesh::rigid::RigidTransform;
-use crate::pipeline::merge::{
-    scan_samples, MergeChange, MergeField, MergeOptions, Merged, ScanSamples,
-};
+use crate::pipeline::merge::{MergeChange, MergeField, MergeOptions, Merged, ScanSamples};
 use crate::pipeline::object::LocalOptions;
 use crate::pipeline::object::{ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
@@ -39,11 +38,12 @@ use crate::pipeline::worker::{
 };
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::TriMesh;
-use glam::DVec3;
 use local::{LastFit, LocalData, Previous};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
+use views::view_spread_deg;
+pub use views::SessionScan;
 
 /// Merged vertices that move less than this share of a cell count as unchanged.
 const UNCHANGED_SHARE_OF_CELL: f64 = 1e-3;
@@ -111,22 +111,6 @@ impl SessionError {
             Self::Fit(e) => e.kind(),
         }
     }
-}
-
-/// One scan of the object.
-#[derive(Clone, Debug)]
-pub struct SessionScan {
-    /// Its transform into the object frame.
-    pub transform: RigidTransform,
-    /// Its samples in the object frame.
-    pub samples: ScanSamples,
-    /// Vertices of the scan as given.
-    pub vertices: usize,
-    /// Its viewing direction in the object frame (the weighted mean of its samples'
-    /// normals); `None` when they cancel out (a closed scan looks from everywhere).
-    pub direction: Option<DVec3>,
-    /// Its median edge length (its sampling spacing), which the merge cell follows.
-    pub spacing: f64,
 }
 
 /// What a local refit touched.
@@ -250,43 +234,7 @@ impl ObjectSession {
         &mut self,
         scans: &[(&str, &TriMesh, RigidTransform)],
     ) -> Result<SessionUpdate, SessionError> {
-        let start = Instant::now();
-        let mut staged = Vec::with_capacity(scans.len());
-        for &(id, mesh, transform) in scans {
-            let samples = scan_samples(mesh, &transform, &self.opts.merge);
-            let spacing = samples.spacing;
-            if samples.points.is_empty() || spacing <= 0.0 || !spacing.is_finite() {
-                return Err(SessionError::EmptyScan { id: id.into() });
-            }
-            let direction = view_direction(&samples);
-            let scan = SessionScan {
-                transform,
-                samples,
-                vertices: mesh.positions.len(),
-                direction,
-                spacing,
-            };
-            staged.push((id.to_string(), scan));
-        }
-        let samples_ms = ms_since(start);
-        let mut previous = Vec::new();
-        for (id, scan) in staged {
-            previous.push((id.clone(), self.scans.insert(id, scan)));
-        }
-        let added: Vec<&str> = previous.iter().map(|(id, _)| id.as_str()).collect();
-        let removed: Vec<&ScanSamples> = previous
-            .iter()
-            .filter_map(|(_, p)| p.as_ref().map(|p| &p.samples))
-            .collect();
-        let result = self.update(start, samples_ms, &added, &removed);
-        result.inspect_err(|_| {
-            for (id, p) in previous.into_iter().rev() {
-                match p {
-                    Some(p) => self.scans.insert(id, p),
-                    None => self.scans.remove(&id),
-                };
-            }
-        })
+        self.change_scans(scans, &[])
     }
 
     /// The merge grid's cell size for the scans held now (see `object_cell`).
@@ -296,25 +244,60 @@ impl ObjectSession {
 
     /// Removes the scan `id` and refits the rest.
     pub fn remove_scan(&mut self, id: &str) -> Result<SessionUpdate, SessionError> {
+        self.change_scans(&[], &[id])
+    }
+
+    /// Adds (or replaces) the scans `added`, removes the scans `removed`, and refits once,
+    /// merging again only around them: one update for any change of an object folder
+    /// (a scan renamed, two deleted, a new one beside a deleted one). With both empty the
+    /// surface is refitted where nothing changed: the previous fit comes out again, at the
+    /// cost of the outputs (what a daemon does when only a rejected scan came or went).
+    /// On an error nothing changes, except that removing the last scan empties the session.
+    pub fn change_scans(
+        &mut self,
+        added: &[(&str, &TriMesh, RigidTransform)],
+        removed: &[&str],
+    ) -> Result<SessionUpdate, SessionError> {
         let start = Instant::now();
-        if self.scans.is_empty() {
+        if !removed.is_empty() && self.scans.is_empty() {
             return Err(SessionError::NoScans);
         }
-        let removed = self
-            .scans
-            .remove(id)
-            .ok_or_else(|| SessionError::UnknownScan { id: id.into() })?;
+        if let Some(id) = removed.iter().find(|id| !self.scans.contains_key(**id)) {
+            return Err(SessionError::UnknownScan { id: (*id).into() });
+        }
+        let mut staged = Vec::with_capacity(added.len());
+        for &(id, mesh, transform) in added {
+            let scan = SessionScan::of(mesh, transform, &self.opts.merge)
+                .ok_or_else(|| SessionError::EmptyScan { id: id.into() })?;
+            staged.push((id.to_string(), scan));
+        }
+        let samples_ms = ms_since(start);
+        // Each changed id and the scan it held before (`None`: a new id).
+        let mut previous = Vec::new();
+        for &id in removed {
+            previous.push((id.to_string(), self.scans.remove(id)));
+        }
+        let added_ids: Vec<String> = staged.iter().map(|(id, _)| id.clone()).collect();
+        for (id, scan) in staged {
+            previous.push((id.clone(), self.scans.insert(id, scan)));
+        }
         if self.scans.is_empty() {
-            self.merged = None;
-            self.warm = None;
-            self.cell = None;
-            self.field = None;
-            self.last = None;
+            *self = Self::new(self.opts.clone());
             return Err(SessionError::NoScans);
         }
-        let result = self.update(start, 0.0, &[], &[&removed.samples]);
+        let added_ids: Vec<&str> = added_ids.iter().map(String::as_str).collect();
+        let gone: Vec<&ScanSamples> = previous
+            .iter()
+            .filter_map(|(_, p)| p.as_ref().map(|p| &p.samples))
+            .collect();
+        let result = self.update(start, samples_ms, &added_ids, &gone);
         result.inspect_err(|_| {
-            self.scans.insert(id.into(), removed);
+            for (id, p) in previous.into_iter().rev() {
+                match p {
+                    Some(p) => self.scans.insert(id, p),
+                    None => self.scans.remove(&id),
+                };
+            }
         })
     }
 
@@ -617,41 +600,6 @@ fn object_controls_pct(scan_pct: f64, cell: f64, spacing: f64) -> f64 {
         1.0
     };
     (scan_pct * points_per_vertex).min(100.0)
-}
-
-/// The weighted mean of a scan's sample normals, unit length (`None` if they cancel out).
-fn view_direction(samples: &ScanSamples) -> Option<DVec3> {
-    let sum: DVec3 = samples
-        .normals
-        .iter()
-        .zip(&samples.weights)
-        .map(|(n, w)| *n * *w)
-        .sum();
-    let total: f64 = samples.weights.iter().sum();
-    // Normals that mostly cancel (a closed or wrapped scan) give no direction.
-    (sum.length() > 0.2 * total)
-        .then(|| sum.normalize())
-        .filter(|d| d.is_finite())
-}
-
-/// The largest angle (degrees) between two scans' viewing directions; 180 when a scan has
-/// none.
-fn view_spread_deg<'a>(scans: impl Iterator<Item = &'a SessionScan>) -> f64 {
-    let directions: Vec<Option<DVec3>> = scans.map(|s| s.direction).collect();
-    let mut widest = 0.0f64;
-    for (k, a) in directions.iter().enumerate() {
-        for b in &directions[k + 1..] {
-            let angle = match (a, b) {
-                (Some(a), Some(b)) => a.dot(*b).clamp(-1.0, 1.0).acos().to_degrees(),
-                _ => 180.0,
-            };
-            widest = widest.max(angle);
-        }
-    }
-    if directions.iter().any(Option::is_none) {
-        widest = 180.0;
-    }
-    widest
 }
 
 fn ms_since(t: Instant) -> f64 {
