@@ -144,13 +144,17 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
 
 /// The object `id`'s update to `scans` (with their keys): one update of its kept session
 /// when one is kept (under the same config), else a fresh session of all of them; the
-/// session is kept for the next update when it succeeds.
+/// session is kept for the next update when it succeeds. A scan the session finds no
+/// surface in (no usable triangle: a point cloud, only degenerate faces) is left out and
+/// its id returned in `left_out`, so that it is rejected alone and the others are fitted
+/// (a failed staging leaves the session as it was).
 fn update_session(
     id: &str,
     cfg: &DaemonConfig,
-    (scans, keys): (&[ReadScan], BTreeMap<String, ScanKey>),
+    (scans, mut keys): (&[ReadScan], BTreeMap<String, ScanKey>),
     config_hash: u64,
     sessions: &ObjectSessions,
+    left_out: &mut Vec<String>,
 ) -> Result<SessionUpdate, SessionError> {
     let fresh = || {
         ObjectSession::new(SessionOptions {
@@ -161,29 +165,42 @@ fn update_session(
             cold: !sessions.enabled(),
         })
     };
-    let staged = |only: Option<&[String]>| -> Vec<(&str, &TriMesh, RigidTransform)> {
+    let staged = |only: &[String]| -> Vec<(&str, &TriMesh, RigidTransform)> {
         scans
             .iter()
-            .filter(|s| only.is_none_or(|ids| ids.contains(&s.id)))
+            .filter(|s| only.contains(&s.id))
             .map(|s| (s.id.as_str(), &s.mesh, s.registration.transform))
             .collect()
     };
-    let (mut session, step) = match sessions.take(id, config_hash) {
-        Some(kept) => {
-            let step = step(&kept.scans, &keys);
-            (kept.session, step)
-        }
-        None => (fresh(), SessionStep::Fresh),
+    let (mut session, kept_scans) = match sessions.take(id, config_hash) {
+        Some(kept) => (kept.session, Some(kept.scans)),
+        None => (fresh(), None),
     };
-    tracing::debug!(object = %id, ?step, "object update");
-    let update = match &step {
-        SessionStep::Update { added, removed } => {
-            let removed: Vec<&str> = removed.iter().map(String::as_str).collect();
-            session.change_scans(&staged(Some(added)), &removed)
-        }
-        SessionStep::Fresh => {
-            session = fresh();
-            session.add_scans(&staged(None))
+    let update = loop {
+        let step = match &kept_scans {
+            Some(kept) => step(kept, &keys),
+            None => SessionStep::Fresh,
+        };
+        tracing::debug!(object = %id, ?step, "object update");
+        let update = match &step {
+            SessionStep::Update { added, removed } => {
+                let removed: Vec<&str> = removed.iter().map(String::as_str).collect();
+                session.change_scans(&staged(added), &removed)
+            }
+            SessionStep::Fresh => {
+                session = fresh();
+                let all: Vec<String> = keys.keys().cloned().collect();
+                session.add_scans(&staged(&all))
+            }
+        };
+        match update {
+            Err(SessionError::EmptyScan { id: scan }) if keys.len() > 1 => {
+                if keys.remove(&scan).is_none() {
+                    break Err(SessionError::EmptyScan { id: scan });
+                }
+                left_out.push(scan);
+            }
+            update => break update,
         }
     };
     if update.is_ok() {
@@ -279,8 +296,28 @@ pub(crate) fn fit_object(
         };
     }
     let fit_start = Instant::now();
-    let update = update_session(&a.id, cfg, (&scans, keys), config_hash, sessions);
+    let mut left_out = Vec::new();
+    let update = update_session(
+        &a.id,
+        cfg,
+        (&scans, keys),
+        config_hash,
+        sessions,
+        &mut left_out,
+    );
     t.fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
+    for scan in &left_out {
+        if let Some(k) = scans.iter().position(|s| &s.id == scan) {
+            let s = scans.remove(k);
+            rejected.push(ScanRejection {
+                file: s.file,
+                kind: "empty_scan",
+                reason: format!(
+                    "scan '{scan}' has no usable triangles (a point cloud, or only degenerate faces): left out of the object"
+                ),
+            });
+        }
+    }
     let mut update = match update {
         Ok(u) => u,
         Err(e) => {

@@ -349,6 +349,57 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_de
     assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
 }
 
+/// `ply` (ASCII, as `cap_ply` writes it) without its faces: a point cloud.
+fn without_faces(ply: &str) -> String {
+    let (header, body) = ply.split_once("end_header\n").expect("a PLY header");
+    let vertices: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .and_then(|n| n.trim().parse().ok())
+        .expect("a vertex count");
+    let header = header
+        .lines()
+        .map(|l| {
+            if l.starts_with("element face ") {
+                "element face 0"
+            } else {
+                l
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let points: Vec<&str> = body.lines().take(vertices).collect();
+    format!("{header}\nend_header\n{}\n", points.join("\n"))
+}
+
+#[test]
+fn a_scan_with_no_surface_is_rejected_alone_and_the_others_are_fitted() {
+    let s = setup(&object_config(""));
+    let object = s.inbox.join("ball");
+    std::fs::create_dir_all(&object).expect("mkdir");
+    let cap = cap_ply(12);
+    write_in(&object, "a.ply", &cap);
+    // A point cloud of the same cap (no triangles to merge) beside it.
+    write_in(&object, "p.ply", &without_faces(&cap));
+    let daemon = s.spawn(&[]);
+    wait_fitted(&s, "ball", 1);
+    let last = fitted(&s.out, "ball").pop().expect("fitted");
+    assert_eq!(scans_of(&last), ["a"], "{last}");
+    let refused = |e: &serde_json::Value| {
+        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with("p.ply"))
+    };
+    let event = events(&s.out)
+        .into_iter()
+        .find(refused)
+        .unwrap_or_else(|| panic!("no rejection of p.ply: {}", s.log()));
+    assert_eq!(event["kind"], "empty_scan", "{event}");
+    assert!(object.join("p.ply").is_file(), "left in its folder");
+    let report = read_json(&s.out.join("ball/report.json"));
+    let rejected = &report["session"]["rejected_scans"];
+    assert_eq!(rejected.as_array().map(Vec::len), Some(1), "{rejected}");
+    assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
+}
+
 #[test]
 fn pipe_records_with_an_object_and_a_transform_are_scans_of_that_object() {
     let s = setup(&object_config(""));
