@@ -72,7 +72,7 @@ impl Default for MergeOptions {
 }
 
 /// One scan's oriented samples in the object frame.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ScanSamples {
     /// The points (the scan's vertices that some triangle uses, then points inside its
     /// stretched triangles).

@@ -248,8 +248,9 @@ impl ObjectSession {
     }
 
     /// Adds (or replaces) the scans `added`, removes the scans `removed`, and refits once,
-    /// merging again only around them: one update for any change of an object folder
-    /// (a scan renamed, two deleted, a new one beside a deleted one). With both empty the
+    /// merging again only around them (a scan renamed, the same samples under a new id,
+    /// changes nothing there): one update for any change of an object folder (a scan
+    /// renamed, two deleted, a new one beside a deleted one). With both empty the
     /// surface is refitted where nothing changed: the previous fit comes out again, at the
     /// cost of the outputs (what a daemon does when only a rejected scan came or went).
     /// On an error nothing changes, except that removing the last scan empties the session.
@@ -285,11 +286,22 @@ impl ObjectSession {
             *self = Self::new(self.opts.clone());
             return Err(SessionError::NoScans);
         }
-        let added_ids: Vec<&str> = added_ids.iter().map(String::as_str).collect();
-        let gone: Vec<&ScanSamples> = previous
+        let mut added_ids: Vec<&str> = added_ids.iter().map(String::as_str).collect();
+        let mut gone: Vec<&ScanSamples> = previous
             .iter()
             .filter_map(|(_, p)| p.as_ref().map(|p| &p.samples))
             .collect();
+        // A scan renamed (the samples of a removed one under a new id) changes no cell.
+        added_ids.retain(|id| {
+            let samples = self.scans.get(*id).map(|s| &s.samples);
+            match gone.iter().position(|g| Some(*g) == samples) {
+                Some(k) => {
+                    gone.swap_remove(k);
+                    false
+                }
+                None => true,
+            }
+        });
         let result = self.update(start, samples_ms, &added_ids, &gone);
         result.inspect_err(|_| {
             for (id, p) in previous.into_iter().rev() {
