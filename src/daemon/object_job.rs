@@ -309,12 +309,18 @@ pub(crate) fn fit_object(
     for scan in &left_out {
         if let Some(k) = scans.iter().position(|s| &s.id == scan) {
             let s = scans.remove(k);
+            // A cloud's triangulation (as for a cloud patch) has no side the scanner saw,
+            // which the merge weighs by: bun045 so oriented merged 43k vertices instead
+            // of 27k and fitted at 146 um against 38 um.
+            let why = if s.mesh.triangles.is_empty() {
+                "it is a point cloud, and point-cloud scans are not merged (a cloud does not say which side the scanner saw): give it as a mesh"
+            } else {
+                "it has no triangle with area"
+            };
             rejected.push(ScanRejection {
                 file: s.file,
                 kind: "empty_scan",
-                reason: format!(
-                    "scan '{scan}' has no usable triangles (a point cloud, or only degenerate faces): left out of the object"
-                ),
+                reason: format!("scan '{scan}' left out of the object: {why}"),
             });
         }
     }

@@ -393,6 +393,8 @@ fn a_scan_with_no_surface_is_rejected_alone_and_the_others_are_fitted() {
         .find(refused)
         .unwrap_or_else(|| panic!("no rejection of p.ply: {}", s.log()));
     assert_eq!(event["kind"], "empty_scan", "{event}");
+    let reason = event["reason"].as_str().unwrap_or_default();
+    assert!(reason.contains("point cloud"), "{event}");
     assert!(object.join("p.ply").is_file(), "left in its folder");
     let report = read_json(&s.out.join("ball/report.json"));
     let rejected = &report["session"]["rejected_scans"];
