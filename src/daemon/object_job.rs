@@ -142,19 +142,26 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
     }
 }
 
+/// A scan an update left out, and why.
+struct ScanLeftOut {
+    id: String,
+    kind: &'static str,
+    reason: String,
+}
+
 /// The object `id`'s update to `scans` (with their keys): one update of its kept session
 /// when one is kept (under the same config), else a fresh session of all of them; the
 /// session is kept for the next update when it succeeds. A scan the session finds no
-/// surface in (no usable triangle: a point cloud, only degenerate faces) is left out and
-/// its id returned in `left_out`, so that it is rejected alone and the others are fitted
-/// (a failed staging leaves the session as it was).
+/// surface in (only degenerate faces, a point cloud that is no view's height field) is
+/// left out and returned in `left_out`, so that it is rejected alone and the others are
+/// fitted (a failed staging leaves the session as it was).
 fn update_session(
     id: &str,
     cfg: &DaemonConfig,
     (scans, mut keys): (&[ReadScan], BTreeMap<String, ScanKey>),
     config_hash: u64,
     sessions: &ObjectSessions,
-    left_out: &mut Vec<String>,
+    left_out: &mut Vec<ScanLeftOut>,
 ) -> Result<SessionUpdate, SessionError> {
     let fresh = || {
         ObjectSession::new(SessionOptions {
@@ -193,14 +200,23 @@ fn update_session(
                 session.add_scans(&staged(&all))
             }
         };
-        match update {
-            Err(SessionError::EmptyScan { id: scan }) if keys.len() > 1 => {
-                if keys.remove(&scan).is_none() {
-                    break Err(SessionError::EmptyScan { id: scan });
-                }
+        let refused = match &update {
+            Err(
+                e @ (SessionError::EmptyScan { id: scan }
+                | SessionError::PointCloud { id: scan, .. }),
+            ) if keys.len() > 1 && keys.contains_key(scan) => Some(ScanLeftOut {
+                id: scan.clone(),
+                kind: e.kind(),
+                reason: e.to_string(),
+            }),
+            _ => None,
+        };
+        match refused {
+            Some(scan) => {
+                keys.remove(&scan.id);
                 left_out.push(scan);
             }
-            update => break update,
+            None => break update,
         }
     };
     if update.is_ok() {
@@ -306,21 +322,12 @@ pub(crate) fn fit_object(
         &mut left_out,
     );
     t.fit_ms = fit_start.elapsed().as_secs_f64() * 1e3;
-    for scan in &left_out {
-        if let Some(k) = scans.iter().position(|s| &s.id == scan) {
-            let s = scans.remove(k);
-            // A cloud's triangulation (as for a cloud patch) has no side the scanner saw,
-            // which the merge weighs by: bun045 so oriented merged 43k vertices instead
-            // of 27k and fitted at 146 um against 38 um.
-            let why = if s.mesh.triangles.is_empty() {
-                "it is a point cloud, and point-cloud scans are not merged (a cloud does not say which side the scanner saw): give it as a mesh"
-            } else {
-                "it has no triangle with area"
-            };
+    for scan in left_out {
+        if let Some(k) = scans.iter().position(|s| s.id == scan.id) {
             rejected.push(ScanRejection {
-                file: s.file,
-                kind: "empty_scan",
-                reason: format!("scan '{scan}' left out of the object: {why}"),
+                file: scans.remove(k).file,
+                kind: scan.kind,
+                reason: format!("left out of the object: {}", scan.reason),
             });
         }
     }

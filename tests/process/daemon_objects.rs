@@ -372,33 +372,91 @@ fn without_faces(ply: &str) -> String {
     format!("{header}\nend_header\n{}\n", points.join("\n"))
 }
 
+/// Points all over a sphere of 1 cm radius as an ASCII PLY without faces: a closed cloud,
+/// no view's height field.
+fn sphere_cloud_ply(n: usize) -> String {
+    let mut points = Vec::new();
+    for i in 0..n {
+        let z = -1.0 + 2.0 * (i as f64 + 0.5) / n as f64;
+        let r = (1.0 - z * z).sqrt();
+        let a = i as f64 * 2.399_963_229_728_653;
+        points.push(format!(
+            "{} {} {}",
+            0.01 * r * a.cos(),
+            0.01 * r * a.sin(),
+            0.01 * z
+        ));
+    }
+    format!(
+        "ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\nproperty float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n{}\n",
+        points.join("\n")
+    )
+}
+
 #[test]
-fn a_scan_with_no_surface_is_rejected_alone_and_the_others_are_fitted() {
+fn a_point_cloud_scan_is_merged_on_its_seen_side_and_one_with_no_surface_is_rejected_alone() {
     let s = setup(&object_config(""));
     let object = s.inbox.join("ball");
     std::fs::create_dir_all(&object).expect("mkdir");
     let cap = cap_ply(12);
     write_in(&object, "a.ply", &cap);
-    // A point cloud of the same cap (no triangles to merge) beside it.
-    write_in(&object, "p.ply", &without_faces(&cap));
     let daemon = s.spawn(&[]);
     wait_fitted(&s, "ball", 1);
-    let last = fitted(&s.out, "ball").pop().expect("fitted");
-    assert_eq!(scans_of(&last), ["a"], "{last}");
+    let alone = read_json(&s.out.join("ball/report.json"));
+    // The same view as a point cloud: triangulated, turned to the side the mesh scan
+    // shows there, and merged (inside out, it would cancel the mesh scan's surface).
+    write_in(&object, "p.ply", &without_faces(&cap));
+    // Points all around a ball: no view's height field, so no surface to merge.
+    write_in(&object, "q.ply", &sphere_cloud_ply(2000));
     let refused = |e: &serde_json::Value| {
-        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with("p.ply"))
+        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with("q.ply"))
     };
-    let event = events(&s.out)
-        .into_iter()
-        .find(refused)
-        .unwrap_or_else(|| panic!("no rejection of p.ply: {}", s.log()));
-    assert_eq!(event["kind"], "empty_scan", "{event}");
+    assert!(
+        wait_until_long(|| events(&s.out).iter().any(refused)),
+        "{}",
+        s.log()
+    );
+    assert!(wait_until_long(|| fitted(&s.out, "ball")
+        .iter()
+        .any(|e| scans_of(e) == ["a", "p"])));
+    let event = events(&s.out).into_iter().find(refused).expect("rejection");
     let reason = event["reason"].as_str().unwrap_or_default();
     assert!(reason.contains("point cloud"), "{event}");
-    assert!(object.join("p.ply").is_file(), "left in its folder");
-    let report = read_json(&s.out.join("ball/report.json"));
-    let rejected = &report["session"]["rejected_scans"];
-    assert_eq!(rejected.as_array().map(Vec::len), Some(1), "{rejected}");
+    assert!(object.join("q.ply").is_file(), "left in its folder");
+    // The update that saw q (p may have come in an update of its own before it).
+    let report_with_q = || {
+        let report = read_json(&s.out.join("ball/report.json"));
+        let rejected = report["session"]["rejected_scans"].as_array().map(Vec::len);
+        (rejected == Some(1)).then_some(report)
+    };
+    assert!(wait_until_long(|| report_with_q().is_some()), "{}", s.log());
+    let both = report_with_q().expect("the report of the update with q");
+    let ids: Vec<&str> = both["session"]["scans"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|s| s["id"].as_str())
+        .collect();
+    assert_eq!(ids, ["a", "p"]);
+    let rms = |r: &serde_json::Value| r["final"]["rms_error"].as_f64().unwrap_or(f64::MAX);
+    // The merged surface's area in cells (the cloud's triangulation is coarser, so the
+    // merge cell grows with it): the same ground, not a surface cancelled or doubled.
+    let area = |r: &serde_json::Value| {
+        let cell = r["session"]["merge"]["cell"].as_f64().unwrap_or(0.0);
+        r["session"]["merge"]["vertices"].as_f64().unwrap_or(0.0) * cell * cell
+    };
+    assert!(
+        (area(&both) - area(&alone)).abs() <= 0.1 * area(&alone),
+        "the cloud lies on the mesh scan: merged area {} against {}",
+        area(&both),
+        area(&alone)
+    );
+    assert!(
+        rms(&both) < 2.0 * rms(&alone) + 1e-6,
+        "{} against {}",
+        rms(&both),
+        rms(&alone)
+    );
     assert!(stop(daemon).is_some_and(|c| c.success()), "{}", s.log());
 }
 

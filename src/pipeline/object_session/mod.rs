@@ -37,6 +37,7 @@ use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
 };
 use crate::pipeline::{PatchFit, PipelineError};
+use crate::remesh::points::PointCloudError;
 use crate::TriMesh;
 use local::{LastFit, LocalData, Previous};
 use serde_json::json;
@@ -87,6 +88,16 @@ pub enum SessionError {
         /// The scan.
         id: String,
     },
+    /// The scan is a point cloud that is no single view's height field (see
+    /// `remesh::points`): its points cannot be triangulated for the merge.
+    #[error("scan '{id}' is a point cloud that cannot be triangulated: {source}")]
+    PointCloud {
+        /// The scan.
+        id: String,
+        /// Why the triangulation refused it.
+        #[source]
+        source: PointCloudError,
+    },
     /// The last scan was removed: there is no object left to fit.
     #[error("the object has no scans left")]
     NoScans,
@@ -106,6 +117,7 @@ impl SessionError {
     pub fn kind(&self) -> &'static str {
         match self {
             Self::EmptyScan { .. } => "empty_scan",
+            Self::PointCloud { source, .. } => source.kind(),
             Self::NoScans => "no_scans",
             Self::UnknownScan { .. } => "unknown_scan",
             Self::Fit(e) => e.kind(),
@@ -266,10 +278,23 @@ impl ObjectSession {
         if let Some(id) = removed.iter().find(|id| !self.scans.contains_key(**id)) {
             return Err(SessionError::UnknownScan { id: (*id).into() });
         }
-        let mut staged = Vec::with_capacity(added.len());
-        for &(id, mesh, transform) in added {
-            let scan = SessionScan::of(mesh, transform, &self.opts.merge)
-                .ok_or_else(|| SessionError::EmptyScan { id: id.into() })?;
+        // Meshes first: a point cloud takes its side from the scans it overlaps.
+        let mut order: Vec<_> = added.iter().collect();
+        order.sort_by_key(|(_, mesh, _)| mesh.triangles.is_empty());
+        let mut staged: Vec<(String, SessionScan)> = Vec::with_capacity(added.len());
+        for &&(id, mesh, transform) in &order {
+            let others: Vec<&ScanSamples> = (self.scans.values().map(|s| &s.samples))
+                .chain(staged.iter().map(|(_, s)| &s.samples))
+                .collect();
+            let scan = SessionScan::of(mesh, transform, &self.opts.merge, &others).map_err(
+                |e| match e {
+                    None => SessionError::EmptyScan { id: id.into() },
+                    Some(source) => SessionError::PointCloud {
+                        id: id.into(),
+                        source,
+                    },
+                },
+            )?;
             staged.push((id.to_string(), scan));
         }
         let samples_ms = ms_since(start);

@@ -1,10 +1,13 @@
-//! A scan as a view of the object: its samples in the object frame, the direction it
-//! looks from and its spacing, and how far apart a session's views look.
+//! A scan as a view of the object: its samples in the object frame (a point cloud's
+//! through its triangulation, turned to the side the scanner saw), the direction it looks
+//! from and its spacing, and how far apart a session's views look.
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{scan_samples, MergeOptions, ScanSamples};
+use crate::remesh::points::{triangulate_points, PointCloudError, PointCloudOptions};
 use crate::TriMesh;
 use glam::DVec3;
+use rustc_hash::FxHashMap;
 
 /// One scan of the object.
 #[derive(Clone, Debug)]
@@ -24,18 +27,29 @@ pub struct SessionScan {
 
 impl SessionScan {
     /// `mesh` (in its own frame, `transform` into the object's) as a scan of the object;
-    /// `None` when it has no samples to merge.
+    /// a point cloud (no triangles) through its triangulation, turned to the side the
+    /// scanner saw (`oriented_cloud`), `others` being the object's other scans. An error
+    /// when the cloud cannot be triangulated (`Some`, why) or the scan has no samples to
+    /// merge (`None`: no triangle with area).
     pub(super) fn of(
         mesh: &TriMesh,
         transform: RigidTransform,
         opts: &MergeOptions,
-    ) -> Option<Self> {
-        let samples = scan_samples(mesh, &transform, opts);
+        others: &[&ScanSamples],
+    ) -> Result<Self, Option<PointCloudError>> {
+        let samples = if mesh.triangles.is_empty() && !mesh.positions.is_empty() {
+            let cloud =
+                triangulate_points(&mesh.positions, &PointCloudOptions::default()).map_err(Some)?;
+            let samples = scan_samples(&cloud.mesh, &transform, opts);
+            oriented_cloud(samples, others)
+        } else {
+            scan_samples(mesh, &transform, opts)
+        };
         let spacing = samples.spacing;
         if samples.points.is_empty() || spacing <= 0.0 || !spacing.is_finite() {
-            return None;
+            return Err(None);
         }
-        Some(SessionScan {
+        Ok(SessionScan {
             transform,
             direction: view_direction(&samples),
             samples,
@@ -43,6 +57,68 @@ impl SessionScan {
             spacing,
         })
     }
+}
+
+/// Cloud samples nearer than this many of their spacings to another scan's sample vote on
+/// the cloud's side ...
+const AGREEMENT_REACH: f64 = 2.0;
+/// ... when at least this many do.
+const MIN_AGREEMENT_VOTES: usize = 20;
+
+/// A cloud's samples (its triangulation's) turned to the side the scanner saw: a cloud
+/// carries no side, and the triangulation's is arbitrary, while the merge weighs signed
+/// distances along the normals (bun045 as a cloud merged inside out: 43k merged vertices
+/// instead of 27k, 146 um against 38 um; turned, 27k and 38.1 um). The side is the one
+/// the other scans' samples agree with where they overlap it; where none does (the first
+/// view, or ground no other view saw), the convex side, away from the cloud's centroid: a
+/// view sees the side of an object that bulges towards it. (The origin of the scan's own
+/// frame is no guide: Stanford's bunny scans have it inside the bunny, not at the
+/// scanner.)
+fn oriented_cloud(mut samples: ScanSamples, others: &[&ScanSamples]) -> ScanSamples {
+    let reach = AGREEMENT_REACH * samples.spacing;
+    let cell = |p: DVec3| (p / reach).floor().as_i64vec3().to_array();
+    let mut grid: FxHashMap<[i64; 3], Vec<(DVec3, DVec3)>> = FxHashMap::default();
+    if reach > 0.0 && reach.is_finite() {
+        for other in others {
+            for (p, n) in other.points.iter().zip(&other.normals) {
+                grid.entry(cell(*p)).or_default().push((*p, *n));
+            }
+        }
+    }
+    let (mut agreement, mut votes) = (0.0, 0usize);
+    for (p, n) in samples.points.iter().zip(&samples.normals) {
+        let c = cell(*p);
+        let nearest = (-1..=1)
+            .flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| [i, j, k])))
+            .filter_map(|d| grid.get(&[c[0] + d[0], c[1] + d[1], c[2] + d[2]]))
+            .flatten()
+            .map(|(q, m)| (p.distance_squared(*q), *m))
+            .filter(|(d2, _)| *d2 <= reach * reach)
+            .min_by(|a, b| a.0.total_cmp(&b.0));
+        if let Some((_, m)) = nearest {
+            agreement += n.dot(m);
+            votes += 1;
+        }
+    }
+    let facing_away = if votes >= MIN_AGREEMENT_VOTES {
+        agreement < 0.0
+    } else {
+        let n = samples.points.len().max(1) as f64;
+        let centroid = samples.points.iter().copied().sum::<DVec3>() / n;
+        let bulge: f64 = samples
+            .points
+            .iter()
+            .zip(&samples.normals)
+            .map(|(p, n)| n.dot(*p - centroid))
+            .sum();
+        bulge < 0.0
+    };
+    if facing_away {
+        for n in &mut samples.normals {
+            *n = -*n;
+        }
+    }
+    samples
 }
 
 /// The weighted mean of a scan's sample normals, unit length (`None` if they cancel out).
@@ -78,4 +154,64 @@ pub(super) fn view_spread_deg<'a>(scans: impl Iterator<Item = &'a SessionScan>) 
         widest = 180.0;
     }
     widest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The points of a unit sphere's cap around +z, on a grid over the xy plane.
+    fn cap_points() -> Vec<DVec3> {
+        let mut points = Vec::new();
+        for j in -10..=10 {
+            for i in -10..=10 {
+                let (x, y) = (f64::from(i) * 0.05, f64::from(j) * 0.05);
+                if x * x + y * y < 0.25 {
+                    points.push(DVec3::new(x, y, (1.0 - x * x - y * y).sqrt()));
+                }
+            }
+        }
+        points
+    }
+
+    fn mean_normal(samples: &ScanSamples) -> DVec3 {
+        samples.normals.iter().copied().sum::<DVec3>() / samples.normals.len() as f64
+    }
+
+    #[test]
+    fn a_cloud_faces_the_side_the_other_scans_show_else_its_convex_side() {
+        let opts = MergeOptions::default();
+        let cloud = TriMesh::new(cap_points(), Vec::new());
+        // Alone: the cap bulges towards +z, the side a scanner saw it from.
+        let alone =
+            SessionScan::of(&cloud, RigidTransform::IDENTITY, &opts, &[]).expect("a height field");
+        assert!(
+            mean_normal(&alone.samples).z > 0.9,
+            "{:?}",
+            mean_normal(&alone.samples)
+        );
+        // Beside a scan of the same ground whose normals point the other way (a mesh
+        // oriented inwards): the cloud agrees with it.
+        let mut inward = alone.samples.clone();
+        inward.normals.iter_mut().for_each(|n| *n = -*n);
+        let beside = SessionScan::of(&cloud, RigidTransform::IDENTITY, &opts, &[&inward])
+            .expect("a height field");
+        assert!(mean_normal(&beside.samples).z < -0.9);
+        // A cloud that is no height field is refused with the triangulation's reason.
+        let ball: Vec<DVec3> = (0..500)
+            .map(|i| {
+                let z = -1.0 + 2.0 * (f64::from(i) + 0.5) / 500.0;
+                let a = f64::from(i) * 2.399_963;
+                let r = (1.0 - z * z).sqrt();
+                DVec3::new(r * a.cos(), r * a.sin(), z)
+            })
+            .collect();
+        let refused = SessionScan::of(
+            &TriMesh::new(ball, Vec::new()),
+            RigidTransform::IDENTITY,
+            &opts,
+            &[],
+        );
+        assert!(matches!(refused, Err(Some(_))));
+    }
 }
