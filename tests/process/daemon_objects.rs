@@ -62,6 +62,22 @@ fn wait_fitted(s: &Setup, object: &str, n: usize) -> f64 {
     start.elapsed().as_secs_f64()
 }
 
+/// Waits for the rejection event of the scan file `name` and returns it.
+fn wait_rejection(s: &Setup, name: &str) -> serde_json::Value {
+    let rejected = |e: &serde_json::Value| {
+        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with(name))
+    };
+    assert!(
+        wait_until_long(|| events(&s.out).iter().any(rejected)),
+        "no rejection of {name}: {}",
+        s.log()
+    );
+    events(&s.out)
+        .into_iter()
+        .find(rejected)
+        .expect("the rejection just seen")
+}
+
 /// `wait_until` for object fits, which take seconds each on a loaded machine.
 fn wait_until_long(mut cond: impl FnMut() -> bool) -> bool {
     for _ in 0..10 {
@@ -286,18 +302,7 @@ fn object_scans_are_registered_by_xf_refused_on_bad_conf_numbers_removed_when_de
     let fits_before = fitted(&s.out, "ball").len();
     write_in(&object, "scans.conf", "bmesh c.ply 0 0 0 0 0 x 1\n");
     write_in(&object, "c.ply", &cap);
-    let rejected = |e: &serde_json::Value| {
-        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with("c.ply"))
-    };
-    assert!(
-        wait_until_long(|| events(&s.out).iter().any(rejected)),
-        "{}",
-        s.log()
-    );
-    let event = events(&s.out)
-        .into_iter()
-        .find(rejected)
-        .expect("rejection");
+    let event = wait_rejection(&s, "c.ply");
     assert_eq!(event["kind"], "malformed", "{event}");
     assert!(
         object.join("c.ply").is_file(),
@@ -408,18 +413,10 @@ fn a_point_cloud_scan_is_merged_on_its_seen_side_and_one_with_no_surface_is_reje
     write_in(&object, "p.ply", &without_faces(&cap));
     // Points all around a ball: no view's height field, so no surface to merge.
     write_in(&object, "q.ply", &sphere_cloud_ply(2000));
-    let refused = |e: &serde_json::Value| {
-        e["status"] == "rejected" && e["input"].as_str().is_some_and(|i| i.ends_with("q.ply"))
-    };
-    assert!(
-        wait_until_long(|| events(&s.out).iter().any(refused)),
-        "{}",
-        s.log()
-    );
+    let event = wait_rejection(&s, "q.ply");
     assert!(wait_until_long(|| fitted(&s.out, "ball")
         .iter()
         .any(|e| scans_of(e) == ["a", "p"])));
-    let event = events(&s.out).into_iter().find(refused).expect("rejection");
     let reason = event["reason"].as_str().unwrap_or_default();
     assert!(reason.contains("point cloud"), "{event}");
     assert!(object.join("q.ply").is_file(), "left in its folder");

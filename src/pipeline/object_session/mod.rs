@@ -303,7 +303,6 @@ impl ObjectSession {
         for &id in removed {
             previous.push((id.to_string(), self.scans.remove(id)));
         }
-        let added_ids: Vec<String> = staged.iter().map(|(id, _)| id.clone()).collect();
         for (id, scan) in staged {
             previous.push((id.clone(), self.scans.insert(id, scan)));
         }
@@ -311,7 +310,7 @@ impl ObjectSession {
             *self = Self::new(self.opts.clone());
             return Err(SessionError::NoScans);
         }
-        let mut added_ids: Vec<&str> = added_ids.iter().map(String::as_str).collect();
+        let mut added_ids: Vec<&str> = added.iter().map(|&(id, _, _)| id).collect();
         let mut gone: Vec<&ScanSamples> = previous
             .iter()
             .filter_map(|(_, p)| p.as_ref().map(|p| &p.samples))

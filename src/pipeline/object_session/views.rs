@@ -7,7 +7,8 @@ use crate::pipeline::merge::{scan_samples, MergeOptions, ScanSamples};
 use crate::remesh::points::{triangulate_points, PointCloudError, PointCloudOptions};
 use crate::TriMesh;
 use glam::DVec3;
-use rustc_hash::FxHashMap;
+use rstar::primitives::GeomWithData;
+use rstar::RTree;
 
 /// One scan of the object.
 #[derive(Clone, Debug)]
@@ -76,27 +77,20 @@ const MIN_AGREEMENT_VOTES: usize = 20;
 /// scanner.)
 fn oriented_cloud(mut samples: ScanSamples, others: &[&ScanSamples]) -> ScanSamples {
     let reach = AGREEMENT_REACH * samples.spacing;
-    let cell = |p: DVec3| (p / reach).floor().as_i64vec3().to_array();
-    let mut grid: FxHashMap<[i64; 3], Vec<(DVec3, DVec3)>> = FxHashMap::default();
-    if reach > 0.0 && reach.is_finite() {
-        for other in others {
-            for (p, n) in other.points.iter().zip(&other.normals) {
-                grid.entry(cell(*p)).or_default().push((*p, *n));
-            }
-        }
-    }
+    let tree = RTree::bulk_load(
+        others
+            .iter()
+            .flat_map(|o| o.points.iter().zip(&o.normals))
+            .map(|(p, n)| GeomWithData::new(p.to_array(), *n))
+            .collect(),
+    );
     let (mut agreement, mut votes) = (0.0, 0usize);
     for (p, n) in samples.points.iter().zip(&samples.normals) {
-        let c = cell(*p);
-        let nearest = (-1..=1)
-            .flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| [i, j, k])))
-            .filter_map(|d| grid.get(&[c[0] + d[0], c[1] + d[1], c[2] + d[2]]))
-            .flatten()
-            .map(|(q, m)| (p.distance_squared(*q), *m))
-            .filter(|(d2, _)| *d2 <= reach * reach)
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        if let Some((_, m)) = nearest {
-            agreement += n.dot(m);
+        let Some(nearest) = tree.nearest_neighbor(&p.to_array()) else {
+            break;
+        };
+        if DVec3::from_array(*nearest.geom()).distance_squared(*p) <= reach * reach {
+            agreement += n.dot(nearest.data);
             votes += 1;
         }
     }
