@@ -382,11 +382,8 @@ fn joined_mesh(
     let m = old_mesh.positions.len();
     let all_new = is_new.iter().filter(|&&b| b).count();
     let mut is_new = is_new.to_vec();
-    let mut refusal = NotExtended::NotManifold {
-        part: "the new region",
-        detail: None,
-    };
-    for _ in 0..MAX_DEMOTION_ROUNDS {
+    let mut demotion_rounds = 0;
+    loop {
         let in_region = region_faces(component, &topo, &is_new);
         let seams = seams(&topo, &in_region).ok_or(NotExtended::NotManifold {
             part: "the new region's boundary",
@@ -426,12 +423,19 @@ fn joined_mesh(
         // it is a small part of the new ground.
         let demoted = demote(component, &topo, &in_region, &failed, &mut is_new);
         let still_new = is_new.iter().filter(|&&b| b).count();
-        refusal = NotExtended::unjoined(seams.len(), &mut misses, all_new - still_new, all_new);
-        if demoted as f64 > MAX_DEMOTED_SHARE * all_new as f64 {
-            return Err(refusal);
+        demotion_rounds += 1;
+        if demotion_rounds >= MAX_DEMOTION_ROUNDS
+            || demoted as f64 > MAX_DEMOTED_SHARE * all_new as f64
+        {
+            let demoted_points = all_new - still_new;
+            return Err(NotExtended::unjoined(
+                seams.len(),
+                &mut misses,
+                demoted_points,
+                all_new,
+            ));
         }
     }
-    Err(refusal)
 }
 
 fn not_manifold(part: &'static str, e: TopologyError) -> NotExtended {
@@ -441,7 +445,7 @@ fn not_manifold(part: &'static str, e: TopologyError) -> NotExtended {
     }
 }
 
-/// Rounds of taking unjoinable parts out of the region at most.
+/// Rounds of taking unjoinable parts out of the region at most (the first always runs).
 const MAX_DEMOTION_ROUNDS: usize = 4;
 
 /// Share of the new points that may be taken out of the region as unjoinable.
