@@ -97,6 +97,9 @@ fn main() {
         if let Some(r) = env("OBJ_LAYOUT_ROUNDS") {
             opts.layout.rounds = r as usize;
         }
+        if let Some(l) = env("OBJ_DOMAIN_LEVELS") {
+            opts.domain_levels = l as usize;
+        }
         if let Some(s) = env("OBJ_REFINE_SHARE") {
             opts.refine.start_share = s;
         }

@@ -25,6 +25,7 @@ mod model;
 mod refine;
 mod repair;
 mod seam;
+mod semi_regular;
 mod solve;
 mod stray;
 mod version;
@@ -92,6 +93,8 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     } else {
         target
     };
+    let split_factor = 4usize.saturating_pow(opts.domain_levels as u32);
+    let first_target = (first_target / split_factor).max(4.min(first_target));
     // The holes' minimum never takes more than a quarter of the budget (a broken scan can
     // have dozens of tiny holes).
     let data_topo = Topology::from_mesh(&component).ok();
@@ -153,6 +156,9 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         &corners,
         &opts.layout,
     );
+    let (control_mesh, params, crease_edges) =
+        semi_regular::split_domain(control_mesh, params, crease_edges, opts.domain_levels)
+            .map_err(ObjectError::NotManifold)?;
     times.layout_ms = ms_since(t);
     let refining = opts.refine.rounds > 0 && first_target < target;
     let first_opts = if refining {
