@@ -10,6 +10,9 @@ use crate::mesh::topology::{Topology, TopologyError};
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 
+/// A control mesh with the data's parameters on its faces and its crease edges.
+pub(super) type ParamMesh = (TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>);
+
 /// A base control mesh split `levels` times: the fine mesh (its first vertices are the
 /// base's, in order; the positions are the Loop-subdivided ones), the data parameters moved
 /// onto the fine faces, and the fine crease edges.
@@ -18,7 +21,7 @@ pub(super) fn split_domain(
     params: Vec<SurfaceParam>,
     creases: Vec<[u32; 2]>,
     levels: usize,
-) -> Result<(TriMesh, Vec<SurfaceParam>, Vec<[u32; 2]>), TopologyError> {
+) -> Result<ParamMesh, TopologyError> {
     let (mut mesh, mut params, mut creases) = (base, params, creases);
     for _ in 0..levels {
         let topo = Topology::from_mesh(&mesh)?;
