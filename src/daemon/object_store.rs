@@ -100,9 +100,35 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
                 && *p != target
         })
         .collect();
-    write_atomic(&target, &bytes).map_err(|e| e.to_string())?;
+    // The transform goes down before the mesh: a fit of the object already running reads
+    // the folder whenever it likes, and must never see the new mesh without its transform
+    // (it would publish the scan misplaced). If the mesh then cannot be written, the
+    // previous transform is put back, so the scan stays as it was.
     let xf = folder.join(format!("{}.xf", s.scan.id));
-    match &s.transform {
+    let previous_xf = std::fs::read(&xf).ok();
+    set_transform(&xf, s.transform.as_ref())?;
+    if let Err(e) = write_atomic(&target, &bytes) {
+        let restored = match &previous_xf {
+            Some(old) => write_atomic(&xf, old).map_err(|e| e.to_string()),
+            None => set_transform(&xf, None),
+        };
+        return Err(match restored {
+            Ok(()) => e.to_string(),
+            Err(r) => format!("{e}; and the previous transform could not be restored: {r}"),
+        });
+    }
+    for p in &stale {
+        std::fs::remove_file(p).map_err(|e| format!("cannot remove {}: {e}", p.display()))?;
+    }
+    let version = format!("{}.{ext}", s.scan.id);
+    let label = format!("{} (object {})", s.scan.label, s.object);
+    Ok(object_arrival(s.object.clone(), folder, version, label))
+}
+
+/// Writes a scan's rigid transform as Stanford's `.xf` (four rows of four), or removes the
+/// sidecar when the record carries none.
+fn set_transform(xf: &Path, transform: Option<&[f64; 16]>) -> Result<(), String> {
+    match transform {
         Some(m) => {
             let rows: Vec<String> = m
                 .chunks(4)
@@ -113,21 +139,14 @@ pub(crate) fn store_scan(objects: &Path, s: &ObjectScan) -> Result<Arrival, Stri
                         .join(" ")
                 })
                 .collect();
-            write_atomic(&xf, format!("{}\n", rows.join("\n")).as_bytes())
-                .map_err(|e| e.to_string())?;
+            write_atomic(xf, format!("{}\n", rows.join("\n")).as_bytes()).map_err(|e| e.to_string())
         }
-        None => match std::fs::remove_file(&xf) {
-            Ok(()) => {}
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => return Err(format!("cannot remove {}: {e}", xf.display())),
+        None => match std::fs::remove_file(xf) {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(format!("cannot remove {}: {e}", xf.display())),
         },
     }
-    for p in &stale {
-        std::fs::remove_file(p).map_err(|e| format!("cannot remove {}: {e}", p.display()))?;
-    }
-    let version = format!("{}.{ext}", s.scan.id);
-    let label = format!("{} (object {})", s.scan.label, s.object);
-    Ok(object_arrival(s.object.clone(), folder, version, label))
 }
 
 /// A path record's file, refused over `max_bytes` before it is read.
@@ -322,5 +341,33 @@ mod tests {
         assert_eq!(resumed.len(), 1);
         assert_eq!(resumed[0].id, "o");
         assert!(matches!(&resumed[0].input, Input::Object(f) if *f == objects.join("o")));
+    }
+
+    #[test]
+    fn a_mesh_that_cannot_be_written_leaves_the_previous_transform() {
+        let tmp = tempfile::tempdir().expect("tmp");
+        let turn = [
+            0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+        ];
+        let first = ObjectScan {
+            object: "o".into(),
+            scan: inline("s", "ply", b"ply\n"),
+            transform: Some(turn),
+            max_bytes: u64::MAX,
+        };
+        store_scan(tmp.path(), &first).expect("stored");
+        let folder = tmp.path().join("o");
+        let before = std::fs::read(folder.join("s.xf")).expect("xf");
+        // A folder where the new version's file would go: its write fails after the
+        // transform was already replaced.
+        std::fs::create_dir_all(folder.join("s.obj").join("busy")).expect("mkdir");
+        let blocked = ObjectScan {
+            scan: inline("s", "obj", b"v 0 0 0\n"),
+            transform: None,
+            ..first
+        };
+        store_scan(tmp.path(), &blocked).expect_err("the mesh cannot be written");
+        assert_eq!(std::fs::read(folder.join("s.xf")).expect("xf back"), before);
+        assert_eq!(std::fs::read(folder.join("s.ply")).expect("kept"), b"ply\n");
     }
 }
