@@ -179,9 +179,10 @@ fn update_session(
             .map(|s| (s.id.as_str(), &s.mesh, s.registration.transform))
             .collect()
     };
+    // A fresh session is made by the `Fresh` step only, never up front to be replaced.
     let (mut session, kept_scans) = match sessions.take(id, config_hash) {
-        Some(kept) => (kept.session, Some(kept.scans)),
-        None => (fresh(), None),
+        Some(kept) => (Some(kept.session), Some(kept.scans)),
+        None => (None, None),
     };
     let update = loop {
         let step = match &kept_scans {
@@ -189,15 +190,14 @@ fn update_session(
             None => SessionStep::Fresh,
         };
         tracing::debug!(object = %id, ?step, "object update");
-        let update = match &step {
-            SessionStep::Update { added, removed } => {
+        let update = match (&step, session.as_mut()) {
+            (SessionStep::Update { added, removed }, Some(kept)) => {
                 let removed: Vec<&str> = removed.iter().map(String::as_str).collect();
-                session.change_scans(&staged(added), &removed)
+                kept.change_scans(&staged(added), &removed)
             }
-            SessionStep::Fresh => {
-                session = fresh();
+            _ => {
                 let all: Vec<String> = keys.keys().cloned().collect();
-                session.add_scans(&staged(&all))
+                session.insert(fresh()).add_scans(&staged(&all))
             }
         };
         let refused = match &update {
@@ -219,7 +219,7 @@ fn update_session(
             None => break update,
         }
     };
-    if update.is_ok() {
+    if let (Ok(_), Some(session)) = (&update, session) {
         let kept = KeptSession {
             session,
             scans: keys,
