@@ -63,9 +63,18 @@ fn fit_with_no_flags_fits_a_whole_object() {
     let input = tmp.path().join("torus.off");
     std::fs::write(&input, torus_off(40, 16, 0.0)).expect("write");
     let fit = tmp.path().join("fit");
-    run(bin().arg("fit").arg(&input).arg("--out").arg(&fit));
+    let out = run(bin().arg("fit").arg(&input).arg("--out").arg(&fit));
     let report = read_json(&fit.join("report.json"));
     assert_eq!(report["path"], "object", "{report}");
+    // A whole object that stops short of the tolerance is told the remedy that applies to
+    // it (the control budget), not the scans' (noise and rims).
+    let line = String::from_utf8_lossy(&out.stdout);
+    assert!(!line.contains("usual for scans"), "{line}");
+    assert_eq!(
+        line.contains("--target-controls-pct"),
+        report["status"] == "stalled",
+        "{line}"
+    );
     assert_eq!(report["surface"], "loop");
     assert_eq!(report["topology"]["control"]["genus"], 1);
     assert_eq!(report["topology"]["data"]["genus"], 1);
