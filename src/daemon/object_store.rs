@@ -262,25 +262,32 @@ mod tests {
         }
     }
 
+    /// A quarter turn about z, as a pipe record's `"transform"` gives it.
+    const TURN: [f64; 16] = [
+        0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+    ];
+
+    /// Scan `s` of object `o`, sent inline with the transform `TURN`.
+    fn turned_scan(ext: &str, bytes: &[u8]) -> ObjectScan {
+        ObjectScan {
+            object: "o".into(),
+            scan: inline("s", ext, bytes),
+            transform: Some(TURN),
+            max_bytes: u64::MAX,
+        }
+    }
+
     #[test]
     fn a_stored_scan_replaces_its_other_versions_and_its_transform() {
         let tmp = tempfile::tempdir().expect("tmp");
-        let turn = [
-            0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
-        ];
-        let first = ObjectScan {
-            object: "o".into(),
-            scan: inline("s", "obj", b"v 0 0 0\n"),
-            transform: Some(turn),
-            max_bytes: u64::MAX,
-        };
+        let first = turned_scan("obj", b"v 0 0 0\n");
         let a = store_scan(tmp.path(), &first).expect("stored");
         let folder = tmp.path().join("o");
         assert!(matches!(&a.input, Input::Object(f) if *f == folder));
         assert_eq!(a.id, "o");
         let xf = std::fs::read_to_string(folder.join("s.xf")).expect("xf");
         let read = crate::io::registration::parse_xf(&xf, "s.xf").expect("rigid");
-        assert_eq!(read.to_row_major(), turn);
+        assert_eq!(read.to_row_major(), TURN);
         // A new version in another format without a transform: the old file and the .xf go.
         let second = ObjectScan {
             object: "o".into(),
@@ -346,15 +353,7 @@ mod tests {
     #[test]
     fn a_mesh_that_cannot_be_written_leaves_the_previous_transform() {
         let tmp = tempfile::tempdir().expect("tmp");
-        let turn = [
-            0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
-        ];
-        let first = ObjectScan {
-            object: "o".into(),
-            scan: inline("s", "ply", b"ply\n"),
-            transform: Some(turn),
-            max_bytes: u64::MAX,
-        };
+        let first = turned_scan("ply", b"ply\n");
         store_scan(tmp.path(), &first).expect("stored");
         let folder = tmp.path().join("o");
         let before = std::fs::read(folder.join("s.xf")).expect("xf");
