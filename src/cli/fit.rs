@@ -324,20 +324,21 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
     let number = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let status = match out.status {
         FitStatus::Met => "met: every target holds".to_string(),
-        // A whole object's max error is held up by its control budget as much as by the
-        // data's noise: the remedy differs, so the line says which applies.
-        FitStatus::Stalled if r["object"].is_object() => {
-            "stalled: further steps stopped improving the fit before every target held \
-            (usual for whole objects: detail finer than the control budget can follow, and \
-            scan noise, keep the max error above the tolerance; judge it by the RMS, or \
-            raise --target-controls-pct; see the README)"
-                .to_string()
-        }
         FitStatus::Stalled => {
-            "stalled: further steps stopped improving the fit before every target held \
-            (usual for scans, whose noise and rims keep the max error above the tolerance; \
-            judge it by the RMS, see the README)"
-                .to_string()
+            // A whole object's max error is held up by its control budget as much as by
+            // the data's noise: the remedy differs, so the line says which applies.
+            let why = if r["object"].is_object() {
+                "usual for whole objects: detail finer than the control budget can follow, \
+                and scan noise, keep the max error above the tolerance; judge it by the RMS, \
+                or raise --target-controls-pct;"
+            } else {
+                "usual for scans, whose noise and rims keep the max error above the \
+                tolerance; judge it by the RMS,"
+            };
+            format!(
+                "stalled: further steps stopped improving the fit before every target held \
+                ({why} see the README)"
+            )
         }
         FitStatus::Capped => "capped: the step or time limit came first (raise --iterations or \
             --max-time-ms)"
