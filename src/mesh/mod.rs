@@ -50,6 +50,18 @@ impl TriMesh {
         crate::numeric::bounds(&self.positions)
     }
 
+    /// The volume a closed mesh encloses, positive when its triangles face outwards (the
+    /// divergence theorem: a sum of tetrahedra from the origin).
+    pub fn signed_volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| self.positions[v as usize]);
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum()
+    }
+
     /// Length of the bounding-box diagonal (0 for an empty mesh).
     pub fn bounds_diagonal(&self) -> f64 {
         self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length())

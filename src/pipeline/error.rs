@@ -10,6 +10,7 @@ use crate::fit::FitError;
 use crate::mesh::detect::DetectError;
 use crate::mesh::inverse::InverseError;
 use crate::mesh::topology::TopologyError;
+use crate::pipeline::merge::CloudError;
 use crate::pipeline::object::ObjectError;
 use crate::pipeline::scattered::ScatteredError;
 use crate::remesh::points::PointCloudError;
@@ -123,9 +124,10 @@ pub enum PipelineError {
     /// needs a mesh).
     #[error("point cloud: {0}")]
     PointCloud(#[from] PointCloudError),
-    /// A point cloud with `fit.domain = "mesh"`: the object path simplifies a mesh.
-    #[error("fit.domain = \"mesh\" fits a control mesh simplified from a mesh, and a point cloud has no faces; point clouds are fitted through the scan path (fit.domain = \"auto\" or \"grid\", --domain auto); whole-object point clouds need surface reconstruction, which is not supported yet")]
-    PointCloudAsObject,
+    /// A point cloud that could not be reconstructed into a mesh (whole-object clouds and
+    /// clouds under `fit.domain = "mesh"`).
+    #[error("point cloud: {0}")]
+    CloudReconstruction(#[from] CloudError),
     /// The solver failed.
     #[error(transparent)]
     Fit(#[from] FitError),
@@ -166,7 +168,7 @@ impl PipelineError {
                 _ => "object_failed",
             },
             PipelineError::PointCloud(e) => e.kind(),
-            PipelineError::PointCloudAsObject => "unsupported",
+            PipelineError::CloudReconstruction(_) => "degenerate_point_cloud",
             PipelineError::Fit(_) => "fit_failed",
             PipelineError::Scattered(e) => e.kind(),
         }

@@ -17,6 +17,7 @@ mod collocation;
 mod coverage;
 mod error;
 mod geometric;
+pub mod measure;
 pub mod merge;
 mod names;
 pub mod object;

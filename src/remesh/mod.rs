@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 mod band;
+pub mod oriented;
 pub mod param;
 pub mod planar;
 mod plane2d;

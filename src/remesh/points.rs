@@ -18,8 +18,8 @@
 //!
 //! Closed objects are no height field over any plane: projected, their sheets interleave,
 //! and what survives the removals is scattered triangles, not one piece holding most
-//! points; such clouds are refused (`NotHeightField`): they need surface
-//! reconstruction, which this crate does not do.
+//! points; such clouds are refused here (`NotHeightField`): they need surface
+//! reconstruction, which the worker then does (`pipeline::merge::reconstruct_cloud`).
 
 use super::planar::PlaneFrame;
 use crate::mesh::stats::UnionFind;
@@ -109,7 +109,7 @@ pub enum PointCloudError {
         points: usize,
     },
     /// Too few points form one surface over the best plane: a closed or overhanging cloud.
-    #[error("only {:.1} % of the {points} points form sizeable pieces of surface over the best plane found (at least {:.0} % needed): the cloud is not a height field over any plane (a whole object?); whole-object point clouds need surface reconstruction, which is not supported yet: reconstruct a mesh first (e.g. Poisson or ball pivoting in Open3D or MeshLab) and fit that", 100.0 * covered, 100.0 * min)]
+    #[error("only {:.1} % of the {points} points form sizeable pieces of surface over the best plane found (at least {:.0} % needed): the cloud is not a height field over any plane (a whole object?): it needs surface reconstruction (the worker reconstructs such clouds, `pipeline::merge::reconstruct_cloud`)", 100.0 * covered, 100.0 * min)]
     NotHeightField {
         /// Points given.
         points: usize,
@@ -122,7 +122,8 @@ pub enum PointCloudError {
 
 impl PointCloudError {
     /// A stable snake_case name of the refusal; a cloud that needs surface reconstruction
-    /// is `unsupported` (valid, not yet handled), as the readers name such inputs.
+    /// is `unsupported` here (valid, but no triangulation takes it: the worker reconstructs
+    /// it instead, an object session refuses it as a scan).
     pub fn kind(&self) -> &'static str {
         match self {
             Self::TooFewPoints { .. } => "too_few_points",

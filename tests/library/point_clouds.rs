@@ -293,10 +293,11 @@ fn a_range_scan_as_a_point_cloud_meets_the_scan_goals_like_its_mesh() {
     );
 }
 
-/// A whole object's cloud is refused, naming what it needs; `fit.domain = "mesh"` on a
-/// cloud is refused too.
+/// A whole object's cloud (no height field over any plane) is reconstructed (oriented
+/// normals, the scans' merge) and fitted as a closed object; its own points are measured
+/// against the surface. `fit.domain = "mesh"` sends a height-field cloud the same way.
 #[test]
-fn closed_clouds_and_object_fits_of_clouds_are_unsupported() {
+fn closed_clouds_are_reconstructed_and_fitted_as_whole_objects() {
     let mut sphere = Vec::new();
     let n = 3000;
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
@@ -307,13 +308,35 @@ fn closed_clouds_and_object_fits_of_clouds_are_unsupported() {
         sphere.push(DVec3::new(r * phi.cos(), y, r * phi.sin()));
     }
     let cloud = TriMesh::new(sphere, Vec::new());
-    let e = run_input(&cloud, None, &loop_config())
-        .err()
-        .expect("a sphere is no height field");
-    assert_eq!(e.kind(), "unsupported");
-    assert!(e.to_string().contains("surface reconstruction"), "{e}");
+    let fitted = run_input(&cloud, None, &loop_config()).expect("a sphere is reconstructed");
+    let report = &fitted.parts[0].outputs.report;
+    assert_eq!(report["path"], "object", "{report}");
+    assert_eq!(report["point_cloud"]["route"], "reconstruction");
+    assert_eq!(report["point_cloud"]["points"], n);
+    assert_eq!(report["topology"]["control"]["genus"], 0);
+    assert_eq!(report["topology"]["control"]["boundary_loops"], 0);
+    let measured = &report["point_cloud"]["points_to_surface"];
+    assert_eq!(measured["points"], n, "{report}");
+    // The points' spacing is about 0.065: the surface lies within a small share of it.
+    let rms = measured["rms"].as_f64().expect("rms");
+    assert!(rms < 2e-3, "cloud to surface rms {rms}");
+
     let mut cfg = loop_config();
     cfg.fit.domain = trispline::pipeline::worker::Domain::Mesh;
-    let e = run_input(&cloud, None, &cfg).err().expect("no object path");
-    assert_eq!(e.kind(), "unsupported");
+    let wavy: Vec<DVec3> = (0..40 * 40)
+        .map(|k| {
+            let (x, y) = ((k % 40) as f64 / 39.0, (k / 40) as f64 / 39.0);
+            DVec3::new(x, y, 0.1 * (3.0 * x).sin() * (2.0 * y).cos())
+        })
+        .collect();
+    let patch = TriMesh::new(wavy, Vec::new());
+    let fitted = run_input(&patch, None, &cfg).expect("a reconstructed patch");
+    let report = &fitted.parts[0].outputs.report;
+    assert_eq!(report["point_cloud"]["route"], "reconstruction");
+    assert_eq!(report["path"], "object");
+    let plain = run_input(&patch, None, &loop_config()).expect("a height field");
+    assert_eq!(
+        plain.parts[0].outputs.report["point_cloud"]["route"],
+        "height_field"
+    );
 }

@@ -60,7 +60,7 @@ fn sphere(n: usize) -> Vec<[f64; 3]> {
 }
 
 #[test]
-fn fit_and_inspect_take_an_xyz_cloud_and_refuse_a_whole_objects_cloud() {
+fn fit_and_inspect_take_an_xyz_cloud_and_fit_a_whole_objects_cloud() {
     let dir = tempfile::tempdir().expect("tmp");
     let pts = cloud(40);
     let input = dir.path().join("cloud.xyz");
@@ -90,6 +90,7 @@ fn fit_and_inspect_take_an_xyz_cloud_and_refuse_a_whole_objects_cloud() {
     let stats: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
     assert_eq!(stats["point_cloud"]["triangulated_points"], pts.len());
 
+    // A whole object's cloud: reconstructed and fitted as a closed object.
     let ball = dir.path().join("ball.xyz");
     std::fs::write(&ball, xyz_bytes(&sphere(3000))).expect("write");
     let o = bin()
@@ -97,9 +98,11 @@ fn fit_and_inspect_take_an_xyz_cloud_and_refuse_a_whole_objects_cloud() {
         .arg(dir.path().join("ball"))
         .output()
         .expect("runs");
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("surface reconstruction"), "{err}");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = read_json(&dir.path().join("ball/report.json"));
+    assert_eq!(report["point_cloud"]["route"], "reconstruction", "{report}");
+    assert_eq!(report["path"], "object");
+    assert!(dir.path().join("ball/surface.glb").exists());
 }
 
 #[test]
@@ -131,13 +134,15 @@ fn the_daemon_fits_pcd_clouds_from_its_folder_and_its_pipe() {
     assert!(finished, "{:?}", events(&s.out));
     let report = read_json(&s.out.join("cloud/report.json"));
     assert_eq!(report["point_cloud"]["points"], pts.len());
+    // A whole object's cloud is reconstructed and fitted, not rejected.
     let ball = events(&s.out)
         .into_iter()
         .find(|e| e["patch"] == "ball")
         .expect("ball event");
-    assert_eq!(ball["status"], "rejected");
-    assert_eq!(ball["kind"], "unsupported", "{ball}");
-    assert!(ball["reason"]
-        .as_str()
-        .is_some_and(|r| r.contains("surface reconstruction")));
+    assert_ne!(ball["status"], "rejected", "{ball}");
+    let report = read_json(&s.out.join("ball/report.json"));
+    assert_eq!(report["point_cloud"]["route"], "reconstruction", "{report}");
+    assert!(report["point_cloud"]["points_to_surface"]["rms"]
+        .as_f64()
+        .is_some());
 }

@@ -15,6 +15,7 @@
 //! (no double weight), and two views a few tens of micrometres apart give one surface
 //! between them, not a ripple between the two.
 
+mod cloud;
 mod field;
 mod holes;
 mod implicit;
@@ -26,6 +27,7 @@ mod types;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 
+pub use cloud::{reconstruct_cloud, CloudError, CloudMesh, CloudReconstruction};
 pub use field::MergeField;
 pub use samples::{median_edge, scan_samples};
 pub use types::{CellKey, MergeOptions, Merged, ScanSamples};
@@ -130,15 +132,7 @@ mod tests {
         let stats = crate::mesh::stats::mesh_stats(&m.mesh, 0);
         assert_eq!(stats.boundary_loops, 0, "{stats:?}");
         // Outward: the signed volume is positive.
-        let volume: f64 = m
-            .mesh
-            .triangles
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|v| m.mesh.positions[v as usize]);
-                a.dot(b.cross(c)) / 6.0
-            })
-            .sum();
+        let volume = m.mesh.signed_volume();
         assert!(
             (volume - 4.0 / 3.0 * std::f64::consts::PI).abs() < 0.05,
             "{volume}"

@@ -22,10 +22,9 @@
 //! depend on the order they arrived in, within what the fits' own spread allows.
 
 mod local;
-mod measure;
 mod views;
 
-pub use measure::{
+pub use crate::pipeline::measure::{
     distance_stats, surface_mesh, surface_points_at_data, DistanceStats, MeshMeasure,
 };
 

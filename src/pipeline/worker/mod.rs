@@ -19,6 +19,7 @@ pub use report::{PartWarm, Refinement, WarmStart};
 pub use stray_guard::StrayReport;
 pub(crate) use stray_guard::{stray_refusal, MAX_STRAY_GROWTH, MAX_STRAY_SHARE};
 
+use super::measure::{distance_stats, surface_mesh};
 use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated_glb, Coverage};
 use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
@@ -268,15 +269,44 @@ pub(crate) fn run_patch_with(
     cfg: &WorkerConfig,
     on_step: Option<StepHook>,
 ) -> Result<PatchOutputs, PipelineError> {
+    run_patch_measuring(mesh, previous, cfg, on_step, None)
+}
+
+/// `run_patch_with`, measuring `measured` (a reconstructed cloud's points, when the cloud
+/// was reconstructed by the caller) or the points of a cloud it reconstructs itself
+/// against the fitted surface: report.json's `point_cloud.points_to_surface`.
+fn run_patch_measuring(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    on_step: Option<StepHook>,
+    measured: Option<&[DVec3]>,
+) -> Result<PatchOutputs, PipelineError> {
     let wall = Instant::now();
     let input = cloud::with_faces(mesh, cfg)?;
     let (mesh, cfg) = (input.mesh.as_ref(), input.cfg.as_ref());
     let fitted = fit_patch_with(mesh, previous, cfg, on_step)?;
+    let to_surface = input
+        .measured_points
+        .or(measured)
+        .map(|points| distance_stats(points, &surface_mesh(&fitted.fit)));
     let mut outputs = outputs_of(fitted, cfg, wall);
     if let Some(cloud) = input.report() {
-        outputs.report["point_cloud"] = cloud;
+        set_cloud_report(&mut outputs.report, cloud);
+    }
+    if let Some(stats) = to_surface {
+        outputs.report["point_cloud"]["points_to_surface"] = json!(stats);
     }
     Ok(outputs)
+}
+
+/// Sets report.json's `point_cloud`, keeping a `points_to_surface` measured before.
+fn set_cloud_report(report: &mut serde_json::Value, cloud: serde_json::Value) {
+    let measured = report["point_cloud"]["points_to_surface"].take();
+    report["point_cloud"] = cloud;
+    if !measured.is_null() {
+        report["point_cloud"]["points_to_surface"] = measured;
+    }
 }
 
 /// The outputs of a fit (`fit_patch`'s result): surface.json, report.json, the GLB and the
@@ -405,25 +435,35 @@ pub(crate) fn run_input_with(
     on_step: Option<StepHook>,
 ) -> Result<InputOutputs, PipelineError> {
     let input = cloud::with_faces(mesh, cfg)?;
-    let mut fitted = run_components(&input.mesh, previous, &input.cfg, on_step)?;
+    let mut fitted = run_components(
+        &input.mesh,
+        previous,
+        &input.cfg,
+        on_step,
+        input.measured_points,
+    )?;
     if let Some(cloud) = input.report() {
         for part in &mut fitted.parts {
-            part.outputs.report["point_cloud"] = cloud.clone();
+            set_cloud_report(&mut part.outputs.report, cloud.clone());
         }
     }
     Ok(fitted)
 }
 
-/// `run_input_with` on a mesh with triangles.
+/// `run_input_with` on a mesh with triangles; `measured`, a reconstructed cloud's points,
+/// are measured against the surface of the largest component (not against each of `all`
+/// the components: most points would belong to the others).
 fn run_components(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
     on_step: Option<StepHook>,
+    measured: Option<&[DVec3]>,
 ) -> Result<InputOutputs, PipelineError> {
     let components = &cfg.fit.components;
     if components.mode == ComponentMode::Largest {
-        let outputs = run_patch_with(mesh, previous.filter(|w| w.parts.is_empty()), cfg, on_step)?;
+        let warm = previous.filter(|w| w.parts.is_empty());
+        let outputs = run_patch_measuring(mesh, warm, cfg, on_step, measured)?;
         return Ok(InputOutputs {
             warm: outputs.warm.clone(),
             parts: vec![PartOutputs {

@@ -1,0 +1,380 @@
+//! Oriented normals of an unorganised point cloud (Hoppe et al. 1992, "Surface
+//! reconstruction from unorganized points"): each point's normal is the direction of least
+//! variance of its nearest neighbours (a local plane fit), and the signs are made
+//! consistent by walking a minimum spanning tree of the neighbour graph whose edge cost is
+//! `1 - |n_i . n_j|`, so that the walk crosses between nearly parallel planes first and
+//! reaches a sharp bend or a thin part last. Each connected piece starts at its highest
+//! point (largest z), whose normal is turned to +z: on a closed surface that point's
+//! outward normal points up.
+//!
+//! Written here rather than taken from a crate: no maintained Rust crate estimates and
+//! orients normals (Open3D and PCL, which do, are C++).
+
+use glam::DVec3;
+use rayon::prelude::*;
+use rstar::primitives::GeomWithData;
+use rstar::RTree;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+/// Neighbours of a point for its plane fit and its edges in the orientation graph, on
+/// clean data.
+pub const NORMAL_NEIGHBOURS: usize = 12;
+
+/// Most neighbours a plane fit takes on noisy data.
+const MAX_NORMAL_NEIGHBOURS: usize = 128;
+
+/// Neighbours over which the noise is measured: their radius, about 4 spacings, spans
+/// noise as large as the spacing. The 12 nearest are no measure of such noise: the
+/// nearest points in space are those displaced alike (on the sphere of CGAL's
+/// `sphere_20k.xyz`, radial noise 0.041, they measured 0.017).
+const NOISE_NEIGHBOURS: usize = 48;
+
+/// Neighbours whose mean distance is a point's local spacing (as `points` measures it).
+const SPACING_NEIGHBOURS: usize = 6;
+
+/// The smoothing width on clean data, in spacings: a range scan's merge cell (1.5 of its
+/// median edge, about one spacing).
+pub const CLEAN_WIDTH_SPACINGS: f64 = 1.5;
+
+/// The noise a Gaussian average of width h may leave, as a share of h. Averaging the
+/// k = pi (h / s)^2 points within h (spacing s) divides the noise sigma by sqrt(k), so
+/// sigma s / (sqrt(pi) h) <= `AVERAGED_NOISE_SHARE` h sets the width.
+const AVERAGED_NOISE_SHARE: f64 = 0.1;
+
+/// A cloud's oriented normals and its sampling density and noise.
+#[derive(Clone, Debug)]
+pub struct OrientedNormals {
+    /// One unit normal per point, consistently signed within each connected piece
+    /// (zero for a point whose neighbours do not span a plane).
+    pub normals: Vec<DVec3>,
+    /// Median over the points of their mean distance to their 6 nearest others.
+    pub spacing: f64,
+    /// Median over the points of the RMS distance of them and their 48 nearest neighbours
+    /// to their least-squares plane: the scanner's noise (and, on clean data, the
+    /// curvature's sag over about 4 spacings).
+    pub noise: f64,
+    /// The width over which the points must be averaged for a surface: `spacing` times
+    /// `CLEAN_WIDTH_SPACINGS`, or more where the noise asks for it (see
+    /// `AVERAGED_NOISE_SHARE`).
+    pub width: f64,
+    /// Neighbours each normal was fitted to (more than `NORMAL_NEIGHBOURS` on noisy data,
+    /// in proportion to the area of the width).
+    pub neighbours: usize,
+    /// Connected pieces of the neighbour graph, each oriented on its own.
+    pub pieces: usize,
+    /// Tree edges crossed between normals more than 60 degrees apart: where the
+    /// orientation had to guess (sharp edges, thin parts, noise).
+    pub sharp_crossings: usize,
+}
+
+type Indexed = GeomWithData<[f64; 3], u32>;
+
+/// Estimates and orients the normals of `points` (see the module docs). Non-finite
+/// points get a zero normal and no edges. On noisy data (noise comparable with the
+/// spacing) the plane fits take as many more neighbours as the wider smoothing width
+/// covers, so that a normal is not tilted by the noise of a few points.
+pub fn oriented_normals(points: &[DVec3]) -> OrientedNormals {
+    let tree: RTree<Indexed> = RTree::bulk_load(
+        points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.is_finite())
+            .map(|(i, p)| Indexed::new(p.to_array(), i as u32))
+            .collect(),
+    );
+    let wide = nearest(points, &tree, NOISE_NEIGHBOURS);
+    let spacing = median_spacing(points, &wide);
+    let noise = median(
+        plane_fits(points, &wide)
+            .iter()
+            .filter(|p| p.normal != DVec3::ZERO)
+            .map(|p| p.residual),
+    );
+    let clean_width = CLEAN_WIDTH_SPACINGS * spacing;
+    let noisy_width =
+        (noise * spacing / (AVERAGED_NOISE_SHARE * std::f64::consts::PI.sqrt())).sqrt();
+    let width = clean_width.max(noisy_width);
+    let k = if clean_width > 0.0 {
+        ((NORMAL_NEIGHBOURS as f64 * (width / clean_width).powi(2)).ceil() as usize)
+            .clamp(NORMAL_NEIGHBOURS, MAX_NORMAL_NEIGHBOURS)
+    } else {
+        NORMAL_NEIGHBOURS
+    };
+    let near = if k > NOISE_NEIGHBOURS {
+        nearest(points, &tree, k)
+    } else {
+        wide.into_iter()
+            .map(|mut near| {
+                near.truncate(k);
+                near
+            })
+            .collect()
+    };
+    let planes = plane_fits(points, &near);
+    let mut normals: Vec<DVec3> = planes.iter().map(|p| p.normal).collect();
+    let (pieces, sharp_crossings) = orient(points, &near, &mut normals);
+    OrientedNormals {
+        normals,
+        spacing,
+        noise,
+        width,
+        neighbours: k,
+        pieces,
+        sharp_crossings,
+    }
+}
+
+/// Each finite point's `k` nearest other points.
+fn nearest(points: &[DVec3], tree: &RTree<Indexed>, k: usize) -> Vec<Vec<u32>> {
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, p)| {
+            if !p.is_finite() {
+                return Vec::new();
+            }
+            tree.nearest_neighbor_iter(&p.to_array())
+                .map(|n| n.data)
+                .filter(|&j| j as usize != i)
+                .take(k)
+                .collect()
+        })
+        .collect()
+}
+
+/// A point's least-squares plane through it and its neighbours.
+struct PlaneFit {
+    /// Unit normal (zero where they span no plane).
+    normal: DVec3,
+    /// RMS distance of the points to the plane.
+    residual: f64,
+}
+
+/// Every point's plane through it and its neighbours `near`.
+fn plane_fits(points: &[DVec3], near: &[Vec<u32>]) -> Vec<PlaneFit> {
+    near.par_iter()
+        .enumerate()
+        .map(|(i, near)| plane_fit(points[i], near.iter().map(|&j| points[j as usize])))
+        .collect()
+}
+
+/// The least-squares plane through `p` and `near`: its normal is the eigenvector of the
+/// smallest eigenvalue of their covariance (zero where they span no plane), whose mean is
+/// the squared residual.
+fn plane_fit(p: DVec3, near: impl Iterator<Item = DVec3> + Clone) -> PlaneFit {
+    let none = PlaneFit {
+        normal: DVec3::ZERO,
+        residual: 0.0,
+    };
+    let count = 1 + near.clone().count();
+    if count < 3 {
+        return none;
+    }
+    let centre = (p + near.clone().sum::<DVec3>()) / count as f64;
+    let mut c = nalgebra::Matrix3::<f64>::zeros();
+    for q in std::iter::once(p).chain(near) {
+        let d = q - centre;
+        let d = nalgebra::Vector3::new(d.x, d.y, d.z);
+        c += d * d.transpose();
+    }
+    let eig = c.symmetric_eigen();
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
+    let values = order.map(|k| eig.eigenvalues[k]);
+    // A plane needs two directions of spread: the middle eigenvalue must not vanish.
+    if values[1].is_nan() || values[1] <= 1e-12 * values[2] {
+        return none;
+    }
+    let n = eig.eigenvectors.column(order[0]);
+    match DVec3::new(n[0], n[1], n[2]).try_normalize() {
+        Some(normal) => PlaneFit {
+            normal,
+            residual: (values[0].max(0.0) / count as f64).sqrt(),
+        },
+        None => none,
+    }
+}
+
+/// Median over the points of their mean distance to their nearest `SPACING_NEIGHBOURS`.
+fn median_spacing(points: &[DVec3], neighbours: &[Vec<u32>]) -> f64 {
+    median(
+        neighbours
+            .iter()
+            .enumerate()
+            .filter(|(_, near)| !near.is_empty())
+            .map(|(i, near)| {
+                let k = near.len().min(SPACING_NEIGHBOURS);
+                near[..k]
+                    .iter()
+                    .map(|&j| points[i].distance(points[j as usize]))
+                    .sum::<f64>()
+                    / k as f64
+            }),
+    )
+}
+
+/// The median of `values` (0 when there are none).
+fn median(values: impl Iterator<Item = f64>) -> f64 {
+    let mut v: Vec<f64> = values.collect();
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    *m
+}
+
+/// Cosine below which a tree edge counts as a sharp crossing (60 degrees).
+const SHARP_COS: f64 = 0.5;
+
+/// Signs the normals consistently along a minimum spanning tree of the symmetric neighbour
+/// graph (Prim's algorithm, cost `1 - |n_i . n_j|`), one tree per connected piece rooted
+/// at its highest point with its normal turned up. Returns the pieces and the sharp
+/// crossings.
+fn orient(points: &[DVec3], neighbours: &[Vec<u32>], normals: &mut [DVec3]) -> (usize, usize) {
+    let n = points.len();
+    let mut adjacency: Vec<Vec<u32>> = neighbours.to_vec();
+    for (i, near) in neighbours.iter().enumerate() {
+        for &j in near {
+            adjacency[j as usize].push(i as u32);
+        }
+    }
+    for list in &mut adjacency {
+        list.sort_unstable();
+        list.dedup();
+    }
+    let mut by_height: Vec<u32> = (0..n as u32)
+        .filter(|&i| normals[i as usize] != DVec3::ZERO)
+        .collect();
+    by_height.sort_by(|&a, &b| points[b as usize].z.total_cmp(&points[a as usize].z));
+    let mut reached = vec![false; n];
+    let (mut pieces, mut sharp) = (0, 0);
+    // Cost first (the bits of a non-negative f64 order as the number), then the edge.
+    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::new();
+    for &root in &by_height {
+        if reached[root as usize] {
+            continue;
+        }
+        pieces += 1;
+        reached[root as usize] = true;
+        if normals[root as usize].z < 0.0 {
+            normals[root as usize] = -normals[root as usize];
+        }
+        push_edges(root, &adjacency, normals, &reached, &mut heap);
+        while let Some(Reverse((_, from, to))) = heap.pop() {
+            let (f, t) = (from as usize, to as usize);
+            if reached[t] {
+                continue;
+            }
+            reached[t] = true;
+            let cos = normals[f].dot(normals[t]);
+            if cos < 0.0 {
+                normals[t] = -normals[t];
+            }
+            if cos.abs() < SHARP_COS {
+                sharp += 1;
+            }
+            push_edges(to, &adjacency, normals, &reached, &mut heap);
+        }
+    }
+    (pieces, sharp)
+}
+
+/// Queues the edges from `from` to the unreached neighbours that have a normal.
+fn push_edges(
+    from: u32,
+    adjacency: &[Vec<u32>],
+    normals: &[DVec3],
+    reached: &[bool],
+    heap: &mut BinaryHeap<Reverse<(u64, u32, u32)>>,
+) {
+    let nf = normals[from as usize];
+    for &to in &adjacency[from as usize] {
+        let nt = normals[to as usize];
+        if reached[to as usize] || nt == DVec3::ZERO {
+            continue;
+        }
+        let cost = (1.0 - nf.dot(nt).abs()).max(0.0);
+        heap.push(Reverse((cost.to_bits(), from, to)));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points on a torus (radii `big`, `small`), `n` x `m` on a jittered lattice.
+    fn torus_points(n: usize, m: usize, big: f64, small: f64) -> Vec<DVec3> {
+        let mut points = Vec::new();
+        for i in 0..n {
+            for j in 0..m {
+                // A deterministic jitter so that the samples are not a lattice.
+                let ju = ((i * 7 + j * 13) % 11) as f64 / 11.0 - 0.5;
+                let jv = ((i * 5 + j * 3) % 7) as f64 / 7.0 - 0.5;
+                let u = (i as f64 + 0.4 * ju) / n as f64 * std::f64::consts::TAU;
+                let v = (j as f64 + 0.4 * jv) / m as f64 * std::f64::consts::TAU;
+                let r = big + small * v.cos();
+                points.push(DVec3::new(r * u.cos(), r * u.sin(), small * v.sin()));
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn a_torus_cloud_gets_outward_normals_everywhere() {
+        let (big, small) = (1.0, 0.35);
+        let points = torus_points(120, 48, big, small);
+        let oriented = oriented_normals(&points);
+        assert_eq!(oriented.pieces, 1);
+        let mut wrong = 0;
+        for (p, n) in points.iter().zip(&oriented.normals) {
+            // The outward normal points from the tube's core circle to the point.
+            let core = DVec3::new(p.x, p.y, 0.0).normalize() * big;
+            let outward = (*p - core).normalize();
+            assert!(n.length() > 0.99, "a unit normal at {p}");
+            if n.dot(outward) < 0.9 {
+                wrong += 1;
+            }
+        }
+        assert_eq!(wrong, 0, "{wrong} of {} normals not outward", points.len());
+        // The mean 6-NN distance of a lattice of these steps lies between its two steps.
+        let (step_u, step_v) = (
+            std::f64::consts::TAU * (big - small) / 120.0,
+            std::f64::consts::TAU * small / 48.0,
+        );
+        assert!(oriented.spacing > 0.5 * step_u.min(step_v));
+        assert!(oriented.spacing < 2.0 * std::f64::consts::TAU * (big + small) / 120.0);
+    }
+
+    #[test]
+    fn separate_pieces_are_each_oriented_up_from_their_top() {
+        let mut points = torus_points(60, 24, 1.0, 0.35);
+        let far: Vec<DVec3> = torus_points(60, 24, 1.0, 0.35)
+            .into_iter()
+            .map(|p| p + DVec3::new(10.0, 0.0, 0.0))
+            .collect();
+        points.extend(far);
+        let oriented = oriented_normals(&points);
+        assert_eq!(oriented.pieces, 2);
+        for (k, (p, n)) in points.iter().zip(&oriented.normals).enumerate() {
+            let centre = if k < 60 * 24 {
+                DVec3::ZERO
+            } else {
+                DVec3::new(10.0, 0.0, 0.0)
+            };
+            let q = *p - centre;
+            let core = DVec3::new(q.x, q.y, 0.0).normalize();
+            assert!(n.dot((q - core).normalize()) > 0.8, "point {k}");
+        }
+    }
+
+    #[test]
+    fn collinear_and_lone_points_get_no_normal() {
+        let mut points: Vec<DVec3> = (0..20).map(|i| DVec3::new(i as f64, 0.0, 0.0)).collect();
+        points.push(DVec3::new(f64::NAN, 0.0, 0.0));
+        let oriented = oriented_normals(&points);
+        assert!(oriented.normals.iter().all(|n| *n == DVec3::ZERO));
+        assert_eq!(oriented.pieces, 0);
+    }
+}
