@@ -14,8 +14,6 @@ use glam::DVec3;
 use rayon::prelude::*;
 use rstar::primitives::GeomWithData;
 use rstar::RTree;
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
 
 /// Neighbours of a point for its plane fit and its edges in the orientation graph, on
 /// clean data.
@@ -29,6 +27,16 @@ const MAX_NORMAL_NEIGHBOURS: usize = 128;
 /// nearest points in space are those displaced alike (on the sphere of CGAL's
 /// `sphere_20k.xyz`, radial noise 0.041, they measured 0.017).
 const NOISE_NEIGHBOURS: usize = 48;
+
+/// Points the noise and the spacing (two medians) are measured at, at most: every
+/// n / `MEASURED_POINTS`-th point, so that a million-point cloud does not find 48
+/// neighbours for each.
+const MEASURED_POINTS: usize = 20_000;
+
+/// Most neighbour entries kept for the plane fits and the orientation graph (4 bytes
+/// each, and as many again for the graph's reverse edges): on a large noisy cloud the
+/// neighbours per point give way to it rather than memory.
+const MAX_NEIGHBOUR_ENTRIES: usize = 32_000_000;
 
 /// Neighbours whose mean distance is a point's local spacing (as `points` measures it).
 const SPACING_NEIGHBOURS: usize = 6;
@@ -83,10 +91,12 @@ pub fn oriented_normals(points: &[DVec3]) -> OrientedNormals {
             .map(|(i, p)| Indexed::new(p.to_array(), i as u32))
             .collect(),
     );
-    let wide = nearest(points, &tree, NOISE_NEIGHBOURS);
-    let spacing = median_spacing(points, &wide);
+    let stride = points.len().div_ceil(MEASURED_POINTS).max(1);
+    let measured: Vec<u32> = (0..points.len() as u32).step_by(stride).collect();
+    let wide = Neighbours::find(points, &tree, &measured, NOISE_NEIGHBOURS);
+    let spacing = median_spacing(points, &measured, &wide);
     let noise = median(
-        plane_fits(points, &wide)
+        plane_fits(points, &measured, &wide)
             .iter()
             .filter(|p| p.normal != DVec3::ZERO)
             .map(|p| p.residual),
@@ -95,24 +105,20 @@ pub fn oriented_normals(points: &[DVec3]) -> OrientedNormals {
     let noisy_width =
         (noise * spacing / (AVERAGED_NOISE_SHARE * std::f64::consts::PI.sqrt())).sqrt();
     let width = clean_width.max(noisy_width);
+    let most = (MAX_NEIGHBOUR_ENTRIES / points.len().max(1)).max(3);
     let k = if clean_width > 0.0 {
         ((NORMAL_NEIGHBOURS as f64 * (width / clean_width).powi(2)).ceil() as usize)
             .clamp(NORMAL_NEIGHBOURS, MAX_NORMAL_NEIGHBOURS)
     } else {
         NORMAL_NEIGHBOURS
-    };
-    let near = if k > NOISE_NEIGHBOURS {
-        nearest(points, &tree, k)
-    } else {
-        wide.into_iter()
-            .map(|mut near| {
-                near.truncate(k);
-                near
-            })
-            .collect()
-    };
-    let planes = plane_fits(points, &near);
-    let mut normals: Vec<DVec3> = planes.iter().map(|p| p.normal).collect();
+    }
+    .min(most);
+    let all: Vec<u32> = (0..points.len() as u32).collect();
+    let near = Neighbours::find(points, &tree, &all, k);
+    let mut normals: Vec<DVec3> = plane_fits(points, &all, &near)
+        .into_iter()
+        .map(|p| p.normal)
+        .collect();
     let (pieces, sharp_crossings) = orient(points, &near, &mut normals);
     OrientedNormals {
         normals,
@@ -125,22 +131,43 @@ pub fn oriented_normals(points: &[DVec3]) -> OrientedNormals {
     }
 }
 
-/// Each finite point's `k` nearest other points.
-fn nearest(points: &[DVec3], tree: &RTree<Indexed>, k: usize) -> Vec<Vec<u32>> {
-    points
-        .par_iter()
-        .enumerate()
-        .map(|(i, p)| {
-            if !p.is_finite() {
-                return Vec::new();
-            }
-            tree.nearest_neighbor_iter(&p.to_array())
-                .map(|n| n.data)
-                .filter(|&j| j as usize != i)
-                .take(k)
-                .collect()
-        })
-        .collect()
+/// The `k` nearest other points of some points, `k` entries each (`u32::MAX` past the
+/// last where a point has fewer), in one allocation.
+struct Neighbours {
+    k: usize,
+    ids: Vec<u32>,
+}
+
+impl Neighbours {
+    /// The neighbours of `of` (indices into `points`), in that order; none for a point
+    /// that is not finite.
+    fn find(points: &[DVec3], tree: &RTree<Indexed>, of: &[u32], k: usize) -> Self {
+        let mut ids = vec![u32::MAX; of.len() * k];
+        ids.par_chunks_mut(k.max(1))
+            .zip(of.par_iter())
+            .for_each(|(slot, &i)| {
+                let p = points[i as usize];
+                if !p.is_finite() {
+                    return;
+                }
+                let found = tree
+                    .nearest_neighbor_iter(&p.to_array())
+                    .map(|n| n.data)
+                    .filter(|&j| j != i)
+                    .take(k);
+                for (s, j) in slot.iter_mut().zip(found) {
+                    *s = j;
+                }
+            });
+        Self { k, ids }
+    }
+
+    /// The neighbours of the `r`-th point asked for.
+    fn of(&self, r: usize) -> &[u32] {
+        let row = &self.ids[r * self.k..(r + 1) * self.k];
+        let len = row.iter().position(|&j| j == u32::MAX).unwrap_or(self.k);
+        &row[..len]
+    }
 }
 
 /// A point's least-squares plane through it and its neighbours.
@@ -151,11 +178,14 @@ struct PlaneFit {
     residual: f64,
 }
 
-/// Every point's plane through it and its neighbours `near`.
-fn plane_fits(points: &[DVec3], near: &[Vec<u32>]) -> Vec<PlaneFit> {
-    near.par_iter()
+/// The plane of each point of `of` through it and its neighbours `near`.
+fn plane_fits(points: &[DVec3], of: &[u32], near: &Neighbours) -> Vec<PlaneFit> {
+    of.par_iter()
         .enumerate()
-        .map(|(i, near)| plane_fit(points[i], near.iter().map(|&j| points[j as usize])))
+        .map(|(r, &i)| {
+            let around = near.of(r).iter().map(|&j| points[j as usize]);
+            plane_fit(points[i as usize], around)
+        })
         .collect()
 }
 
@@ -196,22 +226,21 @@ fn plane_fit(p: DVec3, near: impl Iterator<Item = DVec3> + Clone) -> PlaneFit {
     }
 }
 
-/// Median over the points of their mean distance to their nearest `SPACING_NEIGHBOURS`.
-fn median_spacing(points: &[DVec3], neighbours: &[Vec<u32>]) -> f64 {
-    median(
-        neighbours
-            .iter()
-            .enumerate()
-            .filter(|(_, near)| !near.is_empty())
-            .map(|(i, near)| {
-                let k = near.len().min(SPACING_NEIGHBOURS);
-                near[..k]
-                    .iter()
-                    .map(|&j| points[i].distance(points[j as usize]))
-                    .sum::<f64>()
-                    / k as f64
-            }),
-    )
+/// Median over the points of `of` of their mean distance to their nearest
+/// `SPACING_NEIGHBOURS`.
+fn median_spacing(points: &[DVec3], of: &[u32], near: &Neighbours) -> f64 {
+    median(of.iter().enumerate().filter_map(|(r, &i)| {
+        let near = near.of(r);
+        let k = near.len().min(SPACING_NEIGHBOURS);
+        let p = points[i as usize];
+        (k > 0).then(|| {
+            near[..k]
+                .iter()
+                .map(|&j| p.distance(points[j as usize]))
+                .sum::<f64>()
+                / k as f64
+        })
+    }))
 }
 
 /// The median of `values` (0 when there are none).
@@ -232,26 +261,16 @@ const SHARP_COS: f64 = 0.5;
 /// graph (Prim's algorithm, cost `1 - |n_i . n_j|`), one tree per connected piece rooted
 /// at its highest point with its normal turned up. Returns the pieces and the sharp
 /// crossings.
-fn orient(points: &[DVec3], neighbours: &[Vec<u32>], normals: &mut [DVec3]) -> (usize, usize) {
+fn orient(points: &[DVec3], near: &Neighbours, normals: &mut [DVec3]) -> (usize, usize) {
     let n = points.len();
-    let mut adjacency: Vec<Vec<u32>> = neighbours.to_vec();
-    for (i, near) in neighbours.iter().enumerate() {
-        for &j in near {
-            adjacency[j as usize].push(i as u32);
-        }
-    }
-    for list in &mut adjacency {
-        list.sort_unstable();
-        list.dedup();
-    }
+    let adjacency = Graph::symmetric(n, near);
     let mut by_height: Vec<u32> = (0..n as u32)
         .filter(|&i| normals[i as usize] != DVec3::ZERO)
         .collect();
     by_height.sort_by(|&a, &b| points[b as usize].z.total_cmp(&points[a as usize].z));
     let mut reached = vec![false; n];
     let (mut pieces, mut sharp) = (0, 0);
-    // Cost first (the bits of a non-negative f64 order as the number), then the edge.
-    let mut heap: BinaryHeap<Reverse<(u64, u32, u32)>> = BinaryHeap::new();
+    let mut heap = CostQueue::default();
     for &root in &by_height {
         if reached[root as usize] {
             continue;
@@ -262,7 +281,7 @@ fn orient(points: &[DVec3], neighbours: &[Vec<u32>], normals: &mut [DVec3]) -> (
             normals[root as usize] = -normals[root as usize];
         }
         push_edges(root, &adjacency, normals, &reached, &mut heap);
-        while let Some(Reverse((_, from, to))) = heap.pop() {
+        while let Some((from, to)) = heap.pop() {
             let (f, t) = (from as usize, to as usize);
             if reached[t] {
                 continue;
@@ -281,22 +300,100 @@ fn orient(points: &[DVec3], neighbours: &[Vec<u32>], normals: &mut [DVec3]) -> (
     (pieces, sharp)
 }
 
+/// The symmetric neighbour graph in compressed rows: each point's neighbours and the
+/// points it is a neighbour of (an edge found both ways appears twice, which Prim's
+/// algorithm takes as it comes).
+struct Graph {
+    start: Vec<usize>,
+    to: Vec<u32>,
+}
+
+impl Graph {
+    /// The graph of the neighbours of all `n` points (`near` found for every point).
+    fn symmetric(n: usize, near: &Neighbours) -> Self {
+        let mut degree = vec![0usize; n + 1];
+        for i in 0..n {
+            for &j in near.of(i) {
+                degree[i] += 1;
+                degree[j as usize] += 1;
+            }
+        }
+        let mut start = Vec::with_capacity(n + 1);
+        let mut total = 0;
+        for d in &degree[..n] {
+            start.push(total);
+            total += d;
+        }
+        start.push(total);
+        let mut fill = start.clone();
+        let mut to = vec![0u32; total];
+        for i in 0..n {
+            for &j in near.of(i) {
+                to[fill[i]] = j;
+                fill[i] += 1;
+                to[fill[j as usize]] = i as u32;
+                fill[j as usize] += 1;
+            }
+        }
+        Self { start, to }
+    }
+
+    fn of(&self, i: usize) -> &[u32] {
+        &self.to[self.start[i]..self.start[i + 1]]
+    }
+}
+
 /// Queues the edges from `from` to the unreached neighbours that have a normal.
 fn push_edges(
     from: u32,
-    adjacency: &[Vec<u32>],
+    adjacency: &Graph,
     normals: &[DVec3],
     reached: &[bool],
-    heap: &mut BinaryHeap<Reverse<(u64, u32, u32)>>,
+    heap: &mut CostQueue,
 ) {
     let nf = normals[from as usize];
-    for &to in &adjacency[from as usize] {
+    for &to in adjacency.of(from as usize) {
         let nt = normals[to as usize];
         if reached[to as usize] || nt == DVec3::ZERO {
             continue;
         }
-        let cost = (1.0 - nf.dot(nt).abs()).max(0.0);
-        heap.push(Reverse((cost.to_bits(), from, to)));
+        heap.push(1.0 - nf.dot(nt).abs(), from, to);
+    }
+}
+
+/// Levels the costs in [0, 1] are sorted into.
+const COST_LEVELS: usize = 1024;
+
+/// Prim's queue of edges by cost, the costs `1 - |cos|` in [0, 1] sorted into
+/// `COST_LEVELS` levels: pushing and taking cost the same at any size, where a binary heap
+/// of a million-point cloud's 24 million edges took most of the orientation's time. Edges
+/// of one level (normals within a tenth of a degree near parallel) come in any order:
+/// the tree is minimal to within the level's width.
+#[derive(Default)]
+struct CostQueue {
+    levels: Vec<Vec<(u32, u32)>>,
+    lowest: usize,
+}
+
+impl CostQueue {
+    fn push(&mut self, cost: f64, from: u32, to: u32) {
+        if self.levels.is_empty() {
+            self.levels = vec![Vec::new(); COST_LEVELS];
+        }
+        let level = ((cost.clamp(0.0, 1.0) * (COST_LEVELS - 1) as f64).round() as usize)
+            .min(COST_LEVELS - 1);
+        self.levels[level].push((from, to));
+        self.lowest = self.lowest.min(level);
+    }
+
+    fn pop(&mut self) -> Option<(u32, u32)> {
+        while self.lowest < self.levels.len() {
+            if let Some(edge) = self.levels[self.lowest].pop() {
+                return Some(edge);
+            }
+            self.lowest += 1;
+        }
+        None
     }
 }
 

@@ -76,12 +76,17 @@ pub enum CloudError {
 /// Fewest points with a normal a surface is reconstructed from: one point's neighbourhood.
 const MIN_ORIENTED_POINTS: usize = NORMAL_NEIGHBOURS + 1;
 
+/// Merged vertices a cloud is reconstructed with, about, at most: a cloud of millions of
+/// points is merged on a coarser cell (by the square root of its excess) rather than
+/// handing the fit millions of vertices, whose memory grows with them.
+pub const MAX_MERGED_VERTICES: usize = 500_000;
+
 /// Fewest merged triangles taken for a surface.
 const MIN_MERGED_TRIANGLES: usize = 8;
 
 /// Reconstructs a mesh from the points of a cloud (see the module docs). `opts` are the
 /// merge's options; their `cell` is taken when set, the width the points' spacing and
-/// noise call for otherwise.
+/// noise call for otherwise (coarser on clouds of over `MAX_MERGED_VERTICES` points).
 pub fn reconstruct_cloud(points: &[DVec3], opts: &MergeOptions) -> Result<CloudMesh, CloudError> {
     let oriented = oriented_normals(points);
     let mut samples = ScanSamples {
@@ -108,7 +113,8 @@ pub fn reconstruct_cloud(points: &[DVec3], opts: &MergeOptions) -> Result<CloudM
     let cell = if opts.cell > 0.0 {
         opts.cell
     } else {
-        oriented.width
+        let excess = samples.points.len() as f64 / MAX_MERGED_VERTICES as f64;
+        oriented.width.max(oriented.spacing * excess.sqrt())
     };
     // The cloud has no triangles to fill and no rim to ramp from.
     let merge_opts = MergeOptions {
