@@ -36,12 +36,14 @@ pub struct CloudReconstruction {
     pub sharp_crossings: usize,
     /// Median local spacing of the points.
     pub median_spacing: f64,
+    /// Their 90th percentile, which the cell covers.
+    pub sparse_spacing: f64,
     /// Median RMS distance of a point's neighbourhood to its plane (the noise).
     pub noise: f64,
     /// Neighbours each normal was fitted to.
     pub normal_neighbours: usize,
-    /// The merge's cell size (its Gaussian width): 1.5 spacings on clean data, wider where
-    /// the noise needs a wider average (`remesh::oriented::OrientedNormals::width`).
+    /// The merge's cell size (its Gaussian width): 1.5 sparse spacings on clean data, wider
+    /// where the noise needs a wider average (`remesh::oriented::OrientedNormals::width`).
     pub cell: f64,
     /// Vertices of the merged mesh.
     pub merged_vertices: usize,
@@ -136,6 +138,7 @@ pub fn reconstruct_cloud(points: &[DVec3], opts: &MergeOptions) -> Result<CloudM
         pieces: oriented.pieces,
         sharp_crossings: oriented.sharp_crossings,
         median_spacing: oriented.spacing,
+        sparse_spacing: oriented.sparse_spacing,
         noise: oriented.noise,
         normal_neighbours: oriented.neighbours,
         cell,
