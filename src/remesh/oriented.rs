@@ -76,8 +76,9 @@ pub struct OrientedNormals {
     /// times `CLEAN_WIDTH_SPACINGS`, or more where the noise asks for it (see
     /// `AVERAGED_NOISE_SHARE`).
     pub width: f64,
-    /// Neighbours each normal was fitted to (more than `NORMAL_NEIGHBOURS` on noisy data,
-    /// in proportion to the area of the width).
+    /// Neighbours each normal was fitted to: more than `NORMAL_NEIGHBOURS` on noisy data
+    /// (in proportion to the area the noise's width covers), fewer on clouds of millions of
+    /// points (`MAX_NEIGHBOUR_ENTRIES`).
     pub neighbours: usize,
     /// Connected pieces of the neighbour graph, each oriented on its own.
     pub pieces: usize,
