@@ -515,3 +515,39 @@ fn cached_evaluator_and_value_rows_equal_the_basis_rows() {
     }
     println!("cached evaluator: max relative deviation {worst:e}");
 }
+
+/// At a boundary vertex whose derivatives take a deep descent, the rows are found once
+/// per 1-ring shape and kept with its quadtree: a surface that takes the trees over
+/// (`with_creases_reusing`, as every refinement round does) gives the same rows bit for
+/// bit, and a parameter a hair from the vertex (closer than a descent would resolve) gives
+/// the vertex's own position and tangent plane, where one farther in is already apart.
+#[test]
+fn boundary_vertex_rows_are_kept_with_the_tree_and_a_hair_from_it_are_its_own() {
+    for faces in [2usize, 4, 5] {
+        let m = polar(faces, 3, false, 90 + faces as u64);
+        let first = surface(&m);
+        let at = eval(&first, &m, 0, 1.0, 0.0);
+        let reused = LoopLimitSurface::with_creases_reusing(m.pos.len(), &m.tris, &[], &first)
+            .expect("the same mesh");
+        let again = eval(&reused, &m, 0, 1.0, 0.0);
+        assert_eq!(
+            [at.position, at.du, at.dv],
+            [again.position, again.du, again.dv],
+            "{faces} faces"
+        );
+        let normal = |d: &trispline::surface::Derivatives| d.du.cross(d.dv).normalize();
+        let sc = scale(&m);
+        let hair = 1e-12;
+        let near = eval(&first, &m, 0, 1.0 - hair, 0.5 * hair);
+        assert!(
+            (near.position - at.position).length() <= 1e-12 * sc,
+            "{faces}"
+        );
+        assert!(normal(&near).angle_between(normal(&at)) < 1e-9, "{faces}");
+        // Outside the snap the descent answers: the point is off the vertex.
+        let inside = 1e-6;
+        let off = eval(&first, &m, 0, 1.0 - inside, 0.5 * inside);
+        let gap = (off.position - at.position).length() / sc;
+        assert!(gap > 1e-9 && gap < 1e-4, "{faces} faces: {gap:e}");
+    }
+}

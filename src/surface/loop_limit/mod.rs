@@ -69,6 +69,14 @@ const MEMO_DEPTH: usize = 6;
 /// at 1e-10); the descent keeps full relative precision at this depth (see `Net`).
 const VERTEX_NUDGE: f64 = 1.0 / (1u64 << 40) as f64;
 
+/// Parameters this close (in barycentric weight) to a boundary, crease or corner vertex
+/// or a dart take the vertex's own rows, whose derivatives are those 2^-40 inside the
+/// face anyway (`VERTEX_NUDGE`): otherwise each takes a descent of 36 levels or more, all
+/// but 6 computed on the fly. Rim points on a control vertex and foot points sliding into
+/// one land there every round (on a range scan's ragged rim, 2.3k such descents per fit).
+/// The value moves by under 2^-36 of an edge.
+const CORNER_SNAP: f64 = 1.0 / (1u64 << 36) as f64;
+
 struct Node {
     net: Net,
     regular: Option<RegularPatch>,
@@ -103,9 +111,29 @@ struct IrregularPatch {
     /// The quadtree of child nets, shared by every face of the same 1-ring shape (see
     /// `reuse`): it is a function of the root net alone, which is the identity over the
     /// support in the canonical order of `face_net`.
-    root: std::sync::Arc<Node>,
+    tree: std::sync::Arc<Tree>,
     /// Depth at which the descent stops (see `cap_rows`).
     cap: usize,
+}
+
+/// A face's quadtree and what else is a function of its root net alone.
+struct Tree {
+    root: Node,
+    /// Per corner, the rows at a boundary, crease or corner vertex or a dart
+    /// (`vertex_rows`), found once: their derivatives take a descent to depth 40, 34
+    /// levels of it below the memoised nodes, and the boundary curve's samples and the rim
+    /// points clamped to an edge's end ask for the same corners in every round of every
+    /// fit (kept with the tree, they outlive a refined surface, as the tree does).
+    corner_rows: [OnceLock<Box<[[f64; 6]]>>; 3],
+}
+
+impl Tree {
+    fn new(net: Net) -> Tree {
+        Tree {
+            root: Node::new(net),
+            corner_rows: Default::default(),
+        }
+    }
 }
 
 enum FacePatch {
@@ -283,12 +311,27 @@ impl IrregularPatch {
             (0.0, 0.0) => Some(2),
             _ => None,
         };
-        let net = &self.root.net;
-        let irregular = corner
-            .filter(|&c| !net.corner_is_regular(c))
-            .and_then(|c| net.vertex_rule(c).map(|k| (c, k)));
+        let net = &self.tree.root.net;
+        let at_vertex = |c: u32| {
+            (!net.corner_is_regular(c))
+                .then(|| net.vertex_rule(c).map(|k| (c, k)))
+                .flatten()
+        };
+        let irregular = match corner {
+            Some(c) => at_vertex(c),
+            None => {
+                let w = [u, v, 1.0 - u - v];
+                (0..3u32)
+                    .find(|&c| w[c as usize] > 1.0 - CORNER_SNAP)
+                    .and_then(at_vertex)
+                    .filter(|(_, k)| !matches!(k, VertexRule::Smooth { dart: false, .. }))
+            }
+        };
         match irregular {
-            Some((c, k)) => self.vertex_rows(c, &k, u, v, acc),
+            Some((c, k)) => {
+                let (u, v) = [(1.0, 0.0), (0.0, 1.0), (0.0, 0.0)][c as usize];
+                self.vertex_rows(c, &k, u, v, acc)
+            }
             None => self.descend(u, v, acc),
         }
     }
@@ -330,21 +373,30 @@ impl IrregularPatch {
                     }
                 };
                 for (col, terms) in [(1usize, &du), (2, &dv)] {
-                    add_column(&self.root.net, terms, col, acc);
+                    add_column(&self.tree.root.net, terms, col, acc);
                 }
             }
             _ => {
-                let d = VERTEX_NUDGE;
-                self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, acc);
-                for a in acc.iter_mut() {
-                    a[0] = 0.0;
-                    a[3] = 0.0;
-                    a[4] = 0.0;
-                    a[5] = 0.0;
+                let rows = self.tree.corner_rows[c as usize].get_or_init(|| {
+                    let mut rows = vec![[0.0; 6]; self.support.len()];
+                    let d = VERTEX_NUDGE;
+                    self.descend((1.0 - d) * u + d / 3.0, (1.0 - d) * v + d / 3.0, &mut rows);
+                    for r in rows.iter_mut() {
+                        *r = [0.0, r[1], r[2], 0.0, 0.0, 0.0];
+                    }
+                    rows.into_boxed_slice()
+                });
+                for (a, r) in acc.iter_mut().zip(rows.iter()) {
+                    *a = *r;
                 }
             }
         }
-        add_column(&self.root.net, &kind.limit_mask(c, &self.root.net), 0, acc);
+        add_column(
+            &self.tree.root.net,
+            &kind.limit_mask(c, &self.tree.root.net),
+            0,
+            acc,
+        );
     }
 
     /// The memoised regular quadtree node holding face parameter (u, v), with the local
@@ -354,7 +406,7 @@ impl IrregularPatch {
         let at_corner = matches!((u, v), (1.0, 0.0) | (0.0, 1.0) | (0.0, 0.0));
         let (mut a, mut b) = (u, v);
         let mut jac = Jac::ID;
-        let mut node: &Node = &self.root;
+        let mut node: &Node = &self.tree.root;
         let mut depth = 0;
         loop {
             if let Some(rp) = &node.regular {
@@ -374,7 +426,7 @@ impl IrregularPatch {
     fn descend(&self, u: f64, v: f64, acc: &mut [[f64; 6]]) {
         let (mut a, mut b) = (u, v);
         let mut jac = Jac::ID;
-        let mut node: &Node = &self.root;
+        let mut node: &Node = &self.tree.root;
         let mut depth = 0;
         loop {
             if let Some(rp) = &node.regular {

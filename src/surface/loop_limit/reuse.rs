@@ -10,7 +10,7 @@
 //! mesh finds most of its shapes already built, with their memo, in the previous surface.
 
 use super::net::Net;
-use super::{FacePatch, LoopLimitSurface, Node};
+use super::{FacePatch, LoopLimitSurface, Tree};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -37,7 +37,7 @@ impl Shape {
 /// The quadtrees built so far, by the shape of their root net.
 #[derive(Default)]
 pub(super) struct Trees {
-    by_shape: HashMap<Shape, Arc<Node>>,
+    by_shape: HashMap<Shape, Arc<Tree>>,
 }
 
 impl Trees {
@@ -48,18 +48,18 @@ impl Trees {
             if let FacePatch::Irregular(ip) = patch {
                 trees
                     .by_shape
-                    .entry(Shape::of(&ip.root.net))
-                    .or_insert_with(|| ip.root.clone());
+                    .entry(Shape::of(&ip.tree.root.net))
+                    .or_insert_with(|| ip.tree.clone());
             }
         }
         trees
     }
 
     /// The tree whose root is `net`: one already built for its shape, else a new one.
-    pub(super) fn root(&mut self, net: Net) -> Arc<Node> {
+    pub(super) fn tree(&mut self, net: Net) -> Arc<Tree> {
         self.by_shape
             .entry(Shape::of(&net))
-            .or_insert_with(|| Arc::new(Node::new(net)))
+            .or_insert_with(|| Arc::new(Tree::new(net)))
             .clone()
     }
 }
@@ -146,11 +146,11 @@ mod tests {
         let reused =
             LoopLimitSurface::with_creases_reusing(refined.len(), &refined_faces, &[], &first)
                 .expect("a closed mesh");
-        let roots = |s: &LoopLimitSurface| -> Vec<*const Node> {
+        let roots = |s: &LoopLimitSurface| -> Vec<*const Tree> {
             s.patches
                 .iter()
                 .filter_map(|p| match p {
-                    FacePatch::Irregular(ip) => Some(Arc::as_ptr(&ip.root)),
+                    FacePatch::Irregular(ip) => Some(Arc::as_ptr(&ip.tree)),
                     _ => None,
                 })
                 .collect()

@@ -33,7 +33,7 @@ impl LoopLimitSurface {
                 Built::Regular(p) => FacePatch::Regular(p),
                 Built::Irregular { support, net, cap } => FacePatch::Irregular(IrregularPatch {
                     support,
-                    root: trees.root(net),
+                    tree: trees.tree(net),
                     cap,
                 }),
             })
