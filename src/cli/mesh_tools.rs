@@ -4,8 +4,7 @@ use crate::io::{read_mesh_file, write_mesh_file, LoadOptions};
 use crate::mesh::inverse::{coarsen, InverseError, InverseMethod};
 use crate::mesh::loop_subdiv::subdivide;
 use crate::mesh::stats::mesh_stats;
-use crate::pipeline::merge::{reconstruct_cloud, MergeOptions};
-use crate::remesh::points::{triangulate_points, PointCloudError, PointCloudOptions};
+use crate::pipeline::worker::{point_cloud_route, WorkerConfig};
 use anyhow::Context;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -58,23 +57,8 @@ pub fn inspect(args: &InspectArgs) -> anyhow::Result<ExitCode> {
     if loaded.is_point_cloud() {
         // What `fit` would make of it: the triangulation it fits through, the
         // reconstruction when it is no height field, or why neither.
-        let points = &loaded.mesh.positions;
-        stats["point_cloud"] = match triangulate_points(points, &PointCloudOptions::default()) {
-            Ok(t) => {
-                let mut v = serde_json::to_value(&t.stats)?;
-                v["route"] = serde_json::json!("height_field");
-                v
-            }
-            Err(PointCloudError::NotHeightField { .. }) => {
-                match reconstruct_cloud(points, &MergeOptions::default()) {
-                    Ok(made) => serde_json::to_value(&made.stats)?,
-                    Err(e) => {
-                        serde_json::json!({"refused": e.to_string(), "kind": "degenerate_point_cloud"})
-                    }
-                }
-            }
-            Err(e) => serde_json::json!({"refused": e.to_string(), "kind": e.kind()}),
-        };
+        stats["point_cloud"] =
+            point_cloud_route(&loaded.mesh, &WorkerConfig::default()).unwrap_or_default();
     }
     println!("{}", serde_json::to_string_pretty(&stats)?);
     Ok(ExitCode::SUCCESS)

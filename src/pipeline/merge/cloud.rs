@@ -180,6 +180,12 @@ mod tests {
         (q.length_squared() - 1.0).abs() / g.max(f64::MIN_POSITIVE)
     }
 
+    /// RMS distance of `points` to the sphere of radius `r` about the origin.
+    fn rms_off_sphere(points: &[DVec3], r: f64) -> f64 {
+        let sum: f64 = points.iter().map(|p| (p.length() - r).powi(2)).sum();
+        (sum / points.len() as f64).sqrt()
+    }
+
     #[test]
     fn an_ellipsoid_cloud_becomes_a_closed_mesh_on_the_ellipsoid() {
         let axes = DVec3::new(0.05, 0.03, 0.02);
@@ -215,10 +221,10 @@ mod tests {
         let noise = 0.004;
         let cloud = ellipsoid_cloud(20_000, axes, noise);
         let made = reconstruct_cloud(&cloud, &MergeOptions::default()).expect("a surface");
-        let rms = |ps: &[DVec3]| {
-            (ps.iter().map(|p| (p.length() - 0.05).powi(2)).sum::<f64>() / ps.len() as f64).sqrt()
-        };
-        let (points, merged) = (rms(&cloud), rms(&made.mesh.positions));
+        let (points, merged) = (
+            rms_off_sphere(&cloud, 0.05),
+            rms_off_sphere(&made.mesh.positions, 0.05),
+        );
         assert!(
             merged < 0.5 * points,
             "merged {merged} against points {points}"
@@ -250,10 +256,10 @@ mod tests {
         assert_eq!(stats.components, 1, "{stats:?}");
         assert_eq!(stats.boundary_loops, 0, "{stats:?}");
         assert_eq!(stats.genus, Some(0), "{stats:?}");
-        let rms = |ps: &[DVec3]| {
-            (ps.iter().map(|p| (p.length() - r).powi(2)).sum::<f64>() / ps.len() as f64).sqrt()
-        };
-        let (points, merged) = (rms(&noisy), rms(&made.mesh.positions));
+        let (points, merged) = (
+            rms_off_sphere(&noisy, r),
+            rms_off_sphere(&made.mesh.positions, r),
+        );
         assert!(
             merged < 0.25 * points,
             "merged {merged} against points {points}"

@@ -300,6 +300,20 @@ fn run_patch_measuring(
     Ok(outputs)
 }
 
+/// What the worker makes of a point cloud (a mesh without triangles) under `cfg`, as
+/// report.json's `point_cloud` gives it (the triangulation or the reconstruction it would
+/// fit, and their figures), or why it refuses the cloud (`refused`, `kind`); `None` for a
+/// mesh. What `inspect` prints.
+pub fn point_cloud_route(cloud: &TriMesh, cfg: &WorkerConfig) -> Option<serde_json::Value> {
+    if !cloud.triangles.is_empty() {
+        return None;
+    }
+    Some(match cloud::with_faces(cloud, cfg) {
+        Ok(input) => input.report().unwrap_or_default(),
+        Err(e) => json!({"refused": e.to_string(), "kind": e.kind()}),
+    })
+}
+
 /// Sets report.json's `point_cloud`, keeping a `points_to_surface` measured before.
 fn set_cloud_report(report: &mut serde_json::Value, cloud: serde_json::Value) {
     let measured = report["point_cloud"]["points_to_surface"].take();
@@ -451,8 +465,8 @@ pub(crate) fn run_input_with(
 }
 
 /// `run_input_with` on a mesh with triangles; `measured`, a reconstructed cloud's points,
-/// are measured against the surface of the largest component (not against each of `all`
-/// the components: most points would belong to the others).
+/// are measured against the surface of the largest component only (with the `all`
+/// components policy most points would belong to other parts).
 fn run_components(
     mesh: &TriMesh,
     previous: Option<&WarmStart>,
