@@ -1,5 +1,5 @@
 //! Scalar helpers for hot loops, shared by the surface evaluators and the planar maps, and
-//! the bounds and local origin of point sets.
+//! the bounds, local origin and principal axes of point sets.
 
 use glam::DVec3;
 
@@ -54,6 +54,32 @@ pub(crate) fn local_origin(points: &[DVec3]) -> DVec3 {
     let cell = 2f64.powi(diagonal.log2().ceil() as i32);
     let centre = 0.5 * (lo + hi);
     (centre / cell).round() * cell
+}
+
+/// The principal axes of `points` about `centre`: the eigenvalues of their scatter matrix
+/// (the sum of the offsets' outer products), largest first, and the unit eigenvector of
+/// each. NaN eigenvalues sort first.
+pub(crate) fn principal_axes(
+    centre: DVec3,
+    points: impl IntoIterator<Item = DVec3>,
+) -> ([f64; 3], [DVec3; 3]) {
+    let mut scatter = nalgebra::Matrix3::<f64>::zeros();
+    for p in points {
+        let d = p - centre;
+        let d = nalgebra::Vector3::new(d.x, d.y, d.z);
+        scatter += d * d.transpose();
+    }
+    let eig = scatter.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let axis = |k: usize| {
+        let c = eig.eigenvectors.column(order[k]);
+        DVec3::new(c[0], c[1], c[2])
+    };
+    (
+        order.map(|k| eig.eigenvalues[k]),
+        [axis(0), axis(1), axis(2)],
+    )
 }
 
 #[cfg(test)]

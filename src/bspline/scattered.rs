@@ -16,20 +16,8 @@ pub fn planar_parameters(points: &[DVec3]) -> Vec<(f64, f64)> {
         return Vec::new();
     }
     let c = points.iter().copied().sum::<DVec3>() / points.len() as f64;
-    let mut cov = nalgebra::Matrix3::<f64>::zeros();
-    for p in points {
-        let d = *p - c;
-        let d = nalgebra::Vector3::new(d.x, d.y, d.z);
-        cov += d * d.transpose();
-    }
-    let eig = cov.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let axis = |k: usize| {
-        let v = eig.eigenvectors.column(order[k]);
-        DVec3::new(v[0], v[1], v[2])
-    };
-    let (e1, e2) = (axis(0), axis(1));
+    let (_, axes) = crate::numeric::principal_axes(c, points.iter().copied());
+    let (e1, e2) = (axes[0], axes[1]);
     let raw: Vec<(f64, f64)> = points
         .iter()
         .map(|p| ((*p - c).dot(e1), (*p - c).dot(e2)))

@@ -218,25 +218,16 @@ fn plane_fit(p: DVec3, near: impl Iterator<Item = DVec3> + Clone) -> PlaneFit {
         return none;
     }
     let centre = (p + near.clone().sum::<DVec3>()) / count as f64;
-    let mut c = nalgebra::Matrix3::<f64>::zeros();
-    for q in std::iter::once(p).chain(near) {
-        let d = q - centre;
-        let d = nalgebra::Vector3::new(d.x, d.y, d.z);
-        c += d * d.transpose();
-    }
-    let eig = c.symmetric_eigen();
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[a].total_cmp(&eig.eigenvalues[b]));
-    let values = order.map(|k| eig.eigenvalues[k]);
+    let ([largest, middle, smallest], axes) =
+        crate::numeric::principal_axes(centre, std::iter::once(p).chain(near));
     // A plane needs two directions of spread: the middle eigenvalue must not vanish.
-    if values[1].is_nan() || values[1] <= 1e-12 * values[2] {
+    if largest.is_nan() || middle.is_nan() || middle <= 1e-12 * largest {
         return none;
     }
-    let n = eig.eigenvectors.column(order[0]);
-    match DVec3::new(n[0], n[1], n[2]).try_normalize() {
+    match axes[2].try_normalize() {
         Some(normal) => PlaneFit {
             normal,
-            residual: (values[0].max(0.0) / count as f64).sqrt(),
+            residual: (smallest.max(0.0) / count as f64).sqrt(),
         },
         None => none,
     }

@@ -205,25 +205,13 @@ pub fn triangulate_points(
 fn principal_frame(points: &[DVec3]) -> Option<PlaneFrame> {
     let n = points.len() as f64;
     let origin = points.iter().copied().sum::<DVec3>() / n;
-    let mut cov = nalgebra::Matrix3::<f64>::zeros();
-    for p in points {
-        let d = *p - origin;
-        let v = nalgebra::Vector3::new(d.x, d.y, d.z);
-        cov += v * v.transpose();
-    }
-    let eig = cov.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let (major, middle) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[1]]);
+    let (values, axes) = crate::numeric::principal_axes(origin, points.iter().copied());
+    let (major, middle) = (values[0], values[1]);
     if major.is_nan() || major <= 0.0 || middle <= 1e-12 * major {
         return None;
     }
-    let axis = |k: usize| {
-        let c = eig.eigenvectors.column(order[k]);
-        DVec3::new(c[0], c[1], c[2])
-    };
-    let e1 = axis(0).try_normalize()?;
-    let e2 = (axis(1) - e1 * axis(1).dot(e1)).try_normalize()?;
+    let e1 = axes[0].try_normalize()?;
+    let e2 = (axes[1] - e1 * axes[1].dot(e1)).try_normalize()?;
     Some(PlaneFrame { origin, e1, e2 })
 }
 
