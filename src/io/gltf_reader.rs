@@ -26,13 +26,6 @@ pub(crate) fn read_gltf(
     let e = |kind: IoErrorKind| IoError::new(file, None, kind);
     let read = std::panic::catch_unwind(AssertUnwindSafe(|| {
         let gltf = parse_validated(bytes)?;
-        for ext in gltf.extensions_required().chain(gltf.extensions_used()) {
-            if COMPRESSED.contains(&ext) {
-                return Err(IoErrorKind::unsupported(format!(
-                    "compressed meshes ({ext}) are not supported; export without compression"
-                )));
-            }
-        }
         let buffers = load_buffers(&gltf, base, opts, bytes.len() as u64)?;
         collect_mesh(&gltf, &buffers, opts)
     }));
@@ -56,9 +49,18 @@ pub(crate) fn read_gltf(
 /// so attribute, index and morph-target accessor indices are bounds-checked first.
 fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
     check_glb_header(bytes)?;
-    let unvalidated =
-        gltf::Gltf::from_slice_without_validation(bytes).map_err(IoErrorKind::Gltf)?;
+    let unvalidated = gltf::Gltf::from_slice_without_validation(bytes)
+        .map_err(|e| version_one(bytes).unwrap_or(IoErrorKind::Gltf(e)))?;
     let json = unvalidated.document.as_json();
+    // Before the validation, which a compressed primitive fails (its accessors have no
+    // buffer view) with a message that does not name the compression.
+    for ext in json.extensions_required.iter().chain(&json.extensions_used) {
+        if COMPRESSED.contains(&ext.as_str()) {
+            return Err(IoErrorKind::unsupported(format!(
+                "compressed meshes ({ext}) are not supported; export without compression"
+            )));
+        }
+    }
     let accessors = json.accessors.len();
     for (m, mesh) in json.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
@@ -89,6 +91,24 @@ fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
         document,
         blob: unvalidated.blob,
     })
+}
+
+/// Why a document the `gltf` crate cannot parse is refused, when it is glTF 1.0 (a GLB of
+/// version 1, or JSON whose `asset.version` is "1.0"): its schema differs throughout (maps
+/// of objects where 2.0 has arrays), and the crate's message ("invalid type: map,
+/// expected a sequence") does not say so.
+fn version_one(bytes: &[u8]) -> Option<IoErrorKind> {
+    let unsupported = || {
+        IoErrorKind::unsupported(
+            "glTF 1.0 is not supported (glTF 2.0 only); convert the file to glTF 2.0",
+        )
+    };
+    if bytes.starts_with(b"glTF") {
+        return (bytes.get(4..8)? == 1u32.to_le_bytes()).then(unsupported);
+    }
+    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let version = json.get("asset")?.get("version")?.as_str()?;
+    version.starts_with("1.").then(unsupported)
 }
 
 /// The `gltf` crate subtracts the 12-byte header from the GLB's declared total length
@@ -227,7 +247,7 @@ fn collect_mesh(
     buffers: &[Vec<u8>],
     opts: &LoadOptions,
 ) -> Result<TriMesh, IoErrorKind> {
-    let mut mesh = TriMesh::default();
+    let mut found = Primitives::default();
     let scenes: Vec<gltf::Scene> = gltf.scenes().collect();
     let roots: Vec<Vec<gltf::Node>> = if scenes.is_empty() {
         // No scene: take every node as a root of one implicit scene.
@@ -265,7 +285,7 @@ fn collect_mesh(
             if let Some(gm) = node.mesh() {
                 for prim in gm.primitives() {
                     add_primitive(
-                        &mut mesh,
+                        &mut found,
                         &prim,
                         gm.name().unwrap_or(""),
                         world,
@@ -277,11 +297,46 @@ fn collect_mesh(
             stack.extend(node.children().map(|c| (c, world)));
         }
     }
-    Ok(mesh)
+    found.into_mesh()
+}
+
+/// What the scene's primitives hold: triangles, points, and how many line primitives.
+#[derive(Default)]
+struct Primitives {
+    mesh: TriMesh,
+    points: Vec<DVec3>,
+    lines: usize,
+}
+
+impl Primitives {
+    /// The triangles; a scene of points only is a point cloud (a mesh without triangles,
+    /// as a PLY of vertices only), and one of lines only has nothing to fit.
+    fn into_mesh(self) -> Result<TriMesh, IoErrorKind> {
+        if !self.mesh.triangles.is_empty() {
+            if !self.points.is_empty() {
+                tracing::warn!(
+                    points = self.points.len(),
+                    "glTF point primitives beside triangles are not fitted"
+                );
+            }
+            return Ok(self.mesh);
+        }
+        if !self.points.is_empty() {
+            return Ok(TriMesh::new(self.points, Vec::new()));
+        }
+        if self.lines > 0 {
+            return Err(IoErrorKind::unsupported(format!(
+                "the scene holds {} line primitive(s) (LINES, LINE_LOOP, LINE_STRIP) and no \
+                 triangles or points: no surface to fit",
+                self.lines
+            )));
+        }
+        Ok(self.mesh)
+    }
 }
 
 fn add_primitive(
-    mesh: &mut TriMesh,
+    found: &mut Primitives,
     prim: &gltf::Primitive,
     mesh_name: &str,
     world: DMat4,
@@ -291,12 +346,11 @@ fn add_primitive(
     use gltf::accessor::{DataType, Dimensions};
     use gltf::mesh::Mode;
     let mode = prim.mode();
-    if !matches!(
-        mode,
-        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
-    ) {
+    if matches!(mode, Mode::Lines | Mode::LineLoop | Mode::LineStrip) {
+        found.lines += 1;
         return Ok(());
     }
+    let (mesh, points) = (&mut found.mesh, &mut found.points);
     let positions = prim.get(&gltf::Semantic::Positions).ok_or_else(|| {
         IoErrorKind::malformed(format!("mesh '{mesh_name}' primitive without positions"))
     })?;
@@ -307,7 +361,7 @@ fn add_primitive(
         Dimensions::Vec3,
         "POSITION",
     )?;
-    let vertex_total = mesh.positions.len().saturating_add(positions.count());
+    let vertex_total = (mesh.positions.len() + points.len()).saturating_add(positions.count());
     opts.check_vertices(vertex_total, "the glTF scene")?;
     let index_count = match prim.indices() {
         Some(a) => {
@@ -318,6 +372,7 @@ fn add_primitive(
         None => positions.count(),
     };
     let new_triangles = match mode {
+        Mode::Points => 0,
         Mode::Triangles => index_count / 3,
         _ => index_count.saturating_sub(2),
     };
@@ -345,6 +400,10 @@ fn add_primitive(
         return Err(IoErrorKind::index_out_of_range(
             "index out of range in a primitive",
         ));
+    }
+    if mode == Mode::Points {
+        points.extend(idx.iter().map(|&i| pos[i as usize]));
+        return Ok(());
     }
     let off = mesh.positions.len() as u32;
     let flip = world.determinant() < 0.0;

@@ -14,6 +14,7 @@ pub mod registration;
 pub mod step;
 pub mod stl;
 pub mod surface_json;
+mod text;
 pub mod writers;
 mod xyz;
 
@@ -455,7 +456,7 @@ mod tests {
             (b"OFF\n99999 1 0\n", Format::Off, "too_large"),
             (b"v 0 0 nan\n", Format::Obj, "non_finite"),
             (b"v 0 0 x\n", Format::Obj, "malformed"),
-            (b"\xff\xfe", Format::Obj, "not_text"),
+            (b"v 0 0 0\n\x00\x01", Format::Obj, "not_text"),
             (
                 b"ply\nformat ascii 1.0\nelement vertex 1\nproperty int8x x\nend_header\n",
                 Format::Ply,

@@ -15,13 +15,7 @@ use crate::mesh::TriMesh;
 use glam::DVec3;
 
 pub(crate) fn read_obj(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<TriMesh, IoError> {
-    let text = std::str::from_utf8(bytes).map_err(|e| {
-        IoError::at(
-            file,
-            format!("byte {}", e.valid_up_to()),
-            IoErrorKind::NotText { what: "the file" },
-        )
-    })?;
+    let text = super::text::decode(bytes, file)?;
     let err = |n: usize, kind: IoErrorKind| IoError::at(file, format!("line {n}"), kind);
     let mut positions: Vec<DVec3> = Vec::new();
     // Each face keeps its line (for errors) and the vertices read before it (negative

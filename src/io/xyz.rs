@@ -20,8 +20,7 @@ const MIN_POINT_LINE_BYTES: usize = 6;
 /// Reads an ASCII point cloud held in memory; `file` names it in errors. The result has
 /// no triangles: a point cloud.
 pub(crate) fn read_xyz(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<TriMesh, IoError> {
-    let text = std::str::from_utf8(bytes)
-        .map_err(|_| IoError::new(file, None, IoErrorKind::NotText { what: "the file" }))?;
+    let text = super::text::decode(bytes, file)?;
     let at = |line: usize, kind: IoErrorKind| IoError::at(file, format!("line {line}"), kind);
     let mut positions: Vec<DVec3> = Vec::new();
     let mut declared: Option<(usize, usize)> = None;

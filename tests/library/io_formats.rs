@@ -80,3 +80,178 @@ fn off_variants_and_obj_details() {
     assert_eq!(m.positions.len(), 4, "no vertex split at groups or seams");
     assert_eq!(m.triangles, vec![[0, 1, 2], [1, 3, 2]]);
 }
+
+/// Two facets of the unit square, as `ascii_stl_welds_shared_corners` has them.
+const SQUARE_FACETS: &str = "facet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid\n";
+
+#[test]
+fn stl_first_lines_as_exporters_write_them() {
+    // A bare `solid`, a tab, leading blanks and capitals: all ascii, none of which stl_io
+    // takes on its own (it wants "solid " and read the tab as a binary file).
+    for first in [
+        "solid",
+        "solid\tpart",
+        "  solid part",
+        "SOLID PART",
+        "solid\r",
+    ] {
+        let m = read(format!("{first}\n{SQUARE_FACETS}").as_bytes(), Format::Stl);
+        assert_eq!((m.positions.len(), m.triangles.len()), (4, 2), "{first:?}");
+    }
+}
+
+#[test]
+fn a_binary_stl_whose_header_begins_with_solid_is_read_as_binary() {
+    let mut bytes = b"solid part exported by a CAD tool".to_vec();
+    bytes.resize(80, b' ');
+    bytes.extend_from_slice(&2u32.to_le_bytes());
+    let square = [
+        [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+    ];
+    for facet in square {
+        bytes.extend([0.0f32, 0.0, 1.0].iter().flat_map(|c| c.to_le_bytes()));
+        bytes.extend(facet.iter().flatten().flat_map(|c| c.to_le_bytes()));
+        bytes.extend_from_slice(&[0, 0]);
+    }
+    let m = read(&bytes, Format::Stl);
+    assert_eq!(m.positions.len(), 4, "corners welded");
+    assert_eq!(m.triangles, vec![[0, 1, 2], [1, 3, 2]]);
+    // One byte short: neither a binary STL of its count nor ascii.
+    let e = read_mesh_bytes(
+        &bytes[..bytes.len() - 1],
+        Format::Stl,
+        "part.stl",
+        &LoadOptions::default(),
+    )
+    .expect_err("truncated");
+    assert!(e.to_string().contains("declares 2 facets"), "{e}");
+}
+
+#[test]
+fn text_formats_take_marks_other_encodings_and_free_header_lines() {
+    // A UTF-8 byte-order mark before the first vertex used to hide that vertex.
+    let m = read(
+        b"\xEF\xBB\xBFv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        Format::Obj,
+    );
+    assert_eq!(m.positions.len(), 3);
+    // UTF-16 (with its mark), as Windows tools write it.
+    let utf16: Vec<u8> = [0xFE, 0xFF]
+        .into_iter()
+        .chain(
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+                .encode_utf16()
+                .flat_map(|u| u.to_be_bytes()),
+        )
+        .collect();
+    assert_eq!(read(&utf16, Format::Obj).triangles, vec![[0, 1, 2]]);
+    // A Latin-1 material name.
+    let latin1 = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Terraind\xE6k\nf 1 2 3\n";
+    assert_eq!(read(latin1, Format::Obj).triangles.len(), 1);
+    assert_eq!(
+        read(
+            b"\xEF\xBB\xBFOFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+            Format::Off
+        )
+        .triangles
+        .len(),
+        1
+    );
+    // A PLY header line without a keyword (Blender 2.4x's "Created by" line) is free text;
+    // a known keyword in a broken form is still an error.
+    let ply = |extra: &str| {
+        format!("ply\nformat ascii 1.0\n{extra}\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    };
+    let m = read(
+        ply("Created by Blender3D 247 - www.blender.org, source file:").as_bytes(),
+        Format::Ply,
+    );
+    assert_eq!(m.triangles.len(), 1);
+    let e = read_mesh_bytes(
+        ply("element vertex").as_bytes(),
+        Format::Ply,
+        "x.ply",
+        &LoadOptions::default(),
+    )
+    .expect_err("an element line without a count");
+    assert_eq!(e.kind(), "bad_header");
+}
+
+/// A glTF document of one primitive in `mode` over three points.
+fn gltf_of_mode(mode: u32) -> String {
+    let bin: Vec<u8> = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+        .iter()
+        .flatten()
+        .flat_map(|c| c.to_le_bytes())
+        .collect();
+    let uri = format!("data:application/octet-stream;base64,{}", base64(&bin));
+    format!(
+        r#"{{"asset":{{"version":"2.0"}},"scene":0,"scenes":[{{"nodes":[0]}}],
+        "nodes":[{{"translation":[0,0,5],"mesh":0}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}},"mode":{mode}}}]}}],
+        "buffers":[{{"byteLength":36,"uri":"{uri}"}}],
+        "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#
+    )
+}
+
+#[test]
+fn gltf_points_are_a_cloud_lines_and_version_one_are_named() {
+    let cloud = read_mesh_bytes(
+        gltf_of_mode(0).as_bytes(),
+        Format::Gltf,
+        "p.gltf",
+        &LoadOptions::default(),
+    )
+    .expect("points");
+    assert!(cloud.is_point_cloud());
+    assert_eq!(
+        cloud.mesh.positions[1],
+        glam::DVec3::new(1.0, 0.0, 5.0),
+        "node transform applied"
+    );
+    for mode in [1, 2, 3] {
+        let e = read_mesh_bytes(
+            gltf_of_mode(mode).as_bytes(),
+            Format::Gltf,
+            "l.gltf",
+            &LoadOptions::default(),
+        )
+        .expect_err("lines only");
+        assert_eq!(e.kind(), "unsupported");
+        assert!(e.to_string().contains("line primitive"), "{e}");
+    }
+    let v1 = r#"{"asset":{"version":"1.0"},"meshes":{"m":{"primitives":[]}}}"#;
+    let e = read_mesh_bytes(
+        v1.as_bytes(),
+        Format::Gltf,
+        "old.gltf",
+        &LoadOptions::default(),
+    )
+    .expect_err("glTF 1.0");
+    assert!(e.to_string().contains("glTF 1.0 is not supported"), "{e}");
+    let mut glb = b"glTF".to_vec();
+    glb.extend(1u32.to_le_bytes());
+    glb.extend(20u32.to_le_bytes());
+    glb.extend(b"\x00\x00\x00\x00\x00\x00\x00\x00");
+    let e =
+        read_mesh_bytes(&glb, Format::Glb, "old.glb", &LoadOptions::default()).expect_err("GLB 1");
+    assert!(e.to_string().contains("glTF 1.0 is not supported"), "{e}");
+}
+
+#[test]
+fn a_draco_primitive_is_named_not_reported_as_missing_data() {
+    let doc = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_draco_mesh_compression"],
+        "extensionsRequired":["KHR_draco_mesh_compression"],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0},"extensions":{"KHR_draco_mesh_compression":{"bufferView":0,"attributes":{"POSITION":0}}}}]}],
+        "accessors":[{"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}]}"#;
+    let e = read_mesh_bytes(
+        doc.as_bytes(),
+        Format::Gltf,
+        "d.gltf",
+        &LoadOptions::default(),
+    )
+    .expect_err("draco");
+    assert!(e.to_string().contains("KHR_draco_mesh_compression"), "{e}");
+}

@@ -119,7 +119,7 @@ fn malformed_point_clouds_get_typed_errors() {
         (b"1 2 3\n4 nan 6\n".to_vec(), Format::Xyz, "non_finite"),
         (b"1 2 inf\n".to_vec(), Format::Xyz, "non_finite"),
         (b"# only a comment\n".to_vec(), Format::Xyz, "empty"),
-        (b"\xff\xfe1 2 3\n".to_vec(), Format::Xyz, "not_text"),
+        (b"1 2 3\n\x00\x00\n".to_vec(), Format::Xyz, "not_text"),
         (b"3\n1 2 3\n4 5 6\n".to_vec(), Format::Pts, "truncated"),
         (b"1\n1 2 3\n4 5 6\n".to_vec(), Format::Pts, "count_mismatch"),
         (

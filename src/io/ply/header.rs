@@ -93,8 +93,9 @@ pub(super) fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> 
     if bytes.get(body_offset) == Some(&b'\n') {
         body_offset += 1;
     }
-    let text = std::str::from_utf8(&bytes[..end])
-        .map_err(|_| IoError::new(file, None, IoErrorKind::NotText { what: "the header" }))?;
+    // Comments in a legacy 8-bit encoding are common; a byte that is not UTF-8 elsewhere
+    // spoils a keyword or a number, which is then reported on its line.
+    let text = String::from_utf8_lossy(&bytes[..end]);
     let mut lines = text.lines();
     if lines.next().map(str::trim) != Some("ply") {
         return Err(err(1, "missing 'ply' magic".into()));
@@ -151,7 +152,18 @@ pub(super) fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> 
                 let ty = Scalar::parse(ty).ok_or_else(|| err(n, format!("unknown type '{ty}'")))?;
                 e.props.push(Property::Scalar(name.to_string(), ty));
             }
-            _ => return Err(err(n, format!("cannot read header line '{}'", line.trim()))),
+            // A keyword this reader knows, in a form it does not, is an error; a line
+            // that starts with none is free text (Blender 2.4x wrote its "Created by"
+            // comment without the `comment` keyword) and carries no geometry.
+            [first, ..] if HEADER_KEYWORDS.contains(first) => {
+                return Err(err(n, format!("cannot read header line '{}'", line.trim())))
+            }
+            _ => tracing::warn!(
+                file,
+                line = n,
+                "PLY header line without a keyword skipped: '{}'",
+                line.trim()
+            ),
         }
     }
     let encoding = encoding.ok_or_else(|| {
@@ -171,6 +183,11 @@ pub(super) fn parse_header(bytes: &[u8], file: &str) -> Result<Header, IoError> 
         body_first_line: n + 2,
     })
 }
+
+/// The keywords of PLY header lines: a line starting with one must have its form.
+const HEADER_KEYWORDS: [&str; 6] = [
+    "ply", "format", "comment", "obj_info", "element", "property",
+];
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
     hay.windows(needle.len()).position(|w| w == needle)
