@@ -449,6 +449,13 @@ impl Writer {
                 "parse_ms": timings.parse_ms, "fit_ms": timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
             "paths": paths,
         });
+        // A whole object's surface that strays past its bound from the data (over a
+        // coarse mesh's large triangles, over a hole): said where the fits are followed,
+        // not only in report.json.
+        let stray = &outputs.report["object"]["stray"];
+        if stray["within"] == json!(false) {
+            line["stray"] = stray.clone();
+        }
         if let Some(scans) = outputs.report["session"]["scans"].as_array() {
             // An object's update: which scans its surface is fitted to.
             let ids: Vec<&serde_json::Value> = scans.iter().map(|s| &s["id"]).collect();

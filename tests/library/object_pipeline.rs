@@ -285,6 +285,25 @@ fn dispatch_follows_the_domain() {
     assert!(rms < 2e-3 * patch.bounds_diagonal(), "RMS {rms}");
 }
 
+#[test]
+fn a_whole_object_below_the_component_minimum_is_refused_as_a_scan_is() {
+    // Eight corners: at 5 % the budget is the 4-control floor, a blob far off the box.
+    let corners = cube(1);
+    assert_eq!(corners.positions.len(), 8);
+    match fit_patch(&corners, None, &config(Domain::Auto, 5.0)) {
+        Err(e) => {
+            assert_eq!(e.kind(), "too_few_vertices", "{e}");
+            assert!(e.to_string().contains("8 vertices"), "{e}");
+        }
+        Ok(_) => panic!("8 vertices are under the default minimum of 100"),
+    }
+    // The minimum is the user's to lower, on either path.
+    let mut cfg = config(Domain::Mesh, 5.0);
+    cfg.fit.components.min_vertices = 8;
+    let fitted = fit_patch(&corners, None, &cfg).expect("allowed by the config");
+    assert_eq!(fitted.object.expect("object path").data_topology.genus, 0);
+}
+
 /// A test tube: a cylinder of radius 1 and length `length`, open at z = 0 and closed by a
 /// hemisphere. A disk, but no height field over any plane.
 fn test_tube(length: f64, around: usize, rings: usize) -> TriMesh {

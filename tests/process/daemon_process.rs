@@ -228,3 +228,77 @@ fn sigterm_stops_the_daemon_gracefully() {
         "exit status {status:?}"
     );
 }
+
+/// A closed UV sphere of `around` x `rings` quads (poles fanned), as OBJ.
+fn coarse_sphere_obj(around: usize, rings: usize) -> String {
+    let mut obj = String::from("v 0 0 1\n");
+    for j in 1..rings {
+        let theta = std::f64::consts::PI * j as f64 / rings as f64;
+        for i in 0..around {
+            let phi = std::f64::consts::TAU * i as f64 / around as f64;
+            let (s, c) = (theta.sin(), theta.cos());
+            obj += &format!("v {} {} {}\n", s * phi.cos(), s * phi.sin(), c);
+        }
+    }
+    obj += "v 0 0 -1\n";
+    // 1-based: the north pole is 1, ring j's vertex i is 2 + (j - 1) * around + i.
+    let at = |j: usize, i: usize| 2 + (j - 1) * around + i % around;
+    let south = 2 + (rings - 1) * around;
+    for i in 0..around {
+        obj += &format!("f 1 {} {}\n", at(1, i), at(1, i + 1));
+        obj += &format!("f {} {south} {}\n", at(rings - 1, i), at(rings - 1, i + 1));
+        for j in 1..rings - 1 {
+            let (a, b, c, d) = (at(j, i), at(j + 1, i), at(j + 1, i + 1), at(j, i + 1));
+            obj += &format!("f {a} {b} {c}\nf {a} {c} {d}\n");
+        }
+    }
+    obj
+}
+
+#[test]
+fn an_event_says_when_a_whole_object_strays_past_its_bound() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (inbox, out, cfg) = (
+        tmp.path().join("in"),
+        tmp.path().join("out"),
+        tmp.path().join("defaults.toml"),
+    );
+    std::fs::create_dir_all(&inbox).expect("mkdir");
+    // The embedded defaults (a Loop surface at 5 % of the points), read without delay.
+    std::fs::write(&cfg, "[daemon]\nsettle_ms = 0\npoll_interval_ms = 50\n").expect("config");
+    // 146 points: 8 controls, which stray some 1.6 % of the diagonal from the facets.
+    std::fs::write(inbox.join("coarse.obj"), coarse_sphere_obj(16, 10)).expect("write");
+    // 1,298 points of the same sphere: its 39 controls hold it within the bound.
+    std::fs::write(inbox.join("fine.obj"), coarse_sphere_obj(48, 28)).expect("write");
+    let done = bin()
+        .args(["watch", &inbox.display().to_string(), "--out"])
+        .arg(&out)
+        .arg("--config")
+        .arg(&cfg)
+        .arg("--once")
+        .output()
+        .expect("runs");
+    assert!(
+        done.status.success(),
+        "{}",
+        String::from_utf8_lossy(&done.stderr)
+    );
+    let all = events(&out);
+    let of = |patch: &str| {
+        all.iter()
+            .find(|e| e["patch"] == patch)
+            .unwrap_or_else(|| panic!("no event for {patch}: {all:?}"))
+    };
+    let coarse = of("coarse");
+    assert_eq!(coarse["stray"]["within"], false, "{coarse}");
+    let share = coarse["stray"]["share_of_diagonal"]
+        .as_f64()
+        .expect("share");
+    let limit = coarse["stray"]["limit_share"].as_f64().expect("limit");
+    assert!(share > limit, "{coarse}");
+    let fine = of("fine");
+    assert!(
+        fine["status"].is_string() && fine.get("stray").is_none(),
+        "{fine}"
+    );
+}

@@ -231,6 +231,15 @@ pub(super) fn fit_as_object(
         },
         None => (fit_object(mesh, &opts).map_err(object)?, WarmDecision::None),
     };
+    // The scan path's minimum holds here too: a closed 8-vertex cube came out as a
+    // 4-control blob straying 17 % of its diagonal from its corners.
+    let min = cfg.fit.components.min_vertices;
+    if fit.data.len() < min {
+        return Err(PipelineError::TooFewVertices {
+            vertices: fit.data.len(),
+            min,
+        });
+    }
     let info = ObjectInfo {
         reason,
         warm,
