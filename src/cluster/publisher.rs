@@ -159,7 +159,7 @@ fn publish_loop(
                 let done = JobDone {
                     arrival: job.arrival,
                     cfg: job.cfg,
-                    outcome: Outcome::Incomplete { reason },
+                    outcome: Outcome::Incomplete { reason, wait: None },
                     timings: Timings::default(),
                 };
                 let _ = out.tx.send(Msg::Fitted(Box::new(done)));

@@ -31,6 +31,8 @@ pub(crate) struct Loop {
     /// Files that changed while they were read and did not parse, with when to read them
     /// again (the settle time later).
     pub(crate) retries: Vec<(Instant, Arrival)>,
+    /// The `incomplete` reason last written per patch, until its version is done.
+    pub(crate) told_incomplete: HashMap<String, String>,
     pub(crate) watchdog: sdnotify::Watchdog,
 }
 
@@ -171,10 +173,11 @@ impl Loop {
             Msg::Fitted(done) => {
                 let done = *done;
                 self.in_flight = self.in_flight.saturating_sub(1);
-                if let Outcome::Incomplete { reason } = &done.outcome {
-                    self.retry_later(&done.arrival, reason);
+                if let Outcome::Incomplete { reason, wait } = &done.outcome {
+                    self.retry_later(&done.arrival, reason, *wait);
                     return;
                 }
+                self.told_incomplete.remove(&done.arrival.id);
                 let fitted = matches!(done.outcome, Outcome::Fitted { .. });
                 let stale = superseded_by(&self.sched, &done.arrival, fitted);
                 match (stale, done.outcome) {
@@ -204,14 +207,22 @@ impl Loop {
     /// A version read while its file still changed: the patch is free again, and the file
     /// is read again after the settle time (the folder watcher also hands it on again once
     /// it is complete; the scheduler keeps one of the two).
-    fn retry_later(&mut self, a: &Arrival, reason: &str) {
+    /// The event is written once per reason: a glTF waiting for its buffer is read again
+    /// every second for up to a minute.
+    fn retry_later(&mut self, a: &Arrival, reason: &str, wait: Option<Duration>) {
         self.sched.finish(&a.id);
-        tracing::info!(patch = %a.id, version = %a.version, reason, "incomplete; will read it again");
-        let _ = self.wtx.send(WriterMsg::Event(json!({
-            "patch": a.id, "version": a.version, "input": a.label, "status": "incomplete", "reason": reason,
-        })));
+        let told = self.told_incomplete.get(&a.id).is_some_and(|r| r == reason);
+        if !told {
+            tracing::info!(patch = %a.id, version = %a.version, reason, "incomplete; will read it again");
+            let _ = self.wtx.send(WriterMsg::Event(json!({
+                "patch": a.id, "version": a.version, "input": a.label, "status": "incomplete", "reason": reason,
+            })));
+            self.told_incomplete
+                .insert(a.id.clone(), reason.to_string());
+        }
         let settle = Duration::from_millis(self.cell.get().daemon.settle_ms.max(50));
-        self.retries.push((Instant::now() + settle, a.clone()));
+        self.retries
+            .push((Instant::now() + wait.unwrap_or(settle), a.clone()));
     }
 
     /// Queues the retries that are due, keyed by the file's mtime now.

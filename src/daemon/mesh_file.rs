@@ -8,7 +8,7 @@
 
 use super::config::DaemonSection;
 use super::kinds::{rejection_kind, Cause};
-use crate::io::{read_with_base, Format, LoadOptions};
+use crate::io::{read_with_base, Format, IoErrorKind, LoadOptions};
 use crate::TriMesh;
 use std::path::Path;
 use std::time::SystemTime;
@@ -22,14 +22,26 @@ pub(crate) struct Refused {
     /// A readable mesh the daemon will not fit (over `max_vertices`), as against a broken
     /// or unreadable file.
     pub unsupported: bool,
+    /// A `.gltf` whose external buffer is not in its folder (yet: the two files of a glTF
+    /// are copied one after the other).
+    pub buffer_missing: bool,
 }
 
 impl Refused {
     fn new(cause: Cause<'_>, reason: String) -> Self {
+        let buffer_missing = matches!(
+            cause,
+            Cause::Parse(e) if matches!(
+                &e.kind,
+                IoErrorKind::ExternalBuffer { source, .. }
+                    if source.kind() == std::io::ErrorKind::NotFound
+            )
+        );
         Self {
             unsupported: matches!(cause, Cause::TooManyVertices),
             kind: rejection_kind(&cause),
             reason,
+            buffer_missing,
         }
     }
 }

@@ -272,6 +272,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         job_tx,
         workers,
         retries: Vec::new(),
+        told_incomplete: HashMap::new(),
         watchdog: sdnotify::Watchdog::from_env(),
     };
     let mut reloader = Reloader::new(opts.config_path.clone());

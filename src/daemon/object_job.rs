@@ -272,7 +272,7 @@ pub(crate) fn fit_object(
                 key.push_str(&format!("{id}\trejected\t{hash:?}\t{}\n", r.reason));
                 rejected.push(r);
             }
-            ScanRead::Changing(reason) => return Outcome::Incomplete { reason },
+            ScanRead::Changing(reason) => return Outcome::Incomplete { reason, wait: None },
         }
     }
     let hash = content_hash(key.as_bytes());

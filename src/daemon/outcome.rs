@@ -41,9 +41,13 @@ pub(crate) enum Outcome {
     /// An object none of whose scans is left (all deleted, or its folder gone): its
     /// outputs and state are removed, since they describe data that no longer exists.
     Emptied { reason: String },
-    /// The file changed while it was read and did not parse: a writer is still at it. Not
-    /// a rejection; it is read again once it settles.
-    Incomplete { reason: String },
+    /// The file changed while it was read and did not parse: a writer is still at it, or
+    /// a part of it (a glTF's buffer) has not arrived. Not a rejection; it is read again
+    /// after `wait` (`None`: the settle time).
+    Incomplete {
+        reason: String,
+        wait: Option<std::time::Duration>,
+    },
 }
 
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]

@@ -279,7 +279,7 @@ impl Writer {
                 self.metrics.unchanged.inc();
                 None
             }
-            Outcome::Incomplete { reason } => {
+            Outcome::Incomplete { reason, .. } => {
                 // The scheduler loop retries these and never sends them here.
                 tracing::info!(reason, "incomplete");
                 None

@@ -268,6 +268,36 @@ fn a_gltf_with_an_external_buffer_beside_it_is_fitted() {
     assert!(stop(child).is_some_and(|st| st.success()));
 }
 
+/// The two files of a glTF copied one after the other, the `.gltf` first: it used to be
+/// quarantined at once for its missing buffer, and the `.bin` arriving after it (no mesh
+/// itself) changed nothing. Now it waits for the buffer, said once, and is fitted.
+#[test]
+fn a_gltf_whose_buffer_arrives_after_it_waits_for_it() {
+    let s = setup(&config(200, "native", ""));
+    let child = s.spawn(&[]);
+    assert!(wait_until(|| s.log().contains("watching")), "{}", s.log());
+    let (gltf, bin) = patch_gltf_external(12, 5, "late.bin");
+    drop_file(&s.inbox, "late.gltf", gltf.as_bytes());
+    assert!(
+        wait_until(|| count(&s.out, |e| e["status"] == "incomplete") >= 1),
+        "{}",
+        s.log()
+    );
+    // Read again every second meanwhile: still one event, and nothing quarantined.
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    std::fs::write(s.inbox.join("late.bin"), &bin).expect("bin");
+    assert!(
+        wait_until(|| s.out.join("late/surface.json").exists()),
+        "{}",
+        s.log()
+    );
+    let waiting = count(&s.out, |e| e["status"] == "incomplete");
+    assert_eq!(waiting, 1, "{:?}", events(&s.out));
+    assert_eq!(count(&s.out, |e| e["status"] == "rejected"), 0);
+    assert!(s.inbox.join("late.gltf").exists());
+    assert!(stop(child).is_some_and(|st| st.success()));
+}
+
 /// `output.quarantine_dir` inside OUT under a patch's name used to be published over (or
 /// filled with that patch's versions). Now the daemon refuses to start with the reason,
 /// before it fits anything; under `OUT/quarantine` the folder is taken and a broken input
