@@ -57,6 +57,29 @@ pub(crate) struct Sources {
 }
 
 impl Loop {
+    /// A loop with nothing queued, in flight or waiting yet.
+    pub(crate) fn new(
+        cell: Arc<ConfigCell>,
+        metrics: Arc<Metrics>,
+        wtx: Sender<WriterMsg>,
+        job_tx: Sender<Job>,
+        workers: usize,
+    ) -> Self {
+        Loop {
+            sched: Scheduler::default(),
+            in_flight: 0,
+            warm: HashMap::new(),
+            cell,
+            metrics,
+            wtx,
+            job_tx,
+            workers,
+            retries: Vec::new(),
+            told_incomplete: HashMap::new(),
+            watchdog: sdnotify::Watchdog::from_env(),
+        }
+    }
+
     /// Runs until the work is done (`--once`, stdin ended) or a stop has waited for the
     /// fits in progress (or for its time bound).
     pub(crate) fn drive(

@@ -41,9 +41,7 @@ use ops::sdnotify;
 use pipe::PipeSource;
 pub use pipe::PipeSpec;
 use reload::{ConfigCell, Reloader};
-use scheduler::Scheduler;
 use state::StateStore;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -262,19 +260,7 @@ pub fn run(opts: DaemonOptions, ctl: &Control) -> Result<Summary, DaemonError> {
         dir = %opts.watch_dir.display(), out = %opts.out_dir.display(), workers, "started"
     );
     announce_ready(&ready_rx);
-    let mut lp = Loop {
-        sched: Scheduler::default(),
-        in_flight: 0,
-        warm: HashMap::new(),
-        cell,
-        metrics,
-        wtx,
-        job_tx,
-        workers,
-        retries: Vec::new(),
-        told_incomplete: HashMap::new(),
-        watchdog: sdnotify::Watchdog::from_env(),
-    };
+    let mut lp = Loop::new(cell, metrics, wtx, job_tx, workers);
     let mut reloader = Reloader::new(opts.config_path.clone());
     lp.drive(
         &inbox,
