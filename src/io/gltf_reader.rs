@@ -106,9 +106,18 @@ fn version_one(bytes: &[u8]) -> Option<IoErrorKind> {
     if bytes.starts_with(b"glTF") {
         return (bytes.get(4..8)? == 1u32.to_le_bytes()).then(unsupported);
     }
-    let json: serde_json::Value = serde_json::from_slice(bytes).ok()?;
-    let version = json.get("asset")?.get("version")?.as_str()?;
-    version.starts_with("1.").then(unsupported)
+    // Only `asset.version` is kept: every other field is skipped unallocated, so a large
+    // embedded document costs a scan, not a second copy as a JSON tree.
+    #[derive(serde::Deserialize)]
+    struct Head {
+        asset: Asset,
+    }
+    #[derive(serde::Deserialize)]
+    struct Asset {
+        version: String,
+    }
+    let head: Head = serde_json::from_slice(bytes).ok()?;
+    head.asset.version.starts_with("1.").then(unsupported)
 }
 
 /// The `gltf` crate subtracts the 12-byte header from the GLB's declared total length

@@ -40,7 +40,7 @@ pub(crate) fn read_xyz(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
         let first = values.next().unwrap_or_default();
         if content_lines == 1 {
             if let Some(count) = count_line(first, values.clone().next()) {
-                check_declared(count, bytes.len() - offset, opts).map_err(|e| at(line_no, e))?;
+                check_declared(count, text.len() - offset, opts).map_err(|e| at(line_no, e))?;
                 positions.reserve(count);
                 declared = Some((count, line_no));
                 continue;

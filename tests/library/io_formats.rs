@@ -158,6 +158,13 @@ fn text_formats_take_marks_other_encodings_and_free_header_lines() {
         .len(),
         1
     );
+    // A count line after a comment whose bytes grew in the decoding (each stray byte is a
+    // 3-byte U+FFFD): the bytes left are counted in the text.
+    let xyz = read(
+        b"# \xE6\xE6\xE6\xE6\xE6\xE6\n2\n0 0 0\n1 0 0\n",
+        Format::Xyz,
+    );
+    assert_eq!(xyz.positions.len(), 2);
     // A PLY header line without a keyword (Blender 2.4x's "Created by" line) is free text;
     // a known keyword in a broken form is still an error.
     let ply = |extra: &str| {
