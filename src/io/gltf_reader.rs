@@ -114,10 +114,16 @@ fn version_one(bytes: &[u8]) -> Option<IoErrorKind> {
     }
     #[derive(serde::Deserialize)]
     struct Asset {
-        version: String,
+        // A string by the specification; early 1.0 exporters (collada2gltf) wrote 1.
+        version: serde_json::Value,
     }
     let head: Head = serde_json::from_slice(bytes).ok()?;
-    head.asset.version.starts_with("1.").then(unsupported)
+    let one = match &head.asset.version {
+        serde_json::Value::String(v) => v.starts_with("1.") || v == "1",
+        serde_json::Value::Number(v) => v.as_f64().is_some_and(|v| v < 2.0),
+        _ => false,
+    };
+    one.then(unsupported)
 }
 
 /// The `gltf` crate subtracts the 12-byte header from the GLB's declared total length

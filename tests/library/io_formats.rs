@@ -238,6 +238,15 @@ fn gltf_points_are_a_cloud_lines_and_version_one_are_named() {
     )
     .expect_err("glTF 1.0");
     assert!(e.to_string().contains("glTF 1.0 is not supported"), "{e}");
+    let numbered = r#"{"asset":{"version":1},"meshes":{"m":{"primitives":[]}}}"#;
+    let e = read_mesh_bytes(
+        numbered.as_bytes(),
+        Format::Gltf,
+        "old.gltf",
+        &LoadOptions::default(),
+    )
+    .expect_err("collada2gltf's glTF 1.0");
+    assert!(e.to_string().contains("glTF 1.0 is not supported"), "{e}");
     let mut glb = b"glTF".to_vec();
     glb.extend(1u32.to_le_bytes());
     glb.extend(20u32.to_le_bytes());
