@@ -259,8 +259,12 @@ impl Loop {
             a.key.time = match &a.input {
                 Input::File(path) => match std::fs::metadata(path).and_then(|m| m.modified()) {
                     Ok(mtime) => mtime,
-                    // Gone: nothing to read any more.
-                    Err(_) => continue,
+                    // Gone: nothing to read any more, and a file of its name that comes
+                    // later is new, its reason worth saying again.
+                    Err(_) => {
+                        self.told_incomplete.remove(&a.id);
+                        continue;
+                    }
                 },
                 // The folder is read whole again: newer than anything before.
                 Input::Object(_) => std::time::SystemTime::now(),
