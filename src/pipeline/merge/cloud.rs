@@ -65,8 +65,9 @@ pub enum CloudError {
         /// Points whose neighbours span a plane.
         oriented: usize,
     },
-    /// The merge found no surface (the points are scattered, not on a surface).
-    #[error("the {points} points gave no surface: they are scattered rather than sampling a surface ({merged} merged triangles)")]
+    /// The merge found no surface (the points are scattered, or on a curve, not on a
+    /// surface: a glTF POINTS outline of a square gave this).
+    #[error("the {points} points gave no surface: they do not sample one (scattered, or along a curve; {merged} merged triangles)")]
     NoSurface {
         /// Points given.
         points: usize,
