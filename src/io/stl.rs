@@ -13,7 +13,7 @@ pub(crate) fn read_stl(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
         return read_binary(bytes, facets, file);
     }
     let Some(ascii) = ascii_text(bytes) else {
-        let Some(&[a, b, c, d]) = bytes.get(80..BINARY_HEADER_BYTES) else {
+        let Some(declared) = declared_facets(bytes) else {
             return Err(IoError::new(
                 file,
                 None,
@@ -23,7 +23,6 @@ pub(crate) fn read_stl(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
                 )),
             ));
         };
-        let declared = u32::from_le_bytes([a, b, c, d]);
         return Err(IoError::at(
             file,
             "byte 80",
@@ -72,10 +71,17 @@ pub(crate) fn read_stl(bytes: &[u8], file: &str) -> Result<TriMesh, IoError> {
 const BINARY_HEADER_BYTES: usize = 84;
 const BINARY_FACET_BYTES: usize = 50;
 
+/// The facet count a binary STL header states, if `bytes` are long enough to hold one.
+fn declared_facets(bytes: &[u8]) -> Option<usize> {
+    match bytes.get(80..BINARY_HEADER_BYTES)? {
+        &[a, b, c, d] => Some(u32::from_le_bytes([a, b, c, d]) as usize),
+        _ => None,
+    }
+}
+
 /// The facet count of a binary STL whose size matches it, if `bytes` is one.
 fn binary_facets(bytes: &[u8]) -> Option<usize> {
-    let count = bytes.get(80..BINARY_HEADER_BYTES)?;
-    let n = u32::from_le_bytes([count[0], count[1], count[2], count[3]]) as usize;
+    let n = declared_facets(bytes)?;
     let size = n
         .checked_mul(BINARY_FACET_BYTES)?
         .checked_add(BINARY_HEADER_BYTES)?;
