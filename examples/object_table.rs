@@ -127,6 +127,10 @@ fn main() {
         if let Some(t) = env("OBJ_TANGENTIAL") {
             opts.tangential = t;
         }
+        if let Some(f) = env("OBJ_CURVATURE_FLOOR") {
+            // A negative floor: a constant tangential share, no curvature term.
+            opts.curvature_floor = (f >= 0.0).then_some(f);
+        }
         if let Some(l) = env("OBJ_LIMIT_START") {
             opts.limit_start = l != 0.0;
         }

@@ -1,8 +1,9 @@
 //! Squared-distance minimisation (point-to-plane with a tangential share) at fixed foot
 //! points: minimise
-//!     sum_j (n_j . (S(u_j) - p_j))^2 + t_j |S(u_j) - p_j|^2  +  s |L P|^2
+//!     sum_j (n_j . r_j)^2 + t_j |r_j|^2 + r_j^T C_j r_j  +  s |L P|^2,  r_j = S(u_j) - p_j
 //! over the control points P, where u_j are foot points of the data on the current surface
-//! and n_j the surface normals there. Unlike point-to-point fitting with parameter
+//! and n_j the surface normals there; C_j, where given, is the curvature's tangential term
+//! of the squared distance (`pipeline::geometric::curvature_term`, SDM). Unlike point-to-point fitting with parameter
 //! correction, the surface may slide along itself at no cost, so a few rounds reach what
 //! many rounds of parameter correction approach slowly. `t_j` keeps the system definite
 //! where the normals alone leave a direction free (flat regions, no data), and sets how
@@ -29,6 +30,9 @@ pub(crate) struct DistanceProblem<'a> {
     pub normals: &'a [DVec3],
     /// Per data point: weight of the full point-to-point term beside the point-to-plane one.
     pub tangential: &'a [f64],
+    /// Per data point, or none: the curvature's tangential term of the squared distance
+    /// (`pipeline::geometric::curvature_term`), added to the weight.
+    pub curvature: Option<&'a [[f64; 6]]>,
     pub fairness: Option<&'a Collocation>,
     pub smoothing: f64,
 }
@@ -44,7 +48,7 @@ impl DistanceProblem<'_> {
             self.basis,
             self.data,
             self.normals,
-            self.tangential,
+            (self.tangential, self.curvature),
             fairness,
             lower_only,
         )
@@ -166,6 +170,7 @@ mod tests {
             data: &data,
             normals: &normals,
             tangential: &[1.0; 40],
+            curvature: None,
             fairness: None,
             smoothing: 0.0,
         };
@@ -210,6 +215,7 @@ mod tests {
             data: &data,
             normals: &normals,
             tangential: &[0.0; 20],
+            curvature: None,
             fairness: None,
             smoothing: 0.0,
         };
@@ -256,6 +262,7 @@ mod tests {
             data: &data,
             normals: &normals,
             tangential: &t,
+            curvature: None,
             fairness: None,
             smoothing: 0.0,
         };
@@ -325,6 +332,7 @@ mod tests {
             data: &data,
             normals: &normals,
             tangential: &(0..50).map(|j| 0.01 * (j % 5) as f64).collect::<Vec<_>>(),
+            curvature: None,
             fairness: Some(&fairness),
             smoothing: 0.7,
         };
@@ -380,6 +388,7 @@ mod tests {
                 data: &data,
                 normals: &normals,
                 tangential: &[0.01; 80],
+                curvature: None,
                 fairness: None,
                 smoothing: 0.0,
             };
@@ -439,6 +448,7 @@ mod tests {
             data: &data,
             normals: &normals,
             tangential: &vec![0.01; n],
+            curvature: None,
             fairness: Some(&fairness),
             smoothing: 1e-3,
         };

@@ -400,7 +400,7 @@ impl StencilPlan {
         normals: &[DVec3],
         tangential: &[f64],
     ) -> BlockMatrix {
-        self.assemble::<6>(rows, BlockMatrix::weight(data, normals, tangential))
+        self.assemble::<6>(rows, BlockMatrix::weight(data, normals, tangential, None))
     }
 }
 
@@ -526,7 +526,14 @@ mod tests {
         let tangential: Vec<f64> = (0..points).map(|j| [0.005, 0.05][j % 2]).collect();
         let (a, b) = (
             plan.assemble_blocks(&rows, &data, &normals, &tangential),
-            BlockMatrix::assemble(&basis, &data, &normals, &tangential, Some(fair), false),
+            BlockMatrix::assemble(
+                &basis,
+                &data,
+                &normals,
+                (&tangential, None),
+                Some(fair),
+                false,
+            ),
         );
         for (x, y) in dense(&a, m).iter().zip(&dense(&b, m)) {
             for k in 0..6 {

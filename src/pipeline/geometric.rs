@@ -125,6 +125,68 @@ fn taylor_step<S: TriSurface + ?Sized>(
     true
 }
 
+/// The curvature's share of the squared distance from a data point to a surface that
+/// moves near its foot point (Pottmann & Hofer 2003; the squared-distance minimisation of
+/// Wang, Pottmann & Liu 2006, fitted to subdivision surfaces by Cheng, Wang et al. 2004):
+/// to second order, moving the surface by x along principal direction e_i changes the
+/// squared distance by c_i x^2, c_i = |d k_i| / (1 + |d k_i|), where the surface bends
+/// away from the point (d, the point's offset along `normal`, and k_i, the principal
+/// curvature towards `normal`, of opposite signs). Where it bends towards the point the
+/// exact coefficient is negative, and SDM takes 0 there, which keeps the term convex.
+/// Returned as C = c_1 e_1 e_1^T + c_2 e_2 e_2^T, entries xx, xy, xz, yy, yz, zz (zero
+/// where the tangents degenerate). A constant tangential share instead damps every slide
+/// alike, too much where the surface is flat (slow rounds) or too little where it is
+/// curved (refused rounds).
+pub(crate) fn curvature_term(d: &Derivatives, normal: DVec3, offset: DVec3) -> [f64; 6] {
+    let (e, f, g) = (d.du.dot(d.du), d.du.dot(d.dv), d.dv.dot(d.dv));
+    let (l, m, n) = (d.duu.dot(normal), d.duv.dot(normal), d.dvv.dot(normal));
+    let det = e * g - f * f;
+    let along = offset.dot(normal);
+    if det <= 0.0 || !det.is_finite() || along == 0.0 {
+        return [0.0; 6];
+    }
+    // Principal curvatures: the eigenvalues of the shape operator I^-1 II.
+    let sum = (e * n - 2.0 * f * m + g * l) / det;
+    let product = (l * n - m * m) / det;
+    let spread = (0.25 * sum * sum - product).max(0.0).sqrt();
+    let k = [0.5 * sum + spread, 0.5 * sum - spread];
+    let c = k.map(|k| {
+        let a = along * k;
+        if a < 0.0 {
+            -a / (1.0 - a)
+        } else {
+            0.0
+        }
+    });
+    // The first principal direction: the null vector of II - k_1 I, from its longer row
+    // (any direction at an umbilic, where c_1 = c_2).
+    let rows = [[l - k[0] * e, m - k[0] * f], [m - k[0] * f, n - k[0] * g]];
+    let row = if rows[0][0].hypot(rows[0][1]) >= rows[1][0].hypot(rows[1][1]) {
+        rows[0]
+    } else {
+        rows[1]
+    };
+    let e1 = (d.du * -row[1] + d.dv * row[0])
+        .try_normalize()
+        .or_else(|| d.du.try_normalize());
+    let Some(e1) = e1 else {
+        return [0.0; 6];
+    };
+    let e2 = normal.cross(e1);
+    let outer = |v: DVec3, w: f64| {
+        [
+            w * v.x * v.x,
+            w * v.x * v.y,
+            w * v.x * v.z,
+            w * v.y * v.y,
+            w * v.y * v.z,
+            w * v.z * v.z,
+        ]
+    };
+    let (a, b) = (outer(e1, c[0]), outer(e2, c[1]));
+    std::array::from_fn(|i| a[i] + b[i])
+}
+
 /// Distance of every data point to its foot point, Newton started at its parameter.
 pub(crate) fn geometric_errors(
     surface: &dyn TriSurface,
@@ -238,5 +300,61 @@ mod tests {
         let per_point = evaluations.into_inner() as f64 / 400.0;
         eprintln!("worst step to go {worst:e}, {per_point} evaluations per point");
         assert!(per_point < 2.5, "{per_point} evaluations per point");
+    }
+
+    /// A cylinder of radius `radius` about the z axis, parameterised at angle `u` and height
+    /// `v` (scaled so the parameters are not arc length), and its outward normal.
+    fn cylinder(radius: f64, u: f64, v: f64) -> (Derivatives, DVec3) {
+        let (s, c) = (2.0 * u).sin_cos();
+        let d = Derivatives {
+            position: DVec3::new(radius * c, radius * s, 3.0 * v),
+            du: DVec3::new(-2.0 * radius * s, 2.0 * radius * c, 0.0),
+            dv: DVec3::new(0.0, 0.0, 3.0),
+            duu: DVec3::new(-4.0 * radius * c, -4.0 * radius * s, 0.0),
+            duv: DVec3::ZERO,
+            dvv: DVec3::ZERO,
+        };
+        (d, DVec3::new(c, s, 0.0))
+    }
+
+    fn quadratic_form(c: &[f64; 6], x: DVec3) -> f64 {
+        c[0] * x.x * x.x
+            + c[3] * x.y * x.y
+            + c[5] * x.z * x.z
+            + 2.0 * (c[1] * x.x * x.y + c[2] * x.x * x.z + c[4] * x.y * x.z)
+    }
+
+    /// The term is the second-order change of the exact squared distance: a point outside
+    /// a cylinder, the cylinder moved by x across its axis, is sqrt((R + d)^2 + x^2) - R
+    /// from it, d^2 + d x^2 / (R + d) to second order; moved along its axis, d from it.
+    /// Inside, moving the cylinder across brings it nearer (the exact term is negative) and
+    /// SDM takes none.
+    #[test]
+    fn the_curvature_term_is_the_second_order_change_of_the_squared_distance() {
+        let radius = 2.0;
+        let (d, normal) = cylinder(radius, 0.3, -0.4);
+        let across = normal.cross(DVec3::Z);
+        for offset in [0.05, 0.4] {
+            let c = curvature_term(&d, normal, normal * offset);
+            let squared = |x: f64| (((radius + offset).powi(2) + x * x).sqrt() - radius).powi(2);
+            let h = 1e-3;
+            let exact = (squared(h) - 2.0 * squared(0.0) + squared(-h)) / (2.0 * h * h);
+            let term = quadratic_form(&c, across);
+            assert!(
+                (term - exact).abs() < 1e-6,
+                "{offset}: {term} against {exact}"
+            );
+            assert!((term - offset / (radius + offset)).abs() < 1e-12);
+            assert!(quadratic_form(&c, DVec3::Z).abs() < 1e-12);
+            assert!(quadratic_form(&c, normal).abs() < 1e-12);
+        }
+        let inside = curvature_term(&d, normal, normal * -0.3);
+        assert!(inside.iter().all(|x| x.abs() < 1e-12), "{inside:?}");
+        // On a plane no direction costs anything.
+        let flat = Derivatives {
+            duu: DVec3::ZERO,
+            ..d
+        };
+        assert_eq!(curvature_term(&flat, normal, normal * 0.2), [0.0; 6]);
     }
 }

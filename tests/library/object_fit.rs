@@ -10,7 +10,7 @@ use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::mesh::simplify::SurfaceTopology;
 use trispline::pipeline::object::{
     extend_over_new_ground, farthest_from_data, fit_object, refit_where_changed, NotExtended,
-    ObjectFit, ObjectOptions, PreviousFit, RoundStop,
+    ObjectFit, ObjectOptions, PreviousFit, RoundStop, CURVATURE_FLOOR,
 };
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::TriMesh;
@@ -141,6 +141,47 @@ fn a_torus_is_fitted_by_a_genus_one_control_mesh() {
     assert!(max < 3e-3 * MAJOR, "analytic max {max}");
     assert!(fit.rms < 0.1 * decimated_rms(&fit));
     assert_rounds_lower_the_rms(&fit);
+}
+
+/// With `curvature_floor` the rounds minimise the squared distance with its curvature
+/// term (SDM): on the torus the surface slides freely where the constant tangential share
+/// held it back, and the same rounds end nearer the data and the analytic surface
+/// (measured: RMS 2.07e-4 against 3.14e-4, 192 controls and 16 rounds each).
+#[test]
+fn the_curvature_term_brings_the_rounds_nearer_than_a_constant_share() {
+    let mesh = torus(96, 40);
+    let analytic_rms = |fit: &ObjectFit| {
+        let evaluate = fit.surface.evaluator(&fit.controls);
+        let sum: f64 = fit
+            .params
+            .iter()
+            .map(|p| distance_to_torus(evaluate(*p).position).powi(2))
+            .sum();
+        (sum / fit.params.len() as f64).sqrt()
+    };
+    let sdm = fit_object(
+        &mesh,
+        &ObjectOptions {
+            curvature_floor: Some(CURVATURE_FLOOR),
+            ..Default::default()
+        },
+    )
+    .expect("fitted");
+    let constant = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    eprintln!(
+        "torus: curvature term rms {:.3e} (analytic {:.3e}, {} controls, {} rounds), constant share rms {:.3e} (analytic {:.3e}, {} controls, {} rounds)",
+        sdm.rms,
+        analytic_rms(&sdm),
+        sdm.controls.len(),
+        sdm.rounds.len(),
+        constant.rms,
+        analytic_rms(&constant),
+        constant.controls.len(),
+        constant.rounds.len(),
+    );
+    assert!(sdm.controls.len() <= constant.controls.len());
+    assert!(sdm.rms < constant.rms);
+    assert!(analytic_rms(&sdm) < analytic_rms(&constant));
 }
 
 /// A round is taken when it lowers the two-sided RMS (the data's distances and the

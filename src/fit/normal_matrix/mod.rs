@@ -455,43 +455,54 @@ impl ScalarMatrix {
 }
 
 impl BlockMatrix {
-    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I (`tangential`: t_j per
-    /// data row).
+    /// N^T W N + s L^T L and N^T W p with W_j = n_j n_j^T + t_j I + C_j (`tangential`: t_j
+    /// per data row; `curvature`: C_j, a symmetric 3x3 tangential term per data row, or none).
     pub(crate) fn assemble(
         n: &Csr,
         data: &[DVec3],
         normals: &[DVec3],
-        tangential: &[f64],
+        (tangential, curvature): (&[f64], Option<&[[f64; 6]]>),
         fairness: Option<Fairness>,
         lower_only: bool,
     ) -> Self {
         assemble::<6>(
             n,
-            Self::weight(data, normals, tangential),
+            Self::weight(data, normals, tangential, curvature),
             fairness,
             lower_only,
         )
     }
 
-    /// Per data row: W = n n^T + t I, its six distinct entries.
+    /// Per data row: W = n n^T + t I + C, its six distinct entries (in the order
+    /// xx, xy, xz, yy, yz, zz, as C's), and W p.
     pub(super) fn weight<'a>(
         data: &'a [DVec3],
         normals: &'a [DVec3],
         tangential: &'a [f64],
+        curvature: Option<&'a [[f64; 6]]>,
     ) -> impl Fn(usize) -> ([f64; 6], DVec3) + Sync + 'a {
         move |r: usize| {
             let (q, p, t) = (normals[r], data[r], tangential[r]);
-            (
-                [
-                    q.x * q.x + t,
-                    q.x * q.y,
-                    q.x * q.z,
-                    q.y * q.y + t,
-                    q.y * q.z,
-                    q.z * q.z + t,
-                ],
-                q * q.dot(p) + p * t,
-            )
+            let mut w = [
+                q.x * q.x + t,
+                q.x * q.y,
+                q.x * q.z,
+                q.y * q.y + t,
+                q.y * q.z,
+                q.z * q.z + t,
+            ];
+            let mut wp = q * q.dot(p) + p * t;
+            if let Some(c) = curvature.and_then(|c| c.get(r)) {
+                for (w, c) in w.iter_mut().zip(c) {
+                    *w += c;
+                }
+                wp += DVec3::new(
+                    c[0] * p.x + c[1] * p.y + c[2] * p.z,
+                    c[1] * p.x + c[3] * p.y + c[4] * p.z,
+                    c[2] * p.x + c[4] * p.y + c[5] * p.z,
+                );
+            }
+            (w, wp)
         }
     }
 

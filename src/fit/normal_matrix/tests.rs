@@ -83,7 +83,8 @@ fn scalar_assembly_and_solves_match_dense_normal_equations() {
 }
 
 /// One pattern shared by enough rows to be summed in parallel chunks (a single Bezier
-/// patch), with normals: the blocks against the dense 3m x 3m matrix.
+/// patch), with normals, tangential shares and curvature terms: the blocks against the
+/// dense 3m x 3m matrix.
 #[test]
 fn one_large_pattern_summed_in_parallel_matches_dense_blocks() {
     let m = 40;
@@ -105,12 +106,31 @@ fn one_large_pattern_summed_in_parallel_matches_dense_blocks() {
         .collect();
     // Each row its own tangential share, as near and far from the data's edges.
     let t: Vec<f64> = (0..rows_count).map(|j| [0.005, 0.05][j % 2]).collect();
-    let blocks = BlockMatrix::assemble(&n, &data, &normals, &t, None, false);
+    // A curvature term along one tangent, of a weight varying with the row (none on every
+    // third), and none past the first 2000 rows (the rows of surface samples).
+    let tangent = |j: usize| normals[j].cross(DVec3::X).normalize();
+    let curvature_of = |j: usize| {
+        let (e, k) = (tangent(j), 0.01 * (j % 3) as f64);
+        [
+            k * e.x * e.x,
+            k * e.x * e.y,
+            k * e.x * e.z,
+            k * e.y * e.y,
+            k * e.y * e.z,
+            k * e.z * e.z,
+        ]
+    };
+    let curvature: Vec<[f64; 6]> = (0..2000).map(curvature_of).collect();
+    let blocks = BlockMatrix::assemble(&n, &data, &normals, (&t, Some(&curvature)), None, false);
     let mut want = DMatrix::<f64>::zeros(3 * m, 3 * m);
     let mut rhs = DVector::<f64>::zeros(3 * m);
     for (j, row) in rows.iter().enumerate() {
         let q = normals[j];
-        let w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t[j];
+        let mut w = DMat3::from_cols(q * q.x, q * q.y, q * q.z) + DMat3::IDENTITY * t[j];
+        if j < curvature.len() {
+            let (e, k) = (tangent(j), 0.01 * (j % 3) as f64);
+            w += DMat3::from_cols(e * e.x, e * e.y, e * e.z) * k;
+        }
         let wp = w * data[j];
         for &(a, wa) in row {
             for r in 0..3 {

@@ -234,11 +234,7 @@ pub fn extend_over_new_ground(
     // The new controls start on the data (the simplification's positions): a first
     // point-to-point round at the feet on that surface places them, as a whole fit's
     // first fit does, before the squared-distance rounds.
-    let first_opts = LocalOptions {
-        rounds: 1,
-        tangential: 1.0,
-        ..LocalOptions::of(opts)
-    };
+    let first_opts = LocalOptions::point_to_point(opts);
     let feet = LocalFeet::at(new_params, initial.clone());
     // No surface samples in this round, as in a whole fit's first point fit: pulled
     // point to point (tangential share 1), a sample drags its patch along the data.

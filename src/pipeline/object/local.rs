@@ -23,7 +23,7 @@ use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
 use crate::mesh::distance::MeshDistance;
 use crate::mesh::topology::Topology;
-use crate::pipeline::geometric::foot_point;
+use crate::pipeline::geometric::{curvature_term, foot_point};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -38,6 +38,9 @@ pub(crate) struct LocalOptions {
     pub min_gain: f64,
     /// Share of the point-to-point term beside the point-to-plane one.
     pub tangential: f64,
+    /// The whole fit's `curvature_floor`: away from the rim band, the share and the
+    /// curvature's term of the squared distance in place of `tangential`.
+    pub curvature_floor: Option<f64>,
     /// Fairness weight relative to the data (as the whole-object fit's `smoothing`).
     pub smoothing: f64,
     /// When no round after the first starts (the whole-object fit's `stop`): a new version
@@ -61,11 +64,23 @@ impl LocalOptions {
             rounds: opts.rounds.max(1),
             min_gain: opts.min_gain,
             tangential: opts.tangential,
+            curvature_floor: opts.curvature_floor,
             smoothing: opts.smoothing,
             stop: opts.stop.clone(),
             hold_rim: false,
             tangential_edge: opts.tangential_edge,
             edge_rings: opts.edge_rings,
+        }
+    }
+
+    /// One point-to-point round (tangential share 1, no curvature term), as a whole
+    /// fit's first fit, with `opts`' fairness and stop.
+    pub(crate) fn point_to_point(opts: &ObjectOptions) -> Self {
+        Self {
+            rounds: 1,
+            tangential: 1.0,
+            curvature_floor: None,
+            ..Self::of(opts)
         }
     }
 }
@@ -75,6 +90,8 @@ pub(crate) struct LocalFeet {
     pub params: Vec<SurfaceParam>,
     pub normals: Vec<DVec3>,
     pub errors: Vec<f64>,
+    /// The curvature's term of each point's squared distance (zero until found).
+    pub curvature: Vec<[f64; 6]>,
 }
 
 impl LocalFeet {
@@ -82,10 +99,12 @@ impl LocalFeet {
     /// again, with the feet, for every point a refit moves).
     pub(crate) fn at(params: Vec<SurfaceParam>, errors: Vec<f64>) -> Self {
         let normals = vec![DVec3::ZERO; params.len()];
+        let curvature = vec![[0.0; 6]; params.len()];
         Self {
             params,
             normals,
             errors,
+            curvature,
         }
     }
 
@@ -99,15 +118,16 @@ impl LocalFeet {
         points: &[usize],
     ) {
         let evaluate = surface.evaluator(controls);
-        let found: Vec<(SurfaceParam, DVec3, f64)> = points
+        let found: Vec<(SurfaceParam, DVec3, f64, [f64; 6])> = points
             .par_iter()
             .with_min_len(256)
             .map(|&i| foot(surface, &*evaluate, data[i], self.params[i]))
             .collect();
-        for (&i, (param, normal, distance)) in points.iter().zip(found) {
+        for (&i, (param, normal, distance, curvature)) in points.iter().zip(found) {
             self.params[i] = param;
             self.normals[i] = normal;
             self.errors[i] = distance;
+            self.curvature[i] = curvature;
         }
     }
 }
@@ -172,20 +192,59 @@ impl RimHold {
     }
 }
 
-/// A point's foot on the surface: parameter, unit normal and distance.
+/// The moving points' tangential shares in a round of share `share` (`RimHold::share`, as
+/// a whole fit's) and, with `opts.curvature_floor`, their curvature terms, in `moving`'s
+/// order: away from the rim band the share is the floor and the term is added, both
+/// scaled as the whole fit's (`shares_and_curvature`).
+fn local_shares(
+    moving: &[usize],
+    feet: &LocalFeet,
+    hold: Option<&RimHold>,
+    share: f64,
+    opts: &LocalOptions,
+) -> (Vec<f64>, Option<Vec<[f64; 6]>>) {
+    let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
+    let class = |i: usize| hold.and_then(|h| h.class.get(i).copied()).unwrap_or(0);
+    let shares = moving
+        .iter()
+        .map(|&i| match hold {
+            Some(h) => h.share(i, share, edge_factor),
+            None => share,
+        })
+        .collect();
+    let Some(floor) = opts.curvature_floor else {
+        return (shares, None);
+    };
+    let damping = share / opts.tangential.max(f64::MIN_POSITIVE);
+    let mut shares = shares;
+    let mut curvature = vec![[0.0; 6]; moving.len()];
+    for (k, &i) in moving.iter().enumerate() {
+        if class(i) != 0 {
+            continue;
+        }
+        shares[k] = floor * damping;
+        if let Some(c) = feet.curvature.get(i) {
+            curvature[k] = c.map(|x| x * damping);
+        }
+    }
+    (shares, Some(curvature))
+}
+
+/// A point's foot on the surface: parameter, unit normal, distance and the curvature's
+/// term of its squared distance.
 fn foot(
     surface: &LoopLimitSurface,
     evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
     point: DVec3,
     start: SurfaceParam,
-) -> (SurfaceParam, DVec3, f64) {
+) -> (SurfaceParam, DVec3, f64, [f64; 6]) {
     let (param, d) = foot_point(surface, evaluate, point, start);
     let r = d.position - point;
     let normal =
         d.du.cross(d.dv)
             .try_normalize()
             .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-    (param, normal, r.length())
+    (param, normal, r.length(), curvature_term(&d, normal, -r))
 }
 
 /// A local refit's result: the controls and feet, and what it touched.
@@ -306,20 +365,13 @@ pub(crate) fn refit_around(
             ),
             None => Samples::none(),
         };
-        let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
-        let shares: Vec<f64> = moving
-            .iter()
-            .map(|&i| match &hold {
-                Some(h) => h.share(i, share, edge_factor),
-                None => share,
-            })
-            .collect();
+        let (shares, curvature) = local_shares(&moving, &feet, hold.as_ref(), share, opts);
         let solved = system.solve(
             data,
             (&moving, &feet),
             &samples,
             &controls,
-            (share, &shares),
+            (share, &shares, curvature.as_deref()),
             &mut pattern,
         );
         let Some(solved) = solved else {
@@ -333,6 +385,7 @@ pub(crate) fn refit_around(
             params: feet.params.clone(),
             normals: feet.normals.clone(),
             errors: feet.errors.clone(),
+            curvature: feet.curvature.clone(),
         };
         find(&mut trial, &next);
         let before = rounds[rounds.len() - 1].0;
@@ -504,7 +557,7 @@ impl System<'_> {
         (moving, feet): (&[usize], &LocalFeet),
         samples: &Samples,
         controls: &[DVec3],
-        (share, shares): (f64, &[f64]),
+        (share, shares, curvature): (f64, &[f64], Option<&[[f64; 6]]>),
         pattern: &mut CholeskyPattern,
     ) -> Option<Vec<DVec3>> {
         let mut basis = Csr {
@@ -580,6 +633,7 @@ impl System<'_> {
             data: &targets,
             normals: &normals,
             tangential: &tangential,
+            curvature,
             fairness: None,
             smoothing: 0.0,
         };

@@ -9,8 +9,9 @@
 //! (`layout`); a point-to-point least-squares fit at those parameters with a small umbrella
 //! fairness term; then rounds of foot points (Newton on the limit surface, crossing faces,
 //! the data's rim held on the surface's boundary curve) and squared-distance minimisation
-//! (point-to-plane with a small tangential share) until a round gains less than `min_gain`
-//! of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
+//! (point-to-plane plus the curvature's tangential term of Pottmann's squared distance,
+//! as Cheng, Wang et al. 2004 fit subdivision surfaces: `geometric::curvature_term`)
+//! until a round gains less than `min_gain` of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
 //! error is, each followed by a fit on the refined mesh.
 //! Sharp edges of the data (`mesh::crease`) are kept through the simplification, the
 //! flips and the splits, and become crease edges of the limit surface.
@@ -53,7 +54,7 @@ pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOp
 use model::{control_target, limit_surface, ms_since, MAX_REFUSALS};
 pub use model::{
     LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
-    STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
+    CURVATURE_FLOOR, STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
 };
 use refine::{faces_beyond, refined_mesh, Splits};
 pub use refine::{RefineOptions, RefineRound};
@@ -346,8 +347,7 @@ fn fit_from(
     let near_edge = side.near_edge(opts.edge_rings);
     let on_rim = rim.marks(n);
     let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
-    let mut refusals = 0;
-    let mut taken = 0;
+    let (mut refusals, mut taken) = (0, 0);
     let nearest = opts.surface_samples.then(|| side.nearest());
     let mut sampled_faces = 0;
     let mut pattern = CholeskyPattern::default();
@@ -368,13 +368,15 @@ fn fit_from(
             None => Samples::none(),
         };
         sampled_faces = samples.faces;
-        let tangential = shares(&near_edge, &on_rim, share, edge_factor);
+        let (tangential, curvature) =
+            shares_and_curvature((&near_edge, &on_rim), &feet, (share, edge_factor), opts);
         let round = DistanceRound {
             surface: &surface,
             data: &data,
             fairness: &fairness,
             smoothing,
             tangential: &tangential,
+            curvature: curvature.as_deref(),
             max_iterations: opts.max_iterations,
             samples: &samples,
             sample_tangential: share,
@@ -588,6 +590,35 @@ fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
 /// Per data point, the share of the point-to-point term in a round: `share` inside,
 /// `edge_factor` times more near the data's boundary, and all of it on the rim, where the
 /// boundary curve has to reach the points.
+/// A round's tangential shares (`shares`) and, with `opts.curvature_floor`, the points'
+/// curvature terms: away from the data's edges the share is then the floor, and the
+/// curvature term, like the shares, scaled by the Levenberg-Marquardt factor `share /
+/// opts.tangential`. Near the edges and on the rim the shares are the constant ones:
+/// there the data end, and the foot points of a rim are held on the boundary curve.
+fn shares_and_curvature(
+    (near_edge, on_rim): (&[bool], &[bool]),
+    feet: &Feet,
+    (share, edge_factor): (f64, f64),
+    opts: &ObjectOptions,
+) -> (Vec<f64>, Option<Vec<[f64; 6]>>) {
+    let mut tangential = shares(near_edge, on_rim, share, edge_factor);
+    let Some(floor) = opts.curvature_floor else {
+        return (tangential, None);
+    };
+    let damping = share / opts.tangential.max(f64::MIN_POSITIVE);
+    let mut curvature = vec![[0.0; 6]; tangential.len()];
+    for (i, t) in tangential.iter_mut().enumerate() {
+        if near_edge[i] || on_rim[i] {
+            continue;
+        }
+        *t = floor * damping;
+        if let Some(c) = feet.curvature.get(i) {
+            curvature[i] = c.map(|x| x * damping);
+        }
+    }
+    (tangential, Some(curvature))
+}
+
 fn shares(near_edge: &[bool], on_rim: &[bool], share: f64, edge_factor: f64) -> Vec<f64> {
     near_edge
         .iter()

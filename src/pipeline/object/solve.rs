@@ -10,7 +10,7 @@ use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
 use crate::mesh::distance::MeshDistance;
 use crate::mesh::topology::Topology;
-use crate::pipeline::geometric::foot_point;
+use crate::pipeline::geometric::{curvature_term, foot_point};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -102,6 +102,8 @@ pub(super) struct DistanceRound<'a> {
     pub fairness: &'a Collocation,
     pub smoothing: f64,
     pub tangential: &'a [f64],
+    /// Per data point, or none: the curvature's term of its squared distance.
+    pub curvature: Option<&'a [[f64; 6]]>,
     pub max_iterations: usize,
     pub samples: &'a Samples,
     /// Tangential share of the samples' point-to-point term.
@@ -132,6 +134,7 @@ impl DistanceRound<'_> {
             data: &data,
             normals: &normals,
             tangential: &tangential,
+            curvature: self.curvature,
             fairness: Some(self.fairness),
             smoothing: self.smoothing,
         };
@@ -344,6 +347,8 @@ pub(super) struct Feet {
     pub params: Vec<SurfaceParam>,
     pub normals: Vec<DVec3>,
     pub distances: Vec<f64>,
+    /// The curvature's term of each point's squared distance (`curvature_term`).
+    pub curvature: Vec<[f64; 6]>,
 }
 
 impl Feet {
@@ -360,7 +365,7 @@ impl Feet {
         let n = data.len().min(start.len());
         let mut order: Vec<u32> = (0..n as u32).collect();
         order.sort_by_key(|&i| start[i as usize].face);
-        let by_face: Vec<(SurfaceParam, DVec3, f64)> = order
+        let by_face: Vec<(SurfaceParam, DVec3, f64, [f64; 6])> = order
             .par_iter()
             .with_min_len(256)
             .map(|&i| {
@@ -372,17 +377,19 @@ impl Feet {
                     d.du.cross(d.dv)
                         .try_normalize()
                         .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-                (param, n, r.length())
+                (param, n, r.length(), curvature_term(&d, n, -r))
             })
             .collect();
         let mut feet = Feet {
             params: start[..n].to_vec(),
             normals: vec![DVec3::ZERO; n],
             distances: vec![0.0; n],
+            curvature: vec![[0.0; 6]; n],
         };
-        for (&i, (param, n, d)) in order.iter().zip(by_face) {
+        for (&i, (param, n, d, c)) in order.iter().zip(by_face) {
             let i = i as usize;
             (feet.params[i], feet.normals[i], feet.distances[i]) = (param, n, d);
+            feet.curvature[i] = c;
         }
         feet
     }

@@ -290,6 +290,7 @@ impl DistanceRound<'_> {
                 data: self.data,
                 normals,
                 tangential: self.tangential,
+                curvature: None,
                 fairness: Some(self.fairness),
                 smoothing: self.smoothing,
             };
@@ -308,6 +309,7 @@ impl DistanceRound<'_> {
                     data: self.data,
                     normals,
                     tangential: self.tangential,
+                    curvature: None,
                     fairness: Some(self.fairness),
                     smoothing: self.smoothing,
                 };

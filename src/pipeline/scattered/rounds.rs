@@ -139,6 +139,7 @@ fn distance_solve(
         data,
         normals: &feet.normals,
         tangential: &tangential,
+        curvature: None,
         fairness: Some(fairness),
         smoothing,
     };
