@@ -13,7 +13,7 @@ use super::state::{content_hash, StateStore};
 use crate::io::Format;
 use crate::pipeline::worker::{run_input, WarmStart};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 pub(crate) struct Job {
     pub arrival: Arrival,
@@ -134,16 +134,8 @@ fn fit_one(
         }
     }
     if let (Input::File(path), Err(r)) = (&a.input, &read) {
-        if r.buffer_missing && arrived_within(path, BUFFER_WAIT) {
-            return Outcome::Incomplete {
-                reason: format!(
-                    "{}; the glTF arrived less than {} s ago, so its buffer may still be on \
-                     its way: looked for again every second",
-                    r.reason,
-                    BUFFER_WAIT.as_secs()
-                ),
-                wait: Some(BUFFER_RETRY),
-            };
+        if let Some(incomplete) = r.awaiting_buffer(path) {
+            return incomplete;
         }
     }
     let mesh = match read {
@@ -177,27 +169,6 @@ fn fit_one(
             input_hash: Some(hash),
         },
     }
-}
-
-/// How long a `.gltf` whose external buffer is missing waits for it before it is
-/// quarantined: copying a model's files one by one takes seconds, not minutes.
-const BUFFER_WAIT: Duration = Duration::from_secs(60);
-/// How often it looks for the buffer meanwhile (the `.bin` itself is no mesh, so its
-/// arrival is no event of the watch).
-const BUFFER_RETRY: Duration = Duration::from_secs(1);
-
-/// Whether `path` came into its folder less than `wait` ago, by its inode change time: a
-/// copy or a rename into the folder sets it, while copies that keep the modification time
-/// (`cp -p`, rsync, file managers) leave an old mtime. A file that cannot be stat'ed did not.
-fn arrived_within(path: &std::path::Path, wait: Duration) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    let Ok(meta) = std::fs::metadata(path) else {
-        return false;
-    };
-    let changed = std::time::UNIX_EPOCH + Duration::new(meta.ctime().max(0) as u64, 0);
-    std::time::SystemTime::now()
-        .duration_since(changed)
-        .is_ok_and(|age| age < wait)
 }
 
 #[cfg(test)]

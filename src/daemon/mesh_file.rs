@@ -8,10 +8,11 @@
 
 use super::config::DaemonSection;
 use super::kinds::{rejection_kind, Cause};
+use super::outcome::Outcome;
 use crate::io::{read_with_base, Format, IoErrorKind, LoadOptions};
 use crate::TriMesh;
 use std::path::Path;
-use std::time::SystemTime;
+use std::time::{Duration, SystemTime};
 
 /// Why a mesh was not taken.
 #[derive(Debug)]
@@ -44,6 +45,44 @@ impl Refused {
             buffer_missing,
         }
     }
+}
+
+/// How long a `.gltf` whose external buffer is missing waits for it before it is
+/// quarantined: copying a model's files one by one takes seconds, not minutes.
+const BUFFER_WAIT: Duration = Duration::from_secs(60);
+/// How often it looks for the buffer meanwhile (the `.bin` itself is no mesh, so its
+/// arrival is no event of the watch).
+const BUFFER_RETRY: Duration = Duration::from_secs(1);
+
+impl Refused {
+    /// The `Incomplete` outcome of a `.gltf` at `path` whose buffer is missing and which
+    /// came into its folder less than `BUFFER_WAIT` ago (its buffer may still be on its
+    /// way), for a patch's file and for an object's scan alike; `None` otherwise.
+    pub(crate) fn awaiting_buffer(&self, path: &Path) -> Option<Outcome> {
+        (self.buffer_missing && arrived_within(path, BUFFER_WAIT)).then(|| Outcome::Incomplete {
+            reason: format!(
+                "{}; the glTF arrived less than {} s ago, so its buffer may still be on its \
+                 way: looked for again every second",
+                self.reason,
+                BUFFER_WAIT.as_secs()
+            ),
+            wait: Some(BUFFER_RETRY),
+        })
+    }
+}
+
+/// Whether `path` came into its folder less than `wait` ago, by its inode change time: a
+/// copy or a rename into the folder sets it, while copies that keep the modification time
+/// (`cp -p`, rsync, file managers) leave an old mtime. A file that cannot be stat'ed did not.
+fn arrived_within(path: &Path, wait: Duration) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    let Ok(meta) = std::fs::metadata(path) else {
+        return false;
+    };
+    let changed = std::time::UNIX_EPOCH + Duration::new(meta.ctime().max(0) as u64, 0);
+    SystemTime::now()
+        .duration_since(changed)
+        .is_ok_and(|age| age < wait)
 }
 
 /// A mesh file's bytes, read within the limits.

@@ -91,6 +91,9 @@ enum ScanRead {
     Rejected(ScanRejection, Option<u64>),
     /// Changed while it was read: the object is read again once it settles.
     Changing(String),
+    /// A glTF scan whose buffer may still be on its way (`Refused::awaiting_buffer`): the
+    /// object waits for it as a patch would.
+    Waiting(Outcome),
 }
 
 /// Reads, parses and registers one scan through the daemon's checked read (`mesh_file`),
@@ -119,7 +122,10 @@ fn read_scan(id: &str, file: &Path, cfg: &DaemonConfig) -> ScanRead {
     }
     let mesh = match parsed {
         Ok(mesh) => mesh,
-        Err(r) => return rejected(r, Some(hash)),
+        Err(r) => match r.awaiting_buffer(file) {
+            Some(incomplete) => return ScanRead::Waiting(incomplete),
+            None => return rejected(r, Some(hash)),
+        },
     };
     match registration_for(file, id) {
         Ok(registration) => ScanRead::Read(
@@ -273,6 +279,7 @@ pub(crate) fn fit_object(
                 rejected.push(r);
             }
             ScanRead::Changing(reason) => return Outcome::Incomplete { reason, wait: None },
+            ScanRead::Waiting(incomplete) => return incomplete,
         }
     }
     let hash = content_hash(key.as_bytes());

@@ -1,7 +1,9 @@
 //! Object folders (`[object] folders = true`): a subfolder of the watch folder is one
 //! object, every mesh in it a registered scan; one surface per object after each change.
 
-use crate::daemon_support::{events, is_fitted, read_json, setup, stop, wait_until, Setup};
+use crate::daemon_support::{
+    events, is_fitted, patch_gltf_external, read_json, setup, stop, wait_until, Setup,
+};
 use std::path::Path;
 use std::time::Instant;
 use trispline::testdata::shared_data;
@@ -524,4 +526,35 @@ fn pipe_records_with_an_object_and_a_transform_are_scans_of_that_object() {
             .map(scans_of)
             .collect::<Vec<_>>()
     );
+}
+
+/// A glTF scan in an object folder whose `.bin` is copied after it: the object waits for
+/// the buffer as a patch does (said once, read again every second), then fits the scan.
+/// It used to be rejected at once and the late buffer changed nothing.
+#[test]
+fn an_object_scan_whose_gltf_buffer_arrives_late_is_waited_for() {
+    let s = setup(&object_config(""));
+    let object = s.inbox.join("late");
+    std::fs::create_dir_all(&object).expect("mkdir");
+    let daemon = s.spawn(&[]);
+    assert!(wait_until(|| s.log().contains("watching")), "{}", s.log());
+    let (gltf, bin) = patch_gltf_external(30, 5, "view.bin");
+    write_in(&object, "view.gltf", &gltf);
+    let status = |e: &serde_json::Value, st: &str| e["patch"] == "late" && e["status"] == st;
+    assert!(
+        wait_until(|| events(&s.out).iter().any(|e| status(e, "incomplete"))),
+        "{}",
+        s.log()
+    );
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let part = object.join(".view.bin");
+    std::fs::write(&part, &bin).expect("bin");
+    std::fs::rename(&part, object.join("view.bin")).expect("rename");
+    wait_fitted(&s, "late", 1);
+    let all = events(&s.out);
+    let waiting = all.iter().filter(|e| status(e, "incomplete")).count();
+    assert_eq!(waiting, 1, "{all:?}");
+    assert!(!all.iter().any(|e| status(e, "rejected")), "{all:?}");
+    assert!(object.join("view.gltf").is_file());
+    assert!(stop(daemon).is_some_and(|st| st.success()));
 }
