@@ -119,6 +119,11 @@ pub struct FitArgs {
     /// slides past the last points, higher maximum errors).
     #[arg(long, default_value_t = CorrectionConfig::default().tangential_edge)]
     pub correction_tangential_edge: f64,
+    /// Whole objects: above 0, the rounds add the curvature's term of the squared distance
+    /// (SDM) with this share where the surface is flat, in place of the tangential share
+    /// (0: off; README, "Fitting").
+    #[arg(long, default_value_t = CorrectionConfig::default().curvature_floor)]
+    pub curvature_floor: f64,
     /// Scans: fairness weight relative to the data.
     #[arg(long, default_value_t = ScanConfig::default().smoothing)]
     pub smoothing: f64,
@@ -210,6 +215,7 @@ impl FitArgs {
                 min_gain: self.correction_min_gain,
                 tangential: self.correction_tangential,
                 tangential_edge: self.correction_tangential_edge,
+                curvature_floor: self.curvature_floor,
             },
             crease_angle_deg: self.crease_angle_deg,
             crease_relative_ratio: self.crease_relative_ratio,
@@ -301,8 +307,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
 }
 
 /// `--knot-spread` within the range of the kind asked for (the degrees are range-checked
-/// by their parsers).
+/// by their parsers), and `--curvature-floor` within the config's range.
 fn check_knot_spread(args: &FitArgs) -> anyhow::Result<()> {
+    let floor = args.curvature_floor;
+    if !(0.0..1.0).contains(&floor) {
+        anyhow::bail!("--curvature-floor {floor}: needs a value in [0, 1) (0: off)");
+    }
     let Some(k) = args.knot_spread else {
         return Ok(());
     };

@@ -606,6 +606,12 @@ fn validate_correction(c: &CorrectionConfig) -> Check {
     ] {
         check(value > 0.0 && value <= 1.0, key, value, "must be in (0, 1]")?;
     }
+    check(
+        (0.0..1.0).contains(&c.curvature_floor),
+        "fit.correction.curvature_floor",
+        c.curvature_floor,
+        "must be in [0, 1) (0: off)",
+    )?;
     Ok(())
 }
 

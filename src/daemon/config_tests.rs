@@ -170,3 +170,25 @@ fn crease_relative_ratio_is_off_or_above_one() {
         .to_string();
     assert!(e.contains("fit.crease_relative_ratio"), "{e}");
 }
+
+#[test]
+fn curvature_floor_is_off_by_default_and_checked() {
+    let with = |floor: &str| {
+        DEFAULT_CONFIG.replace(
+            "curvature_floor = 0.0",
+            &format!("curvature_floor = {floor}"),
+        )
+    };
+    let cfg = DaemonConfig::embedded_default().expect("default");
+    assert_eq!(cfg.fit.correction.curvature_floor(), None);
+    let on = DaemonConfig::parse(&with("3e-4"), "on.toml").expect("a floor");
+    assert_eq!(on.fit.correction.curvature_floor(), Some(3e-4));
+    for bad in ["-0.1", "1.0"] {
+        let e = DaemonConfig::parse(&with(bad), "bad.toml").expect_err("refused");
+        assert_eq!(e.kind(), "config_out_of_range");
+        assert!(
+            e.to_string().contains("fit.correction.curvature_floor"),
+            "{e}"
+        );
+    }
+}

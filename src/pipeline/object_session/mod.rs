@@ -520,7 +520,7 @@ impl ObjectSession {
             rounds: worker.fit.correction.rounds.max(1),
             min_gain: defaults.min_gain,
             tangential: defaults.tangential,
-            curvature_floor: defaults.curvature_floor,
+            curvature_floor: worker.fit.correction.curvature_floor(),
             smoothing: worker.fit.scan.smoothing,
             stop: RoundStop::of_budget(&budget, t),
             hold_rim: true,

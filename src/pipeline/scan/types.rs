@@ -99,6 +99,17 @@ pub struct CorrectionConfig {
     /// holes): sliding there pulls the surface past the last points (higher maximum
     /// errors), so it stays stiffer.
     pub tangential_edge: f64,
+    /// Whole objects: above 0, the rounds minimise the squared distance with its curvature
+    /// term (SDM) and this tangential share where the curvature gives none, in place of
+    /// `tangential` (`pipeline::object::CURVATURE_FLOOR` says what it measured); 0: off.
+    pub curvature_floor: f64,
+}
+
+impl CorrectionConfig {
+    /// `curvature_floor` as the whole-object fit takes it (`None`: off).
+    pub fn curvature_floor(&self) -> Option<f64> {
+        (self.curvature_floor > 0.0).then_some(self.curvature_floor)
+    }
 }
 
 impl Default for CorrectionConfig {
@@ -109,6 +120,7 @@ impl Default for CorrectionConfig {
             min_gain: 0.04,
             tangential: 0.005,
             tangential_edge: 0.02,
+            curvature_floor: 0.0,
         }
     }
 }

@@ -201,6 +201,7 @@ fn options(cfg: &WorkerConfig) -> ObjectOptions {
         },
         smoothing: cfg.fit.scan.smoothing,
         rounds: cfg.fit.correction.rounds,
+        curvature_floor: cfg.fit.correction.curvature_floor(),
         ..ObjectOptions::default()
     }
 }
