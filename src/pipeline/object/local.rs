@@ -90,7 +90,8 @@ pub(crate) struct LocalFeet {
     pub params: Vec<SurfaceParam>,
     pub normals: Vec<DVec3>,
     pub errors: Vec<f64>,
-    /// The curvature's term of each point's squared distance (zero until found).
+    /// The curvature's term of each point's squared distance (zero until found; empty,
+    /// and not found, without a curvature floor).
     pub curvature: Vec<[f64; 6]>,
 }
 
@@ -99,12 +100,11 @@ impl LocalFeet {
     /// again, with the feet, for every point a refit moves).
     pub(crate) fn at(params: Vec<SurfaceParam>, errors: Vec<f64>) -> Self {
         let normals = vec![DVec3::ZERO; params.len()];
-        let curvature = vec![[0.0; 6]; params.len()];
         Self {
             params,
             normals,
             errors,
-            curvature,
+            curvature: Vec::new(),
         }
     }
 
@@ -118,16 +118,19 @@ impl LocalFeet {
         points: &[usize],
     ) {
         let evaluate = surface.evaluator(controls);
+        let with_curvature = !self.curvature.is_empty();
         let found: Vec<(SurfaceParam, DVec3, f64, [f64; 6])> = points
             .par_iter()
             .with_min_len(256)
-            .map(|&i| foot(surface, &*evaluate, data[i], self.params[i]))
+            .map(|&i| foot(surface, &*evaluate, data[i], self.params[i], with_curvature))
             .collect();
         for (&i, (param, normal, distance, curvature)) in points.iter().zip(found) {
             self.params[i] = param;
             self.normals[i] = normal;
             self.errors[i] = distance;
-            self.curvature[i] = curvature;
+            if let Some(slot) = self.curvature.get_mut(i) {
+                *slot = curvature;
+            }
         }
     }
 }
@@ -230,13 +233,14 @@ fn local_shares(
     (shares, Some(curvature))
 }
 
-/// A point's foot on the surface: parameter, unit normal, distance and the curvature's
-/// term of its squared distance.
+/// A point's foot on the surface: parameter, unit normal, distance and, with `curvature`,
+/// the curvature's term of its squared distance.
 fn foot(
     surface: &LoopLimitSurface,
     evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
     point: DVec3,
     start: SurfaceParam,
+    curvature: bool,
 ) -> (SurfaceParam, DVec3, f64, [f64; 6]) {
     let (param, d) = foot_point(surface, evaluate, point, start);
     let r = d.position - point;
@@ -244,7 +248,12 @@ fn foot(
         d.du.cross(d.dv)
             .try_normalize()
             .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-    (param, normal, r.length(), curvature_term(&d, normal, -r))
+    let term = if curvature {
+        curvature_term(&d, normal, -r)
+    } else {
+        [0.0; 6]
+    };
+    (param, normal, r.length(), term)
 }
 
 /// A local refit's result: the controls and feet, and what it touched.
@@ -316,6 +325,9 @@ pub(crate) fn refit_around(
             h.hold(feet, surface, controls, data, &is_moving);
         }
     };
+    if opts.curvature_floor.is_some() {
+        feet.curvature = vec![[0.0; 6]; n];
+    }
     find(&mut feet, &controls);
     let mut rounds = vec![rms_of(&feet.errors, &moving)];
 

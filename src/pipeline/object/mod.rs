@@ -325,7 +325,12 @@ fn fit_from(
     };
     let (mut controls, mut feet) = match warm {
         Some(controls) => {
-            let mut feet = Feet::find(&surface, &controls, &data, &params);
+            let mut feet = Feet::find(
+                &surface,
+                &controls,
+                &data,
+                (&params, opts.curvature_floor.is_some()),
+            );
             rim.hold(&mut feet, &surface, &controls, &data);
             (controls, feet)
         }
@@ -461,7 +466,7 @@ fn first_fit(
 ) -> Result<(Vec<DVec3>, Feet), ObjectError> {
     let positions = &f.control_mesh.positions;
     let params = if opts.limit_start {
-        let mut start = Feet::find(f.surface, positions, f.data, &params);
+        let mut start = Feet::find(f.surface, positions, f.data, (&params, false));
         f.rim.hold(&mut start, f.surface, positions, f.data);
         start.params
     } else {
@@ -478,7 +483,12 @@ fn first_fit(
     )
     .ok_or(ObjectError::Solve { stage: "first" })?;
     drop(rows);
-    let mut feet = Feet::find(f.surface, &controls, f.data, &params);
+    let mut feet = Feet::find(
+        f.surface,
+        &controls,
+        f.data,
+        (&params, opts.curvature_floor.is_some()),
+    );
     f.rim.hold(&mut feet, f.surface, &controls, f.data);
     Ok((controls, feet))
 }

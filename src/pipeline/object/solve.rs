@@ -156,7 +156,8 @@ impl DistanceRound<'_> {
         nearest: Option<&MeshDistance>,
         before: f64,
     ) -> Option<(Feet, Vec<DVec3>, f64)> {
-        let mut feet = Feet::find(self.surface, &next, self.data, start);
+        let with_curvature = self.curvature.is_some();
+        let mut feet = Feet::find(self.surface, &next, self.data, (start, with_curvature));
         rim.hold(&mut feet, self.surface, &next, self.data);
         let on_samples = match nearest {
             Some(nearest) => self.samples.distances_at(self.surface, &next, nearest),
@@ -347,17 +348,19 @@ pub(super) struct Feet {
     pub params: Vec<SurfaceParam>,
     pub normals: Vec<DVec3>,
     pub distances: Vec<f64>,
-    /// The curvature's term of each point's squared distance (`curvature_term`).
+    /// The curvature's term of each point's squared distance (`curvature_term`; empty
+    /// when not asked for).
     pub curvature: Vec<[f64; 6]>,
 }
 
 impl Feet {
-    /// Newton on the limit surface from `start`, crossing faces through `step`.
+    /// Newton on the limit surface from `start`, crossing faces through `step`; with
+    /// `curvature`, each point's curvature term too (else `curvature` stays empty).
     pub(super) fn find(
         surface: &LoopLimitSurface,
         controls: &[DVec3],
         data: &[DVec3],
-        start: &[SurfaceParam],
+        (start, curvature): (&[SurfaceParam], bool),
     ) -> Feet {
         let evaluate = surface.evaluator(controls);
         // Points taken face by face: the evaluator keeps the last leaf patch of an
@@ -377,19 +380,26 @@ impl Feet {
                     d.du.cross(d.dv)
                         .try_normalize()
                         .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-                (param, n, r.length(), curvature_term(&d, n, -r))
+                let term = if curvature {
+                    curvature_term(&d, n, -r)
+                } else {
+                    [0.0; 6]
+                };
+                (param, n, r.length(), term)
             })
             .collect();
         let mut feet = Feet {
             params: start[..n].to_vec(),
             normals: vec![DVec3::ZERO; n],
             distances: vec![0.0; n],
-            curvature: vec![[0.0; 6]; n],
+            curvature: vec![[0.0; 6]; if curvature { n } else { 0 }],
         };
         for (&i, (param, n, d, c)) in order.iter().zip(by_face) {
             let i = i as usize;
             (feet.params[i], feet.normals[i], feet.distances[i]) = (param, n, d);
-            feet.curvature[i] = c;
+            if let Some(slot) = feet.curvature.get_mut(i) {
+                *slot = c;
+            }
         }
         feet
     }
