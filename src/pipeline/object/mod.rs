@@ -324,16 +324,7 @@ fn fit_from(
         smoothing,
     };
     let (mut controls, mut feet) = match warm {
-        Some(controls) => {
-            let mut feet = Feet::find(
-                &surface,
-                &controls,
-                &data,
-                (&params, opts.curvature_floor.is_some()),
-            );
-            rim.hold(&mut feet, &surface, &controls, &data);
-            (controls, feet)
-        }
+        Some(controls) => warm_start(&first, controls, &params, opts),
         None => first_fit(first, params, opts)?,
     };
     times.first_fit_ms = ms_since(t);
@@ -455,6 +446,20 @@ struct FirstFit<'a> {
     rim: &'a Rim,
     fairness: &'a Collocation,
     smoothing: f64,
+}
+
+/// A warm start's first fit: the previous controls as they are, and the data's feet on
+/// their surface from `params`, the rim held.
+fn warm_start(
+    f: &FirstFit,
+    controls: Vec<DVec3>,
+    params: &[SurfaceParam],
+    opts: &ObjectOptions,
+) -> (Vec<DVec3>, Feet) {
+    let with_curvature = opts.curvature_floor.is_some();
+    let mut feet = Feet::find(f.surface, &controls, f.data, (params, with_curvature));
+    f.rim.hold(&mut feet, f.surface, &controls, f.data);
+    (controls, feet)
 }
 
 /// The point-to-point fit at the initial parameters (or, with `limit_start`, at their foot
