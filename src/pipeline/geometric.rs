@@ -303,12 +303,13 @@ mod tests {
     }
 
     /// A cylinder of radius `radius` about the z axis, parameterised at angle `u` and height
-    /// `v` (scaled so the parameters are not arc length), and its outward normal.
-    fn cylinder(radius: f64, u: f64, v: f64) -> (Derivatives, DVec3) {
+    /// `v` (scaled so the parameters are not arc length, and sheared by `shear` so that
+    /// they need not be orthogonal either), and its outward normal.
+    fn cylinder(radius: f64, u: f64, v: f64, shear: f64) -> (Derivatives, DVec3) {
         let (s, c) = (2.0 * u).sin_cos();
         let d = Derivatives {
-            position: DVec3::new(radius * c, radius * s, 3.0 * v),
-            du: DVec3::new(-2.0 * radius * s, 2.0 * radius * c, 0.0),
+            position: DVec3::new(radius * c, radius * s, 3.0 * v + shear * u),
+            du: DVec3::new(-2.0 * radius * s, 2.0 * radius * c, shear),
             dv: DVec3::new(0.0, 0.0, 3.0),
             duu: DVec3::new(-4.0 * radius * c, -4.0 * radius * s, 0.0),
             duv: DVec3::ZERO,
@@ -332,10 +333,16 @@ mod tests {
     #[test]
     fn the_curvature_term_is_the_second_order_change_of_the_squared_distance() {
         let radius = 2.0;
-        let (d, normal) = cylinder(radius, 0.3, -0.4);
+        for shear in [0.0, 1.7] {
+            let (d, normal) = cylinder(radius, 0.3, -0.4, shear);
+            second_order_on_a_cylinder(&d, normal, radius);
+        }
+    }
+
+    fn second_order_on_a_cylinder(d: &Derivatives, normal: DVec3, radius: f64) {
         let across = normal.cross(DVec3::Z);
         for offset in [0.05, 0.4] {
-            let c = curvature_term(&d, normal, normal * offset);
+            let c = curvature_term(d, normal, normal * offset);
             let squared = |x: f64| (((radius + offset).powi(2) + x * x).sqrt() - radius).powi(2);
             let h = 1e-3;
             let exact = (squared(h) - 2.0 * squared(0.0) + squared(-h)) / (2.0 * h * h);
@@ -348,12 +355,12 @@ mod tests {
             assert!(quadratic_form(&c, DVec3::Z).abs() < 1e-12);
             assert!(quadratic_form(&c, normal).abs() < 1e-12);
         }
-        let inside = curvature_term(&d, normal, normal * -0.3);
+        let inside = curvature_term(d, normal, normal * -0.3);
         assert!(inside.iter().all(|x| x.abs() < 1e-12), "{inside:?}");
         // On a plane no direction costs anything.
         let flat = Derivatives {
             duu: DVec3::ZERO,
-            ..d
+            ..*d
         };
         assert_eq!(curvature_term(&flat, normal, normal * 0.2), [0.0; 6]);
     }
