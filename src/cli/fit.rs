@@ -248,7 +248,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
     let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let cfg = args.worker_config();
-    check_knot_spread(args)?;
+    check_ranges(args)?;
     let progress = Progress::new(cfg.fit.budget.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
     let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));
@@ -306,9 +306,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// `--knot-spread` within the range of the kind asked for (the degrees are range-checked
-/// by their parsers), and `--curvature-floor` within the config's range.
-fn check_knot_spread(args: &FitArgs) -> anyhow::Result<()> {
+/// The flags whose range their parsers do not check: `--curvature-floor` within the
+/// config's range, `--knot-spread` within the range of the kind asked for.
+fn check_ranges(args: &FitArgs) -> anyhow::Result<()> {
     let floor = args.curvature_floor;
     if !(0.0..1.0).contains(&floor) {
         anyhow::bail!("--curvature-floor {floor}: needs a value in [0, 1) (0: off)");

@@ -127,6 +127,8 @@ fn degrees_and_spreads_out_of_range_are_refused() {
         ["--dms-degree", "1"],
         ["--bpatch-degree", "30"],
         ["--knot-spread", "1.5"],
+        ["--curvature-floor", "1.5"],
+        ["--curvature-floor", "1"],
     ] {
         let o = trispline(&[
             "fit",
@@ -140,6 +142,10 @@ fn degrees_and_spreads_out_of_range_are_refused() {
         ]);
         assert!(!o.status.success(), "{flags:?} accepted");
         assert!(!out.join("surface.json").exists());
+        if flags[0] == "--curvature-floor" {
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert!(stderr.contains("needs a value in [0, 1)"), "{stderr}");
+        }
     }
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, DMS_CONFIG.replace("degree = 2", "degree = 5")).expect("write");
