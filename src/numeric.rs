@@ -3,6 +3,30 @@
 
 use glam::DVec3;
 
+/// The six distinct entries of the symmetric matrix w v v^T, packed in the order xx, xy,
+/// xz, yy, yz, zz (a plane's quadric, the normal matrix's 3x3 blocks, a curvature term).
+#[inline]
+pub(crate) fn packed_outer(v: DVec3, w: f64) -> [f64; 6] {
+    [
+        w * v.x * v.x,
+        w * v.x * v.y,
+        w * v.x * v.z,
+        w * v.y * v.y,
+        w * v.y * v.z,
+        w * v.z * v.z,
+    ]
+}
+
+/// S v for a symmetric S packed as [`packed_outer`] packs it.
+#[inline]
+pub(crate) fn packed_mul(s: &[f64; 6], v: DVec3) -> DVec3 {
+    DVec3::new(
+        s[0] * v.x + s[1] * v.y + s[2] * v.z,
+        s[1] * v.x + s[3] * v.y + s[4] * v.z,
+        s[2] * v.x + s[4] * v.y + s[5] * v.z,
+    )
+}
+
 /// `x.floor()` for |x| < 2^63 without the libm call that `floor` is on baseline x86-64
 /// (no SSE4.1 rounding instruction): every surface evaluation locates its cell.
 #[inline(always)]

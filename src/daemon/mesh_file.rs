@@ -45,16 +45,7 @@ impl Refused {
             buffer_missing,
         }
     }
-}
 
-/// How long a `.gltf` whose external buffer is missing waits for it before it is
-/// quarantined: copying a model's files one by one takes seconds, not minutes.
-const BUFFER_WAIT: Duration = Duration::from_secs(60);
-/// How often it looks for the buffer meanwhile (the `.bin` itself is no mesh, so its
-/// arrival is no event of the watch).
-const BUFFER_RETRY: Duration = Duration::from_secs(1);
-
-impl Refused {
     /// The `Incomplete` outcome of a `.gltf` at `path` whose buffer is missing and which
     /// came into its folder less than `BUFFER_WAIT` ago (its buffer may still be on its
     /// way), for a patch's file and for an object's scan alike; `None` otherwise.
@@ -70,6 +61,13 @@ impl Refused {
         })
     }
 }
+
+/// How long a `.gltf` whose external buffer is missing waits for it before it is
+/// quarantined: copying a model's files one by one takes seconds, not minutes.
+const BUFFER_WAIT: Duration = Duration::from_secs(60);
+/// How often it looks for the buffer meanwhile (the `.bin` itself is no mesh, so its
+/// arrival is no event of the watch).
+const BUFFER_RETRY: Duration = Duration::from_secs(1);
 
 /// Whether `path` came into its folder less than `wait` ago, by its inode change time: a
 /// copy or a rename into the folder sets it, while copies that keep the modification time

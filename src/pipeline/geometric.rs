@@ -1,6 +1,7 @@
 //! Geometric error: the distance from a data point to its foot point on the surface,
 //! found by Newton iterations on `|S(u) - p|^2` started from the data point's parameter.
 
+use crate::numeric::packed_outer;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -173,17 +174,7 @@ pub(crate) fn curvature_term(d: &Derivatives, normal: DVec3, offset: DVec3) -> [
         return [0.0; 6];
     };
     let e2 = normal.cross(e1);
-    let outer = |v: DVec3, w: f64| {
-        [
-            w * v.x * v.x,
-            w * v.x * v.y,
-            w * v.x * v.z,
-            w * v.y * v.y,
-            w * v.y * v.z,
-            w * v.z * v.z,
-        ]
-    };
-    let (a, b) = (outer(e1, c[0]), outer(e2, c[1]));
+    let (a, b) = (packed_outer(e1, c[0]), packed_outer(e2, c[1]));
     std::array::from_fn(|i| a[i] + b[i])
 }
 

@@ -17,6 +17,7 @@
 //! solve) and a row costs six multiplies per pair.
 
 use super::csr::Csr;
+use crate::numeric::{packed_mul, packed_outer};
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
@@ -483,24 +484,16 @@ impl BlockMatrix {
     ) -> impl Fn(usize) -> ([f64; 6], DVec3) + Sync + 'a {
         move |r: usize| {
             let (q, p, t) = (normals[r], data[r], tangential[r]);
-            let mut w = [
-                q.x * q.x + t,
-                q.x * q.y,
-                q.x * q.z,
-                q.y * q.y + t,
-                q.y * q.z,
-                q.z * q.z + t,
-            ];
+            let mut w = packed_outer(q, 1.0);
+            for diagonal in [0, 3, 5] {
+                w[diagonal] += t;
+            }
             let mut wp = q * q.dot(p) + p * t;
             if let Some(c) = curvature.and_then(|c| c.get(r)) {
                 for (w, c) in w.iter_mut().zip(c) {
                     *w += c;
                 }
-                wp += DVec3::new(
-                    c[0] * p.x + c[1] * p.y + c[2] * p.z,
-                    c[1] * p.x + c[3] * p.y + c[4] * p.z,
-                    c[2] * p.x + c[4] * p.y + c[5] * p.z,
-                );
+                wp += packed_mul(c, p);
             }
             (w, wp)
         }
@@ -515,12 +508,7 @@ impl BlockMatrix {
     /// M x.
     pub fn apply(&self, x: &[DVec3], out: &mut [DVec3]) {
         row_products(&self.ptr, &self.idx, x, out, |k, v| {
-            let e = &self.entries[k];
-            DVec3::new(
-                e[0] * v.x + e[1] * v.y + e[2] * v.z,
-                e[1] * v.x + e[3] * v.y + e[4] * v.z,
-                e[2] * v.x + e[4] * v.y + e[5] * v.z,
-            )
+            packed_mul(&self.entries[k], v)
         });
     }
 

@@ -109,18 +109,9 @@ fn one_large_pattern_summed_in_parallel_matches_dense_blocks() {
     // A curvature term along one tangent, of a weight varying with the row (none on every
     // third), and none past the first 2000 rows (the rows of surface samples).
     let tangent = |j: usize| normals[j].cross(DVec3::X).normalize();
-    let curvature_of = |j: usize| {
-        let (e, k) = (tangent(j), 0.01 * (j % 3) as f64);
-        [
-            k * e.x * e.x,
-            k * e.x * e.y,
-            k * e.x * e.z,
-            k * e.y * e.y,
-            k * e.y * e.z,
-            k * e.z * e.z,
-        ]
-    };
-    let curvature: Vec<[f64; 6]> = (0..2000).map(curvature_of).collect();
+    let curvature: Vec<[f64; 6]> = (0..2000)
+        .map(|j| crate::numeric::packed_outer(tangent(j), 0.01 * (j % 3) as f64))
+        .collect();
     let blocks = BlockMatrix::assemble(&n, &data, &normals, (&t, Some(&curvature)), None, false);
     let mut want = DMatrix::<f64>::zeros(3 * m, 3 * m);
     let mut rhs = DVector::<f64>::zeros(3 * m);

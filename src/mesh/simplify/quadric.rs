@@ -17,14 +17,7 @@ impl Quadric {
         let n = normal;
         let d = -n.dot(point);
         Quadric {
-            a: [
-                weight * n.x * n.x,
-                weight * n.x * n.y,
-                weight * n.x * n.z,
-                weight * n.y * n.y,
-                weight * n.y * n.z,
-                weight * n.z * n.z,
-            ],
+            a: crate::numeric::packed_outer(n, weight),
             b: n * (weight * d),
             c: weight * d * d,
         }
