@@ -1,5 +1,6 @@
 //! Scalar helpers for hot loops, shared by the surface evaluators and the planar maps, and
-//! the bounds, local origin and principal axes of point sets.
+//! the bounds, local origin and principal axes of point sets, and the packed symmetric
+//! 3x3 matrices.
 
 use glam::DVec3;
 
