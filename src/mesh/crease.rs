@@ -42,6 +42,7 @@ use super::stats::UnionFind;
 use super::topology::{Topology, NONE};
 use super::TriMesh;
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// What counts as a crease.
 #[derive(Clone, Debug, PartialEq)]
@@ -94,11 +95,21 @@ pub fn detect_creases(mesh: &TriMesh, topo: &Topology, opts: &CreaseOptions) -> 
     }
     let turn = signed_turns(mesh, topo);
     let extremes = turn_extremes(&turn, topo);
+    // Each edge on its own, in parallel, the edges kept in edge order.
+    let judged: Vec<([u32; 2], Option<Sharp>)> = topo
+        .edges()
+        .into_par_iter()
+        .map(|(a, b, h)| {
+            (
+                [a.min(b), a.max(b)],
+                sharpness(&turn, &extremes, topo, h, opts),
+            )
+        })
+        .collect();
     let mut by_angle = Vec::new();
     let mut by_relative = Vec::new();
-    for (a, b, h) in topo.edges() {
-        let edge = [a.min(b), a.max(b)];
-        match sharpness(&turn, &extremes, topo, h, opts) {
+    for (edge, sharp) in judged {
+        match sharp {
             Some(Sharp::Angle) => by_angle.push(edge),
             Some(Sharp::Relative) => by_relative.push(edge),
             None => {}
@@ -259,6 +270,7 @@ const AGAINST_RATIO: f64 = 2.0;
 /// `None` on the boundary or at a degenerate face.
 fn signed_turns(mesh: &TriMesh, topo: &Topology) -> Vec<Option<f64>> {
     (0..topo.twin.len() as u32)
+        .into_par_iter()
         .map(|h| {
             let d = dihedral_deg(mesh, topo, h)?;
             let t = topo.twin[h as usize];

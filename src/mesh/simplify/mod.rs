@@ -28,6 +28,7 @@ mod options;
 mod quadric;
 mod state;
 mod summary;
+mod vertex;
 
 use super::topology::Topology;
 use super::TriMesh;
@@ -114,8 +115,8 @@ fn simplify_centred(
     let (carrier, carried) = crossbeam_channel::bounded(FAN_BATCHES);
     let creases = Creases::new(&topo, crease_edges);
     let mut state = State::new(mesh, &topo, opts, creases, carrier);
-    for (locked, &kept) in state.locked.iter_mut().zip(keep) {
-        *locked |= kept;
+    for (v, _) in keep.iter().enumerate().filter(|(_, &kept)| kept) {
+        state.lock(v);
     }
     let landings = Landings::new(&mesh.positions, &state.faces, &state.vfaces);
     let target = opts.target_vertices.max(4);

@@ -6,6 +6,7 @@ use super::carry::Fans;
 use super::crease::Creases;
 use super::options::{Landing, Simplified, SimplifyOptions, REMOVED};
 use super::quadric::Quadric;
+use super::vertex::Vertex;
 use crate::mesh::topology::{Topology, NONE};
 use crate::mesh::{triangle_area_normal, triangle_quality, TriMesh};
 use crossbeam_channel::Sender;
@@ -80,22 +81,20 @@ struct Candidate {
 pub(super) struct State<'a> {
     opts: &'a SimplifyOptions,
     cos_turn: f64,
-    pos: Vec<DVec3>,
-    quadric: Vec<Quadric>,
+    verts: Vec<Vertex>,
     pub(super) faces: Vec<[u32; 3]>,
     face_alive: Vec<bool>,
     pub(super) vfaces: Vec<Vec<u32>>,
-    boundary: Vec<bool>,
-    pub(super) locked: Vec<bool>,
     creases: Creases,
-    alive: Vec<bool>,
     pub(super) alive_vertices: usize,
-    version: Vec<u32>,
     /// Collapses not yet sent to be carried ...
     fans: Fans,
     /// ... and where they go (`carry`); `None` once the last went.
     carrier: Option<Sender<Fans>>,
     collapses: usize,
+    /// A collapse's changed faces and the faces it removes (buffers only).
+    affected: Vec<u32>,
+    shared: Vec<u32>,
 }
 
 impl<'a> State<'a> {
@@ -108,7 +107,7 @@ impl<'a> State<'a> {
     ) -> Self {
         let nv = mesh.positions.len();
         let nf = mesh.triangles.len();
-        let pos = mesh.positions.clone();
+        let pos = &mesh.positions;
         let mut quadric = vec![Quadric::default(); nv];
         let mut vfaces: Vec<Vec<u32>> = (0..nv)
             .map(|v| Vec::with_capacity(topo.face_valence[v] as usize))
@@ -133,28 +132,36 @@ impl<'a> State<'a> {
             }
         }
         creases.add_planes(&mesh.positions, topo, opts.boundary_weight, &mut quadric);
-        let mut locked = Self::corners(mesh, topo, opts.corner_turn_deg);
+        let corners = Self::corners(mesh, topo, opts.corner_turn_deg);
         let crease_corners = creases.corners(&mesh.positions, topo, opts.corner_turn_deg);
-        for (l, c) in locked.iter_mut().zip(crease_corners) {
-            *l |= c;
-        }
+        let verts = (0..nv)
+            .map(|v| Vertex {
+                locked: corners[v] || crease_corners[v],
+                quadric: quadric[v],
+                ..Vertex::new(pos[v], topo.boundary[v])
+            })
+            .collect();
         State {
             opts,
             cos_turn: opts.max_normal_turn_deg.to_radians().cos(),
-            pos,
-            quadric,
+            verts,
             faces: mesh.triangles.clone(),
             face_alive: vec![true; nf],
             vfaces,
-            boundary: topo.boundary.clone(),
-            locked,
             creases,
-            alive: vec![true; nv],
             alive_vertices: nv,
-            version: vec![0; nv],
             fans: Fans::default(),
             carrier: Some(carrier),
             collapses: 0,
+            affected: Vec::new(),
+            shared: Vec::new(),
+        }
+    }
+
+    /// Keeps vertex `v` where it is: no collapse removes or moves it.
+    pub(super) fn lock(&mut self, v: usize) {
+        if let Some(vertex) = self.verts.get_mut(v) {
+            vertex.locked = true;
         }
     }
 
@@ -246,10 +253,8 @@ impl<'a> State<'a> {
     fn is_current(&self, e: &Queued) -> bool {
         let (a, b) = e.edge();
         let (a, b) = (a as usize, b as usize);
-        self.alive[a]
-            && self.alive[b]
-            && self.version[a] == e.versions[0]
-            && self.version[b] == e.versions[1]
+        let (a, b) = (&self.verts[a], &self.verts[b]);
+        a.alive && b.alive && a.version == e.versions[0] && b.version == e.versions[1]
     }
 
     fn push(&self, heap: &mut QuaternaryHeap<Entry>, a: u32, b: u32) {
@@ -264,7 +269,10 @@ impl<'a> State<'a> {
         let cost = if c.cost.is_finite() { c.cost } else { f64::MAX };
         Some(Reverse(Queued {
             key: (u128::from(cost.to_bits()) << 64) | (u128::from(a) << 32) | u128::from(b),
-            versions: [self.version[a as usize], self.version[b as usize]],
+            versions: [
+                self.verts[a as usize].version,
+                self.verts[b as usize].version,
+            ],
         }))
     }
 
@@ -297,25 +305,24 @@ impl<'a> State<'a> {
     /// other is free or interior (the boundary keeps its shape), otherwise the lower index
     /// stays and moves to the quadric's minimiser (on the edge where that is singular).
     fn candidate(&self, a: u32, b: u32) -> Option<Candidate> {
-        let (ai, bi) = (a as usize, b as usize);
-        if self.locked[ai] && self.locked[bi] {
+        let (va, vb) = (&self.verts[a as usize], &self.verts[b as usize]);
+        if va.locked && vb.locked {
             return None;
         }
-        let q = self.quadric[ai].sum(&self.quadric[bi]);
+        let q = va.quadric.sum(&vb.quadric);
         // A locked end stays whatever the other is; a locked interior end and a boundary
         // end would move the boundary inwards or remove the locked vertex: no collapse.
-        let pinned_inside =
-            |l: usize, o: usize| self.locked[l] && !self.boundary[l] && self.boundary[o];
-        if pinned_inside(ai, bi) || pinned_inside(bi, ai) {
+        let pinned_inside = |l: &Vertex, o: &Vertex| l.locked && !l.boundary && o.boundary;
+        if pinned_inside(va, vb) || pinned_inside(vb, va) {
             return None;
         }
-        let fixed = if self.locked[ai] {
+        let fixed = if va.locked {
             Some((a, b))
-        } else if self.locked[bi] {
+        } else if vb.locked {
             Some((b, a))
-        } else if self.boundary[ai] && !self.boundary[bi] {
+        } else if va.boundary && !vb.boundary {
             Some((a, b))
-        } else if self.boundary[bi] && !self.boundary[ai] {
+        } else if vb.boundary && !va.boundary {
             Some((b, a))
         } else if self.creases.count(a) > 0 && !self.creases.is_crease(a, b) {
             // Off a chain only a crease vertex with a smooth neighbour may be collapsed
@@ -327,9 +334,9 @@ impl<'a> State<'a> {
             None
         };
         let (keep, remove, position) = match fixed {
-            Some((k, r)) => (k, r, self.pos[k as usize]),
+            Some((k, r)) => (k, r, self.verts[k as usize].pos),
             None => {
-                let (pa, pb) = (self.pos[ai], self.pos[bi]);
+                let (pa, pb) = (va.pos, vb.pos);
                 let mid = (pa + pb) * 0.5;
                 let reach = 2.0 * (pa - pb).length();
                 let x = q
@@ -338,7 +345,7 @@ impl<'a> State<'a> {
                 (a.min(b), a.max(b), x)
             }
         };
-        let length2 = (self.pos[ai] - self.pos[bi]).length_squared();
+        let length2 = (va.pos - vb.pos).length_squared();
         Some(Candidate {
             keep,
             remove,
@@ -361,10 +368,11 @@ impl<'a> State<'a> {
             2 => false,
             _ => return false,
         };
-        if self.boundary[ki] && self.boundary[ri] && !on_boundary {
+        if self.verts[ki].boundary && self.verts[ri].boundary && !on_boundary {
             return false;
         }
-        if !self.creases.allows(k, r, &self.boundary) {
+        let boundary = |v: u32| self.verts[v as usize].boundary;
+        if !self.creases.allows(k, r, boundary) {
             return false;
         }
         let opposite = &mut scratch.opposite;
@@ -399,7 +407,7 @@ impl<'a> State<'a> {
         let (ki, ri) = (k as usize, r as usize);
         let merged = self.vfaces[ki].len() + self.vfaces[ri].len() - 2 * shared;
         let max = self.opts.max_faces_per_vertex;
-        let (lo, hi) = if self.boundary[ki] || self.boundary[ri] {
+        let (lo, hi) = if self.verts[ki].boundary || self.verts[ri].boundary {
             (2, max.saturating_sub(1))
         } else {
             (3, max)
@@ -408,7 +416,11 @@ impl<'a> State<'a> {
             return false;
         }
         opposite.iter().all(|&o| {
-            let min = if self.boundary[o as usize] { 2 } else { 3 };
+            let min = if self.verts[o as usize].boundary {
+                2
+            } else {
+                3
+            };
             self.vfaces[o as usize].len() > min
         })
     }
@@ -425,12 +437,12 @@ impl<'a> State<'a> {
             if t.contains(&k) && t.contains(&r) {
                 continue;
             }
-            let before = t.map(|v| self.pos[v as usize]);
+            let before = t.map(|v| self.verts[v as usize].pos);
             let after = t.map(|v| {
                 if v == k || v == r {
                     c.position
                 } else {
-                    self.pos[v as usize]
+                    self.verts[v as usize].pos
                 }
             });
             let (n0, n1) = (triangle_area_normal(before), triangle_area_normal(after));
@@ -481,13 +493,18 @@ impl<'a> State<'a> {
     fn collapse(&mut self, c: &Candidate) {
         let (k, r) = (c.keep, c.remove);
         let (ki, ri) = (k as usize, r as usize);
-        let mut affected: Vec<u32> = self.vfaces[ki].clone();
+        // Buffers kept between collapses (an allocation each per collapse otherwise).
+        let mut affected = std::mem::take(&mut self.affected);
+        affected.clear();
+        affected.extend_from_slice(&self.vfaces[ki]);
         affected.extend(self.vfaces[ri].iter().copied().filter(|f| {
             let t = self.faces[*f as usize];
             !t.contains(&k)
         }));
-        let shared: Vec<u32> = self.shared_faces(k, r).collect();
-        for f in shared {
+        let mut shared = std::mem::take(&mut self.shared);
+        shared.clear();
+        shared.extend(self.shared_faces(k, r));
+        for &f in &shared {
             self.face_alive[f as usize] = false;
             for v in self.faces[f as usize] {
                 self.vfaces[v as usize].retain(|&g| g != f);
@@ -502,24 +519,32 @@ impl<'a> State<'a> {
             }
             self.vfaces[ki].push(f);
         }
-        self.pos[ki] = c.position;
-        self.quadric[ki] = c.quadric;
-        self.boundary[ki] |= self.boundary[ri];
+        let removed_boundary = self.verts[ri].boundary;
+        let kept = &mut self.verts[ki];
+        kept.pos = c.position;
+        kept.quadric = c.quadric;
+        kept.boundary |= removed_boundary;
+        kept.version += 1;
+        let removed = &mut self.verts[ri];
+        removed.alive = false;
+        removed.version += 1;
         self.creases.merge(k, r);
-        self.alive[ri] = false;
         self.alive_vertices -= 1;
-        self.version[ki] += 1;
-        self.version[ri] += 1;
         self.collapses += 1;
         self.carry_points(k, &affected);
+        self.affected = affected;
+        self.shared = shared;
     }
 
     /// Queues the new fan around `k` and the faces whose points move onto it for the
     /// carrying thread, and sends a full batch.
     fn carry_points(&mut self, k: u32, affected: &[u32]) {
-        let fan = self.vfaces[k as usize]
-            .iter()
-            .map(|&f| (f, self.faces[f as usize].map(|v| self.pos[v as usize])));
+        let fan = self.vfaces[k as usize].iter().map(|&f| {
+            (
+                f,
+                self.faces[f as usize].map(|v| self.verts[v as usize].pos),
+            )
+        });
         self.fans.push(fan, affected);
         if self.fans.len() >= Fans::BATCH {
             self.send_fans();
@@ -543,12 +568,12 @@ impl<'a> State<'a> {
     }
 
     pub(super) fn finish(self, land_face: &[u32], land_bary: &[[f64; 3]]) -> Simplified {
-        let mut control_of = vec![REMOVED; self.pos.len()];
+        let mut control_of = vec![REMOVED; self.verts.len()];
         let mut positions = Vec::with_capacity(self.alive_vertices);
-        for (v, &alive) in self.alive.iter().enumerate() {
-            if alive {
+        for (v, vertex) in self.verts.iter().enumerate() {
+            if vertex.alive {
                 control_of[v] = positions.len() as u32;
-                positions.push(self.pos[v]);
+                positions.push(vertex.pos);
             }
         }
         let mut face_index = vec![u32::MAX; self.faces.len()];
@@ -568,7 +593,7 @@ impl<'a> State<'a> {
                 v: b[1],
             })
             .collect();
-        let locked_corners = self.locked.iter().filter(|&&l| l).count();
+        let locked_corners = self.verts.iter().filter(|v| v.locked).count();
         let crease_edges = self.creases.edges(&control_of);
         Simplified {
             mesh: TriMesh::new(positions, triangles),
