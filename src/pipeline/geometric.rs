@@ -310,10 +310,7 @@ mod tests {
     }
 
     fn quadratic_form(c: &[f64; 6], x: DVec3) -> f64 {
-        c[0] * x.x * x.x
-            + c[3] * x.y * x.y
-            + c[5] * x.z * x.z
-            + 2.0 * (c[1] * x.x * x.y + c[2] * x.x * x.z + c[4] * x.y * x.z)
+        x.dot(crate::numeric::packed_mul(c, x))
     }
 
     /// The term is the second-order change of the exact squared distance: a point outside

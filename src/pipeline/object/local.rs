@@ -17,15 +17,14 @@
 
 use super::model::{limit_surface, ObjectOptions, RoundStop, MAX_REFUSALS};
 use super::refine::{new_faces, Refined};
-use super::solve::{near_boundary, FeetMut, Rim, Samples};
+use super::solve::{foot, near_boundary, FeetMut, Rim, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
 use crate::mesh::distance::MeshDistance;
 use crate::mesh::topology::Topology;
-use crate::pipeline::geometric::{curvature_term, foot_point};
 use crate::surface::loop_limit::LoopLimitSurface;
-use crate::surface::{Derivatives, SurfaceParam, TriSurface};
+use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -231,29 +230,6 @@ fn local_shares(
         }
     }
     (shares, Some(curvature))
-}
-
-/// A point's foot on the surface: parameter, unit normal, distance and, with `curvature`,
-/// the curvature's term of its squared distance.
-fn foot(
-    surface: &LoopLimitSurface,
-    evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
-    point: DVec3,
-    start: SurfaceParam,
-    curvature: bool,
-) -> (SurfaceParam, DVec3, f64, [f64; 6]) {
-    let (param, d) = foot_point(surface, evaluate, point, start);
-    let r = d.position - point;
-    let normal =
-        d.du.cross(d.dv)
-            .try_normalize()
-            .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-    let term = if curvature {
-        curvature_term(&d, normal, -r)
-    } else {
-        [0.0; 6]
-    };
-    (param, normal, r.length(), term)
 }
 
 /// A local refit's result: the controls and feet, and what it touched.

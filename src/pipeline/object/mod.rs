@@ -9,10 +9,11 @@
 //! (`layout`); a point-to-point least-squares fit at those parameters with a small umbrella
 //! fairness term; then rounds of foot points (Newton on the limit surface, crossing faces,
 //! the data's rim held on the surface's boundary curve) and squared-distance minimisation
-//! (point-to-plane plus the curvature's tangential term of Pottmann's squared distance,
-//! as Cheng, Wang et al. 2004 fit subdivision surfaces: `geometric::curvature_term`)
-//! until a round gains less than `min_gain` of the RMS; then refinement rounds (`refine`) spend the rest of the budget where the
-//! error is, each followed by a fit on the refined mesh.
+//! (point-to-plane with a small tangential share; with `curvature_floor`, the curvature's
+//! tangential term of Pottmann's squared distance instead, as Cheng, Wang et al. 2004 fit
+//! subdivision surfaces: `geometric::curvature_term`) until a round gains less than
+//! `min_gain` of the RMS; then refinement rounds (`refine`) spend the rest of the budget
+//! where the error is, each followed by a fit on the refined mesh.
 //! Sharp edges of the data (`mesh::crease`) are kept through the simplification, the
 //! flips and the splits, and become crease edges of the limit surface.
 

@@ -12,7 +12,7 @@ use crate::mesh::distance::MeshDistance;
 use crate::mesh::topology::Topology;
 use crate::pipeline::geometric::{curvature_term, foot_point};
 use crate::surface::loop_limit::LoopLimitSurface;
-use crate::surface::{SurfaceParam, TriSurface};
+use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -353,6 +353,30 @@ pub(super) struct Feet {
     pub curvature: Vec<[f64; 6]>,
 }
 
+/// A point's foot on the surface (Newton from `start`): parameter, unit normal, distance
+/// and, with `curvature`, the curvature's term of its squared distance (zero without).
+pub(super) fn foot(
+    surface: &LoopLimitSurface,
+    evaluate: &(dyn Fn(SurfaceParam) -> Derivatives + Sync),
+    point: DVec3,
+    start: SurfaceParam,
+    curvature: bool,
+) -> (SurfaceParam, DVec3, f64, [f64; 6]) {
+    let (param, d) = foot_point(surface, evaluate, point, start);
+    let r = d.position - point;
+    // Where the tangents degenerate the residual is the best normal at hand.
+    let normal =
+        d.du.cross(d.dv)
+            .try_normalize()
+            .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
+    let term = if curvature {
+        curvature_term(&d, normal, -r)
+    } else {
+        [0.0; 6]
+    };
+    (param, normal, r.length(), term)
+}
+
 impl Feet {
     /// Newton on the limit surface from `start`, crossing faces through `step`; with
     /// `curvature`, each point's curvature term too (else `curvature` stays empty).
@@ -372,20 +396,13 @@ impl Feet {
             .par_iter()
             .with_min_len(256)
             .map(|&i| {
-                let (p, s) = (&data[i as usize], &start[i as usize]);
-                let (param, d) = foot_point(surface, &*evaluate, *p, *s);
-                let r = d.position - *p;
-                // Where the tangents degenerate the residual is the best normal at hand.
-                let n =
-                    d.du.cross(d.dv)
-                        .try_normalize()
-                        .unwrap_or_else(|| r.try_normalize().unwrap_or(DVec3::Z));
-                let term = if curvature {
-                    curvature_term(&d, n, -r)
-                } else {
-                    [0.0; 6]
-                };
-                (param, n, r.length(), term)
+                foot(
+                    surface,
+                    &*evaluate,
+                    data[i as usize],
+                    start[i as usize],
+                    curvature,
+                )
             })
             .collect();
         let mut feet = Feet {
