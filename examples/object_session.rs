@@ -34,7 +34,7 @@
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
-//! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls); `OBJ_SESSION_MEASURE=1` measures every scan against the
+//! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls), `OBJ_SESSION_ROUNDS` (correction rounds); `OBJ_SESSION_MEASURE=1` measures every scan against the
 //! surface in each update, as the daemon does.
 
 use std::path::{Path, PathBuf};
@@ -135,6 +135,9 @@ fn main() {
     }
     if let Some(p) = env("OBJ_SESSION_PCT") {
         opts.worker.fit.scan.target_controls_pct = p;
+    }
+    if let Some(r) = env("OBJ_SESSION_ROUNDS") {
+        opts.worker.fit.correction.rounds = r as usize;
     }
     if std::env::var("OBJ_SESSION_MEASURE").is_ok() {
         opts.measure_scans = true;

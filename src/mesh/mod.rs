@@ -13,6 +13,7 @@ pub mod loop_subdiv;
 mod repeats;
 pub mod rigid;
 pub mod simplify;
+pub mod spatial_order;
 pub mod stats;
 pub mod topology;
 

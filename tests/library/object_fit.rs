@@ -143,6 +143,37 @@ fn a_torus_is_fitted_by_a_genus_one_control_mesh() {
     assert_rounds_lower_the_rms(&fit);
 }
 
+/// The order a file lists a mesh in is not part of the object: the same torus with its
+/// vertices permuted and its faces reversed in order, each with its corners rotated, is
+/// fitted to the same surface to the last bit (the fit renumbers its data spatially).
+#[test]
+fn the_order_a_file_lists_the_mesh_in_does_not_change_the_fit() {
+    let mesh = torus(40, 16);
+    let n = mesh.positions.len();
+    // A permutation (7919 is prime to n = 640) and its inverse.
+    let new_of_old: Vec<u32> = (0..n).map(|i| ((i * 7919) % n) as u32).collect();
+    let mut positions = vec![DVec3::ZERO; n];
+    for (old, &new) in new_of_old.iter().enumerate() {
+        positions[new as usize] = mesh.positions[old];
+    }
+    let triangles = mesh
+        .triangles
+        .iter()
+        .rev()
+        .enumerate()
+        .map(|(k, t)| {
+            let t = t.map(|v| new_of_old[v as usize]);
+            [t[k % 3], t[(k + 1) % 3], t[(k + 2) % 3]]
+        })
+        .collect();
+    let shuffled = TriMesh::new(positions, triangles);
+    let a = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    let b = fit_object(&shuffled, &ObjectOptions::default()).expect("fitted shuffled");
+    assert!(a.controls.len() > 10);
+    assert_eq!(a.controls, b.controls);
+    assert_eq!(a.rms, b.rms);
+}
+
 /// With `curvature_floor` the rounds minimise the squared distance with its curvature
 /// term (SDM): on the torus the surface slides freely where the constant tangential share
 /// held it back, and the same rounds end nearer the data and the analytic surface

@@ -227,13 +227,26 @@ fn the_curvature_floor_of_the_config_reaches_the_object_fit() {
 }
 
 /// Data in far-off coordinates (a site or map frame, as UTM puts a part 4000 km from the
-/// origin) fit as well as at the origin, on both paths. Not to the last digit: moving the
-/// points rounds them, and the torus's collapses, with many equal costs, then take other
-/// orders (its far fit refines once more than its fit at the origin).
+/// origin) fit as well as at the origin, on both paths. The torus is roughened by 0.1 % of
+/// its minor radius: on the exact torus the simplification's collapses have many equal
+/// costs, and which of them goes first then follows the last bits the move rounds (the
+/// fits at the origin and far off took 38 and 64 controls, or the same 38 in other
+/// orders 13 % apart in RMS). Roughened, the costs differ by far more than the rounding,
+/// and the two fits are the same fit.
 #[test]
 fn a_fit_does_not_depend_on_where_the_data_lies() {
     let offset = DVec3::new(5.0e5, 4.0e6, 1.0e2);
-    for (what, mesh) in [("torus", torus(40, 16)), ("height patch", height_patch())] {
+    let exact = torus(40, 16);
+    let rough = TriMesh::new(
+        exact
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *p * (1.0 + 3.5e-4 * (i as f64 * 0.618_034).fract()))
+            .collect(),
+        exact.triangles.clone(),
+    );
+    for (what, mesh) in [("torus", rough), ("height patch", height_patch())] {
         let size = mesh.bounds_diagonal();
         let moved = TriMesh::new(
             mesh.positions.iter().map(|p| *p + offset * size).collect(),
@@ -243,7 +256,9 @@ fn a_fit_does_not_depend_on_where_the_data_lies() {
         let here = fit_patch(&mesh, None, &cfg).expect("fits");
         let there = fit_patch(&moved, None, &cfg).expect("fits far off");
         let (a, b) = (here.fit.geometric_rms(), there.fit.geometric_rms());
-        assert!(b <= 1.1 * a, "{what}: RMS {a} at the origin, {b} far off");
+        let controls = (here.fit.controls.len(), there.fit.controls.len());
+        assert_eq!(controls.0, controls.1, "{what}: controls");
+        assert!(b <= 1.02 * a, "{what}: RMS {a} at the origin, {b} far off");
         assert!(there.fit.controls.len() <= mesh.positions.len() / 10 + 1);
     }
 }

@@ -59,6 +59,7 @@ pub use model::{
 };
 use refine::{faces_beyond, refined_mesh, Splits};
 pub use refine::{RefineOptions, RefineRound};
+pub(crate) use repair::refine_where_far;
 use solve::{point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};

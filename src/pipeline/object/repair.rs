@@ -2,13 +2,16 @@
 //! the bound, its faces are split and the controls around them refitted.
 
 use super::data_side::DataSide;
-use super::local::{refit_refined, LocalOptions, RefinedRefit};
+use super::layout::LayoutOptions;
+use super::local::{refit_refined, LocalFit, LocalOptions, RefinedRefit};
 use super::model::STRAY_LATTICE_SEGMENTS;
 use super::model::{ms_since, ObjectFit, ObjectOptions};
-use super::refine::{refined_mesh, RefineRound, Refined, Splits};
+use super::refine::{refined_mesh, Fitted, RefineRound, Refined, Splits};
 use super::solve::rms;
 use super::stray::face_strays;
+use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::TriSurface;
+use crate::TriMesh;
 use std::time::Instant;
 
 /// Stray repair rounds at most (`keep_near_data`; on decimated-max at 5 % controls the
@@ -155,4 +158,72 @@ fn repaired_locally(fit: &ObjectFit, refined: Refined, opts: &ObjectOptions) -> 
         stray: None,
         cleaning: fit.cleaning.clone(),
     })
+}
+
+/// A local refit (`local`, of the controls of `surface`) refined where it leaves data
+/// points of `component` farther than `limit` off the surface: the longest edge of every
+/// control face holding such a point is split (`refine::Splits::Marked`) and the controls
+/// around the new faces refitted from the local refit's (`local::refit_refined`), every
+/// other control kept. Marinov & Kobbelt's local refinement, inside an update: a local
+/// refit keeps the control mesh, and where the changed data asks for more than it can
+/// give (a rim point past the boundary curve's reach) a few more controls there cost
+/// less than fitting the whole object again. The refined surface and the refit, whose
+/// free controls, point counts and rounds include the first refit's; `None` when no point
+/// is that far or the mesh cannot be refined.
+pub(crate) fn refine_where_far(
+    surface: &LoopLimitSurface,
+    local: LocalFit,
+    component: &TriMesh,
+    limit: f64,
+    opts: &LocalOptions,
+) -> Option<(LoopLimitSurface, LocalFit)> {
+    let mut far = vec![false; surface.domain_face_count()];
+    for (p, _) in local
+        .params
+        .iter()
+        .zip(&local.errors)
+        .filter(|(_, &e)| e > limit)
+    {
+        if let Some(f) = far.get_mut(p.face as usize) {
+            *f = true;
+        }
+    }
+    let add = far.iter().filter(|&&f| f).count();
+    if add == 0 {
+        return None;
+    }
+    let fitted = Fitted {
+        component,
+        surface,
+        controls: &local.controls,
+        params: &local.params,
+        distances: &local.errors,
+    };
+    let refined = refined_mesh(
+        &fitted,
+        add,
+        &LayoutOptions::default(),
+        Splits::Marked(&far),
+    )?;
+    let RefinedRefit {
+        surface: refined_surface,
+        fit,
+        ..
+    } = refit_refined(surface, &refined, component, &local.errors, true, opts)?;
+    let mut free_controls = local.free_controls;
+    free_controls.extend(&fit.free_controls);
+    free_controls.sort_unstable();
+    free_controls.dedup();
+    let mut rounds = local.rounds;
+    rounds.extend(fit.rounds.iter().skip(1));
+    Some((
+        refined_surface,
+        LocalFit {
+            free_controls,
+            changed_points: local.changed_points,
+            moving_points: local.moving_points.max(fit.moving_points),
+            rounds,
+            ..fit
+        },
+    ))
 }

@@ -236,10 +236,11 @@ impl LastFit {
         })
     }
 
-    /// Why a local refit of `surface` to `data` is not kept, if it is not: it fits the
-    /// data clearly worse than the previous fit did (`fits_worse`), leaves a point off the
-    /// surface by more than the stray guard lets the surface leave the data
-    /// (`largest_error_refusal`), or strays from the data (`worker::stray_refusal`).
+    /// Why a local refit on `surface` (the previous fit's, or its refinement) to `data` is
+    /// not kept, if it is not: it fits the data clearly worse than the previous fit did
+    /// (`fits_worse`), leaves a point off the surface by more than the stray guard lets
+    /// the surface leave the data (`largest_error_refusal`), or strays from the data
+    /// farther than the previous surface there (`worker::stray_refusal`).
     pub(super) fn refusal(
         &self,
         surface: &LoopLimitSurface,
@@ -247,6 +248,10 @@ impl LastFit {
         data: &TriMesh,
     ) -> Option<String> {
         let largest = |e: &[f64]| e.iter().copied().fold(0.0, f64::max);
+        let previous = match &self.fit.model {
+            SurfaceModel::Mesh(s) => Some(s.as_ref()),
+            _ => None,
+        };
         fits_worse(self.fit.geometric_rms(), local.rounds.last().map(|r| r.0))
             .or_else(|| {
                 largest_error_refusal(
@@ -257,15 +262,30 @@ impl LastFit {
             })
             .or_else(|| {
                 stray_refusal(surface, &local.controls, data, &self.fit.controls, || {
-                    Some(surface)
+                    previous
                 })
             })
     }
 
+    /// The largest distance from `data` to the surface a local refit may leave
+    /// (`largest_error_refusal`'s bound).
+    pub(super) fn largest_error_limit(&self, data: &TriMesh) -> f64 {
+        let before = self
+            .fit
+            .geometric_errors
+            .iter()
+            .copied()
+            .fold(0.0, f64::max);
+        largest_allowed(before, data.bounds_diagonal())
+    }
+
     /// The refit's result in the form the worker's outputs read.
+    /// `refined`: the refined control mesh's surface when the refit refined it
+    /// (`object::refine_where_far`), else the previous surface stays.
     pub(super) fn refitted(
         &self,
         (data, local): &(Vec<DVec3>, LocalFit),
+        refined: Option<LoopLimitSurface>,
         data_topology: SurfaceTopology,
         budget: Budget,
         fit_ms: f64,
@@ -295,6 +315,10 @@ impl LastFit {
             warm_start: true,
             prepare_ms: 0.0,
             fit_ms,
+            model: match refined {
+                Some(surface) => SurfaceModel::Mesh(Arc::new(surface)),
+                None => self.fit.model.clone(),
+            },
             ..self.fit.clone()
         };
         let info = ObjectInfo {
@@ -357,7 +381,7 @@ fn fits_worse(before: f64, after: Option<f64>) -> Option<String> {
 /// Data covering a hole the kept control mesh still has (the data's topology may lose
 /// holes, `topology_refusal`) lies off the surface by about the hole's radius.
 fn largest_error_refusal(before: f64, after: f64, diagonal: f64) -> Option<String> {
-    let allowed = (MAX_STRAY_GROWTH * before).max(MAX_STRAY_SHARE * diagonal);
+    let allowed = largest_allowed(before, diagonal);
     // Written so that a NaN refuses the refit.
     let within = after <= allowed;
     (!within).then(|| {
@@ -367,6 +391,11 @@ fn largest_error_refusal(before: f64, after: f64, diagonal: f64) -> Option<Strin
              diagonal or {MAX_STRAY_GROWTH} times the previous)"
         )
     })
+}
+
+/// The largest error a local refit may leave when the previous fit's was `before`.
+fn largest_allowed(before: f64, diagonal: f64) -> f64 {
+    (MAX_STRAY_GROWTH * before).max(MAX_STRAY_SHARE * diagonal)
 }
 
 #[cfg(test)]
@@ -473,6 +502,103 @@ mod tests {
         assert_eq!(data.topology.boundary_loops, 1);
         for (p, c) in data.mesh.positions.iter().zip(&data.cells) {
             assert_eq!([p.x as i32, p.y as i32, 0], *c);
+        }
+    }
+
+    /// `object::refine_where_far`, the refinement an update's local refit falls back on.
+    mod refined_where_far {
+        use crate::mesh::loop_subdiv::subdivide;
+        use crate::pipeline::object::{
+            fit_object, refine_where_far, LocalFit, LocalOptions, ObjectOptions, RefineOptions,
+        };
+        use crate::surface::TriSurface;
+        use crate::testdata::icosahedron;
+        use crate::TriMesh;
+        use glam::DVec3;
+
+        /// A unit sphere with a narrow bump of 0.3 around +z: a coarse control mesh leaves
+        /// the bump's top far off.
+        fn bumped_sphere() -> TriMesh {
+            let (positions, triangles) = icosahedron();
+            let fine = subdivide(&TriMesh::new(positions, triangles), 4).expect("manifold");
+            let positions = fine
+                .positions
+                .iter()
+                .map(|p| {
+                    let n = p.normalize();
+                    n * (1.0 + 0.3 * (-(n - DVec3::Z).length_squared() / 0.02).exp())
+                })
+                .collect();
+            TriMesh::new(positions, fine.triangles)
+        }
+
+        #[test]
+        fn a_local_refit_is_refined_where_it_leaves_points_far_and_nowhere_else() {
+            let opts = ObjectOptions {
+                target_controls: Some(150),
+                refine: RefineOptions {
+                    rounds: 0,
+                    ..Default::default()
+                },
+                max_stray_share: None,
+                ..Default::default()
+            };
+            let fit = fit_object(&bumped_sphere(), &opts).expect("fitted");
+            // The whole fit as a local refit that freed nothing.
+            let unrefined = || LocalFit {
+                controls: fit.controls.clone(),
+                params: fit.params.clone(),
+                errors: fit.distances.clone(),
+                free_controls: Vec::new(),
+                changed_points: 0,
+                moving_points: 0,
+                rounds: vec![(fit.rms, fit.max)],
+            };
+            let local = unrefined();
+            let limit = 0.5 * fit.max;
+            let far = fit.distances.iter().filter(|&&d| d > limit).count();
+            assert!(
+                far > 0 && fit.max > 0.01,
+                "the bump is left off: max {}",
+                fit.max
+            );
+            let (surface, refined) = refine_where_far(
+                &fit.surface,
+                local,
+                &fit.component,
+                limit,
+                &LocalOptions::of(&opts),
+            )
+            .expect("refined");
+            let max = refined.errors.iter().copied().fold(0.0, f64::max);
+            eprintln!(
+                "{} -> {} controls, max {:.3e} -> {max:.3e}, {far} points beyond {limit:.3e}",
+                fit.controls.len(),
+                refined.controls.len(),
+                fit.max
+            );
+            assert!(refined.controls.len() > fit.controls.len());
+            assert_eq!(surface.control_count(), refined.controls.len());
+            assert!(max < fit.max, "max {max} against {}", fit.max);
+            // Every control the refit did not free is the previous one, bit for bit, and the
+            // freed ones are around the bump.
+            for (k, (a, b)) in fit.controls.iter().zip(&refined.controls).enumerate() {
+                if refined.free_controls.binary_search(&(k as u32)).is_err() {
+                    assert_eq!(a, b, "control {k}");
+                }
+            }
+            assert!(!refined.free_controls.is_empty());
+            assert!(refined.free_controls.len() < refined.controls.len() / 2);
+            // Nothing to refine below the largest error.
+            let local = unrefined();
+            let none = refine_where_far(
+                &fit.surface,
+                local,
+                &fit.component,
+                fit.max,
+                &LocalOptions::of(&opts),
+            );
+            assert!(none.is_none());
         }
     }
 }

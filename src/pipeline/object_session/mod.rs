@@ -30,7 +30,7 @@ pub use crate::pipeline::measure::{
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{MergeChange, MergeField, MergeOptions, Merged, ScanSamples};
-use crate::pipeline::object::LocalOptions;
+use crate::pipeline::object::{refine_where_far, LocalOptions};
 use crate::pipeline::object::{ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
@@ -540,13 +540,25 @@ impl ObjectSession {
             let why = "the merged data's largest part is not a manifold surface";
             return Ok(Err(Some(why.into())));
         };
-        let fitted = match local::refit(&previous, &data, &opts) {
+        let (points, mut local_fit) = match local::refit(&previous, &data, &opts) {
             Ok(fitted) => fitted,
             Err(why) => return Ok(Err(Some(why))),
         };
-        if let Some(why) = last.refusal(surface, &fitted.1, &data.mesh) {
-            return Ok(Err(Some(why)));
+        let mut refined = None;
+        if let Some(why) = last.refusal(surface, &local_fit, &data.mesh) {
+            // Points left too far: the control mesh refined there once, then judged again.
+            let limit = last.largest_error_limit(&data.mesh);
+            let Some((refined_surface, refit)) =
+                refine_where_far(surface, local_fit, &data.mesh, limit, &opts)
+            else {
+                return Ok(Err(Some(why)));
+            };
+            if let Some(again) = last.refusal(&refined_surface, &refit, &data.mesh) {
+                return Ok(Err(Some(format!("{why}; refined there: {again}"))));
+            }
+            (local_fit, refined) = (refit, Some(refined_surface));
         }
+        let fitted = (points, local_fit);
         let summary = LocalRefit {
             controls: fitted.1.free_controls.clone(),
             changed_points: fitted.1.changed_points,
@@ -554,7 +566,7 @@ impl ObjectSession {
             rounds: fitted.1.rounds.len() - 1,
         };
         Ok(Ok((
-            last.refitted(&fitted, data.topology, budget, ms_since(t)),
+            last.refitted(&fitted, refined, data.topology, budget, ms_since(t)),
             Some(summary),
         )))
     }
