@@ -1,6 +1,7 @@
 //! Locating the third-party test data in `../shared/data` (never committed here), and the
 //! small generated shapes that tests and examples share.
 
+use crate::TriMesh;
 use glam::DVec3;
 use std::path::PathBuf;
 
@@ -106,4 +107,26 @@ pub fn icosahedron() -> (Vec<DVec3>, Vec<[u32; 3]>) {
         [9, 8, 1],
     ];
     (vertices.to_vec(), faces)
+}
+
+/// The unit square as a height field: `n` x `n` cells, vertex (i, j) at (x, y) = (i/n, j/n)
+/// lifted to `height(x, y)`, row by row, two triangles per cell split along the diagonal
+/// from (i, j) to (i+1, j+1), counter-clockwise seen from above.
+pub fn height_grid(n: u32, height: impl Fn(f64, f64) -> f64) -> TriMesh {
+    let at = |i: u32, j: u32| j * (n + 1) + i;
+    let mut positions = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (f64::from(i) / f64::from(n), f64::from(j) / f64::from(n));
+            positions.push(DVec3::new(x, y, height(x, y)));
+        }
+    }
+    let mut triangles = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+        }
+    }
+    TriMesh::new(positions, triangles)
 }

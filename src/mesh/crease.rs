@@ -412,22 +412,7 @@ mod tests {
     /// A unit square sheet, `n` x `n` cells (`n` even), flat for x <= 1/2 and rising by
     /// `rise(x)` beyond; two triangles per cell.
     fn sheet(n: usize, rise: impl Fn(f64) -> f64) -> TriMesh {
-        let at = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-        let mut positions = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                let x = i as f64 / n as f64;
-                positions.push(DVec3::new(x, j as f64 / n as f64, rise(x)));
-            }
-        }
-        let mut triangles = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        TriMesh::new(positions, triangles)
+        crate::testdata::height_grid(n as u32, |x, _| rise(x))
     }
 
     #[test]

@@ -88,25 +88,7 @@ mod tests {
     use super::*;
 
     fn grid(n: u32) -> TriMesh {
-        let mut positions = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                positions.push(DVec3::new(
-                    f64::from(i),
-                    f64::from(j),
-                    0.1 * f64::from(i * j),
-                ));
-            }
-        }
-        let at = |i: u32, j: u32| j * (n + 1) + i;
-        let mut triangles = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-            }
-        }
-        TriMesh::new(positions, triangles)
+        crate::testdata::height_grid(n, |x, y| 0.1 * x * y)
     }
 
     /// The same mesh whatever order its vertices came in: a reversed copy renumbers to
