@@ -40,7 +40,8 @@ pub struct StrayReport {
     pub limit_share: f64,
     /// Whether `share_of_diagonal` is within `limit_share`.
     pub within: bool,
-    /// Segments per control face edge of the sampled lattice.
+    /// Segments per control face edge of the sampled lattice (the farthest samples are
+    /// then climbed to their local maxima: `object::farthest_from`).
     pub lattice_segments: usize,
 }
 
