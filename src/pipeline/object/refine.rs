@@ -125,16 +125,24 @@ pub(super) struct Refined {
 /// Control faces holding a data point farther than `tolerance` from the surface (every
 /// face with a point off it without one).
 pub(super) fn faces_beyond(fit: &Fitted, tolerance: Option<f64>) -> usize {
-    let tol = tolerance.unwrap_or(0.0);
+    faces_holding_beyond(fit, tolerance.unwrap_or(0.0))
+        .iter()
+        .filter(|&&b| b)
+        .count()
+}
+
+/// Per control face of `fit`, whether it holds a data point farther than `tolerance` from
+/// the surface.
+pub(super) fn faces_holding_beyond(fit: &Fitted, tolerance: f64) -> Vec<bool> {
     let mut beyond = vec![false; fit.surface.domain_face_count()];
     for (p, &d) in fit.params.iter().zip(fit.distances) {
-        if d > tol {
+        if d > tolerance {
             if let Some(b) = beyond.get_mut(p.face as usize) {
                 *b = true;
             }
         }
     }
-    beyond.iter().filter(|&&b| b).count()
+    beyond
 }
 
 /// Each control vertex's limit point on the surface of `controls` (the control itself for

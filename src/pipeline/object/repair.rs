@@ -6,7 +6,7 @@ use super::layout::LayoutOptions;
 use super::local::{refit_refined, LocalFit, LocalOptions, RefinedRefit};
 use super::model::STRAY_LATTICE_SEGMENTS;
 use super::model::{ms_since, ObjectFit, ObjectOptions};
-use super::refine::{refined_mesh, Fitted, RefineRound, Refined, Splits};
+use super::refine::{faces_holding_beyond, refined_mesh, Fitted, RefineRound, Refined, Splits};
 use super::solve::rms;
 use super::stray::face_strays;
 use crate::surface::loop_limit::LoopLimitSurface;
@@ -177,21 +177,6 @@ pub(crate) fn refine_where_far(
     limit: f64,
     opts: &LocalOptions,
 ) -> Option<(LoopLimitSurface, LocalFit)> {
-    let mut far = vec![false; surface.domain_face_count()];
-    for (p, _) in local
-        .params
-        .iter()
-        .zip(&local.errors)
-        .filter(|(_, &e)| e > limit)
-    {
-        if let Some(f) = far.get_mut(p.face as usize) {
-            *f = true;
-        }
-    }
-    let add = far.iter().filter(|&&f| f).count();
-    if add == 0 {
-        return None;
-    }
     let fitted = Fitted {
         component,
         surface,
@@ -199,6 +184,11 @@ pub(crate) fn refine_where_far(
         params: &local.params,
         distances: &local.errors,
     };
+    let far = faces_holding_beyond(&fitted, limit);
+    let add = far.iter().filter(|&&f| f).count();
+    if add == 0 {
+        return None;
+    }
     let refined = refined_mesh(
         &fitted,
         add,

@@ -88,7 +88,7 @@ pub fn face_strays(
                         v: j as f64 / k as f64,
                     };
                     let d = distance_at(p);
-                    if d > farthest.0 || !d.is_finite() {
+                    if d > farthest.0 {
                         farthest = (d, p);
                     }
                 }
