@@ -7,7 +7,11 @@
 //! (data vertices to their foot points on the limit surface), the same measured
 //! independently (data vertices to a tessellation of the limit surface, `TESS` segments per
 //! control face edge, through `MeshDistance`), the decimated mesh's RMS / max (data vertices
-//! to it), the ratio of the RMS values (tessellation over decimation), genus and boundary loops, and the stage times.
+//! to it), the ratio of the RMS values (tessellation over decimation), genus and boundary
+//! loops, the stray (how far the tessellation strays from the data, in percent of the
+//! diagonal: overall, inside the rim, and the decimated mesh's own on a lattice of its
+//! triangles, which says whether the budget lets any mesh stay within the bound), and the
+//! stage times; `q1` marks a control mesh simplified without the triangle-quality guard.
 //!
 //!     cargo run --release --example object_table [-- DATA_DIR [PCT [REFINE_ROUNDS]]]
 //!
@@ -103,6 +107,9 @@ fn main() {
         if let Some(s) = env("OBJ_REFINE_SHARE") {
             opts.refine.start_share = s;
         }
+        if let Some(q) = env("OBJ_MIN_QUALITY") {
+            opts.simplify.min_quality = q;
+        }
         if let Some(l) = env("OBJ_MIN_LOOP") {
             opts.simplify.min_boundary_loop = l as usize;
         }
@@ -167,14 +174,15 @@ fn main() {
             match decimated {
                 Ok(b) => {
                     let (r, m) = rms_max(&fit.data, &b.mesh);
-                    if baseline.is_none_or(|(best, _, _)| r < best) {
-                        baseline = Some((r, m, b.mesh.positions.len()));
+                    if baseline.is_none_or(|(best, _, _, _)| r < best) {
+                        let (_, s) = rms_max(&face_lattice(&b.mesh, TESS), &fit.component);
+                        baseline = Some((r, m, b.mesh.positions.len(), s));
                     }
                 }
                 Err(e) => println!("{name}: baseline decimation failed: {e}"),
             }
         }
-        let Some((qem_rms, qem_max, qem_count)) = baseline else {
+        let Some((qem_rms, qem_max, qem_count, qem_stray)) = baseline else {
             continue;
         };
         let n = fit.data.len();
@@ -184,7 +192,7 @@ fn main() {
             diagnose(&fit, tess_rms);
         }
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} k{} s{} {}",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner, qem {:.3}) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} k{} s{} q{} {}",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -201,6 +209,7 @@ fn main() {
             fit.control_topology.boundary_loops,
             stray_pct,
             inner_pct,
+            100.0 * qem_stray / fit.component.bounds_diagonal(),
             read_ms,
             ts.clean_ms,
             ts.simplify_ms,
@@ -216,6 +225,7 @@ fn main() {
             fit.layout.corners,
             fit.surface.crease_edges().len(),
             fit.sampled_faces,
+            u8::from(fit.layout.quality_guard_dropped),
             fit.refinement
                 .iter()
                 .map(|r| format!("{}:{:.3e}", r.controls, r.rms))
@@ -437,6 +447,22 @@ fn rms_max(points: &[DVec3], mesh: &TriMesh) -> (f64, f64) {
 /// shared edges repeated: only distances are measured on it).
 fn tessellation(fit: &ObjectFit) -> TriMesh {
     tessellation_at(fit, TESS)
+}
+
+/// The points of a lattice of `k` segments per edge on every triangle of `mesh`: where a
+/// triangle mesh strays from the data, measured as the fit's tessellation is.
+fn face_lattice(mesh: &TriMesh, k: usize) -> Vec<DVec3> {
+    let mut points = Vec::new();
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+        for j in 0..=k {
+            for i in 0..=k - j {
+                let (u, v) = (i as f64 / k as f64, j as f64 / k as f64);
+                points.push(a * (1.0 - u - v) + b * u + c * v);
+            }
+        }
+    }
+    points
 }
 
 /// [`tessellation`] at `k` segments per control face edge.

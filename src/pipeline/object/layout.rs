@@ -70,6 +70,9 @@ pub struct LayoutReport {
     /// Other boundary vertices of a single face (Loop corners the data does not ask for)
     /// given a second face by a split, each adding a control.
     pub stray_corners_opened: usize,
+    /// The simplification ran without its triangle-quality guard, which cost the control
+    /// mesh too much of its shape or its budget (`simplification`).
+    pub quality_guard_dropped: bool,
 }
 
 /// Faces of a quality below this are never created by a flip.

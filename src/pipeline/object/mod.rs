@@ -28,6 +28,7 @@ mod refine;
 mod repair;
 mod seam;
 mod semi_regular;
+mod simplification;
 mod solve;
 mod stray;
 mod version;
@@ -37,9 +38,7 @@ use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{crease_sets, detect_creases};
-use crate::mesh::simplify::{
-    fixed_crease_vertices, simplify_with_creases, Simplified, SimplifyOptions, SurfaceTopology,
-};
+use crate::mesh::simplify::{fixed_crease_vertices, Simplified, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::Topology;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::SurfaceParam;
@@ -60,6 +59,7 @@ pub use model::{
 use refine::{faces_beyond, refined_mesh, Splits};
 pub use refine::{RefineOptions, RefineRound};
 pub(crate) use repair::refine_where_far;
+use simplification::simplify_for_control;
 use solve::{point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};
@@ -121,8 +121,9 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         }
         None => Vec::new(),
     };
-    let simplified = simplify_with_creases(&component, &simplify_opts, &data_creases)
-        .map_err(ObjectError::Simplify)?;
+    let (simplified, guard_dropped) =
+        simplify_for_control(&component, &simplify_opts, &data_creases)
+            .map_err(ObjectError::Simplify)?;
     times.simplify_ms = ms_since(t);
 
     let Simplified {
@@ -151,7 +152,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         })
         .collect();
     let t = Instant::now();
-    let (control_mesh, params, crease_edges, layout) = improve_layout(
+    let (control_mesh, params, crease_edges, mut layout) = improve_layout(
         &component,
         control_mesh,
         params,
@@ -159,6 +160,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         &corners,
         &opts.layout,
     );
+    layout.quality_guard_dropped = guard_dropped;
     let (control_mesh, params, crease_edges) =
         semi_regular::split_domain(control_mesh, params, crease_edges, opts.domain_levels)
             .map_err(ObjectError::NotManifold)?;
