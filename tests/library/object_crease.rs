@@ -497,3 +497,41 @@ fn a_shallow_roof_ridge_stays_sharp_by_the_relative_rule() {
         a.rms
     );
 }
+
+/// A faceted part whose flat sides only long thin faces keep: the simplification's
+/// triangle-quality guard would stop it far above the budget, so it gives way, and the fit
+/// holds the budget (plus the stray repair's tenth) while matching the part at least as
+/// well as the plain quadric decimation with as many vertices (the guarded one stalls
+/// too).
+#[test]
+fn a_faceted_part_keeps_its_budget_where_the_quality_guard_would_stall() {
+    let (mesh, _) = trispline::testdata::faceted_prism(8, 60, 2);
+    let opts = ObjectOptions {
+        target_controls: Some(40),
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let (rms, max) = rms_max(&fit.data, &tessellation(&fit, 8));
+    let [guarded, plain] = decimation_baselines(&fit.component, fit.controls.len())
+        .map(|qem| qem.expect("the decimation baseline").mesh);
+    let (qem_rms, qem_max) = rms_max(&fit.data, &plain);
+    println!(
+        "faceted prism {} points: {} controls, {} crease edges, guard dropped {}; RMS {rms:.3e} max {max:.3e}; plain QEM ({} vertices) RMS {qem_rms:.3e} max {qem_max:.3e}; guarded QEM {} vertices",
+        fit.data.len(),
+        fit.controls.len(),
+        fit.surface.crease_edges().len(),
+        fit.layout.quality_guard_dropped,
+        plain.positions.len(),
+        guarded.positions.len(),
+    );
+    assert!(fit.layout.quality_guard_dropped, "the guard kept");
+    assert!(fit.controls.len() <= 44, "{} controls", fit.controls.len());
+    assert_eq!(plain.positions.len(), fit.controls.len());
+    // Both can be exact: rounding aside, no worse.
+    let floor = 1e-9;
+    assert!(rms <= qem_rms.max(floor), "RMS {rms} vs QEM {qem_rms}");
+    assert!(
+        max <= 1.5 * qem_max.max(floor),
+        "max {max} vs QEM {qem_max}"
+    );
+}

@@ -107,57 +107,7 @@ fn landing_rms(component: &TriMesh, simplified: &Simplified) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
-
-    /// A closed octagonal prism of radius 1 and height 2, its sides a fine grid (`rows`
-    /// rows of squares split in two, `per_side` squares across each side) and its caps
-    /// fans from a centre vertex; and its 24 sharp edges (the two rims and the eight
-    /// vertical edges), each as the chain of mesh edges along it.
-    fn prism(sides: usize, rows: usize, per_side: usize) -> (TriMesh, Vec<[u32; 2]>) {
-        let around = sides * per_side;
-        let corner = |k: usize| {
-            let a = std::f64::consts::TAU * k as f64 / sides as f64;
-            DVec3::new(a.cos(), a.sin(), 0.0)
-        };
-        let ring_point = |j: usize| {
-            let (side, step) = (j / per_side, j % per_side);
-            let t = step as f64 / per_side as f64;
-            corner(side) * (1.0 - t) + corner(side + 1) * t
-        };
-        let mut positions = Vec::new();
-        for r in 0..=rows {
-            let z = 2.0 * r as f64 / rows as f64 - 1.0;
-            positions.extend((0..around).map(|j| ring_point(j) + DVec3::Z * z));
-        }
-        let at = |r: usize, j: usize| (r * around + j % around) as u32;
-        let mut triangles = Vec::new();
-        for r in 0..rows {
-            for j in 0..around {
-                let (a, b, c, d) = (at(r, j), at(r, j + 1), at(r + 1, j + 1), at(r + 1, j));
-                triangles.push([a, b, c]);
-                triangles.push([a, c, d]);
-            }
-        }
-        let bottom = positions.len() as u32;
-        positions.push(-DVec3::Z);
-        let top = positions.len() as u32;
-        positions.push(DVec3::Z);
-        for j in 0..around {
-            triangles.push([bottom, at(0, j + 1), at(0, j)]);
-            triangles.push([top, at(rows, j), at(rows, j + 1)]);
-        }
-        let mut creases = Vec::new();
-        for j in 0..around {
-            creases.push([at(0, j), at(0, j + 1)]);
-            creases.push([at(rows, j), at(rows, j + 1)]);
-        }
-        for side in 0..sides {
-            for r in 0..rows {
-                creases.push([at(r, side * per_side), at(r + 1, side * per_side)]);
-            }
-        }
-        (TriMesh::new(positions, triangles), creases)
-    }
+    use crate::testdata::faceted_prism as prism;
 
     fn options(target: usize) -> SimplifyOptions {
         SimplifyOptions {
