@@ -75,11 +75,13 @@ struct Judged {
 const ROUNDING_SHARE: f64 = 1e-9;
 
 /// Whether the guard gives way: when it stops the simplification above the `target`
-/// where the unguarded one goes further (it costs the user controls), or when the data
-/// stand more than `GUARD_COST_LIMIT` times as far from the guarded mesh, beyond
-/// `noise`.
+/// where the unguarded one goes further (it costs the user controls) without the data
+/// standing more than `GUARD_COST_LIMIT` times as far from it, or when the data stand more
+/// than that many times as far from the guarded mesh; distances below `noise` are equal.
 fn guard_gives_way(guarded: Judged, unguarded: Judged, target: usize, noise: f64) -> bool {
-    let stalled = guarded.vertices > target && unguarded.vertices < guarded.vertices;
+    let stalled = guarded.vertices > target
+        && unguarded.vertices < guarded.vertices
+        && unguarded.rms <= (GUARD_COST_LIMIT * guarded.rms).max(noise);
     let costly = guarded.rms > noise && guarded.rms > GUARD_COST_LIMIT * unguarded.rms;
     stalled || costly
 }
@@ -153,7 +155,9 @@ mod tests {
         assert!(guard_gives_way(at(100, 2e-3), at(100, 1e-3), 100, noise));
         assert!(!guard_gives_way(at(100, 1.4e-3), at(100, 1e-3), 100, noise));
         assert!(!guard_gives_way(at(100, 3e-13), at(100, 1e-13), 100, noise));
-        assert!(guard_gives_way(at(450, 1e-3), at(150, 3e-3), 100, noise));
+        assert!(guard_gives_way(at(450, 1e-3), at(150, 1.4e-3), 100, noise));
+        assert!(!guard_gives_way(at(450, 1e-3), at(150, 3e-3), 100, noise));
+        assert!(guard_gives_way(at(450, 0.0), at(100, 1e-13), 100, noise));
         assert!(!guard_gives_way(at(100, 1e-3), at(90, 1e-3), 100, noise));
         assert!(!guard_gives_way(at(450, 1e-3), at(450, 1e-3), 100, noise));
     }
