@@ -2,6 +2,7 @@
 
 use crate::mesh::topology::TopologyError;
 use crate::mesh::TriMesh;
+use glam::DVec3;
 
 /// Marks an input vertex that was collapsed away (`Simplified::control_of`).
 pub const REMOVED: u32 = u32::MAX;
@@ -60,6 +61,15 @@ pub struct Landing {
     pub u: f64,
     /// Barycentric weight of the face's corner 1.
     pub v: f64,
+}
+
+impl Landing {
+    /// The point it stands for on `mesh` (`None` when `mesh` has no such face).
+    pub fn position_on(&self, mesh: &TriMesh) -> Option<DVec3> {
+        let t = mesh.triangles.get(self.face as usize)?;
+        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
+        Some(a * self.u + b * self.v + c * (1.0 - self.u - self.v))
+    }
 }
 
 /// The result of [`simplify`]: the control mesh and how the input vertices map onto it.

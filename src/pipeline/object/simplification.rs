@@ -92,11 +92,9 @@ fn landing_rms(component: &TriMesh, simplified: &Simplified) -> f64 {
     let mut sum = 0.0;
     let mut count = 0usize;
     for (p, l) in component.positions.iter().zip(&simplified.landing) {
-        let Some(t) = mesh.triangles.get(l.face as usize) else {
+        let Some(on) = l.position_on(mesh) else {
             continue;
         };
-        let [a, b, c] = t.map(|v| mesh.positions[v as usize]);
-        let on = a * l.u + b * l.v + c * (1.0 - l.u - l.v);
         sum += p.distance_squared(on);
         count += 1;
     }
