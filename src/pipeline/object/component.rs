@@ -7,9 +7,40 @@ use crate::mesh::spatial_order::spatially_ordered;
 use crate::mesh::topology::Topology;
 use crate::TriMesh;
 use rustc_hash::FxHashSet;
+use std::time::Instant;
 
 /// Repair passes before the input is given up as not manifold.
 const REPAIR_PASSES: usize = 8;
+
+/// What the object path fits of an input, prepared once: the worker judges from it whether
+/// an input goes the object path (`worker::object::object_reason`) and the fit starts
+/// from it, where each cleaned the input on its own before (on a 139k-vertex closed scan
+/// the second cleaning and topology took about 100 ms of a 3 s fit).
+pub struct ObjectInput {
+    /// The largest component (`largest_component`), in spatial order.
+    pub mesh: TriMesh,
+    /// What the first cleaning pass changed.
+    pub cleaning: CleanReport,
+    /// Its topology; `None` where the repairs left it no manifold.
+    pub topology: Option<Topology>,
+    /// Time taken to prepare it, in milliseconds.
+    pub prepare_ms: f64,
+}
+
+impl ObjectInput {
+    /// `mesh` prepared for the object path; `None` when cleaning leaves nothing.
+    pub fn of(mesh: &TriMesh, opts: &CleanOptions) -> Option<Self> {
+        let start = Instant::now();
+        let (mesh, cleaning) = largest_component(mesh, opts)?;
+        let topology = Topology::from_mesh(&mesh).ok();
+        Some(Self {
+            mesh,
+            cleaning,
+            topology,
+            prepare_ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
 
 /// The largest manifold, oriented component of `mesh` (see the module comment), its
 /// vertices and faces in spatial order (`spatially_ordered`: the stages after walk it

@@ -21,6 +21,7 @@ mod component;
 mod corners;
 mod data_side;
 mod extend;
+mod fit_parts;
 mod layout;
 mod local;
 mod model;
@@ -28,13 +29,13 @@ mod refine;
 mod repair;
 mod seam;
 mod semi_regular;
+mod shares;
 mod simplification;
 mod solve;
 mod stray;
 mod version;
 
 use crate::fit::distance::CholeskyPattern;
-use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::crease::{crease_sets, detect_creases};
@@ -43,49 +44,59 @@ use crate::mesh::topology::Topology;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
-use component::largest_component;
+pub use component::ObjectInput;
 use corners::rim_corners;
 use data_side::DataSide;
 pub use extend::{extend_over_new_ground, NotExtended, PreviousFit};
+use fit_parts::{declined, FitStart, GoOn, RoundContext, Setup};
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
-use model::{control_target, limit_surface, ms_since, MAX_REFUSALS};
+use model::{control_target, ms_since, MAX_REFUSALS};
 pub use model::{
     LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
     CURVATURE_FLOOR, STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
 };
-use refine::{faces_beyond, refined_mesh, Splits};
+use refine::{faces_beyond, refined_mesh, Fitted, Splits, MIN_FACES_BEYOND_SHARE};
 pub use refine::{RefineOptions, RefineRound};
 pub(crate) use repair::refine_where_far;
 use simplification::simplify_for_control;
-use solve::{point_fit, rows_at, two_sided_rms, DistanceRound, Feet, Rim, Samples};
+use solve::{point_fit, rows_at, Feet, Rim};
+use std::cell::Cell;
 use std::time::Instant;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
 
-/// A refinement round needs at least one control face with points beyond the tolerance,
-/// and one edge to split, per this many controls. A round is a whole refit, and points
-/// beyond the tolerance on so few faces are isolated (outliers, noise spikes) rather than
-/// shape the control mesh misses: on bun_zipper subdivided once (139k points, 250 um
-/// tolerance) three rounds for one or two such points each took 3.8 of the 7.4 s, and the
-/// max moved 257 -> 285 -> 314 -> 270 um.
-const MIN_FACES_BEYOND_SHARE: usize = 100;
-
 /// The component of `mesh` [`fit_object`] fits: its cleaned largest component, repaired
 /// to a manifold where cleaning alone leaves it not one; `None` when nothing is left.
 pub fn fitted_component(mesh: &TriMesh, clean: &CleanOptions) -> Option<TriMesh> {
-    largest_component(mesh, clean).map(|(component, _)| component)
+    ObjectInput::of(mesh, clean).map(|input| input.mesh)
 }
 
 /// Fits the exact Loop limit surface of a simplified control mesh to the largest
 /// component of `mesh`.
 pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, ObjectError> {
+    let input = ObjectInput::of(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
+    fit_object_input(input, opts)
+}
+
+/// [`fit_object`] of an input already prepared (with `opts.clean`).
+pub fn fit_object_input(
+    input: ObjectInput,
+    opts: &ObjectOptions,
+) -> Result<ObjectFit, ObjectError> {
     let start = Instant::now();
-    let mut times = ObjectTimes::default();
-    let (component, cleaning) = largest_component(mesh, &opts.clean).ok_or(ObjectError::Empty)?;
-    times.clean_ms = ms_since(start);
+    let mut times = ObjectTimes {
+        clean_ms: input.prepare_ms,
+        ..ObjectTimes::default()
+    };
+    let ObjectInput {
+        mesh: component,
+        cleaning,
+        topology: data_topo,
+        ..
+    } = input;
 
     let t = Instant::now();
     let target = control_target(component.positions.len(), opts);
@@ -100,7 +111,6 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     let first_target = (first_target / split_factor).max(4.min(first_target));
     // The holes' minimum never takes more than a quarter of the budget (a broken scan can
     // have dozens of tiny holes).
-    let data_topo = Topology::from_mesh(&component).ok();
     let loops = data_topo.as_ref().map_or(0, |topo| {
         SurfaceTopology::of_built(&component, topo).boundary_loops
     });
@@ -177,11 +187,21 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
         None => DataSide::new(&component, opts)?,
     };
     let side_ms = ms_since(t);
-    let first = FitStart::new(control_mesh, &crease_edges, params);
+    let go_on = GoOn {
+        rounds: opts.rounds,
+        cap: target,
+        declined_at: Cell::new(None),
+    };
+    let first = FitStart {
+        go_on: refining.then_some(&go_on),
+        ..FitStart::new(control_mesh, &crease_edges, params)
+    };
     let mut fit = fit_from(&side, first, &first_opts)?;
     // The data side is built for every fit: reported with the first fit's own setup.
     fit.times.surface_ms += side_ms;
-    if refining {
+    if let Some(declined_at) = go_on.declined_at.get() {
+        fit.refinement = vec![declined_at];
+    } else if refining {
         fit = refine_fit(fit, target, opts, &side);
     }
     let mut fit = repair::keep_near_data(fit, target, opts, &side);
@@ -190,7 +210,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
     fit.times.clean_ms = times.clean_ms;
     fit.times.simplify_ms = times.simplify_ms;
     fit.times.layout_ms = times.layout_ms;
-    fit.times.total_ms = ms_since(start);
+    fit.times.total_ms = times.clean_ms + ms_since(start);
     Ok(fit)
 }
 
@@ -257,32 +277,6 @@ pub fn fit_on_creased_control_mesh(
     )
 }
 
-/// What a fit starts from: the control mesh, its creases, the data points' parameters on
-/// it, and maybe more.
-struct FitStart<'a> {
-    control_mesh: TriMesh,
-    crease_edges: &'a [[u32; 2]],
-    /// One per data point, on the control faces.
-    params: Vec<SurfaceParam>,
-    /// Control positions to start the rounds from (one per control mesh vertex), the
-    /// first point fit skipped.
-    warm: Option<Vec<DVec3>>,
-    /// The surface of an earlier control mesh whose unchanged patches are reused.
-    previous: Option<&'a LoopLimitSurface>,
-}
-
-impl<'a> FitStart<'a> {
-    fn new(control_mesh: TriMesh, crease_edges: &'a [[u32; 2]], params: Vec<SurfaceParam>) -> Self {
-        Self {
-            control_mesh,
-            crease_edges,
-            params,
-            warm: None,
-            previous: None,
-        }
-    }
-}
-
 /// [`fit_on_creased_control_mesh`] from `start`, on the data of `side`.
 fn fit_from(
     side: &DataSide,
@@ -295,26 +289,23 @@ fn fit_from(
         params,
         warm,
         previous,
+        go_on,
     } = start_from;
     let start = Instant::now();
     let mut times = ObjectTimes::default();
-    let t = Instant::now();
     let component = side.mesh;
     let n = component.positions.len();
     one_param_per_point(&params, n)?;
     let data_topology = side.topology;
-    let control_topology = SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let surface = limit_surface(&control_mesh, crease_edges, previous)?;
+    let Setup {
+        surface,
+        control_topology,
+        rim,
+        fairness,
+        smoothing,
+    } = Setup::new(side, &control_mesh, crease_edges, previous, opts)?;
     let m = control_mesh.positions.len();
-    let control_topo = Topology::from_mesh(&control_mesh).map_err(ObjectError::NotManifold)?;
-    let rim = Rim::new(&control_topo.twin, &side.on_rim);
-    let fairness = Collocation::new(umbrella_laplacian_with_creases(
-        m,
-        &control_mesh.triangles,
-        surface.crease_edges(),
-    ));
-    let smoothing = opts.smoothing * n as f64 / m.max(1) as f64;
-    times.surface_ms = ms_since(t);
+    times.surface_ms = ms_since(start);
 
     let t = Instant::now();
     let data = component.positions.clone();
@@ -345,50 +336,44 @@ fn fit_from(
     // makes unstable and a fixed large share makes slow.
     let mut share = opts.tangential;
     let near_edge = side.near_edge(opts.edge_rings);
-    let on_rim = rim.marks(n);
-    let edge_factor = opts.tangential_edge / opts.tangential.max(f64::MIN_POSITIVE);
+    let context = RoundContext {
+        surface: &surface,
+        data: &data,
+        component,
+        rim: &rim,
+        fairness: &fairness,
+        smoothing,
+        near_edge: &near_edge,
+        on_rim: &rim.marks(n),
+        nearest: opts.surface_samples.then(|| side.nearest()),
+        opts,
+    };
     let (mut refusals, mut taken) = (0, 0);
-    let nearest = opts.surface_samples.then(|| side.nearest());
     let mut sampled_faces = 0;
     let mut pattern = CholeskyPattern::default();
-    while taken < opts.rounds && refusals < MAX_REFUSALS {
+    let mut go_on = go_on;
+    let mut limit = opts.rounds;
+    while refusals < MAX_REFUSALS {
+        if taken >= limit {
+            let fitted = Fitted {
+                component,
+                surface: &surface,
+                controls: &controls,
+                params: &feet.params,
+                distances: &feet.distances,
+            };
+            match go_on.take().and_then(|g| g.raised(limit, &fitted, opts)) {
+                Some(raised) => limit = raised,
+                None => break,
+            }
+        }
         if opts.stop.reached(&feet.distances) {
             break;
         }
-        let samples = match &nearest {
-            Some(nearest) => Samples::find(
-                &surface,
-                &controls,
-                &feet.params,
-                &rim,
-                component,
-                nearest,
-                None,
-            ),
-            None => Samples::none(),
-        };
-        sampled_faces = samples.faces;
-        let (tangential, curvature) =
-            shares_and_curvature((&near_edge, &on_rim), &feet, (share, edge_factor), opts);
-        let round = DistanceRound {
-            surface: &surface,
-            data: &data,
-            fairness: &fairness,
-            smoothing,
-            tangential: &tangential,
-            curvature: curvature.as_deref(),
-            max_iterations: opts.max_iterations,
-            samples: &samples,
-            sample_tangential: share,
-        };
-        // A round is taken when it lowers the two-sided RMS it minimises: judged by the
-        // data's distances alone, a round that pulls a bulge over a hole back onto the data
-        // was refused (bun_zipper_res4 at 40 % controls kept a first fit straying 17.7 %
-        // of the diagonal).
-        let before = two_sided_rms(&feet.distances, &samples.distances);
-        let next_feet = round
-            .solve(&feet, controls.clone(), &mut pattern)
-            .and_then(|next| round.judge(next, &feet.params, &rim, nearest, before));
+        let tried = context.round(&controls, &feet, share, &mut pattern);
+        sampled_faces = tried.sampled_faces;
+        let before = tried.before;
+        let next_feet = tried.next;
         let Some((next_feet, next, after)) = next_feet else {
             refusals += 1;
             share *= 4.0;
@@ -517,18 +502,15 @@ fn refine_fit(first: ObjectFit, cap: usize, opts: &ObjectOptions, side: &DataSid
     // converged): then the rest of its rounds run after the refinement.
     let mut unfinished = true;
     for round in 0..opts.refine.rounds {
-        let room = cap.saturating_sub(fit.controls.len());
-        if room == 0 || opts.stop.reached(&fit.distances) {
+        let fitted = fit.fitted();
+        if declined(&fitted, cap, opts) {
             break;
         }
+        let room = cap - fit.controls.len();
         let share = room.div_ceil(opts.refine.rounds - round);
-        let fitted = fit.fitted();
         // As many splits as faces miss the tolerance (up to the round's share of the room):
         // the misfit says how much to refine, the squared error where.
         let beyond = faces_beyond(&fitted, tolerance);
-        if beyond * MIN_FACES_BEYOND_SHARE < fit.controls.len() {
-            break;
-        }
         let add = share.min(beyond);
         let Some(refined) = refined_mesh(&fitted, add, &opts.layout, Splits::ByError) else {
             break;
@@ -604,48 +586,4 @@ fn intermediate(opts: &ObjectOptions) -> ObjectOptions {
         rounds: opts.rounds.min(opts.refine.intermediate_rounds),
         ..opts.clone()
     }
-}
-
-/// Per data point, the share of the point-to-point term in a round: `share` inside,
-/// `edge_factor` times more near the data's boundary, and all of it on the rim, where the
-/// boundary curve has to reach the points.
-/// A round's tangential shares (`shares`) and, with `opts.curvature_floor`, the points'
-/// curvature terms: away from the data's edges the share is then the floor, and the
-/// curvature term, like the shares, scaled by the Levenberg-Marquardt factor `share /
-/// opts.tangential`. Near the edges and on the rim the shares are the constant ones:
-/// there the data end, and the foot points of a rim are held on the boundary curve.
-fn shares_and_curvature(
-    (near_edge, on_rim): (&[bool], &[bool]),
-    feet: &Feet,
-    (share, edge_factor): (f64, f64),
-    opts: &ObjectOptions,
-) -> (Vec<f64>, Option<Vec<[f64; 6]>>) {
-    let mut tangential = shares(near_edge, on_rim, share, edge_factor);
-    let Some(floor) = opts.curvature_floor else {
-        return (tangential, None);
-    };
-    let damping = share / opts.tangential.max(f64::MIN_POSITIVE);
-    let mut curvature = vec![[0.0; 6]; tangential.len()];
-    for (i, t) in tangential.iter_mut().enumerate() {
-        if near_edge[i] || on_rim[i] {
-            continue;
-        }
-        *t = floor * damping;
-        if let Some(c) = feet.curvature.get(i) {
-            curvature[i] = c.map(|x| x * damping);
-        }
-    }
-    (tangential, Some(curvature))
-}
-
-fn shares(near_edge: &[bool], on_rim: &[bool], share: f64, edge_factor: f64) -> Vec<f64> {
-    near_edge
-        .iter()
-        .zip(on_rim)
-        .map(|(&e, &r)| match (r, e) {
-            (true, _) => 1.0,
-            (false, true) => share * edge_factor,
-            (false, false) => share,
-        })
-        .collect()
 }

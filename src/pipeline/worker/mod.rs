@@ -131,7 +131,14 @@ pub(crate) fn fit_patch_with(
         });
     }
     if fit_cfg.domain == Domain::Mesh {
-        return object_patch(mesh, previous, cfg, budget, "fit.domain = \"mesh\"".into());
+        return object_patch(
+            mesh,
+            None,
+            previous,
+            cfg,
+            budget,
+            "fit.domain = \"mesh\"".into(),
+        );
     }
     let any_previous = previous;
     let previous = previous.filter(|w| w.surface == fit_cfg.surface);
@@ -173,8 +180,9 @@ pub(crate) fn fit_patch_with(
     };
     let auto = fit_cfg.domain == Domain::Auto;
     if auto && object::may_be_nearly_closed(mesh) {
-        if let Some(reason) = object::object_reason(mesh) {
-            return object_patch(mesh, any_previous, cfg, budget, reason);
+        let input = object::object_input(mesh, cfg);
+        if let Some(reason) = input.as_ref().and_then(object::object_reason) {
+            return object_patch(mesh, input, any_previous, cfg, budget, reason);
         }
     }
     // No subdivision connectivity: remesh the scan onto a lattice.
@@ -203,7 +211,7 @@ pub(crate) fn fit_patch_with(
                 | RemeshError::NotManifold(_)
                 | RemeshError::Distorted { .. }),
         }) if auto => {
-            return object_patch(mesh, any_previous, cfg, budget, source.to_string());
+            return object_patch(mesh, None, any_previous, cfg, budget, source.to_string());
         }
         Err(e) => {
             return Err(PipelineError::ScanFailed {
@@ -227,6 +235,7 @@ pub(crate) fn fit_patch_with(
 /// The object path of `fit_patch`: warm from the previous version's object fit if any.
 fn object_patch(
     mesh: &TriMesh,
+    input: Option<crate::pipeline::object::ObjectInput>,
     previous: Option<&WarmStart>,
     cfg: &WorkerConfig,
     budget: Budget,
@@ -235,6 +244,7 @@ fn object_patch(
     let warm = previous.and_then(|w| w.object.as_ref().map(|o| (o, w.controls.as_slice())));
     let (fit, info) = object::fit_as_object(
         mesh,
+        input,
         warm.map(|w| w.0),
         warm.map_or(&[][..], |w| w.1),
         cfg,

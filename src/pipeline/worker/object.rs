@@ -7,17 +7,16 @@
 use super::config::WorkerConfig;
 use super::stray_guard::{stays_on_data, StrayReport};
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
-use crate::mesh::clean::{clean, CleanOptions, CleanReport};
+use crate::mesh::clean::CleanReport;
 use crate::mesh::crease::CreaseOptions;
 use crate::mesh::edge_table::EdgeTable;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    extend_over_new_ground, fit_object, fit_on_creased_control_mesh, fitted_component,
-    refit_where_changed, LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
-    ObjectTimes, PreviousFit, RefineRound, RoundReport, RoundStop,
+    extend_over_new_ground, fit_object_input, fit_on_creased_control_mesh, refit_where_changed,
+    LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectInput, ObjectOptions, ObjectTimes,
+    PreviousFit, RefineRound, RoundReport, RoundStop,
 };
-use crate::pipeline::scan::components::cleaned_components;
 use crate::pipeline::scan::WarmFeet;
 use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::boundary_loops;
@@ -80,14 +79,19 @@ pub(super) fn may_be_nearly_closed(mesh: &TriMesh) -> bool {
     !long_rim
 }
 
+/// `mesh` prepared for the object path as `fit_as_object` fits it (the worker's cleaning
+/// options); `None` when cleaning leaves nothing.
+pub(super) fn object_input(mesh: &TriMesh, cfg: &WorkerConfig) -> Option<ObjectInput> {
+    ObjectInput::of(mesh, &options(cfg).clean)
+}
+
 /// Why an input without subdivision connectivity goes the object path under
 /// `domain = "auto"`, or `None` when it is a disk-like scan (or so broken that the scan
-/// path's own refusal says more). Judged on the cleaned input's largest component.
-pub(super) fn object_reason(mesh: &TriMesh) -> Option<String> {
-    let cleaned = clean(mesh, &CleanOptions::default());
-    let part = cleaned_components(&cleaned).into_iter().next()?;
-    let topo = Topology::from_mesh(&part).ok()?;
-    let loops = boundary_loops(&topo);
+/// path's own refusal says more). Judged on the component the object path would fit.
+pub(super) fn object_reason(input: &ObjectInput) -> Option<String> {
+    let part = &input.mesh;
+    let topo = input.topology.as_ref()?;
+    let loops = boundary_loops(topo);
     if loops.is_empty() {
         return Some("closed surface".into());
     }
@@ -206,9 +210,11 @@ fn options(cfg: &WorkerConfig) -> ObjectOptions {
     }
 }
 
-/// Fits `mesh` as a whole object, from `previous` when it still fits.
+/// Fits `mesh` as a whole object, from `previous` when it still fits; `input` is `mesh`
+/// prepared already (`object_input`), if it was.
 pub(super) fn fit_as_object(
     mesh: &TriMesh,
+    input: Option<ObjectInput>,
     previous: Option<&ObjectWarm>,
     previous_controls: &[DVec3],
     cfg: &WorkerConfig,
@@ -220,17 +226,26 @@ pub(super) fn fit_as_object(
     // The rounds stop where the budget holds or its time is up, as a scan's do.
     opts.stop = RoundStop::of_budget(budget, Instant::now());
     let object = |source| PipelineError::Object { source };
+    let input = match input {
+        Some(input) => input,
+        None => ObjectInput::of(mesh, &opts.clean)
+            .ok_or(ObjectError::Empty)
+            .map_err(object)?,
+    };
     let (fit, warm) = match previous {
-        Some(w) => match from_previous(mesh, w, previous_controls, &opts)
+        Some(w) => match from_previous(input.mesh.clone(), w, previous_controls, &opts)
             .and_then(|fit| stays_on_data(fit, &w.faces, &w.crease_edges, previous_controls))
         {
             Ok(fit) => (fit.map_err(object)?, WarmDecision::Used),
             Err(why) => (
-                fit_object(mesh, &opts).map_err(object)?,
+                fit_object_input(input, &opts).map_err(object)?,
                 WarmDecision::Refused(why),
             ),
         },
-        None => (fit_object(mesh, &opts).map_err(object)?, WarmDecision::None),
+        None => (
+            fit_object_input(input, &opts).map_err(object)?,
+            WarmDecision::None,
+        ),
     };
     // The scan path's minimum holds here too: a closed 8-vertex cube came out as a
     // 4-control blob straying 17 % of its diagonal from its corners.
@@ -324,15 +339,14 @@ const MAX_INNER_CHANGE: f64 = 0.01;
 /// A new version fitted from the previous fit: extended over new ground when it covers
 /// more (an object session's new view), else refitted where it changed; `Err` says why
 /// the previous fit does not fit the new data (the whole fit runs).
+/// `component` is the one a cold fit would take (`ObjectInput`): a broken input repaired
+/// the same way.
 fn from_previous(
-    mesh: &TriMesh,
+    component: TriMesh,
     warm: &ObjectWarm,
     controls: &[DVec3],
     opts: &ObjectOptions,
 ) -> Result<Result<ObjectFit, ObjectError>, String> {
-    // The component a cold fit would take: a broken input repaired the same way.
-    let component =
-        fitted_component(mesh, &CleanOptions::default()).ok_or("nothing left after cleaning")?;
     let faces_ok = warm
         .faces
         .iter()
