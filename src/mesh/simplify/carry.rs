@@ -7,6 +7,7 @@
 //! carrying in line gives, bit for bit, and the two halves of the work, each about half of
 //! a simplification, overlap on two cores.
 
+use super::vertex::FaceList;
 use crate::mesh::distance::{barycentric_on, closest_on_triangle};
 use crossbeam_channel::Receiver;
 use glam::DVec3;
@@ -79,7 +80,7 @@ fn bounding_ball(t: [DVec3; 3]) -> (DVec3, f64) {
 
 impl<'a> Landings<'a> {
     /// Every point on the first face of its own (`vfaces[v][0]`), at that corner.
-    pub fn new(input: &'a [DVec3], triangles: &[[u32; 3]], vfaces: &[Vec<u32>]) -> Self {
+    pub fn new(input: &'a [DVec3], triangles: &[[u32; 3]], vfaces: &[FaceList]) -> Self {
         let nv = input.len();
         let mut face = vec![0u32; nv];
         let mut bary = vec![[0.0; 3]; nv];

@@ -6,7 +6,7 @@ use super::carry::Fans;
 use super::crease::Creases;
 use super::options::{Landing, Simplified, SimplifyOptions, REMOVED};
 use super::quadric::Quadric;
-use super::vertex::Vertex;
+use super::vertex::{FaceList, Vertex};
 use crate::mesh::topology::{Topology, NONE};
 use crate::mesh::{triangle_area_normal, triangle_quality, TriMesh};
 use crossbeam_channel::Sender;
@@ -84,7 +84,7 @@ pub(super) struct State<'a> {
     verts: Vec<Vertex>,
     pub(super) faces: Vec<[u32; 3]>,
     face_alive: Vec<bool>,
-    pub(super) vfaces: Vec<Vec<u32>>,
+    pub(super) vfaces: Vec<FaceList>,
     creases: Creases,
     pub(super) alive_vertices: usize,
     /// Collapses not yet sent to be carried ...
@@ -109,8 +109,8 @@ impl<'a> State<'a> {
         let nf = mesh.triangles.len();
         let pos = &mesh.positions;
         let mut quadric = vec![Quadric::default(); nv];
-        let mut vfaces: Vec<Vec<u32>> = (0..nv)
-            .map(|v| Vec::with_capacity(topo.face_valence[v] as usize))
+        let mut vfaces: Vec<FaceList> = (0..nv)
+            .map(|v| FaceList::with_capacity(topo.face_valence[v] as usize))
             .collect();
         for (f, t) in mesh.triangles.iter().enumerate() {
             let p = t.map(|v| pos[v as usize]);
@@ -507,7 +507,7 @@ impl<'a> State<'a> {
         for &f in &shared {
             self.face_alive[f as usize] = false;
             for v in self.faces[f as usize] {
-                self.vfaces[v as usize].retain(|&g| g != f);
+                self.vfaces[v as usize].retain(|g| *g != f);
             }
         }
         let moved = std::mem::take(&mut self.vfaces[ri]);

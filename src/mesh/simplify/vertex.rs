@@ -2,6 +2,7 @@
 
 use super::quadric::Quadric;
 use glam::DVec3;
+use smallvec::SmallVec;
 
 /// A vertex of the mesh being collapsed. Every candidate collapse reads all of this for
 /// both ends of its edge, and the ends are anywhere in memory: held as six arrays, an end
@@ -33,3 +34,8 @@ impl Vertex {
         }
     }
 }
+
+/// A vertex's live faces. Inline up to 10 (the valence guard keeps nearly every vertex
+/// at 12 faces or fewer, most near 6): the collapses walk the face lists of the two ends
+/// and their neighbours, and separately allocated lists were a cache miss each.
+pub(super) type FaceList = SmallVec<[u32; 10]>;
