@@ -186,4 +186,17 @@ fn simplification_is_deterministic() {
     let b = simplify(&mesh, &opts).expect("simplified");
     assert_eq!(a.mesh, b.mesh);
     assert_eq!(a.landing, b.landing);
+    // The topology built by the caller gives the same result, off the origin too (where
+    // the mesh is simplified as a moved copy).
+    for shift in [DVec3::ZERO, DVec3::new(5e3, -2e3, 1e3)] {
+        let moved = TriMesh::new(
+            mesh.positions.iter().map(|p| *p + shift).collect(),
+            mesh.triangles.clone(),
+        );
+        let topo = Topology::from_mesh(&moved).expect("manifold");
+        let plain = simplify(&moved, &opts).expect("simplified");
+        let built = simplify_with_topology(&moved, &topo, &opts, &[]).expect("simplified");
+        assert_eq!(plain.mesh, built.mesh);
+        assert_eq!(plain.landing, built.landing);
+    }
 }

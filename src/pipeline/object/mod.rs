@@ -131,9 +131,13 @@ pub fn fit_object_input(
         }
         None => Vec::new(),
     };
-    let (simplified, guard_dropped) =
-        simplify_for_control(&component, &simplify_opts, &data_creases)
-            .map_err(ObjectError::Simplify)?;
+    let (simplified, guard_dropped) = simplify_for_control(
+        &component,
+        data_topo.as_ref(),
+        &simplify_opts,
+        &data_creases,
+    )
+    .map_err(ObjectError::Simplify)?;
     times.simplify_ms = ms_since(t);
 
     let Simplified {

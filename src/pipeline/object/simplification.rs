@@ -14,7 +14,10 @@
 //! mesh that holds the shape. Data without creases (scans, organic models) is simplified
 //! once, with the guard, as before.
 
-use crate::mesh::simplify::{simplify_with_creases, Simplified, SimplifyError, SimplifyOptions};
+use crate::mesh::simplify::{
+    simplify_with_creases, simplify_with_topology, Simplified, SimplifyError, SimplifyOptions,
+};
+use crate::mesh::topology::Topology;
 use crate::TriMesh;
 
 /// The guarded mesh is kept unless its data vertices stand this many times as far (RMS)
@@ -23,14 +26,20 @@ use crate::TriMesh;
 const GUARD_COST_LIMIT: f64 = 1.5;
 
 /// `component` simplified for a control mesh (`opts`, keeping `creases`), and whether
-/// the triangle-quality guard was dropped (module docs).
+/// the triangle-quality guard was dropped (module docs); `topo` is the component's
+/// topology when the caller has it.
 pub(super) fn simplify_for_control(
     component: &TriMesh,
+    topo: Option<&Topology>,
     opts: &SimplifyOptions,
     creases: &[[u32; 2]],
 ) -> Result<(Simplified, bool), SimplifyError> {
+    let simplify = |opts: &SimplifyOptions| match topo {
+        Some(topo) => simplify_with_topology(component, topo, opts, creases),
+        None => simplify_with_creases(component, opts, creases),
+    };
     if creases.is_empty() || opts.min_quality <= 0.0 {
-        return Ok((simplify_with_creases(component, opts, creases)?, false));
+        return Ok((simplify(opts)?, false));
     }
     let unguarded_opts = SimplifyOptions {
         min_quality: 0.0,
@@ -38,10 +47,7 @@ pub(super) fn simplify_for_control(
     };
     // Each simplification is sequential but for its landing carrier: side by side they
     // take about the time of one.
-    let (guarded, unguarded) = rayon::join(
-        || simplify_with_creases(component, opts, creases),
-        || simplify_with_creases(component, &unguarded_opts, creases),
-    );
+    let (guarded, unguarded) = rayon::join(|| simplify(opts), || simplify(&unguarded_opts));
     let guarded = guarded?;
     let Ok(unguarded) = unguarded else {
         return Ok((guarded, false));
@@ -125,7 +131,9 @@ mod tests {
         let (mesh, creases) = prism(8, 60, 2);
         let opts = options(40);
         let guarded = simplify_with_creases(&mesh, &opts, &creases).expect("simplified");
-        let (chosen, dropped) = simplify_for_control(&mesh, &opts, &creases).expect("simplified");
+        let topo = Topology::from_mesh(&mesh).expect("manifold");
+        let (chosen, dropped) =
+            simplify_for_control(&mesh, Some(&topo), &opts, &creases).expect("simplified");
         let (gn, cn) = (guarded.mesh.positions.len(), chosen.mesh.positions.len());
         assert!(gn > 40, "the guarded mesh reached the budget ({gn})");
         assert!(dropped, "the guard kept at {gn} vertices");
@@ -141,7 +149,8 @@ mod tests {
     #[test]
     fn exact_meshes_keep_the_guard() {
         let (mesh, creases) = prism(8, 12, 12);
-        let (_, dropped) = simplify_for_control(&mesh, &options(40), &creases).expect("simplified");
+        let (_, dropped) =
+            simplify_for_control(&mesh, None, &options(40), &creases).expect("simplified");
         assert!(!dropped);
     }
 
@@ -165,7 +174,7 @@ mod tests {
     fn without_creases_the_guard_stays() {
         let (mesh, _) = prism(8, 24, 6);
         let opts = options(40);
-        let (chosen, dropped) = simplify_for_control(&mesh, &opts, &[]).expect("simplified");
+        let (chosen, dropped) = simplify_for_control(&mesh, None, &opts, &[]).expect("simplified");
         let guarded = simplify_with_creases(&mesh, &opts, &[]).expect("simplified");
         assert!(!dropped);
         assert_eq!(chosen.mesh.positions, guarded.mesh.positions);
