@@ -96,11 +96,10 @@ impl Setup {
         previous: Option<&LoopLimitSurface>,
         opts: &ObjectOptions,
     ) -> Result<Self, ObjectError> {
-        let control_topology =
-            SurfaceTopology::of(control_mesh).map_err(ObjectError::NotManifold)?;
+        let control_topo = Topology::from_mesh(control_mesh).map_err(ObjectError::NotManifold)?;
+        let control_topology = SurfaceTopology::of_built(control_mesh, &control_topo);
         let surface = limit_surface(control_mesh, crease_edges, previous)?;
         let m = control_mesh.positions.len();
-        let control_topo = Topology::from_mesh(control_mesh).map_err(ObjectError::NotManifold)?;
         let fairness = Collocation::new(umbrella_laplacian_with_creases(
             m,
             &control_mesh.triangles,

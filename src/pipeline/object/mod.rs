@@ -377,8 +377,7 @@ fn fit_from(
         let tried = context.round(&controls, &feet, share, &mut pattern);
         sampled_faces = tried.sampled_faces;
         let before = tried.before;
-        let next_feet = tried.next;
-        let Some((next_feet, next, after)) = next_feet else {
+        let Some((next_feet, next, after)) = tried.next else {
             refusals += 1;
             share *= 4.0;
             continue;
