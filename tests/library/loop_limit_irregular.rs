@@ -516,6 +516,53 @@ fn cached_evaluator_and_value_rows_equal_the_basis_rows() {
     println!("cached evaluator: max relative deviation {worst:e}");
 }
 
+/// Evaluators of two control sets used in turn on the same faces (as the stray repair
+/// compares a refit with the surface before it) each give their own surface: the leaf
+/// memo every thread keeps is told apart by evaluator, not only by leaf and face.
+#[test]
+fn interleaved_evaluators_keep_to_their_own_controls() {
+    for m in meshes_with_extraordinary_vertices() {
+        let s = surface(&m);
+        let sc = scale(&m);
+        let moved: Vec<DVec3> = m
+            .pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| *p + DVec3::new(0.1, -0.05, 0.2) * sc * (i % 3) as f64)
+            .collect();
+        let (first, second) = (s.evaluator(&m.pos), s.evaluator(&moved));
+        let mut rng = Rng(5);
+        for face in 0..m.tris.len() {
+            for _ in 0..12 {
+                let (u, v) = (rng.f(), rng.f());
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let p = SurfaceParam {
+                    face: face as u32,
+                    u: 0.02 + 0.96 * u,
+                    v: 0.01 + 0.96 * v,
+                };
+                for (evaluate, controls) in [(&first, &m.pos), (&second, &moved), (&first, &m.pos)]
+                {
+                    let (got, want) = (evaluate(p), s.evaluate(controls, p));
+                    let err = (got.position - want.position).length() / sc;
+                    let err_du = (got.du - want.du).length() / want.du.length().max(sc);
+                    assert!(
+                        err < 1e-12 && err_du < 1e-11,
+                        "{} face {face} at ({}, {}): {err:e} / {err_du:e}",
+                        m.name,
+                        p.u,
+                        p.v
+                    );
+                }
+            }
+        }
+    }
+}
+
 /// At a boundary vertex whose derivatives take a deep descent, the rows are found once
 /// per 1-ring shape and kept with its quadtree: a surface that takes the trees over
 /// (`with_creases_reusing`, as every refinement round does) gives the same rows bit for

@@ -7,22 +7,36 @@ use super::patch::{evaluate_patch, Jac};
 use super::{clamp_param, FacePatch, LoopLimitSurface};
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
 use glam::DVec3;
-use std::cell::Cell;
+use std::cell::RefCell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Source of evaluator ids: a leaf memo entry is only valid for the evaluator (control
 /// set) that wrote it, and ids are never reused, unlike addresses.
 static NEXT_ID: AtomicU64 = AtomicU64::new(1);
 
-/// The last irregular-face leaf each thread evaluated: evaluator id, the leaf patch's
+/// The irregular-face leaves each thread evaluated last: evaluator id, the leaf patch's
 /// address and the face (faces of one 1-ring shape share their leaves, each over its own
-/// controls), its ordinates and base. Consecutive evaluations (Newton steps of one point,
-/// neighbouring data points) mostly land in the same leaf, whose ordinates then cost
-/// nothing.
+/// controls), its ordinates and base. The Newton steps of one point, and the data points
+/// near it (the fit's data are in spatial order), mostly land in leaves evaluated just
+/// before, whose ordinates then cost nothing. A single entry missed whenever a point's
+/// steps crossed between leaves of different depths near an irregular corner: on
+/// bun_zipper the misses' ordinates were 9 % of a fit's samples.
 type LeafMemo = (u64, (usize, usize), [DVec3; 15], DVec3);
 
+/// Entries of each thread's leaf memo, direct-mapped by the leaf's address and face.
+const LEAF_MEMO_SLOTS: usize = 256;
+
+const EMPTY_LEAF: LeafMemo = (0, (0, 0), [DVec3::ZERO; 15], DVec3::ZERO);
+
 thread_local! {
-    static LAST_LEAF: Cell<LeafMemo> = const { Cell::new((0, (0, 0), [DVec3::ZERO; 15], DVec3::ZERO)) };
+    static LEAVES: RefCell<Box<[LeafMemo; LEAF_MEMO_SLOTS]>> =
+        RefCell::new(Box::new([EMPTY_LEAF; LEAF_MEMO_SLOTS]));
+}
+
+/// The memo slot of a leaf: its patch's address (structures of at least 8 bytes) and face.
+fn leaf_slot((patch, face): (usize, usize)) -> usize {
+    let h = ((patch >> 3) ^ face.wrapping_mul(0x9E37_79B9)).wrapping_mul(0x85EB_CA6B);
+    (h >> 8) % LEAF_MEMO_SLOTS
 }
 
 pub(super) struct CachedEvaluator<'a> {
@@ -69,15 +83,17 @@ impl<'a> CachedEvaluator<'a> {
                     // be that of the local geometry, not of the coordinates' magnitude
                     // (the rows get the same from `restore_sums`).
                     let key = (rp as *const _ as usize, f);
-                    let (id, at, mut ords, mut base) = LAST_LEAF.get();
-                    if (id, at) != (self.id, key) {
-                        let origin = self.controls[ip.support[0] as usize];
-                        (ords, base) = rp
-                            .ordinates(|c| self.controls[ip.support[c as usize] as usize] - origin);
-                        base += origin;
-                        LAST_LEAF.set((self.id, key, ords, base));
-                    }
-                    return evaluate_patch(&ords, base, a, b, &jac);
+                    return LEAVES.with_borrow_mut(|leaves| {
+                        let entry = &mut leaves[leaf_slot(key)];
+                        if (entry.0, entry.1) != (self.id, key) {
+                            let origin = self.controls[ip.support[0] as usize];
+                            let (ords, base) = rp.ordinates(|c| {
+                                self.controls[ip.support[c as usize] as usize] - origin
+                            });
+                            *entry = (self.id, key, ords, base + origin);
+                        }
+                        evaluate_patch(&entry.2, entry.3, a, b, &jac)
+                    });
                 }
             }
         }
