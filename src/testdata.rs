@@ -5,6 +5,14 @@ use crate::TriMesh;
 use glam::DVec3;
 use std::path::PathBuf;
 
+/// xorshift in [0, 1): reproducible random numbers for tests, without a dependency.
+pub fn uniform(seed: &mut u64) -> f64 {
+    *seed ^= *seed << 13;
+    *seed ^= *seed >> 7;
+    *seed ^= *seed << 17;
+    (*seed >> 11) as f64 / (1u64 << 53) as f64
+}
+
 /// Path of a file under `../shared/data`, or `None` when the folder is absent so that a
 /// test can skip. With `TRISPLINE_REQUIRE_DATA=1` (set by `.ci/run`) a missing file panics
 /// instead: CI must never pass by skipping.

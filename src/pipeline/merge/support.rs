@@ -87,6 +87,7 @@ fn convex_hull(points: &mut [DVec2]) -> Vec<DVec2> {
 #[cfg(test)]
 mod tests {
     use super::{convex_hull, distance_to_hull, surrounds_origin};
+    use crate::testdata::uniform;
     use glam::DVec2;
 
     fn grid(x0: f64, x1: f64) -> Vec<DVec2> {
@@ -104,13 +105,8 @@ mod tests {
     /// around, beside and far from the origin, and points on the axes (no quadrant).
     #[test]
     fn the_quadrant_shortcut_agrees_with_the_hull() {
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        };
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || uniform(&mut seed) * 2.0 - 1.0;
         let (mut inside, mut shortcut) = (0, 0);
         for case in 0..2000 {
             let n = 3 + case % 40;

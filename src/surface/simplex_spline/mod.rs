@@ -315,6 +315,7 @@ impl SimplexFamily {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testdata::uniform;
 
     #[test]
     fn coincident_knots_give_bernstein_polynomials() {
@@ -333,14 +334,6 @@ mod tests {
         // The coincident knots make every proper 3-subset a thin (zero) triangle except
         // [a, b, c], so the recurrence reduces to de Casteljau on the Bernstein weights.
         assert!((out[0][0] - 2.0 * 0.3 * 0.5).abs() < 1e-12, "{}", out[0][0]);
-    }
-
-    /// xorshift in [0, 1): the tests' knots and points, reproducible.
-    fn uniform(seed: &mut u64) -> f64 {
-        *seed ^= *seed << 13;
-        *seed ^= *seed >> 7;
-        *seed ^= *seed << 17;
-        (*seed >> 11) as f64 / (1u64 << 53) as f64
     }
 
     #[test]
