@@ -66,9 +66,11 @@ impl Buckets {
         match count {
             Some(n) if n <= limit => {
                 let mut ranges = vec![(0, 0); n as usize];
+                // Every key lies inside the box it spans.
                 for (k, range) in sparse {
-                    let slot = dense_slot(&low, &size, k).expect("a key inside its own box");
-                    ranges[slot] = range;
+                    if let Some(slot) = dense_slot(&low, &size, k) {
+                        ranges[slot] = range;
+                    }
                 }
                 Buckets::Dense { low, size, ranges }
             }
