@@ -42,14 +42,10 @@ const DENSE_PER_SAMPLE: usize = 8;
 const MIN_DENSE: usize = 1 << 16;
 
 impl Buckets {
+    /// The buckets of samples sorted by key (`PointIndex::build`).
     fn of(keyed: &[([i32; 3], u32, u32)]) -> Self {
-        let mut sparse: FxHashMap<[i32; 3], (u32, u32)> = FxHashMap::default();
-        for (at, (k, _, _)) in keyed.iter().enumerate() {
-            let at = at as u32;
-            sparse.entry(*k).or_insert((at, at)).1 = at + 1;
-        }
         let (Some(first), Some(last)) = (keyed.first(), keyed.last()) else {
-            return Buckets::Sparse(sparse);
+            return Buckets::Sparse(FxHashMap::default());
         };
         // Sorted by key, so x runs from the first to the last; y and z need a pass.
         let mut low = [first.0[0] as i64, i64::MAX, i64::MAX];
@@ -67,14 +63,14 @@ impl Buckets {
             Some(n) if n <= limit => {
                 let mut ranges = vec![(0, 0); n as usize];
                 // Every key lies inside the box it spans.
-                for (k, range) in sparse {
+                for (k, range) in key_runs(keyed) {
                     if let Some(slot) = dense_slot(&low, &size, k) {
                         ranges[slot] = range;
                     }
                 }
                 Buckets::Dense { low, size, ranges }
             }
-            _ => Buckets::Sparse(sparse),
+            _ => Buckets::Sparse(key_runs(keyed).collect()),
         }
     }
 
@@ -88,6 +84,15 @@ impl Buckets {
             }
         }
     }
+}
+
+/// Each key of samples sorted by key, with the range of its samples.
+fn key_runs(keyed: &[([i32; 3], u32, u32)]) -> impl Iterator<Item = ([i32; 3], (u32, u32))> + '_ {
+    keyed.chunk_by(|a, b| a.0 == b.0).scan(0u32, |at, run| {
+        let from = *at;
+        *at += run.len() as u32;
+        Some((run[0].0, (from, *at)))
+    })
 }
 
 /// The array slot of bucket `k` (x fastest), `None` outside the box.
@@ -331,17 +336,20 @@ mod tests {
         let keyed = keyed(&keys);
         let dense = Buckets::of(&keyed);
         assert!(matches!(dense, Buckets::Dense { .. }));
-        let mut sparse: FxHashMap<[i32; 3], (u32, u32)> = FxHashMap::default();
-        for (at, (k, _, _)) in keyed.iter().enumerate() {
-            sparse.entry(*k).or_insert((at as u32, at as u32)).1 = at as u32 + 1;
-        }
-        let sparse = Buckets::Sparse(sparse);
+        let sparse = Buckets::Sparse(key_runs(&keyed).collect());
         for x in -6..6i64 {
             for y in -8..8i64 {
                 for z in 97..107i64 {
                     let (d, s) = (dense.get([x, y, z]), sparse.get([x, y, z]));
                     // An empty range in the array is a missing bucket in the map.
                     assert_eq!(d.filter(|r| r.0 < r.1), s, "bucket {x} {y} {z}");
+                    // The range is where the sorted samples have that key, counted
+                    // here without the runs.
+                    let at: Vec<usize> = (0..keyed.len())
+                        .filter(|&i| keyed[i].0.map(i64::from) == [x, y, z])
+                        .collect();
+                    let want = at.first().map(|&f| (f as u32, f as u32 + at.len() as u32));
+                    assert_eq!(s, want, "bucket {x} {y} {z}");
                 }
             }
         }

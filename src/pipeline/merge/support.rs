@@ -13,6 +13,11 @@ pub(super) fn distance_to_hull(points: &mut [DVec2]) -> Option<f64> {
     if surrounds_origin(points) {
         return Some(0.0);
     }
+    distance_by_hull(points)
+}
+
+/// [`distance_to_hull`] from the hull itself.
+fn distance_by_hull(points: &mut [DVec2]) -> Option<f64> {
     let hull = convex_hull(points);
     if hull.len() < 3 {
         return None;
@@ -86,7 +91,7 @@ fn convex_hull(points: &mut [DVec2]) -> Vec<DVec2> {
 
 #[cfg(test)]
 mod tests {
-    use super::{convex_hull, distance_to_hull, surrounds_origin};
+    use super::{distance_by_hull, distance_to_hull, surrounds_origin};
     use crate::testdata::uniform;
     use glam::DVec2;
 
@@ -117,15 +122,7 @@ mod tests {
             if case % 7 == 0 {
                 points.extend([DVec2::new(0.5, 0.0), DVec2::new(0.0, -0.5)]);
             }
-            let by_hull = {
-                let mut copy = points.clone();
-                let hull = convex_hull(&mut copy);
-                let left = |k: usize| {
-                    let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
-                    (b - a).perp_dot(-a) >= 0.0
-                };
-                hull.len() >= 3 && (0..hull.len()).all(left)
-            };
+            let by_hull = distance_by_hull(&mut points.clone()) == Some(0.0);
             let quick = surrounds_origin(&points);
             assert!(
                 !quick || by_hull,
@@ -155,6 +152,7 @@ mod tests {
         ];
         assert!(!surrounds_origin(&cross));
         assert_eq!(distance_to_hull(&mut cross), Some(0.0));
+        assert_eq!(distance_by_hull(&mut cross), Some(0.0));
     }
 
     #[test]
