@@ -374,6 +374,26 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         ));
     }
     let stray = &r["object"]["stray"];
+    if let Some(budgets) = r["object"]["stray_budgets"]
+        .as_array()
+        .filter(|b| b.len() > 1)
+    {
+        let again: Vec<String> = budgets[1..]
+            .iter()
+            .map(|b| b["target"].to_string())
+            .collect();
+        let outcome = if stray["within"].as_bool() == Some(true) {
+            format!("the surface of {} kept", r["control_points"])
+        } else {
+            "none came within the bound, the first is kept".to_string()
+        };
+        line.push_str(&format!(
+            "; the fit at {} control points strayed from the data, so it was fitted again \
+            at {} ({outcome}; report.json object.stray_budgets)",
+            budgets[0]["target"],
+            again.join(" and "),
+        ));
+    }
     if let Some(added) = stray_repair_controls(&r["object"]["refinement"]) {
         line.push_str(&format!(
             "; {added} control points added where the surface strayed from the data (the \

@@ -419,6 +419,63 @@ fn fertility_keeps_genus_four() {
     assert!(fit.rms < 0.5 * decimated_rms(&fit));
 }
 
+/// fertility at 2 % controls (90) webs across its handles: the surface strays about 1.2 %
+/// of the diagonal from the data, past what the stray repair's tenth more controls mend.
+/// A plain decimation of 90 vertices strays as far, so the budget cannot hold the shape:
+/// the object is fitted again from scratch at 4 %, which stays within 0.5 %, and that fit
+/// is kept.
+#[test]
+fn a_budget_too_small_for_the_shape_grows_until_the_surface_stays_on_the_data() {
+    let Some(mesh) = shared_mesh("models/fertility.off") else {
+        return;
+    };
+    let opts = ObjectOptions {
+        target_controls_pct: 2.0,
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    assert_topology_kept(&fit);
+    assert_eq!(fit.control_topology.genus, 4);
+    let diag = fit.component.bounds_diagonal();
+    let budgets = &fit.stray_budgets;
+    eprintln!(
+        "fertility at 2 %: {} controls, rms {:.3e}, stray {:.3} % of the diagonal, tried {budgets:?}",
+        fit.controls.len(),
+        fit.rms,
+        100.0 * farthest_from_data(&fit, 8) / diag,
+    );
+    let asked = (0.02 * fit.data.len() as f64).round() as usize;
+    assert_eq!(budgets[0].target, asked);
+    assert!(budgets[0].stray > 5e-3 * diag, "the case no longer strays");
+    let kept = budgets.last().expect("an escalation");
+    assert_eq!(kept.target, 2 * asked, "{budgets:?}");
+    assert_eq!(fit.controls.len(), kept.controls);
+    assert!(kept.stray <= 5e-3 * diag);
+    // The fit's own measure, and a finer lattice than the repair's, agree.
+    assert_eq!(fit.stray, Some(kept.stray));
+    assert!(farthest_from_data(&fit, 8) <= 5.5e-3 * diag);
+    assert!(fit.rms < budgets[0].rms);
+    assert!(fit.times.stray_budget_ms > 0.0);
+}
+
+/// The broken bunny at 5 % strays 7.4 % of its diagonal over its 19 holes; twice the
+/// controls stray farther, so the escalation stops there and the fit at the budget asked
+/// is kept: more controls are spent only where they bring the surface within the bound.
+#[test]
+fn an_escalation_that_does_not_bring_the_surface_within_the_bound_keeps_the_first_fit() {
+    let Some(mesh) = shared_mesh("models/bun_zipper_res4.ply") else {
+        return;
+    };
+    let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    let diag = fit.component.bounds_diagonal();
+    let budgets = &fit.stray_budgets;
+    eprintln!("res4: {} controls, tried {budgets:?}", fit.controls.len());
+    assert!(budgets.len() >= 2, "{budgets:?}");
+    assert!(budgets.iter().all(|b| b.stray > 5e-3 * diag));
+    assert_eq!(fit.controls.len(), budgets[0].controls);
+    assert_eq!(fit.stray, Some(budgets[0].stray));
+}
+
 #[test]
 fn bun_zipper_keeps_its_five_holes() {
     let Some(mesh) = shared_mesh("models/bun_zipper.ply") else {

@@ -29,12 +29,12 @@ pub(super) struct DataSide<'a> {
 
 impl<'a> DataSide<'a> {
     /// The data side of `mesh` whose topology `topo` is built already.
-    pub(super) fn of_built(mesh: &'a TriMesh, topo: Topology, opts: &ObjectOptions) -> Self {
+    pub(super) fn of_built(mesh: &'a TriMesh, topo: &Topology, opts: &ObjectOptions) -> Self {
         Self {
             mesh,
-            topology: SurfaceTopology::of_built(mesh, &topo),
-            on_rim: near_boundary_in(&topo, 0),
-            near_edge: near_boundary_in(&topo, opts.edge_rings),
+            topology: SurfaceTopology::of_built(mesh, topo),
+            on_rim: near_boundary_in(topo, 0),
+            near_edge: near_boundary_in(topo, opts.edge_rings),
             edge_rings: opts.edge_rings,
             nearest: OnceLock::new(),
         }
@@ -43,7 +43,7 @@ impl<'a> DataSide<'a> {
     /// The data side of `mesh`; an error when it is no manifold.
     pub(super) fn new(mesh: &'a TriMesh, opts: &ObjectOptions) -> Result<Self, ObjectError> {
         let topo = Topology::from_mesh(mesh).map_err(ObjectError::NotManifold)?;
-        Ok(Self::of_built(mesh, topo, opts))
+        Ok(Self::of_built(mesh, &topo, opts))
     }
 
     /// Per vertex: within `rings` vertex rings of the boundary. A band of another width

@@ -248,6 +248,9 @@ pub struct ObjectTimes {
     pub rounds_ms: f64,
     /// The whole fit, end to end.
     pub total_ms: f64,
+    /// Whole fits at smaller budgets whose surfaces strayed and were dropped
+    /// (`ObjectFit::stray_budgets`), not counted in `total_ms`.
+    pub stray_budget_ms: f64,
 }
 
 /// RMS and max distance of the data to the surface after a stage.
@@ -305,6 +308,33 @@ pub struct ObjectFit {
     /// What cleaning changed in the input before the fit (its first pass; `None` where
     /// the fit was given data already cleaned, as the rounds and refits of a fit are).
     pub cleaning: Option<CleanReport>,
+    /// The whole fits tried when the first strayed past the bound, that one first, each at
+    /// a larger budget (empty when the first stayed within it or was not measured).
+    pub stray_budgets: Vec<StrayBudget>,
+}
+
+/// One whole fit of a stray escalation (`ObjectFit::stray_budgets`).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct StrayBudget {
+    /// The control budget it was asked for.
+    pub target: usize,
+    /// The controls it ended with (a stray repair may add a tenth).
+    pub controls: usize,
+    /// Its RMS distance.
+    pub rms: f64,
+    /// How far its surface strayed from the data.
+    pub stray: f64,
+}
+
+impl StrayBudget {
+    pub(super) fn of(target: usize, fit: &ObjectFit) -> Self {
+        Self {
+            target,
+            controls: fit.controls.len(),
+            rms: fit.rms,
+            stray: fit.stray.unwrap_or(f64::INFINITY),
+        }
+    }
 }
 
 impl ObjectFit {

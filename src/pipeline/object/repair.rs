@@ -164,6 +164,7 @@ fn repaired_locally(fit: &ObjectFit, refined: Refined, opts: &ObjectOptions) -> 
         local: None,
         stray: None,
         cleaning: fit.cleaning.clone(),
+        stray_budgets: Vec::new(),
     })
 }
 

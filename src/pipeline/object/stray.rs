@@ -5,8 +5,10 @@
 
 use super::model::ObjectFit;
 use crate::mesh::distance::MeshDistance;
+use crate::mesh::simplify::{simplify, SimplifyOptions};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
+use crate::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -163,4 +165,84 @@ fn ascend(
         h *= 0.5;
     }
     best
+}
+
+/// Whether the plain quadric decimation of `data` to `vertices` vertices (the control
+/// mesh's own simplification, guards and all) strays farther than `limit` from `data`,
+/// on a lattice of `segments` segments per triangle edge: whether a mesh of that budget
+/// can hold the shape at all. Where it does, a surface of the same budget straying past
+/// the bound strays by its own making (a boundary curve past a jagged rim), which more
+/// controls do not mend. `true` when the decimation fails.
+pub(super) fn decimation_strays(
+    data: &MeshDistance,
+    mesh: &TriMesh,
+    vertices: usize,
+    limit: f64,
+    segments: usize,
+) -> bool {
+    let opts = SimplifyOptions {
+        target_vertices: vertices,
+        ..SimplifyOptions::default()
+    };
+    let Ok(decimated) = simplify(mesh, &opts) else {
+        return true;
+    };
+    let k = segments.max(1);
+    let corners = &decimated.mesh.positions;
+    decimated
+        .mesh
+        .triangles
+        .par_iter()
+        .with_min_len(64)
+        .any(|t| {
+            let [a, b, c] = t.map(|v| corners[v as usize]);
+            (0..=k).any(|j| {
+                (0..=k - j).any(|i| {
+                    let (u, v) = (i as f64 / k as f64, j as f64 / k as f64);
+                    let p = a * (1.0 - u - v) + b * u + c * v;
+                    data.distance(p).is_none_or(|d| d.is_nan() || d > limit)
+                })
+            })
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testdata::icosahedron;
+
+    /// The unit sphere: the icosahedron's faces split 1-to-4 `levels` times, every vertex
+    /// pushed out onto the sphere.
+    fn sphere(levels: usize) -> TriMesh {
+        let (mut positions, mut faces) = icosahedron();
+        for _ in 0..levels {
+            let mut middle = std::collections::HashMap::new();
+            let mut split = Vec::with_capacity(4 * faces.len());
+            for [a, b, c] in faces {
+                let mut mid = |p: u32, q: u32| {
+                    *middle.entry((p.min(q), p.max(q))).or_insert_with(|| {
+                        positions.push((positions[p as usize] + positions[q as usize]) * 0.5);
+                        positions.len() as u32 - 1
+                    })
+                };
+                let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+                split.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+            }
+            faces = split;
+        }
+        TriMesh::new(positions.iter().map(|p| p.normalize()).collect(), faces)
+    }
+
+    #[test]
+    fn a_decimation_strays_only_where_its_budget_cannot_hold_the_shape() {
+        let mesh = sphere(3);
+        let data = MeshDistance::new(&mesh);
+        let n = mesh.positions.len();
+        // Every vertex kept: the lattice lies on the data's own triangles.
+        assert!(!decimation_strays(&data, &mesh, n, 1e-9, 6));
+        // 12 vertices: flat faces (an icosahedron's lie 0.21 inside the unit sphere) ...
+        assert!(decimation_strays(&data, &mesh, 12, 0.1, 6));
+        // ... but no face of a decimation that keeps the sphere's shape lies at its centre.
+        assert!(!decimation_strays(&data, &mesh, 12, 0.6, 6));
+    }
 }

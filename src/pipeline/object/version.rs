@@ -369,6 +369,7 @@ impl Refitted {
             local: Some(update),
             stray: None,
             cleaning: None,
+            stray_budgets: Vec::new(),
         }
     }
 }

@@ -341,6 +341,7 @@ impl LastFit {
             local: None,
             stray: None,
             cleaning: None,
+            stray_budgets: Vec::new(),
         };
         FittedPatch {
             fit,

@@ -15,7 +15,7 @@ use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
     extend_over_new_ground, fit_object_input, fit_on_creased_control_mesh, refit_where_changed,
     LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectInput, ObjectOptions, ObjectTimes,
-    PreviousFit, RefineRound, RoundReport, RoundStop,
+    PreviousFit, RefineRound, RoundReport, RoundStop, StrayBudget,
 };
 use crate::pipeline::scan::WarmFeet;
 use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
@@ -183,6 +183,8 @@ pub struct ObjectInfo {
     /// What cleaning changed in the input (`None` on a warm refit, which cleans the new
     /// version only to match it to the previous one).
     pub cleaning: Option<CleanReport>,
+    /// The whole fits at growing budgets when the first strayed (empty otherwise).
+    pub stray_budgets: Vec<StrayBudget>,
 }
 
 /// Whether a warm start was used.
@@ -268,6 +270,7 @@ pub(super) fn fit_as_object(
         local: fit.local.clone(),
         stray: Some(StrayReport::of(&fit)),
         cleaning: fit.cleaning.clone(),
+        stray_budgets: fit.stray_budgets.clone(),
     };
     if let Some(stray) = info.stray.filter(|s| !s.within) {
         tracing::warn!(
@@ -645,6 +648,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "warm": warm,
         "local": info.local,
         "stray": info.stray,
+        "stray_budgets": info.stray_budgets,
         "cleaning": info.cleaning,
     })
 }
