@@ -148,6 +148,11 @@ pub struct FitArgs {
     /// surface, narrower ones bridged; data triangles wider than that are trimmed too.
     #[arg(long, default_value_t = ScanConfig::default().hole_bridge_edges)]
     pub hole_bridge_edges: f64,
+    /// Whole objects: a surface still straying past 0.5 % of the diagonal after its repair,
+    /// where a decimation of as many vertices strays too, is fitted again at twice the
+    /// controls, at most this many times (0: the budget holds).
+    #[arg(long, default_value_t = ScanConfig::default().stray_budget_steps as u8, value_parser = clap::value_parser!(u8).range(0..=4))]
+    pub stray_budget_steps: u8,
     /// `--surface dms`: the degree, 2 or 3 (C1 or C2 surfaces; 6 or 10 controls per domain
     /// triangle, their number set by --target-controls-pct).
     #[arg(long, default_value_t = DmsConfig::default().degree, value_parser = clap::value_parser!(u8).range(2..=3).map(usize::from))]
@@ -208,6 +213,7 @@ impl FitArgs {
                 lattice: self.lattice.unwrap_or(scan_defaults.lattice),
                 smoothing: self.smoothing,
                 hole_bridge_edges: self.hole_bridge_edges,
+                stray_budget_steps: usize::from(self.stray_budget_steps),
             },
             correction: CorrectionConfig {
                 rounds: self.corrections,

@@ -554,6 +554,12 @@ fn validate_scan(s: &ScanConfig) -> Check {
         "fit.scan.hole_bridge_edges",
         s.hole_bridge_edges,
         "must be a positive number",
+    )?;
+    check(
+        s.stray_budget_steps <= 4,
+        "fit.scan.stray_budget_steps",
+        s.stray_budget_steps,
+        "must be 0..=4 (each step doubles the controls)",
     )
 }
 

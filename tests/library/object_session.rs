@@ -295,7 +295,7 @@ fn two_arrival_orders_end_at_the_same_surface() {
                 .expect("update");
             let report = &update.outputs.report;
             eprintln!(
-                "v{k}: {} controls {} rms {:.2e} merge {} topology {} rounds {} refinement {} stray {} warm {} local {}",
+                "v{k}: {} controls {} rms {:.2e} merge {} topology {} rounds {} refinement {} stray {} warm {} local {} budgets {}",
                 update.path,
                 update.fit.controls.len(),
                 update.fit.geometric_rms(),
@@ -306,6 +306,7 @@ fn two_arrival_orders_end_at_the_same_surface() {
                 report["object"]["stray"],
                 report["object"]["warm"],
                 report["session"]["updated_region"]["fit"],
+                report["object"]["stray_budgets"],
             );
             last = Some(update);
         }

@@ -56,7 +56,7 @@ pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOp
 use model::{control_target, ms_since, MAX_REFUSALS};
 pub use model::{
     LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
-    StrayBudget, CURVATURE_FLOOR, STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
+    StrayBudget, CURVATURE_FLOOR, STRAY_BUDGET_STEPS, STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
 };
 use refine::{faces_beyond, refined_mesh, Fitted, Splits, MIN_FACES_BEYOND_SHARE};
 pub use refine::{RefineOptions, RefineRound};
@@ -84,7 +84,7 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
 /// [`fit_object`] of an input already prepared (with `opts.clean`). Where the whole fit
 /// and its stray repair leave the surface straying past `opts.max_stray_share`, the object
 /// is fitted again from scratch at twice the controls (`STRAY_BUDGET_STEPS` times at
-/// most): see `STRAY_BUDGET_STEPS`.
+/// most): see `model::STRAY_BUDGET_STEPS`.
 pub fn fit_object_input(
     input: ObjectInput,
     opts: &ObjectOptions,
@@ -116,18 +116,7 @@ pub fn fit_object_input(
     Ok(fit)
 }
 
-/// Whole fits from scratch a stray escalation may add, each at `STRAY_BUDGET_GROWTH` times
-/// the controls of the one before (so at most 4x the budget asked). The stray repair
-/// splits faces around a fold and refits around them, which does not undo a fold the
-/// coarse control mesh made across a thin part (a leg, horns beside an ear: the surface
-/// webs across the gap), while a control mesh simplified to a larger budget does not make
-/// it. Measured (`trispline fit`, 5 %, then 10 % and 20 %; 23 CGAL meshes never tuned on,
-/// of which 14 strayed at 5 %): bull, homer, elephant, mech-holes-shark and rotor_small
-/// come within the bound at 2x, triceratops, dino, cow and the 10k-vertex dragon at 4x;
-/// femur (0.60 %), couplingdown (5.4 %) and cheese (133 handles) stay over it. The bound
-/// is a promise to the user; the control budget gives way to it, as in the stray repair.
-const STRAY_BUDGET_STEPS: usize = 2;
-/// See `STRAY_BUDGET_STEPS`.
+/// See `model::STRAY_BUDGET_STEPS`.
 const STRAY_BUDGET_GROWTH: usize = 2;
 
 /// `fit` (at the `asked` budget) or, when its surface strays past the bound, the first fit
@@ -155,7 +144,7 @@ fn grow_budget_while_straying(
     let mut last_stray = stray_of(&fit);
     let mut last_controls = fit.controls.len();
     let mut target = asked;
-    for _ in 0..STRAY_BUDGET_STEPS {
+    for _ in 0..opts.stray_budget_steps {
         target = (target * STRAY_BUDGET_GROWTH).min(points);
         let late = opts.stop.deadline.is_some_and(|d| Instant::now() >= d);
         if last_stray <= limit || late {

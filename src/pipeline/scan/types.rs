@@ -66,6 +66,11 @@ pub struct ScanConfig {
     /// exceeds this many median edge lengths of the data are trimmed out of the surface,
     /// narrower ones bridged; data triangles wider than that are trimmed too.
     pub hole_bridge_edges: f64,
+    /// Whole objects: where the surface strays past 0.5 % of the diagonal after its
+    /// repair and a decimation of as many vertices strays too, the object is fitted again
+    /// at twice the budget, at most this many times (0: the budget holds). Object
+    /// sessions never do (their updates are refitted view by view).
+    pub stray_budget_steps: usize,
 }
 
 impl Default for ScanConfig {
@@ -77,6 +82,7 @@ impl Default for ScanConfig {
             lattice: 16,
             smoothing: 1e-5,
             hole_bridge_edges: 1.5,
+            stray_budget_steps: crate::pipeline::object::STRAY_BUDGET_STEPS,
         }
     }
 }

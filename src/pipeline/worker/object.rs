@@ -206,6 +206,7 @@ fn options(cfg: &WorkerConfig) -> ObjectOptions {
             ..CreaseOptions::default()
         },
         smoothing: cfg.fit.scan.smoothing,
+        stray_budget_steps: cfg.fit.scan.stray_budget_steps,
         rounds: cfg.fit.correction.rounds,
         curvature_floor: cfg.fit.correction.curvature_floor(),
         ..ObjectOptions::default()
