@@ -14,8 +14,9 @@ use crate::TriMesh;
 use glam::DVec3;
 use std::time::Instant;
 
-/// Whole fits from scratch a stray escalation may add, each at `STRAY_BUDGET_GROWTH` times
-/// the controls of the one before (so at most 4x the budget asked). The stray repair
+/// Whole fits from scratch a stray escalation adds at most by default
+/// (`ObjectOptions::stray_budget_steps`), each at twice the budget of the one before (so
+/// at most 4x the budget asked). The stray repair
 /// splits faces around a fold and refits around them, which does not undo a fold the
 /// coarse control mesh made across a thin part (a leg, horns beside an ear: the surface
 /// webs across the gap), while a control mesh simplified to a larger budget does not make
@@ -25,6 +26,7 @@ use std::time::Instant;
 /// femur (0.60 %), couplingdown (5.4 %) and cheese (133 handles) stay over it. The bound
 /// is a promise to the user; the control budget gives way to it, as in the stray repair.
 pub const STRAY_BUDGET_STEPS: usize = 2;
+
 /// Refused rounds (each retried with four times the tangential share) before the rounds
 /// of a fit, whole or local, stop.
 pub(super) const MAX_REFUSALS: usize = 3;
@@ -264,8 +266,8 @@ pub struct ObjectTimes {
     pub rounds_ms: f64,
     /// The whole fit, end to end.
     pub total_ms: f64,
-    /// Whole fits at smaller budgets whose surfaces strayed and were dropped
-    /// (`ObjectFit::stray_budgets`), not counted in `total_ms`.
+    /// The stray escalation beside the fit kept: its decimation checks and the whole fits
+    /// it dropped (`ObjectFit::stray_budgets`); part of `total_ms`.
     pub stray_budget_ms: f64,
 }
 
