@@ -246,3 +246,66 @@ fn fit_says_when_the_surface_strays_from_the_data() {
         "{line}"
     );
 }
+
+/// fertility at 2 % controls webs across its handles (1.2 % of the diagonal off the data)
+/// and a decimation of as many vertices strays as far: `trispline fit` fits it again at
+/// twice the budget, keeps that surface (within the bound) and says so; with
+/// `--stray-budget-steps 0` the budget holds and the line says the surface strays. On
+/// bun_zipper_res4 twice the budget strays farther, and the line says the first is kept.
+#[test]
+fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
+    let (Some(genus_four), Some(broken)) = (
+        trispline::testdata::shared_data("models/fertility.off"),
+        trispline::testdata::shared_data("models/bun_zipper_res4.ply"),
+    ) else {
+        return;
+    };
+    let tmp = tempfile::tempdir().expect("tmp");
+    let fit_at = |name: &str, input: &Path, steps: &str| {
+        let dir = tmp.path().join(name);
+        let out = run(bin()
+            .arg("fit")
+            .arg(input)
+            .args(["--target-controls-pct", "2", "--stray-budget-steps", steps])
+            .arg("--out")
+            .arg(&dir));
+        let line = String::from_utf8_lossy(&out.stdout).into_owned();
+        (line, read_json(&dir.join("report.json")))
+    };
+
+    let (line, report) = fit_at("grown", &genus_four, "2");
+    let object = &report["object"];
+    let budgets = object["stray_budgets"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    assert_eq!(budgets.len(), 2, "{budgets:?}");
+    assert_eq!(object["stray"]["within"], true, "{}", object["stray"]);
+    assert_eq!(
+        report["control_points"], budgets[1]["controls"],
+        "{budgets:?}"
+    );
+    assert_eq!(object["topology"]["control"]["genus"], 4);
+    assert!(object["stages"]["stray_budget_ms"].as_f64().unwrap_or(0.0) > 0.0);
+    let again = format!(
+        "the fit at {} control points strayed from the data, so it was fitted again at {} \
+         (the surface of {} kept",
+        budgets[0]["target"], budgets[1]["target"], report["control_points"]
+    );
+    assert!(line.contains(&again), "{line}");
+
+    let (line, report) = fit_at("held", &genus_four, "0");
+    assert_eq!(report["object"]["stray_budgets"], serde_json::json!([]));
+    assert_eq!(report["object"]["stray"]["within"], false);
+    assert!(!line.contains("fitted again"), "{line}");
+    assert!(line.contains("strays up to"), "{line}");
+
+    let (line, report) = fit_at("kept", &broken, "2");
+    assert!(report["object"]["stray_budgets"]
+        .as_array()
+        .is_some_and(|b| b.len() >= 2));
+    assert!(
+        line.contains("none came within the bound, the first is kept"),
+        "{line}"
+    );
+}
