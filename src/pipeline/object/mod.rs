@@ -122,7 +122,7 @@ const STRAY_BUDGET_GROWTH: usize = 2;
 
 /// `fit` (at the `asked` budget) or, when its surface strays past the bound, the first fit
 /// `fit_at` makes within it at `STRAY_BUDGET_GROWTH` times the budget before. Each step
-/// runs only while a plain decimation of the data to the last fit's control count strays
+/// runs only while a decimation of the data to the last fit's control count strays
 /// past the bound as well (`stray::decimation_strays`: where such a mesh stays within it,
 /// the surface strays by its own making, a boundary curve past a jagged rim, and more
 /// controls do not mend it: chin_tri on the object path, 0.53 % at 2x as at 1x), and

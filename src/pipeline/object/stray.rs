@@ -167,10 +167,10 @@ fn ascend(
     best
 }
 
-/// Whether the plain quadric decimation of `data` to `vertices` vertices (the control
-/// mesh's own simplification, guards and all) strays farther than `limit` from `data`,
-/// on a lattice of `segments` segments per triangle edge: whether a mesh of that budget
-/// can hold the shape at all. Where it does, a surface of the same budget straying past
+/// Whether the quadric decimation of `mesh` to `vertices` vertices (`mesh::simplify` with
+/// its default guards, no creases) strays farther than `limit` from the data (`data`, the
+/// distance to `mesh`), on a lattice of `segments` segments per triangle edge: whether a
+/// mesh of that budget can hold the shape at all. Where it does, a surface of the same budget straying past
 /// the bound strays by its own making (a boundary curve past a jagged rim), which more
 /// controls do not mend. `true` when the decimation fails.
 pub(super) fn decimation_strays(

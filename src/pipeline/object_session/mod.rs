@@ -393,8 +393,8 @@ impl ObjectSession {
         // No fit of the merged views again at a larger budget where it strays: an update
         // is refitted from the previous one when the next view comes, and on the generated
         // sphere session the larger control meshes of the middle views left the last
-        // surface 1.52e-4 off the sphere against 0.97e-4 (two_arrival_orders_end_at_the_same_surface),
-        // besides doubling those updates' time.
+        // surface 1.52e-4 off the sphere against 0.97e-4
+        // (`two_arrival_orders_end_at_the_same_surface`), besides doubling their time.
         worker.fit.scan.stray_budget_steps = 0;
         let wraps = worker.fit.domain == Domain::Auto && spread > VIEW_SPREAD_DEG;
         if wraps {
