@@ -105,12 +105,13 @@ pub fn fit_object_input(
     };
     let side_ms = ms_since(t);
     let asked = control_target(component.positions.len(), opts);
-    let mut fit = fit_at_target(&side, data_topo.as_ref(), asked, opts)?;
-    // The data side is built once for every fit: reported with the first fit's setup.
+    let fit = fit_at_target(&side, data_topo.as_ref(), asked, opts)?;
+    let mut fit =
+        grow_budget_while_straying(fit, asked, opts, &side, data_topo.as_ref(), |target| {
+            fit_at_target(&side, data_topo.as_ref(), target, opts)
+        });
+    // The data side is built once for every fit: reported with the kept fit's setup.
     fit.times.surface_ms += side_ms;
-    let mut fit = grow_budget_while_straying(fit, asked, opts, &side, |target| {
-        fit_at_target(&side, data_topo.as_ref(), target, opts)
-    });
     fit.cleaning = Some(cleaning);
     fit.times.clean_ms = prepare_ms;
     fit.times.total_ms = prepare_ms + ms_since(start);
@@ -120,7 +121,8 @@ pub fn fit_object_input(
 /// See `model::STRAY_BUDGET_STEPS`.
 const STRAY_BUDGET_GROWTH: usize = 2;
 
-/// `fit` (at the `asked` budget) or, when its surface strays past the bound, the first fit
+/// `fit` (at the `asked` budget; the data are `side`'s, of topology `data_topo` where it
+/// is a manifold) or, when its surface strays past the bound, the first fit
 /// `fit_at` makes within it at `STRAY_BUDGET_GROWTH` times the budget before. Each step
 /// runs only while a decimation of the data to the last fit's control count strays
 /// past the bound as well (`stray::decimation_strays`: where such a mesh stays within it,
@@ -135,6 +137,7 @@ fn grow_budget_while_straying(
     asked: usize,
     opts: &ObjectOptions,
     side: &DataSide,
+    data_topo: Option<&Topology>,
     fit_at: impl Fn(usize) -> Result<ObjectFit, ObjectError>,
 ) -> ObjectFit {
     let Some(share) = opts.max_stray_share else {
@@ -163,6 +166,7 @@ fn grow_budget_while_straying(
         let budget_holds_shape = !stray::decimation_strays(
             side.nearest(),
             side.mesh,
+            data_topo,
             last_controls,
             limit,
             STRAY_LATTICE_SEGMENTS,

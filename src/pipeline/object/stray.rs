@@ -5,7 +5,8 @@
 
 use super::model::ObjectFit;
 use crate::mesh::distance::MeshDistance;
-use crate::mesh::simplify::{simplify, SimplifyOptions};
+use crate::mesh::simplify::{simplify, simplify_with_topology, SimplifyOptions};
+use crate::mesh::topology::Topology;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -170,12 +171,14 @@ fn ascend(
 /// Whether the quadric decimation of `mesh` to `vertices` vertices (`mesh::simplify` with
 /// its default guards, no creases) strays farther than `limit` from the data (`data`, the
 /// distance to `mesh`), on a lattice of `segments` segments per triangle edge: whether a
-/// mesh of that budget can hold the shape at all. Where it does, a surface of the same budget straying past
+/// mesh of that budget can hold the shape at all. `topo`: `mesh`'s topology, where the
+/// caller has it. Where it does, a surface of the same budget straying past
 /// the bound strays by its own making (a boundary curve past a jagged rim), which more
 /// controls do not mend. `true` when the decimation fails.
 pub(super) fn decimation_strays(
     data: &MeshDistance,
     mesh: &TriMesh,
+    topo: Option<&Topology>,
     vertices: usize,
     limit: f64,
     segments: usize,
@@ -184,7 +187,11 @@ pub(super) fn decimation_strays(
         target_vertices: vertices,
         ..SimplifyOptions::default()
     };
-    let Ok(decimated) = simplify(mesh, &opts) else {
+    let decimated = match topo {
+        Some(topo) => simplify_with_topology(mesh, topo, &opts, &[]),
+        None => simplify(mesh, &opts),
+    };
+    let Ok(decimated) = decimated else {
         return true;
     };
     let k = segments.max(1);
@@ -239,10 +246,14 @@ mod tests {
         let data = MeshDistance::new(&mesh);
         let n = mesh.positions.len();
         // Every vertex kept: the lattice lies on the data's own triangles.
-        assert!(!decimation_strays(&data, &mesh, n, 1e-9, 6));
+        assert!(!decimation_strays(&data, &mesh, None, n, 1e-9, 6));
         // 12 vertices: flat faces (an icosahedron's lie 0.21 inside the unit sphere) ...
-        assert!(decimation_strays(&data, &mesh, 12, 0.1, 6));
-        // ... but no face of a decimation that keeps the sphere's shape lies at its centre.
-        assert!(!decimation_strays(&data, &mesh, 12, 0.6, 6));
+        assert!(decimation_strays(&data, &mesh, None, 12, 0.1, 6));
+        // ... but no face of a decimation that keeps the sphere's shape lies at its centre,
+        // with the topology given or built.
+        let topo = Topology::from_mesh(&mesh).expect("manifold");
+        assert!(!decimation_strays(&data, &mesh, None, 12, 0.6, 6));
+        assert!(!decimation_strays(&data, &mesh, Some(&topo), 12, 0.6, 6));
+        assert!(decimation_strays(&data, &mesh, Some(&topo), 12, 0.1, 6));
     }
 }
