@@ -150,7 +150,8 @@ pub struct FitArgs {
     pub hole_bridge_edges: f64,
     /// Whole objects: a surface still straying past 0.5 % of the diagonal after its repair,
     /// where a decimation of as many vertices strays too, is fitted again at twice the
-    /// controls, at most this many times (0: the budget holds).
+    /// controls it spent, at most this many times, and the least straying fit kept (0: the
+    /// budget holds).
     #[arg(long, default_value_t = ScanConfig::default().stray_budget_steps as u8, value_parser = clap::value_parser!(u8).range(0..=4))]
     pub stray_budget_steps: u8,
     /// `--surface dms`: the degree, 2 or 3 (C1 or C2 surfaces; 6 or 10 controls per domain
@@ -388,15 +389,21 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
             .iter()
             .map(|b| b["target"].to_string())
             .collect();
+        let first_kept = budgets[0]["kept"].as_bool() == Some(true);
         let outcome = if stray["within"].as_bool() == Some(true) {
             format!("the surface of {} kept", r["control_points"])
+        } else if first_kept {
+            "none strayed less, the first is kept".to_string()
         } else {
-            "none came within the bound, the first is kept".to_string()
+            format!(
+                "none came within the bound; the surface of {}, which strays least, is kept",
+                r["control_points"]
+            )
         };
         line.push_str(&format!(
             "; the fit at {} control points strayed from the data, so it was fitted again \
             at {} ({outcome}; report.json object.stray_budgets)",
-            budgets[0]["target"],
+            budgets[0]["controls"],
             again.join(" and "),
         ));
     }

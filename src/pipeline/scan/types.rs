@@ -68,7 +68,8 @@ pub struct ScanConfig {
     pub hole_bridge_edges: f64,
     /// Whole objects: where the surface strays past 0.5 % of the diagonal after its
     /// repair and a decimation of as many vertices strays too, the object is fitted again
-    /// at twice the budget, at most this many times (0: the budget holds). Object
+    /// at twice the controls the fit before spent, at most this many times, and the least
+    /// straying fit kept (0: the budget holds). Object
     /// sessions never do (their updates are refitted view by view).
     pub stray_budget_steps: usize,
 }
