@@ -607,7 +607,15 @@ fn a_broken_bunny_is_cleaned_and_fitted() {
     let Some(mesh) = shared_mesh("models/bun_zipper_res4.ply") else {
         return;
     };
-    let fit = fit_object(&mesh, &ObjectOptions::default()).expect("fitted");
+    // The fit at the budget asked: the stray escalation takes it to 248 controls (see
+    // `an_escalation_that_never_comes_within_the_bound_keeps_the_least_straying_fit`),
+    // where a decimation of as many of the 445 points is nearly the data (RMS 7.6e-4
+    // against the surface's 5.3e-4 to its tessellation).
+    let opts = ObjectOptions {
+        stray_budget_steps: 0,
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
     assert_topology_kept(&fit);
     let diag = mesh.bounds_diagonal();
     assert!(fit.distances.iter().all(|d| d.is_finite()));

@@ -131,7 +131,7 @@ const STRAY_BUDGET_GROWTH: usize = 2;
 /// path, 0.53 % at 2x as at 1x), and stops at a fit that strays no less than the one
 /// before. The least straying fit is kept, within the bound or not: where the steps run
 /// out first, each brought the surface closer (elk, 4.3 % of the diagonal at 82 controls,
-/// 0.65 % at 361), which a user asking for a surface on the data would rather have than
+/// 0.67 % at 772), which a user asking for a surface on the data would rather have than
 /// the budget. The fits tried are listed in `stray_budgets`, the time beside the kept fit
 /// in `times.stray_budget_ms`.
 fn grow_budget_while_straying(
