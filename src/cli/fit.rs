@@ -381,31 +381,8 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         ));
     }
     let stray = &r["object"]["stray"];
-    if let Some(budgets) = r["object"]["stray_budgets"]
-        .as_array()
-        .filter(|b| b.len() > 1)
-    {
-        let again: Vec<String> = budgets[1..]
-            .iter()
-            .map(|b| b["target"].to_string())
-            .collect();
-        let first_kept = budgets[0]["kept"].as_bool() == Some(true);
-        let outcome = if stray["within"].as_bool() == Some(true) {
-            format!("the surface of {} kept", r["control_points"])
-        } else if first_kept {
-            "none strayed less, the first is kept".to_string()
-        } else {
-            format!(
-                "none came within the bound; the surface of {}, which strays least, is kept",
-                r["control_points"]
-            )
-        };
-        line.push_str(&format!(
-            "; the fit at {} control points strayed from the data, so it was fitted again \
-            at {} ({outcome}; report.json object.stray_budgets)",
-            budgets[0]["controls"],
-            again.join(" and "),
-        ));
+    if let Some(said) = escalation_summary(&r["object"], &r["control_points"]) {
+        line.push_str(&said);
     }
     if let Some(added) = stray_repair_controls(&r["object"]["refinement"]) {
         line.push_str(&format!(
@@ -423,6 +400,32 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         ));
     }
     line
+}
+
+/// What the line says of a stray escalation (`object.stray_budgets`, more than one fit
+/// tried): the controls of the first fit, the budgets tried after it, and which surface
+/// was kept; `None` without one.
+fn escalation_summary(object: &serde_json::Value, controls: &serde_json::Value) -> Option<String> {
+    let budgets = object["stray_budgets"].as_array().filter(|b| b.len() > 1)?;
+    let again: Vec<String> = budgets[1..]
+        .iter()
+        .map(|b| b["target"].to_string())
+        .collect();
+    let outcome = if object["stray"]["within"].as_bool() == Some(true) {
+        format!("the surface of {controls} kept")
+    } else if budgets[0]["kept"].as_bool() == Some(true) {
+        "none strayed less, the first is kept".to_string()
+    } else {
+        format!(
+            "none came within the bound; the surface of {controls}, which strays least, is kept"
+        )
+    };
+    Some(format!(
+        "; the fit at {} control points strayed from the data, so it was fitted again at {} \
+         ({outcome}; report.json object.stray_budgets)",
+        budgets[0]["controls"],
+        again.join(" and "),
+    ))
 }
 
 /// Control points the stray repair's rounds added (report.json `object.refinement`), when
@@ -460,4 +463,39 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
         ],
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::escalation_summary;
+    use serde_json::json;
+
+    fn object(within: bool, kept: usize) -> serde_json::Value {
+        let budgets: Vec<_> = [(22, 28), (56, 62), (124, 124)]
+            .iter()
+            .enumerate()
+            .map(|(k, &(target, controls))| {
+                json!({"target": target, "controls": controls, "kept": k == kept})
+            })
+            .collect();
+        json!({"stray_budgets": budgets, "stray": {"within": within}})
+    }
+
+    #[test]
+    fn the_line_names_the_fit_an_escalation_kept() {
+        let said = |within, kept, controls| {
+            escalation_summary(&object(within, kept), &json!(controls)).unwrap_or_default()
+        };
+        let tried = "the fit at 28 control points strayed from the data, so it was fitted \
+                     again at 56 and 124";
+        assert!(said(true, 2, 124).contains(tried));
+        assert!(said(true, 2, 124).contains("(the surface of 124 kept;"));
+        assert!(said(false, 0, 28).contains("(none strayed less, the first is kept;"));
+        assert!(said(false, 1, 62).contains(
+            "(none came within the bound; the surface of 62, which strays least, is kept;"
+        ));
+        let one = json!({"stray_budgets": [{"target": 22, "controls": 28, "kept": true}]});
+        assert_eq!(escalation_summary(&one, &json!(28)), None);
+        assert_eq!(escalation_summary(&json!({}), &json!(28)), None);
+    }
 }
