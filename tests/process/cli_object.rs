@@ -249,7 +249,7 @@ fn fit_says_when_the_surface_strays_from_the_data() {
 
 /// fertility at 2 % controls webs across its handles (1.2 % of the diagonal off the data)
 /// and a decimation of as many vertices strays as far: `trispline fit` fits it again at
-/// twice the budget, keeps that surface (within the bound) and says so; with
+/// twice the controls it spent, keeps that surface (within the bound) and says so; with
 /// `--stray-budget-steps 0` the budget holds and the line says the surface strays. On
 /// bun_zipper_res4 (2 %) no step comes within the bound, and the line says the least
 /// straying fit is kept.

@@ -123,8 +123,8 @@ const STRAY_BUDGET_GROWTH: usize = 2;
 
 /// `fit` (at the `asked` budget; the data are `side`'s, of topology `data_topo` where it
 /// is a manifold) or, when its surface strays past the bound, a fit `fit_at` makes at
-/// `STRAY_BUDGET_GROWTH` times the controls the fit before spent, step after step until
-/// one is within the bound. Each step runs only while a decimation of the data to the
+/// `STRAY_BUDGET_GROWTH` times the controls the fit before spent (its budget, where it
+/// spent fewer), step after step until one is within the bound. Each step runs only while a decimation of the data to the
 /// last fit's control count strays past the bound as well (`stray::decimation_strays`:
 /// where such a mesh stays within it, the surface strays by its own making, a boundary
 /// curve past a jagged rim, and more controls do not mend it: chin_tri on the object
