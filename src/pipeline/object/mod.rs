@@ -124,16 +124,16 @@ const STRAY_BUDGET_GROWTH: usize = 2;
 /// `fit` (at the `asked` budget; the data are `side`'s, of topology `data_topo` where it
 /// is a manifold) or, when its surface strays past the bound, a fit `fit_at` makes at
 /// `STRAY_BUDGET_GROWTH` times the controls the fit before spent (its budget, where it
-/// spent fewer), step after step until one is within the bound. Each step runs only while a decimation of the data to the
-/// last fit's control count strays past the bound as well (`stray::decimation_strays`:
-/// where such a mesh stays within it, the surface strays by its own making, a boundary
-/// curve past a jagged rim, and more controls do not mend it: chin_tri on the object
-/// path, 0.53 % at 2x as at 1x), and stops at a fit that strays no less than the one
-/// before. The least straying fit is kept, within the bound or not: where the steps run
-/// out first, each brought the surface closer (elk, 4.3 % of the diagonal at 82 controls,
-/// 0.67 % at 772), which a user asking for a surface on the data would rather have than
-/// the budget. The fits tried are listed in `stray_budgets`, the time beside the kept fit
-/// in `times.stray_budget_ms`.
+/// spent fewer), step after step until one is within the bound. Each step runs only
+/// while a decimation of the data to the last fit's control count strays past the bound
+/// as well (`stray::decimation_strays`: where such a mesh stays within it, the surface
+/// strays by its own making, a boundary curve past a jagged rim, and more controls do
+/// not mend it: chin_tri on the object path, 0.53 % at 2x as at 1x), and stops at a fit
+/// that strays no less than the one before. The least straying fit is kept, within the
+/// bound or not: where the steps run out first, each brought the surface closer (elk,
+/// 4.3 % of the diagonal at 82 controls, 0.67 % at 772), which a user asking for a
+/// surface on the data would rather have than the budget. The fits tried are listed in
+/// `stray_budgets`, the time beside the kept fit in `times.stray_budget_ms`.
 fn grow_budget_while_straying(
     fit: ObjectFit,
     asked: usize,
