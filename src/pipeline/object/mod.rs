@@ -84,8 +84,8 @@ pub fn fit_object(mesh: &TriMesh, opts: &ObjectOptions) -> Result<ObjectFit, Obj
 /// [`fit_object`] of an input already prepared (with `opts.clean`). Where the whole fit
 /// and its stray repair leave the surface straying past `opts.max_stray_share` and the
 /// budget cannot hold the shape, the object is fitted again from scratch at twice the
-/// budget, `opts.stray_budget_steps` times at most (`grow_budget_while_straying`; why:
-/// `model::STRAY_BUDGET_STEPS`).
+/// controls the fit before spent, `opts.stray_budget_steps` times at most, and the least
+/// straying fit is kept (`grow_budget_while_straying`; why: `model::STRAY_BUDGET_STEPS`).
 pub fn fit_object_input(
     input: ObjectInput,
     opts: &ObjectOptions,
