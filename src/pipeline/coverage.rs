@@ -1,6 +1,7 @@
 //! Which part of a scan's tessellation is shown: where the surface was fitted, never where
 //! it only extrapolates, and nowhere farther from the data than the hole-bridging distance.
 
+use super::object::STRAY_LIMIT_SHARE;
 use super::scan::ScanFit;
 use super::PatchFit;
 use crate::remesh::param::Locator;
@@ -47,6 +48,11 @@ const MAX_STRETCH: f64 = 3.0;
 /// At most this many segments per side when a rim triangle is cut finer (a 10 mm sliver
 /// at a 1.2 mm reach needs 17; longer ones are rarer than one in a thousand triangles).
 const MAX_CUT: usize = 24;
+
+/// The bounding-box diagonal of `points` (0 for none).
+fn points_diagonal(points: &[DVec3]) -> f64 {
+    crate::numeric::bounds(points).map_or(0.0, |(lo, hi)| (hi - lo).length())
+}
 
 impl Coverage {
     /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
@@ -113,20 +119,23 @@ impl Coverage {
 
     /// The scanned region of a scan fit: its mapped patch and the footprint of the data
     /// the surface passes within the hole-bridging distance of (the furthest the shown
-    /// surface may stand from a measured point).
+    /// surface may stand from a measured point), but never farther than the stray bound
+    /// every surface is held to (`STRAY_LIMIT_SHARE` of the data's bounding-box
+    /// diagonal): on a small or coarse patch the bridging distance, a few point spacings,
+    /// is several percent of its size, and the shown surface ran on past the rim by that.
     pub fn of(fit: &PatchFit, scan: &ScanFit) -> Self {
+        let reach = scan
+            .trims
+            .plan
+            .max_bridge
+            .min(STRAY_LIMIT_SHARE * points_diagonal(&fit.data));
         Self::new(
             &scan.trims.plan.covered,
             &fit.params,
             &scan.mapping.mapped_params,
             &scan.mapping.near_fold,
         )
-        .with_footprint(
-            &fit.params,
-            &fit.data,
-            &fit.geometric_errors,
-            scan.trims.plan.max_bridge,
-        )
+        .with_footprint(&fit.params, &fit.data, &fit.geometric_errors, reach)
     }
 
     /// Returns a test for parameters: inside a kept triangle of the mapped patch.

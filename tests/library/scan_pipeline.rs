@@ -532,3 +532,82 @@ fn the_edge_band_lowers_the_rms_without_raising_the_maximum() {
         loose_max * 1e6
     );
 }
+
+/// The farthest point of `fit`'s shown grid surface (the GLB's tessellation) from `data`.
+fn grid_stray(data: &TriMesh, fitted: &trispline::pipeline::worker::FittedPatch) -> f64 {
+    let scan = fitted.scan.as_ref().expect("a grid fit");
+    let coverage = Coverage::of(&fitted.fit, scan);
+    let segments = trispline::pipeline::worker::DEFAULT_TESSELLATION;
+    let shown = tessellate(&fitted.fit, segments, Some(&coverage));
+    let nearest = MeshDistance::new(data);
+    shown
+        .triangles
+        .iter()
+        .flatten()
+        .map(|&v| {
+            nearest
+                .distance(shown.positions[v as usize])
+                .expect("a finite vertex")
+        })
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn a_grid_surface_straying_from_a_small_curved_patch_gives_way_to_the_object_path() {
+    // Nine bumps on a patch of 324 points: the few grid cells over them bulge off the data
+    // between the points (about 9 % of the diagonal), which the data-to-surface errors
+    // cannot see.
+    let mesh = height_field(17, 0, |x, y| {
+        let bump = |t: f64| (3.0 * std::f64::consts::PI * t).sin();
+        DVec3::new(x, y, 0.3 * bump(x) * bump(y))
+    });
+    let diagonal = mesh.bounds_diagonal();
+    let mut grid_cfg = loop_config();
+    grid_cfg.fit.domain = trispline::pipeline::worker::Domain::Grid;
+    let grid = fit_patch(&mesh, None, &grid_cfg).expect("the grid fit");
+    let grid_stray = grid_stray(&mesh, &grid);
+    assert!(
+        grid_stray > 0.005 * diagonal,
+        "the grid surface strays {:.3} % of the diagonal",
+        100.0 * grid_stray / diagonal
+    );
+
+    let auto = run_patch(&mesh, None, &loop_config()).expect("the default fit");
+    let report = &auto.report;
+    assert_eq!(report["path"], "object", "{report}");
+    let reason = report["object"]["path_reason"].as_str().unwrap_or_default();
+    assert!(reason.starts_with("the grid surface strays"), "{reason}");
+    // Closer both ways: its farthest point from the data, and the data's from it.
+    let object_stray = report["object"]["stray"]["max"].as_f64().expect("a stray");
+    let object_max = report["final"]["geometric_max_error"]
+        .as_f64()
+        .expect("a max");
+    let grid_max = grid.fit.geometric_max();
+    assert!(
+        object_stray.max(object_max) < grid_stray.max(grid_max),
+        "object {object_stray:.3e} / {object_max:.3e}, grid {grid_stray:.3e} / {grid_max:.3e}"
+    );
+    // The object path was given at least the grid surface's controls.
+    let controls = report["control_points"].as_u64().unwrap_or(0) as usize;
+    assert!(controls >= grid.fit.controls.len(), "{controls} controls");
+}
+
+#[test]
+fn a_grid_surface_is_shown_no_farther_past_the_rim_than_the_stray_bound() {
+    // Half a cylinder of 484 points: its grid surface curls on past the straight rims. The
+    // shown part reached a few point spacings (the hole-bridging distance) past them, 2.7 %
+    // of the diagonal; it stops at the bound, and the patch stays on the grid.
+    let mesh = height_field(21, 0, |x, y| {
+        let a = std::f64::consts::PI * y;
+        DVec3::new(x, 0.5 * a.cos(), 0.5 * a.sin())
+    });
+    let fitted = fit_patch(&mesh, None, &loop_config()).expect("the fit");
+    assert!(fitted.scan.is_some(), "the grid path");
+    let stray = grid_stray(&mesh, &fitted);
+    let diagonal = mesh.bounds_diagonal();
+    assert!(
+        stray <= 0.005 * diagonal,
+        "the shown surface strays {:.3} % of the diagonal",
+        100.0 * stray / diagonal
+    );
+}

@@ -352,6 +352,7 @@ impl LastFit {
             object: Some(info),
             scattered: None,
             planar_shown: None,
+            grid_shown: None,
         }
     }
 }

@@ -6,6 +6,8 @@
 
 mod cloud;
 mod config;
+mod fitted;
+mod grid_stray;
 mod object;
 mod report;
 mod stray_guard;
@@ -14,6 +16,7 @@ pub use config::{
     BudgetConfig, ComponentsConfig, Domain, FitConfig, WorkerConfig, DEFAULT_CREASE_ANGLE_DEG,
     DEFAULT_CREASE_RELATIVE_RATIO, DEFAULT_TESSELLATION,
 };
+pub use fitted::FittedPatch;
 pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
 pub use stray_guard::StrayReport;
@@ -24,10 +27,8 @@ use super::output::{error_legend, tessellate, tessellate_mesh_faces, tessellated
 use super::scan::components::{
     cleaned_components, split_components, ComponentFilter, ComponentMode,
 };
-use super::scan::{fit_scan, ScanFit, ScanOptions, ScanWarm};
-use super::scattered::{
-    add_outputs, fit_planar, fit_planar_subdivided, tessellate_planar, ScatteredInfo,
-};
+use super::scan::{fit_scan, ScanOptions, ScanWarm};
+use super::scattered::{add_outputs, fit_planar, fit_planar_subdivided, tessellate_planar};
 use super::subdivided::fit_subdivided;
 use super::{FitOptions, PatchFit, PipelineError, SurfaceKind};
 use crate::fit::{Budget, FitStatus, StepHook};
@@ -35,6 +36,7 @@ use crate::mesh::clean::{clean, CleanOptions};
 use crate::remesh::RemeshError;
 use crate::TriMesh;
 use glam::DVec3;
+use grid_stray::held_to_the_stray_bound;
 use serde_json::json;
 use std::time::Instant;
 
@@ -52,26 +54,6 @@ pub struct PatchOutputs {
     pub warm: WarmStart,
     /// How the fit ended.
     pub status: FitStatus,
-}
-
-/// A fit before it is turned into outputs.
-pub struct FittedPatch {
-    /// The fit.
-    pub fit: PatchFit,
-    /// Remeshed scans: the preparation and domain.
-    pub scan: Option<ScanFit>,
-    /// The budget, its tolerance resolved.
-    pub budget: Budget,
-    /// Levels of inverse subdivision of the fit returned (subdivided inputs may refine).
-    pub levels: usize,
-    /// Subdivided inputs: the fits that missed the budget before it, coarsest first.
-    pub refinement: Vec<Refinement>,
-    /// Whole objects: the object fit and why that path was taken.
-    pub object: Option<ObjectInfo>,
-    /// B-patch and DMS fits: the planar map, coverage and trims.
-    pub scattered: Option<ScatteredInfo>,
-    /// B-patch and DMS fits of subdivided inputs: the region shown, in domain points.
-    pub planar_shown: Option<Coverage>,
 }
 
 /// The fit alone: with `domain = "mesh"` the object path; else subdivision connectivity
@@ -105,30 +87,7 @@ pub(crate) fn fit_patch_with(
         on_step,
     };
     if matches!(fit_cfg.surface, SurfaceKind::Bpatch | SurfaceKind::Dms) {
-        // Subdivision connectivity: over the coarse net, as the other kinds.
-        if let Some((fit, shown)) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
-            return Ok(FittedPatch {
-                fit,
-                scan: None,
-                budget,
-                levels: fit_cfg.levels,
-                refinement: Vec::new(),
-                object: None,
-                scattered: None,
-                planar_shown: Some(shown),
-            });
-        }
-        let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
-        return Ok(FittedPatch {
-            fit,
-            scan: None,
-            budget,
-            levels: 0,
-            refinement: Vec::new(),
-            object: None,
-            scattered: Some(info),
-            planar_shown: None,
-        });
+        return fit_planar_kind(mesh, previous, cfg, budget);
     }
     if fit_cfg.domain == Domain::Mesh {
         return object_patch(
@@ -165,14 +124,9 @@ pub(crate) fn fit_patch_with(
     let not_subdivided = match subdivided {
         Ok(fit) => {
             return Ok(FittedPatch {
-                fit,
-                scan: None,
-                budget,
                 levels,
                 refinement,
-                object: None,
-                scattered: None,
-                planar_shown: None,
+                ..FittedPatch::bare(fit, budget)
             })
         }
         Err(e @ (PipelineError::NoSubdivision(_) | PipelineError::NoLimitSurface { .. })) => e,
@@ -220,15 +174,45 @@ pub(crate) fn fit_patch_with(
             })
         }
     };
-    Ok(FittedPatch {
-        fit: s.fit.clone(),
-        scan: Some(s),
-        budget,
+    let mut fitted = FittedPatch {
         levels: fit_cfg.levels,
         refinement,
-        object: None,
-        scattered: None,
-        planar_shown: None,
+        ..FittedPatch::bare(s.fit.clone(), budget)
+    };
+    fitted.scan = Some(s);
+    if auto {
+        let budget = fitted.budget.clone();
+        let fit_as_object = |cfg: &WorkerConfig, input, reason| {
+            object_patch(mesh, Some(input), any_previous, cfg, budget, reason).ok()
+        };
+        if let Some(object) = held_to_the_stray_bound(mesh, &mut fitted, cfg, fit_as_object) {
+            return Ok(object);
+        }
+    }
+    Ok(fitted)
+}
+
+/// B-patch and DMS fits: over the coarse net of an input with subdivision connectivity,
+/// else over a planar map of the input.
+fn fit_planar_kind(
+    mesh: &TriMesh,
+    previous: Option<&WarmStart>,
+    cfg: &WorkerConfig,
+    budget: Budget,
+) -> Result<FittedPatch, PipelineError> {
+    let fit_cfg = &cfg.fit;
+    // Subdivision connectivity: over the coarse net, as the other kinds.
+    if let Some((fit, shown)) = fit_planar_subdivided(mesh, previous, cfg, &budget)? {
+        return Ok(FittedPatch {
+            levels: fit_cfg.levels,
+            planar_shown: Some(shown),
+            ..FittedPatch::bare(fit, budget)
+        });
+    }
+    let (fit, info) = fit_planar(mesh, previous, cfg, &budget)?;
+    Ok(FittedPatch {
+        scattered: Some(info),
+        ..FittedPatch::bare(fit, budget)
     })
 }
 
@@ -252,14 +236,8 @@ fn object_patch(
         reason,
     )?;
     Ok(FittedPatch {
-        fit,
-        scan: None,
-        budget,
-        levels: 0,
-        refinement: Vec::new(),
         object: Some(info),
-        scattered: None,
-        planar_shown: None,
+        ..FittedPatch::bare(fit, budget)
     })
 }
 
@@ -345,6 +323,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         object: object_info,
         scattered: planar_info,
         planar_shown,
+        grid_shown,
     } = fitted;
     let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
@@ -359,9 +338,10 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
                 return (glb, Some((check, shown_ms)));
             }
             let planar = planar_info.as_ref().map(|i| &i.coverage);
-            let tess = match planar.or(planar_shown.as_ref()) {
-                Some(shown) => tessellate_planar(&fitted, shown, cfg.tessellation.max(1)),
-                None => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
+            let tess = match (planar.or(planar_shown.as_ref()), grid_shown) {
+                (Some(shown), _) => tessellate_planar(&fitted, shown, cfg.tessellation.max(1)),
+                (None, Some(shown)) => shown,
+                (None, None) => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
             };
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)
         },

@@ -1,0 +1,49 @@
+//! A fit as the worker's paths return it, before it is turned into outputs.
+
+use super::object::ObjectInfo;
+use super::report::Refinement;
+use crate::fit::Budget;
+use crate::pipeline::output::{Coverage, Tessellation};
+use crate::pipeline::scan::ScanFit;
+use crate::pipeline::scattered::ScatteredInfo;
+use crate::pipeline::PatchFit;
+
+/// A fit before it is turned into outputs.
+pub struct FittedPatch {
+    /// The fit.
+    pub fit: PatchFit,
+    /// Remeshed scans: the preparation and domain.
+    pub scan: Option<ScanFit>,
+    /// The budget, its tolerance resolved.
+    pub budget: Budget,
+    /// Levels of inverse subdivision of the fit returned (subdivided inputs may refine).
+    pub levels: usize,
+    /// Subdivided inputs: the fits that missed the budget before it, coarsest first.
+    pub refinement: Vec<Refinement>,
+    /// Whole objects: the object fit and why that path was taken.
+    pub object: Option<ObjectInfo>,
+    /// B-patch and DMS fits: the planar map, coverage and trims.
+    pub scattered: Option<ScatteredInfo>,
+    /// B-patch and DMS fits of subdivided inputs: the region shown, in domain points.
+    pub planar_shown: Option<Coverage>,
+    /// Remeshed scans: the shown tessellation the stray check measured (the GLB's).
+    pub grid_shown: Option<Tessellation>,
+}
+
+impl FittedPatch {
+    /// `fit` at `budget` with nothing beside it (no levels, refinement or path details):
+    /// what each path fills in.
+    pub(super) fn bare(fit: PatchFit, budget: Budget) -> Self {
+        Self {
+            fit,
+            scan: None,
+            budget,
+            levels: 0,
+            refinement: Vec::new(),
+            object: None,
+            scattered: None,
+            planar_shown: None,
+            grid_shown: None,
+        }
+    }
+}
