@@ -590,6 +590,12 @@ fn a_grid_surface_straying_from_a_small_curved_patch_gives_way_to_the_object_pat
     // The object path was given at least the grid surface's controls.
     let controls = report["control_points"].as_u64().unwrap_or(0) as usize;
     assert!(controls >= grid.fit.controls.len(), "{controls} controls");
+
+    // The object path fits Loop surfaces only: Bezier patches asked for stay on the grid.
+    let mut bezier = loop_config();
+    bezier.fit.surface = SurfaceKind::Bezier;
+    let kept = fit_patch(&mesh, None, &bezier).expect("the Bezier fit");
+    assert!(kept.scan.is_some() && kept.object.is_none());
 }
 
 #[test]

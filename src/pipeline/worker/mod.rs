@@ -180,7 +180,8 @@ pub(crate) fn fit_patch_with(
         ..FittedPatch::bare(s.fit.clone(), budget)
     };
     fitted.scan = Some(s);
-    if auto {
+    // The object path fits Loop surfaces only; another kind asked for is kept.
+    if auto && fit_cfg.surface == SurfaceKind::Loop {
         let budget = fitted.budget.clone();
         let fit_as_object = |cfg: &WorkerConfig, input, reason| {
             object_patch(mesh, Some(input), any_previous, cfg, budget, reason).ok()
