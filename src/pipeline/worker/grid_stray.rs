@@ -1,10 +1,12 @@
 //! How far a scan fit's grid surface strays from its data. The grid path maps a disk-like
 //! input to the plane and fits a fixed lattice of cells; where the map stretches a strongly
-//! curved or small input (a face, a half cylinder of a few hundred points), the few cells
-//! over it bulge away from the data, up to several percent of the diagonal, and the fit's
-//! own errors (data to surface) cannot see it. The object path holds its surfaces to the
-//! stray bound (its repair and escalation), so a grid surface past the bound is fitted
-//! there too and the one that strays less is kept (`fit_patch`).
+//! curved or small input (a face, bumps on a few hundred points), the few cells over it
+//! bulge away from the data between the points, up to several percent of the diagonal, and
+//! the fit's own errors (data to surface) cannot see it. The object path holds its surfaces
+//! to the stray bound (its repair and escalation), so a grid surface past the bound is
+//! fitted there too, and the one that lies closer to the data both ways is kept
+//! (`fit_patch`). The shown surface's overhang past the rim is held to the bound by the
+//! coverage itself (`Coverage::of`).
 
 use super::config::WorkerConfig;
 use super::fitted::FittedPatch;

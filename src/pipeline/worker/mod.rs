@@ -326,7 +326,6 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         planar_shown,
         grid_shown,
     } = fitted;
-    let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
         || {
@@ -342,7 +341,10 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
             let tess = match (planar.or(planar_shown.as_ref()), grid_shown) {
                 (Some(shown), _) => tessellate_planar(&fitted, shown, cfg.tessellation.max(1)),
                 (None, Some(shown)) => shown,
-                (None, None) => tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref()),
+                (None, None) => {
+                    let coverage = scan_info.as_ref().map(|s| Coverage::of(&fitted, s));
+                    tessellate(&fitted, cfg.tessellation.max(1), coverage.as_ref())
+                }
             };
             (tessellated_glb(&fitted, &tess, budget.tolerance), None)
         },
