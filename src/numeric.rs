@@ -61,6 +61,11 @@ pub(crate) fn bounds(points: &[DVec3]) -> Option<(DVec3, DVec3)> {
     )
 }
 
+/// The length of the diagonal of the points' bounds (0 without points).
+pub(crate) fn bounds_diagonal(points: &[DVec3]) -> f64 {
+    bounds(points).map_or(0.0, |(lo, hi)| (hi - lo).length())
+}
+
 /// A local origin for `points`: their box's centre rounded to a multiple of the power of two
 /// at or above the box's diagonal. Subtracting it is exact (it is a multiple of every far
 /// coordinate's unit in the last place, and the difference is smaller than the coordinate),

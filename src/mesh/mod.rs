@@ -46,11 +46,6 @@ impl TriMesh {
         self.triangles.len()
     }
 
-    /// Axis-aligned bounds, or `None` for a mesh without vertices.
-    pub(crate) fn bounds(&self) -> Option<(DVec3, DVec3)> {
-        crate::numeric::bounds(&self.positions)
-    }
-
     /// The volume a closed mesh encloses, positive when its triangles face outwards (the
     /// divergence theorem: a sum of tetrahedra from the origin).
     pub fn signed_volume(&self) -> f64 {
@@ -65,7 +60,7 @@ impl TriMesh {
 
     /// Length of the bounding-box diagonal (0 for an empty mesh).
     pub fn bounds_diagonal(&self) -> f64 {
-        self.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length())
+        crate::numeric::bounds_diagonal(&self.positions)
     }
 
     /// Per vertex, the sum of its faces' area normals (`triangle_area_normal`: weighted by

@@ -49,11 +49,6 @@ const MAX_STRETCH: f64 = 3.0;
 /// at a 1.2 mm reach needs 17; longer ones are rarer than one in a thousand triangles).
 const MAX_CUT: usize = 24;
 
-/// The bounding-box diagonal of `points` (0 for none).
-fn points_diagonal(points: &[DVec3]) -> f64 {
-    crate::numeric::bounds(points).map_or(0.0, |(lo, hi)| (hi - lo).length())
-}
-
 impl Coverage {
     /// `corrected[v]`: the final parameter of data vertex v (fewer than `mapped`, whose
     /// remaining entries are hole-fill vertices); `mapped[v]`: the parameter of the plain map;
@@ -128,7 +123,7 @@ impl Coverage {
             .trims
             .plan
             .max_bridge
-            .min(STRAY_LIMIT_SHARE * points_diagonal(&fit.data));
+            .min(STRAY_LIMIT_SHARE * crate::numeric::bounds_diagonal(&fit.data));
         Self::new(
             &scan.trims.plan.covered,
             &fit.params,

@@ -344,15 +344,8 @@ impl LastFit {
             stray_budgets: Vec::new(),
         };
         FittedPatch {
-            fit,
-            scan: None,
-            budget,
-            levels: 0,
-            refinement: Vec::new(),
             object: Some(info),
-            scattered: None,
-            planar_shown: None,
-            grid_shown: None,
+            ..FittedPatch::bare(fit, budget)
         }
     }
 }

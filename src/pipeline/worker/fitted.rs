@@ -33,7 +33,7 @@ pub struct FittedPatch {
 impl FittedPatch {
     /// `fit` at `budget` with nothing beside it (no levels, refinement or path details):
     /// what each path fills in.
-    pub(super) fn bare(fit: PatchFit, budget: Budget) -> Self {
+    pub(crate) fn bare(fit: PatchFit, budget: Budget) -> Self {
         Self {
             fit,
             scan: None,
