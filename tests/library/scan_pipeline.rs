@@ -7,7 +7,9 @@ use trispline::mesh::clean::{clean, CleanOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::{surface_json, tessellate, Coverage};
 use trispline::pipeline::scan::Domain;
-use trispline::pipeline::worker::{fit_patch, run_patch, FitConfig, PatchOutputs, WorkerConfig};
+use trispline::pipeline::worker::{
+    fit_patch, outputs_of, run_patch, FitConfig, PatchOutputs, WorkerConfig,
+};
 use trispline::pipeline::SurfaceKind;
 use trispline::remesh::fill_holes;
 use trispline::remesh::planar::{folded_triangles, planar_map, MapMethod, PlaneFrame};
@@ -579,6 +581,7 @@ fn a_grid_surface_straying_from_a_small_curved_patch_gives_way_to_the_object_pat
     assert!(reason.starts_with("the grid surface strays"), "{reason}");
     // Closer both ways: its farthest point from the data, and the data's from it.
     let object_stray = report["object"]["stray"]["max"].as_f64().expect("a stray");
+    assert_eq!(report["stray"]["max"], report["object"]["stray"]["max"]);
     let object_max = report["final"]["geometric_max_error"]
         .as_f64()
         .expect("a max");
@@ -598,16 +601,83 @@ fn a_grid_surface_straying_from_a_small_curved_patch_gives_way_to_the_object_pat
     assert!(kept.scan.is_some() && kept.object.is_none());
 }
 
+/// A half cylinder of radius 1, three long, sampled 40 times around and 30 times along
+/// (the shape and sampling of CGAL's `cylinder.off`).
+fn long_half_cylinder() -> TriMesh {
+    let (along, around) = (30usize, 40usize);
+    let mut positions = Vec::new();
+    for j in 0..around {
+        let a = std::f64::consts::PI * j as f64 / (around - 1) as f64;
+        for i in 0..along {
+            let x = 3.0 * i as f64 / (along - 1) as f64;
+            positions.push(DVec3::new(x, a.cos(), a.sin()));
+        }
+    }
+    let id = |i: usize, j: usize| (j * along + i) as u32;
+    let mut triangles = Vec::new();
+    for j in 0..around - 1 {
+        for i in 0..along - 1 {
+            triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    TriMesh::new(positions, triangles)
+}
+
+#[test]
+fn a_grid_surface_missing_the_error_budget_gives_way_to_a_closer_object_fit() {
+    // The grid surface of this half cylinder stays within the stray bound but misses the
+    // data everywhere (RMS over the tolerance, a largest error): the object path is tried
+    // and its surface, closer on average and no farther both ways, is kept.
+    let mesh = long_half_cylinder();
+    let mut grid_cfg = loop_config();
+    grid_cfg.fit.domain = trispline::pipeline::worker::Domain::Grid;
+    let grid = fit_patch(&mesh, None, &grid_cfg).expect("the grid fit");
+    let tolerance = grid.budget.tolerance;
+    let grid_rms = grid.fit.geometric_rms();
+    assert!(
+        grid_rms > tolerance,
+        "the grid fit's RMS {grid_rms:.3e} within the tolerance {tolerance:.3e}"
+    );
+    let grid_distance = grid_stray(&mesh, &grid).max(grid.fit.geometric_max());
+
+    let auto = run_patch(&mesh, None, &loop_config()).expect("the default fit");
+    let report = &auto.report;
+    assert_eq!(report["path"], "object", "{report}");
+    let reason = report["object"]["path_reason"].as_str().unwrap_or_default();
+    assert!(
+        reason.starts_with("the grid surface misses the data"),
+        "{reason}"
+    );
+    let rms = report["final"]["geometric_rms_error"]
+        .as_f64()
+        .expect("an RMS");
+    assert!(rms < grid_rms, "object RMS {rms:.3e}, grid {grid_rms:.3e}");
+    let stray = report["stray"]["max"].as_f64().expect("a stray");
+    let max = report["final"]["geometric_max_error"]
+        .as_f64()
+        .expect("a max");
+    assert!(
+        stray.max(max) <= grid_distance,
+        "object {stray:.3e} / {max:.3e}, grid both ways {grid_distance:.3e}"
+    );
+    assert_eq!(report["stray"]["within"], true, "{}", report["stray"]);
+}
+
 #[test]
 fn a_grid_surface_is_shown_no_farther_past_the_rim_than_the_stray_bound() {
     // Half a cylinder of 484 points: its grid surface curls on past the straight rims. The
     // shown part reached a few point spacings (the hole-bridging distance) past them, 2.7 %
-    // of the diagonal; it stops at the bound, and the patch stays on the grid.
+    // of the diagonal; it stops at the bound, and the patch stays on the grid. The budget
+    // is one the grid surface meets in RMS (at the default 0.1 % of the diagonal it misses
+    // it by 17 %, and the object path's surface is kept, closer to the data both ways).
     let mesh = height_field(21, 0, |x, y| {
         let a = std::f64::consts::PI * y;
         DVec3::new(x, 0.5 * a.cos(), 0.5 * a.sin())
     });
-    let fitted = fit_patch(&mesh, None, &loop_config()).expect("the fit");
+    let mut cfg = loop_config();
+    cfg.fit.budget.tolerance_rel = 2e-3;
+    let fitted = fit_patch(&mesh, None, &cfg).expect("the fit");
     assert!(fitted.scan.is_some(), "the grid path");
     let stray = grid_stray(&mesh, &fitted);
     let diagonal = mesh.bounds_diagonal();
@@ -616,4 +686,14 @@ fn a_grid_surface_is_shown_no_farther_past_the_rim_than_the_stray_bound() {
         "the shown surface strays {:.3} % of the diagonal",
         100.0 * stray / diagonal
     );
+    // report.json says what the check measured, as it says an object's stray.
+    let outputs = outputs_of(fitted, &cfg, std::time::Instant::now());
+    let reported = &outputs.report["stray"];
+    let max = reported["max"].as_f64().expect("stray.max in report.json");
+    assert!(
+        (max - stray).abs() <= 1e-9 * diagonal,
+        "report.json's stray {max:.6e} against the shown surface's {stray:.6e}"
+    );
+    assert_eq!(reported["within"], true);
+    assert_eq!(reported["limit_share"], 0.005);
 }

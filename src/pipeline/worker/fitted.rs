@@ -2,8 +2,9 @@
 
 use super::object::ObjectInfo;
 use super::report::Refinement;
+use super::shown::GridShown;
 use crate::fit::Budget;
-use crate::pipeline::output::{Coverage, Tessellation};
+use crate::pipeline::output::Coverage;
 use crate::pipeline::scan::ScanFit;
 use crate::pipeline::scattered::ScatteredInfo;
 use crate::pipeline::PatchFit;
@@ -26,8 +27,9 @@ pub struct FittedPatch {
     pub scattered: Option<ScatteredInfo>,
     /// B-patch and DMS fits of subdivided inputs: the region shown, in domain points.
     pub planar_shown: Option<Coverage>,
-    /// Remeshed scans: the shown tessellation the stray check measured (the GLB's).
-    pub grid_shown: Option<Tessellation>,
+    /// Remeshed scans: the shown tessellation the stray check measured (the GLB's), and
+    /// the stray.
+    pub grid_shown: Option<GridShown>,
 }
 
 impl FittedPatch {

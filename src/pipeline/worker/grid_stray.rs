@@ -1,88 +1,55 @@
-//! How far a scan fit's grid surface strays from its data. The grid path maps a disk-like
-//! input to the plane and fits a fixed lattice of cells; where the map stretches a strongly
-//! curved or small input (a face, bumps on a few hundred points), the few cells over it
-//! bulge away from the data between the points, up to several percent of the diagonal, and
-//! the fit's own errors (data to surface) cannot see it. The object path holds its surfaces
-//! to the stray bound (its repair and escalation), so a grid surface past the bound is
-//! fitted there too, and the one that lies closer to the data both ways is kept
-//! (`fit_patch`). The shown surface's overhang past the rim is held to the bound by the
-//! coverage itself (`Coverage::of`).
+//! When a scan fit's grid surface gives way to the object path's. The grid path maps a
+//! disk-like input to the plane and fits a fixed lattice of cells; where the map stretches
+//! a strongly curved or small input (a face, bumps on a few hundred points), the few cells
+//! over it bulge away from the data between the points, up to several percent of the
+//! diagonal, and the fit's own errors (data to surface) cannot see it. The object path
+//! holds its surfaces to the stray bound (its repair and escalation), so a grid surface
+//! past the bound (measured by `shown`) is fitted there too, and the one that lies closer
+//! to the data both ways is kept (`fit_patch`). So is a grid surface that misses the data
+//! everywhere (its RMS over the budget's tolerance), when the object surface fits better
+//! without straying farther. The shown surface's overhang past the rim is held to the
+//! bound by the coverage itself (`Coverage::of`).
 
 use super::config::WorkerConfig;
 use super::fitted::FittedPatch;
 use super::object::object_input;
-use super::stray_guard::MAX_STRAY_SHARE;
-use crate::mesh::distance::MeshDistance;
+use super::shown::{GridShown, GridStray};
 use crate::pipeline::object::ObjectInput;
-use crate::pipeline::output::{tessellate, Coverage, Tessellation};
 use crate::pipeline::scan::ScanFit;
 use crate::TriMesh;
-use rayon::prelude::*;
 
-/// The grid surface's farthest point from the data, measured on the tessellation the GLB
-/// shows.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) struct GridStray {
-    /// The largest distance from a vertex of the shown tessellation to the data mesh
-    /// (infinite when a vertex has no nearest point).
-    pub max: f64,
-    /// `max` as a share of the data's bounding-box diagonal.
-    pub share_of_diagonal: f64,
+/// Why a grid surface is fitted on the object path too.
+enum Doubt {
+    /// Its shown tessellation strays past the bound.
+    Strays(GridStray),
+    /// It is within the bound, but its RMS distance from the data exceeds the budget's
+    /// tolerance (a largest error): it misses the data everywhere, not only at rim junk.
+    MissesBudget {
+        /// Its RMS.
+        rms: f64,
+        /// The tolerance.
+        tolerance: f64,
+    },
 }
 
-impl GridStray {
-    /// The stray of `scan`'s surface from `data` (the input it was fitted to), on the
-    /// tessellation of `segments` the outputs show, and that tessellation (the GLB's).
-    pub(super) fn of(data: &TriMesh, scan: &ScanFit, segments: usize) -> (GridStray, Tessellation) {
-        let coverage = Coverage::of(&scan.fit, scan);
-        let shown = tessellate(&scan.fit, segments.max(1), Some(&coverage));
-        let nearest = MeshDistance::new(data);
-        // The coverage drops triangles, not vertices: only the kept triangles' corners
-        // are shown.
-        let mut corner = vec![false; shown.positions.len()];
-        for &v in shown.triangles.iter().flatten() {
-            if let Some(c) = corner.get_mut(v as usize) {
-                *c = true;
-            }
-        }
-        let max = shown
-            .positions
-            .par_iter()
-            .zip(&corner)
-            .with_min_len(256)
-            .filter(|(_, &shown)| shown)
-            .map(|(&p, _)| nearest.distance(p).unwrap_or(f64::INFINITY))
-            .reduce(|| 0.0, f64::max);
-        let diagonal = data.bounds_diagonal();
-        let share_of_diagonal = if diagonal > 0.0 { max / diagonal } else { 0.0 };
-        let stray = GridStray {
-            max,
-            share_of_diagonal,
-        };
-        (stray, shown)
-    }
-
-    /// Whether it is within the bound every whole fit is held to (an infinite or NaN
-    /// share is not).
-    pub(super) fn within(&self) -> bool {
-        self.share_of_diagonal <= MAX_STRAY_SHARE
-    }
-
+impl Doubt {
     /// Why the object path was tried, for report.json's `object.path_reason`.
-    pub(super) fn reason(&self) -> String {
-        format!(
-            "the grid surface strays {:.2} % of the bounding-box diagonal from the data \
-             (over {:.2} %)",
-            100.0 * self.share_of_diagonal,
-            100.0 * MAX_STRAY_SHARE
-        )
+    fn reason(&self) -> String {
+        match self {
+            Self::Strays(stray) => stray.reason(),
+            Self::MissesBudget { rms, tolerance } => format!(
+                "the grid surface misses the data by RMS {rms:.3e}, over the tolerance \
+                 {tolerance:.3e}"
+            ),
+        }
     }
 }
 
 /// Measures how far the grid surface of `grid` (a scan fit) strays from `mesh` on the
-/// tessellation its GLB shows (kept in `grid` for the outputs), and past the bound, the
-/// object path's fit (`fit_as_object`: the worker's, under a config, of a prepared input,
-/// for a reason) when that lies closer (`closer_as_object`).
+/// tessellation its GLB shows (kept in `grid` for the outputs). Past the bound, or when
+/// its RMS exceeds the budget's tolerance, the object path's fit (`fit_as_object`: the
+/// worker's, under a config, of a prepared input, for a reason) is returned when it lies
+/// closer (`closer_as_object`).
 pub(super) fn held_to_the_stray_bound(
     mesh: &TriMesh,
     grid: &mut FittedPatch,
@@ -91,34 +58,49 @@ pub(super) fn held_to_the_stray_bound(
 ) -> Option<FittedPatch> {
     let scan = grid.scan.as_ref()?;
     let (stray, shown) = GridStray::of(mesh, scan, cfg.tessellation);
-    let closer = if stray.within() {
-        None
+    let rms = scan.fit.geometric_rms();
+    let tolerance = grid.budget.tolerance;
+    let doubt = if !stray.within() {
+        Some(Doubt::Strays(stray))
+    } else if rms > tolerance {
+        Some(Doubt::MissesBudget { rms, tolerance })
     } else {
-        let object = closer_as_object(mesh, cfg, scan, &stray, fit_as_object);
+        None
+    };
+    let closer = doubt.and_then(|doubt| {
+        let object = closer_as_object(mesh, cfg, scan, &stray, &doubt, fit_as_object);
         if object.is_none() {
             tracing::warn!(
                 "{}; the object path's surface lies no closer to the data, so the grid \
                  surface is kept",
-                stray.reason()
+                doubt.reason()
             );
         }
         object
-    };
-    grid.grid_shown = Some(shown);
+    });
+    grid.grid_shown = Some(GridShown {
+        tessellation: shown,
+        stray,
+    });
     closer
 }
 
-/// The object path's fit of a disk-like `mesh` whose grid surface (`grid`'s) strayed past
-/// the bound (`stray`), if it lies closer to the data: its two-sided (Hausdorff) distance,
-/// the larger of its farthest point from the data and the data's farthest point from it,
-/// is smaller. A surface that strays less but misses the data by more is no better. It
-/// is given at least as many controls as the grid surface has (a small input's grid keeps
-/// a few cells over it whatever the budget), so the two are compared at one cost.
+/// The object path's fit of a disk-like `mesh` whose grid surface (`grid`'s, straying
+/// `stray` from the data) is in `doubt`, if it lies closer to the data: its two-sided
+/// (Hausdorff) distance, the larger of its farthest point from the data and the data's
+/// farthest point from it, is smaller, and where the grid surface was within the stray
+/// bound, no larger, with a lower RMS, and within the bound (or no farther past it than
+/// the grid surface). A surface that strays less but misses the data by more is no
+/// better; nor is one that fits better on average but strays past the bound the grid
+/// surface kept. It is given at least as many controls as the
+/// grid surface has (a small input's grid keeps a few cells over it whatever the budget),
+/// so the two are compared at one cost.
 fn closer_as_object(
     mesh: &TriMesh,
     cfg: &WorkerConfig,
     grid: &ScanFit,
     stray: &GridStray,
+    doubt: &Doubt,
     fit_as_object: impl FnOnce(&WorkerConfig, ObjectInput, String) -> Option<FittedPatch>,
 ) -> Option<FittedPatch> {
     let input = object_input(mesh, cfg)?;
@@ -126,9 +108,17 @@ fn closer_as_object(
     let mut cfg = cfg.clone();
     let pct = &mut cfg.fit.scan.target_controls_pct;
     *pct = pct.max((100.0 * grid.fit.controls.len() as f64 / points as f64).min(100.0));
-    let fitted = fit_as_object(&cfg, input, stray.reason())?;
-    let object_stray = fitted.object.as_ref()?.stray?.max;
+    let fitted = fit_as_object(&cfg, input, doubt.reason())?;
+    let object_stray = fitted.object.as_ref()?.stray?;
+    let (object_within, object_stray) = (object_stray.within, object_stray.max);
     let object_distance = object_stray.max(fitted.fit.geometric_max());
     let grid_distance = stray.max.max(grid.fit.geometric_max());
-    (object_distance < grid_distance).then_some(fitted)
+    let closer = match doubt {
+        Doubt::Strays(_) => object_distance < grid_distance,
+        Doubt::MissesBudget { rms, .. } => {
+            let keeps_the_bound = object_within || object_stray <= stray.max;
+            keeps_the_bound && object_distance <= grid_distance && fitted.fit.geometric_rms() < *rms
+        }
+    };
+    closer.then_some(fitted)
 }

@@ -10,6 +10,7 @@ mod fitted;
 mod grid_stray;
 mod object;
 mod report;
+mod shown;
 mod stray_guard;
 
 pub use config::{
@@ -326,6 +327,8 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         planar_shown,
         grid_shown,
     } = fitted;
+    let grid_stray = grid_shown.as_ref().map(|shown| shown.stray.report());
+    let grid_shown = grid_shown.map(|shown| shown.tessellation);
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
         || {
@@ -376,6 +379,20 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
             report["object"]["stages"]["shown_ms"] = json!(shown_ms);
         }
         warm.object = object::object_warm(&fitted, info);
+    }
+    // Every path that measures how far its surface strays from the data says so in one
+    // place: the scan path's shown grid, the object path's lattice (`object.stray`).
+    let object_stray = report["object"]["stray"].clone();
+    let stray = grid_stray.or_else(|| {
+        (!object_stray.is_null()).then(|| {
+            let mut stray = object_stray;
+            stray["measured_on"] =
+                json!("a lattice over each control face, its farthest samples climbed to their local maxima");
+            stray
+        })
+    });
+    if let Some(stray) = stray {
+        report["stray"] = stray;
     }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
     PatchOutputs {

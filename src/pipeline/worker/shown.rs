@@ -1,0 +1,89 @@
+//! What a grid surface's GLB shows, and how far that strays from the data: measured once
+//! by the stray check (`grid_stray`) and handed on to the outputs (`FittedPatch`).
+
+use super::stray_guard::MAX_STRAY_SHARE;
+use crate::mesh::distance::MeshDistance;
+use crate::pipeline::output::{tessellate, Coverage, Tessellation};
+use crate::pipeline::scan::ScanFit;
+use crate::TriMesh;
+use rayon::prelude::*;
+
+/// The grid surface's farthest point from the data, measured on the tessellation the GLB
+/// shows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GridStray {
+    /// The largest distance from a vertex of the shown tessellation to the data mesh
+    /// (infinite when a vertex has no nearest point).
+    pub max: f64,
+    /// `max` as a share of the data's bounding-box diagonal.
+    pub share_of_diagonal: f64,
+}
+
+/// The tessellation a grid surface's GLB shows, and how far it strays from the data.
+pub struct GridShown {
+    /// The shown tessellation (the coverage's triangles).
+    pub tessellation: Tessellation,
+    /// Its farthest shown vertex from the data.
+    pub stray: GridStray,
+}
+
+impl GridStray {
+    /// The stray of `scan`'s surface from `data` (the input it was fitted to), on the
+    /// tessellation of `segments` the outputs show, and that tessellation (the GLB's).
+    pub(super) fn of(data: &TriMesh, scan: &ScanFit, segments: usize) -> (GridStray, Tessellation) {
+        let coverage = Coverage::of(&scan.fit, scan);
+        let shown = tessellate(&scan.fit, segments.max(1), Some(&coverage));
+        let nearest = MeshDistance::new(data);
+        // The coverage drops triangles, not vertices: only the kept triangles' corners
+        // are shown.
+        let mut corner = vec![false; shown.positions.len()];
+        for &v in shown.triangles.iter().flatten() {
+            if let Some(c) = corner.get_mut(v as usize) {
+                *c = true;
+            }
+        }
+        let max = shown
+            .positions
+            .par_iter()
+            .zip(&corner)
+            .with_min_len(256)
+            .filter(|(_, &shown)| shown)
+            .map(|(&p, _)| nearest.distance(p).unwrap_or(f64::INFINITY))
+            .reduce(|| 0.0, f64::max);
+        let diagonal = data.bounds_diagonal();
+        let share_of_diagonal = if diagonal > 0.0 { max / diagonal } else { 0.0 };
+        let stray = GridStray {
+            max,
+            share_of_diagonal,
+        };
+        (stray, shown)
+    }
+
+    /// Whether it is within the bound every whole fit is held to (an infinite or NaN
+    /// share is not).
+    pub(super) fn within(&self) -> bool {
+        self.share_of_diagonal <= MAX_STRAY_SHARE
+    }
+
+    /// report.json's `stray` for a grid surface: the figures of a whole fit's
+    /// (`StrayReport`), and what they were measured on.
+    pub(super) fn report(&self) -> serde_json::Value {
+        serde_json::json!({
+            "max": self.max,
+            "share_of_diagonal": self.share_of_diagonal,
+            "limit_share": MAX_STRAY_SHARE,
+            "within": self.within(),
+            "measured_on": "the vertices of the shown tessellation",
+        })
+    }
+
+    /// Why the object path was tried, for report.json's `object.path_reason`.
+    pub(super) fn reason(&self) -> String {
+        format!(
+            "the grid surface strays {:.2} % of the bounding-box diagonal from the data \
+             (over {:.2} %)",
+            100.0 * self.share_of_diagonal,
+            100.0 * MAX_STRAY_SHARE
+        )
+    }
+}
