@@ -6,7 +6,8 @@
 //! holds its surfaces to the stray bound (its repair and escalation), so a grid surface
 //! past the bound (measured by `shown`) is fitted there too, and the one that lies closer
 //! to the data both ways is kept (`fit_patch`). So is a grid surface that misses the data
-//! everywhere (its RMS over the budget's tolerance), when the object surface fits better
+//! everywhere (its RMS over the budget's tolerance and `GROSS_MISS_SHARE` of the
+//! diagonal), when the object surface fits better
 //! without straying farther. The shown surface's overhang past the rim is held to the
 //! bound by the coverage itself (`Coverage::of`).
 
@@ -18,17 +19,25 @@ use crate::pipeline::object::ObjectInput;
 use crate::pipeline::scan::ScanFit;
 use crate::TriMesh;
 
+/// A grid surface within the stray bound is fitted on the object path too only when its
+/// RMS exceeds this share of the data's bounding-box diagonal (the default tolerance) as
+/// well as the budget's tolerance: a gross miss whatever the budget. A tight tolerance on
+/// noisy data (a user asking for 10 um of a scan with 40 um of noise) is no reason to fit
+/// every scan twice; the Stanford scans' grid surfaces stay at a quarter of it.
+const GROSS_MISS_SHARE: f64 = 1e-3;
+
 /// Why a grid surface is fitted on the object path too.
 enum Doubt {
     /// Its shown tessellation strays past the bound.
     Strays(GridStray),
     /// It is within the bound, but its RMS distance from the data exceeds the budget's
-    /// tolerance (a largest error): it misses the data everywhere, not only at rim junk.
+    /// tolerance (a largest error) and `GROSS_MISS_SHARE` of the diagonal: it misses the
+    /// data everywhere, not only at rim junk.
     MissesBudget {
         /// Its RMS.
         rms: f64,
-        /// The tolerance.
-        tolerance: f64,
+        /// The larger of the two.
+        bound: f64,
     },
 }
 
@@ -37,9 +46,9 @@ impl Doubt {
     fn reason(&self) -> String {
         match self {
             Self::Strays(stray) => stray.reason(),
-            Self::MissesBudget { rms, tolerance } => format!(
-                "the grid surface misses the data by RMS {rms:.3e}, over the tolerance \
-                 {tolerance:.3e}"
+            Self::MissesBudget { rms, bound } => format!(
+                "the grid surface misses the data by RMS {rms:.3e}, over the tolerance and \
+                 {GROSS_MISS_SHARE} of the bounding-box diagonal ({bound:.3e})"
             ),
         }
     }
@@ -47,9 +56,9 @@ impl Doubt {
 
 /// Measures how far the grid surface of `grid` (a scan fit) strays from `mesh` on the
 /// tessellation its GLB shows (kept in `grid` for the outputs). Past the bound, or when
-/// its RMS exceeds the budget's tolerance, the object path's fit (`fit_as_object`: the
-/// worker's, under a config, of a prepared input, for a reason) is returned when it lies
-/// closer (`closer_as_object`).
+/// its RMS exceeds the budget's tolerance and `GROSS_MISS_SHARE` of the diagonal, the
+/// object path's fit (`fit_as_object`: the worker's, under a config, of a prepared input,
+/// for a reason) is returned when it lies closer (`closer_as_object`).
 pub(super) fn held_to_the_stray_bound(
     mesh: &TriMesh,
     grid: &mut FittedPatch,
@@ -59,14 +68,18 @@ pub(super) fn held_to_the_stray_bound(
     let scan = grid.scan.as_ref()?;
     let (stray, shown) = GridStray::of(mesh, scan, cfg.tessellation);
     let rms = scan.fit.geometric_rms();
-    let tolerance = grid.budget.tolerance;
+    let bound = grid
+        .budget
+        .tolerance
+        .max(GROSS_MISS_SHARE * mesh.bounds_diagonal());
     let doubt = if !stray.within() {
         Some(Doubt::Strays(stray))
-    } else if rms > tolerance {
-        Some(Doubt::MissesBudget { rms, tolerance })
+    } else if rms > bound {
+        Some(Doubt::MissesBudget { rms, bound })
     } else {
         None
     };
+    let mut object_tried = None;
     let closer = doubt.and_then(|doubt| {
         let object = closer_as_object(mesh, cfg, scan, &stray, &doubt, fit_as_object);
         if object.is_none() {
@@ -75,12 +88,14 @@ pub(super) fn held_to_the_stray_bound(
                  surface is kept",
                 doubt.reason()
             );
+            object_tried = Some(doubt.reason());
         }
         object
     });
     grid.grid_shown = Some(GridShown {
         tessellation: shown,
         stray,
+        object_tried,
     });
     closer
 }

@@ -328,6 +328,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         grid_shown,
     } = fitted;
     let grid_stray = grid_shown.as_ref().map(|shown| shown.stray.report());
+    let object_tried = grid_shown.as_ref().and_then(|s| s.object_tried.clone());
     let grid_shown = grid_shown.map(|shown| shown.tessellation);
     // The shown surface and the written descriptions need nothing of each other.
     let (glb_and_check, (mut report, surface, mut warm)) = rayon::join(
@@ -393,6 +394,9 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
     });
     if let Some(stray) = stray {
         report["stray"] = stray;
+    }
+    if let Some(reason) = object_tried {
+        report["object_path_tried"] = json!({ "reason": reason, "kept": false });
     }
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
     PatchOutputs {

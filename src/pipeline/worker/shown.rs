@@ -25,6 +25,9 @@ pub struct GridShown {
     pub tessellation: Tessellation,
     /// Its farthest shown vertex from the data.
     pub stray: GridStray,
+    /// Why the object path was tried for the same input, when it was and its surface was
+    /// not kept (report.json `object_path_tried`: the time it took is in the fit's).
+    pub object_tried: Option<String>,
 }
 
 impl GridStray {
