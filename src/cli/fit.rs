@@ -380,7 +380,6 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
             100.0 * number(&dropped["share"]),
         ));
     }
-    let stray = &r["object"]["stray"];
     if let Some(said) = escalation_summary(&r["object"], &r["control_points"]) {
         line.push_str(&said);
     }
@@ -390,16 +389,34 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
             stray repair, over the target)"
         ));
     }
-    if stray["within"].as_bool() == Some(false) {
-        line.push_str(&format!(
-            "; the surface strays up to {:.2} % of the bounding-box diagonal from the data \
-            (over {:.2} %: over a hole or a coarse mesh's large triangles; a higher \
-            --target-controls-pct brings it closer)",
-            100.0 * number(&stray["share_of_diagonal"]),
-            100.0 * number(&stray["limit_share"]),
-        ));
+    if let Some(said) = stray_clause(r) {
+        line.push_str(&said);
     }
     line
+}
+
+/// What the line says of a surface straying past the bound (report.json `stray`, which
+/// every path that measures it writes), with the remedy of its path; `None` within it or
+/// unmeasured.
+fn stray_clause(report: &serde_json::Value) -> Option<String> {
+    let stray = &report["stray"];
+    if stray["within"].as_bool() != Some(false) {
+        return None;
+    }
+    let hint = if report["object"].is_null() {
+        "the surface of this path is kept as it is; --domain mesh fits the input as a whole \
+        object, whose surface is repaired towards the bound"
+    } else {
+        "over a hole or a coarse mesh's large triangles; a higher --target-controls-pct \
+        brings it closer"
+    };
+    let share = |key: &str| 100.0 * stray[key].as_f64().unwrap_or(f64::NAN);
+    Some(format!(
+        "; the surface strays up to {:.2} % of the bounding-box diagonal from the data (over \
+        {:.2} %: {hint})",
+        share("share_of_diagonal"),
+        share("limit_share"),
+    ))
 }
 
 /// What the line says of a stray escalation (`object.stray_budgets`, more than one fit
@@ -467,7 +484,7 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
 
 #[cfg(test)]
 mod tests {
-    use super::escalation_summary;
+    use super::{escalation_summary, stray_clause};
     use serde_json::json;
 
     fn object(within: bool, kept: usize) -> serde_json::Value {
@@ -497,5 +514,20 @@ mod tests {
         let one = json!({"stray_budgets": [{"target": 22, "controls": 28, "kept": true}]});
         assert_eq!(escalation_summary(&one, &json!(28)), None);
         assert_eq!(escalation_summary(&json!({}), &json!(28)), None);
+    }
+
+    #[test]
+    fn the_line_says_a_stray_past_the_bound_with_its_paths_remedy() {
+        let stray =
+            |within| json!({"within": within, "share_of_diagonal": 0.0068, "limit_share": 0.005});
+        let exact = json!({"stray": stray(false)});
+        let said = stray_clause(&exact).unwrap_or_default();
+        assert!(said.contains("strays up to 0.68 %"), "{said}");
+        assert!(said.contains("--domain mesh"), "{said}");
+        let object = json!({"stray": stray(false), "object": {"stray": stray(false)}});
+        let said = stray_clause(&object).unwrap_or_default();
+        assert!(said.contains("--target-controls-pct"), "{said}");
+        assert_eq!(stray_clause(&json!({"stray": stray(true)})), None);
+        assert_eq!(stray_clause(&json!({})), None);
     }
 }

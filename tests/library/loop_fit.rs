@@ -5,11 +5,13 @@
 use crate::shared_mesh;
 use trispline::fit::{Budget, FitStatus, Method};
 use trispline::mesh::detect::Hierarchy;
+use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::inverse::{coarsen, InverseMethod};
 use trispline::mesh::loop_subdiv::subdivide;
 use trispline::mesh::topology::Topology;
+use trispline::pipeline::output::tessellate;
 use trispline::pipeline::subdivided::fit_subdivided;
-use trispline::pipeline::worker::{run_patch, FitConfig, WorkerConfig};
+use trispline::pipeline::worker::{fit_patch, outputs_of, run_patch, FitConfig, WorkerConfig};
 use trispline::pipeline::{FitOptions, SurfaceKind};
 use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
@@ -158,6 +160,57 @@ fn the_exact_path_writes_the_control_faces_and_warm_starts() {
     assert_eq!(second.report["warm_start"], true);
     let steps = |r: &serde_json::Value| r["iterations"].as_array().map_or(0, Vec::len);
     assert!(steps(&second.report) <= steps(&first.report));
+}
+
+/// A sphere sampled as coarsely as CGAL's `sphere.off` (an icosahedron split twice, 162
+/// vertices on the sphere) keeps the exact path, and report.json says how far its surface
+/// strays from the data's facets, which sag below the sphere the surface follows: the
+/// figure of the tessellation the GLB shows.
+#[test]
+fn the_exact_path_reports_how_far_its_surface_strays() {
+    let (positions, triangles) = trispline::testdata::icosahedron();
+    let fine = subdivide(&TriMesh::new(positions, triangles), 2).expect("subdivides");
+    let data = TriMesh::new(
+        fine.positions.iter().map(|p| p.normalize()).collect(),
+        fine.triangles,
+    );
+    let cfg = WorkerConfig {
+        fit: FitConfig {
+            surface: SurfaceKind::Loop,
+            ..FitConfig::default()
+        },
+        ..WorkerConfig::default()
+    };
+    let fitted = fit_patch(&data, None, &cfg).expect("fits");
+    assert!(
+        fitted.scan.is_none() && fitted.object.is_none(),
+        "the exact path"
+    );
+    // Independently: every vertex of the whole tessellation the GLB shows, to the data's
+    // facets.
+    let shown = tessellate(&fitted.fit, cfg.tessellation, None);
+    let nearest = MeshDistance::new(&data);
+    let farthest = shown
+        .positions
+        .iter()
+        .map(|&p| nearest.distance(p).expect("a finite vertex"))
+        .fold(0.0, f64::max);
+    let outputs = outputs_of(fitted, &cfg, std::time::Instant::now());
+    let stray = &outputs.report["stray"];
+    let max = stray["max"].as_f64().expect("stray.max in report.json");
+    assert!(
+        (max - farthest).abs() <= 1e-12,
+        "report.json {max:.6e}, the GLB's vertices {farthest:.6e}"
+    );
+    let share = max / data.bounds_diagonal();
+    assert!(
+        (stray["share_of_diagonal"].as_f64().unwrap_or(f64::NAN) - share).abs() < 1e-12,
+        "{stray}"
+    );
+    // The facets sag about half a percent of the diagonal below the sphere: the surface
+    // stands near the bound, on whichever side the report says.
+    assert!((0.002..0.01).contains(&share), "{share:.4}");
+    assert_eq!(stray["within"], share <= 0.005, "{stray}");
 }
 
 /// The semi-regular elephant (subd2 = two exact 1-to-4 splits of subd0): fitted on its own

@@ -2,7 +2,7 @@
 
 use super::object::ObjectInfo;
 use super::report::Refinement;
-use super::shown::GridShown;
+use super::shown::ShownSurface;
 use crate::fit::Budget;
 use crate::pipeline::output::Coverage;
 use crate::pipeline::scan::ScanFit;
@@ -27,9 +27,9 @@ pub struct FittedPatch {
     pub scattered: Option<ScatteredInfo>,
     /// B-patch and DMS fits of subdivided inputs: the region shown, in domain points.
     pub planar_shown: Option<Coverage>,
-    /// Remeshed scans: the shown tessellation the stray check measured (the GLB's), and
-    /// the stray.
-    pub grid_shown: Option<GridShown>,
+    /// Remeshed scans and exact-subdivision fits: the tessellation the GLB shows and its
+    /// stray from the data (a grid surface's measured by the stray check).
+    pub shown: Option<ShownSurface>,
 }
 
 impl FittedPatch {
@@ -45,7 +45,7 @@ impl FittedPatch {
             object: None,
             scattered: None,
             planar_shown: None,
-            grid_shown: None,
+            shown: None,
         }
     }
 }

@@ -14,7 +14,7 @@
 use super::config::WorkerConfig;
 use super::fitted::FittedPatch;
 use super::object::object_input;
-use super::shown::{GridShown, GridStray};
+use super::shown::{ShownStray, ShownSurface};
 use crate::pipeline::object::ObjectInput;
 use crate::pipeline::scan::ScanFit;
 use crate::TriMesh;
@@ -29,7 +29,7 @@ const GROSS_MISS_SHARE: f64 = 1e-3;
 /// Why a grid surface is fitted on the object path too.
 enum Doubt {
     /// Its shown tessellation strays past the bound.
-    Strays(GridStray),
+    Strays(ShownStray),
     /// It is within the bound, but its RMS distance from the data exceeds the budget's
     /// tolerance (a largest error) and `GROSS_MISS_SHARE` of the diagonal: it misses the
     /// data everywhere, not only at rim junk.
@@ -66,7 +66,8 @@ pub(super) fn held_to_the_stray_bound(
     fit_as_object: impl FnOnce(&WorkerConfig, ObjectInput, String) -> Option<FittedPatch>,
 ) -> Option<FittedPatch> {
     let scan = grid.scan.as_ref()?;
-    let (stray, shown) = GridStray::of(mesh, scan, cfg.tessellation);
+    let mut shown = ShownSurface::of_grid(mesh, scan, cfg.tessellation);
+    let stray = shown.stray;
     let rms = scan.fit.geometric_rms();
     let bound = grid
         .budget
@@ -92,11 +93,8 @@ pub(super) fn held_to_the_stray_bound(
         }
         object
     });
-    grid.grid_shown = Some(GridShown {
-        tessellation: shown,
-        stray,
-        object_tried,
-    });
+    shown.object_tried = object_tried;
+    grid.shown = Some(shown);
     closer
 }
 
@@ -114,7 +112,7 @@ fn closer_as_object(
     mesh: &TriMesh,
     cfg: &WorkerConfig,
     grid: &ScanFit,
-    stray: &GridStray,
+    stray: &ShownStray,
     doubt: &Doubt,
     fit_as_object: impl FnOnce(&WorkerConfig, ObjectInput, String) -> Option<FittedPatch>,
 ) -> Option<FittedPatch> {

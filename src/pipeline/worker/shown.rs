@@ -1,17 +1,18 @@
-//! What a grid surface's GLB shows, and how far that strays from the data: measured once
-//! by the stray check (`grid_stray`) and handed on to the outputs (`FittedPatch`).
+//! What a grid or exact-subdivision surface's GLB shows, and how far that strays from the
+//! data: measured once (for the grid path by its stray check, `grid_stray`) and handed on
+//! to the outputs (`FittedPatch`), which write the stray into report.json.
 
 use super::stray_guard::MAX_STRAY_SHARE;
 use crate::mesh::distance::MeshDistance;
 use crate::pipeline::output::{tessellate, Coverage, Tessellation};
 use crate::pipeline::scan::ScanFit;
+use crate::pipeline::PatchFit;
 use crate::TriMesh;
 use rayon::prelude::*;
 
-/// The grid surface's farthest point from the data, measured on the tessellation the GLB
-/// shows.
+/// A surface's farthest point from the data, measured on the tessellation the GLB shows.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GridStray {
+pub struct ShownStray {
     /// The largest distance from a vertex of the shown tessellation to the data mesh
     /// (infinite when a vertex has no nearest point).
     pub max: f64,
@@ -19,23 +20,45 @@ pub struct GridStray {
     pub share_of_diagonal: f64,
 }
 
-/// The tessellation a grid surface's GLB shows, and how far it strays from the data.
-pub struct GridShown {
-    /// The shown tessellation (the coverage's triangles).
+/// The tessellation a surface's GLB shows, and how far it strays from the data.
+pub struct ShownSurface {
+    /// The shown tessellation (a grid surface's: the coverage's triangles).
     pub tessellation: Tessellation,
     /// Its farthest shown vertex from the data.
-    pub stray: GridStray,
+    pub stray: ShownStray,
     /// Why the object path was tried for the same input, when it was and its surface was
     /// not kept (report.json `object_path_tried`: the time it took is in the fit's).
     pub object_tried: Option<String>,
 }
 
-impl GridStray {
-    /// The stray of `scan`'s surface from `data` (the input it was fitted to), on the
-    /// tessellation of `segments` the outputs show, and that tessellation (the GLB's).
-    pub(super) fn of(data: &TriMesh, scan: &ScanFit, segments: usize) -> (GridStray, Tessellation) {
+impl ShownSurface {
+    /// The tessellation of `segments` the outputs show of `scan`'s grid surface (the
+    /// coverage's triangles), and its stray from `data` (the input it was fitted to).
+    pub(super) fn of_grid(data: &TriMesh, scan: &ScanFit, segments: usize) -> ShownSurface {
         let coverage = Coverage::of(&scan.fit, scan);
-        let shown = tessellate(&scan.fit, segments.max(1), Some(&coverage));
+        let tessellation = tessellate(&scan.fit, segments.max(1), Some(&coverage));
+        ShownSurface::measured(data, tessellation)
+    }
+
+    /// The whole tessellation of `segments` of `fit`'s surface (an exact-subdivision fit
+    /// of `data`, shown whole), and its stray from `data`.
+    pub(super) fn of_whole(data: &TriMesh, fit: &PatchFit, segments: usize) -> ShownSurface {
+        ShownSurface::measured(data, tessellate(fit, segments.max(1), None))
+    }
+
+    fn measured(data: &TriMesh, tessellation: Tessellation) -> ShownSurface {
+        ShownSurface {
+            stray: ShownStray::of(data, &tessellation),
+            tessellation,
+            object_tried: None,
+        }
+    }
+}
+
+impl ShownStray {
+    /// The largest distance from a shown vertex of `shown` (a corner of one of its
+    /// triangles) to `data`.
+    fn of(data: &TriMesh, shown: &Tessellation) -> ShownStray {
         let nearest = MeshDistance::new(data);
         // The coverage drops triangles, not vertices: only the kept triangles' corners
         // are shown.
@@ -55,11 +78,10 @@ impl GridStray {
             .reduce(|| 0.0, f64::max);
         let diagonal = data.bounds_diagonal();
         let share_of_diagonal = if diagonal > 0.0 { max / diagonal } else { 0.0 };
-        let stray = GridStray {
+        ShownStray {
             max,
             share_of_diagonal,
-        };
-        (stray, shown)
+        }
     }
 
     /// Whether it is within the bound every whole fit is held to (an infinite or NaN
@@ -68,7 +90,7 @@ impl GridStray {
         self.share_of_diagonal <= MAX_STRAY_SHARE
     }
 
-    /// report.json's `stray` for a grid surface: the figures of a whole fit's
+    /// report.json's `stray` for a grid or exact-subdivision surface: the figures of a whole fit's
     /// (`StrayReport`), and what they were measured on.
     pub(super) fn report(&self) -> serde_json::Value {
         serde_json::json!({
