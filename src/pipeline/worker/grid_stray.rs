@@ -7,9 +7,9 @@
 //! past the bound (measured by `shown`) is fitted there too, and the one that lies closer
 //! to the data both ways is kept (`fit_patch`). So is a grid surface that misses the data
 //! everywhere (its RMS over the budget's tolerance and `GROSS_MISS_SHARE` of the
-//! diagonal), when the object surface fits better
-//! without straying farther. The shown surface's overhang past the rim is held to the
-//! bound by the coverage itself (`Coverage::of`).
+//! diagonal), when the object surface fits better without straying farther. The shown
+//! surface's overhang past the rim is held to the bound by the coverage itself
+//! (`Coverage::of`).
 
 use super::config::WorkerConfig;
 use super::fitted::FittedPatch;
@@ -105,9 +105,9 @@ pub(super) fn held_to_the_stray_bound(
 /// bound, no larger, with a lower RMS, and within the bound (or no farther past it than
 /// the grid surface). A surface that strays less but misses the data by more is no
 /// better; nor is one that fits better on average but strays past the bound the grid
-/// surface kept. It is given at least as many controls as the
-/// grid surface has (a small input's grid keeps a few cells over it whatever the budget),
-/// so the two are compared at one cost.
+/// surface kept. It is given at least as many controls as the grid surface has (a small
+/// input's grid keeps a few cells over it whatever the budget), so the two are compared
+/// at one cost.
 fn closer_as_object(
     mesh: &TriMesh,
     cfg: &WorkerConfig,

@@ -1,6 +1,7 @@
 //! What a grid or exact-subdivision surface's GLB shows, and how far that strays from the
-//! data: measured once (for the grid path by its stray check, `grid_stray`) and handed on
-//! to the outputs (`FittedPatch`), which write the stray into report.json.
+//! data: measured once after the fit (a grid surface under `domain auto` by the stray
+//! check, `grid_stray`, which may give it up for the object path's) and handed on to the
+//! outputs (`FittedPatch`), which write the stray into report.json.
 
 use super::stray_guard::MAX_STRAY_SHARE;
 use crate::mesh::distance::MeshDistance;
@@ -90,8 +91,8 @@ impl ShownStray {
         self.share_of_diagonal <= MAX_STRAY_SHARE
     }
 
-    /// report.json's `stray` for a grid or exact-subdivision surface: the figures of a whole fit's
-    /// (`StrayReport`), and what they were measured on.
+    /// report.json's `stray` for a grid or exact-subdivision surface: the figures of a
+    /// whole fit's (`StrayReport`), and what they were measured on.
     pub(super) fn report(&self) -> serde_json::Value {
         serde_json::json!({
             "max": self.max,
