@@ -189,3 +189,32 @@ pub fn faceted_prism(sides: usize, rows: usize, per_side: usize) -> (TriMesh, Ve
     }
     (TriMesh::new(positions, triangles), creases)
 }
+
+/// A torus (radii 1 and 0.35) on an `n x m` grid, its quads split along alternating
+/// diagonals: a closed genus-1 mesh without subdivision connectivity, so the worker fits
+/// it on the object path.
+pub fn torus(n: usize, m: usize) -> TriMesh {
+    use std::f64::consts::TAU;
+    let mut positions = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            let (a, b) = (TAU * i as f64 / n as f64, TAU * j as f64 / m as f64);
+            let r = 1.0 + 0.35 * b.cos();
+            positions.push(DVec3::new(r * a.cos(), r * a.sin(), 0.35 * b.sin()));
+        }
+    }
+    let at = |i: usize, j: usize| ((i % n) * m + j % m) as u32;
+    let mut triangles = Vec::new();
+    for i in 0..n {
+        for j in 0..m {
+            if (i + j) % 2 == 0 {
+                triangles.push([at(i, j), at(i + 1, j), at(i, j + 1)]);
+                triangles.push([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
+            } else {
+                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
+                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
+            }
+        }
+    }
+    TriMesh::new(positions, triangles)
+}

@@ -372,10 +372,10 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         dir.display(),
     );
     let dropped = &r["dropped"];
-    if dropped["pieces"].as_u64().is_some_and(|p| p > 0) {
+    if let Some(pieces) = dropped["pieces"].as_u64().filter(|&p| p > 0) {
         line.push_str(&format!(
-            "; {} pieces not fitted ({} vertices, {:.1} %; --components all fits every sizeable piece)",
-            dropped["pieces"],
+            "; {pieces} {} not fitted ({} vertices, {:.1} %; --components all fits every sizeable piece)",
+            if pieces == 1 { "piece" } else { "pieces" },
             dropped["vertices"],
             100.0 * number(&dropped["share"]),
         ));

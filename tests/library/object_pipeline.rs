@@ -10,38 +10,11 @@ use std::f64::consts::{PI, TAU};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::tessellate_mesh_faces;
-use trispline::pipeline::worker::{
-    fit_patch, run_input, run_patch, Domain, FittedPatch, WorkerConfig,
-};
+use trispline::pipeline::worker::{fit_patch, run_patch, Domain, FittedPatch, WorkerConfig};
 use trispline::pipeline::PipelineError;
 use trispline::remesh::planar::MapMethod;
+use trispline::testdata::torus;
 use trispline::TriMesh;
-
-/// A torus (radii 1 and 0.35) on an `n x m` grid with alternating diagonals.
-fn torus(n: usize, m: usize) -> TriMesh {
-    let mut positions = Vec::new();
-    for i in 0..n {
-        for j in 0..m {
-            let (a, b) = (TAU * i as f64 / n as f64, TAU * j as f64 / m as f64);
-            let r = 1.0 + 0.35 * b.cos();
-            positions.push(DVec3::new(r * a.cos(), r * a.sin(), 0.35 * b.sin()));
-        }
-    }
-    let at = |i: usize, j: usize| ((i % n) * m + j % m) as u32;
-    let mut triangles = Vec::new();
-    for i in 0..n {
-        for j in 0..m {
-            if (i + j) % 2 == 0 {
-                triangles.push([at(i, j), at(i + 1, j), at(i, j + 1)]);
-                triangles.push([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
-            } else {
-                triangles.push([at(i, j), at(i + 1, j + 1), at(i, j + 1)]);
-                triangles.push([at(i, j), at(i + 1, j), at(i + 1, j + 1)]);
-            }
-        }
-    }
-    TriMesh::new(positions, triangles)
-}
 
 /// The unit sphere on latitude rings without polar caps of 25 degrees (two holes of radius
 /// 0.42) and with a third hole cut around (1, 0, 0). The holes span several control
@@ -403,29 +376,6 @@ fn camelhead_is_fitted_whole() {
     // The disk map's grid fit stood at 13 mm RMS (diagonal 1.0); whole, 0.24 mm.
     let rms = fitted.fit.geometric_rms();
     assert!(rms < 1e-3 * mesh.bounds_diagonal(), "RMS {rms}");
-}
-
-#[test]
-fn components_all_fits_each_object() {
-    // Two tori apart: each its own surface, each on the object path.
-    let a = torus(32, 12);
-    let mut b = torus(24, 10);
-    for p in &mut b.positions {
-        *p += DVec3::new(4.0, 0.0, 0.0);
-    }
-    let offset = a.positions.len() as u32;
-    let mut both = a.clone();
-    both.positions.extend(&b.positions);
-    both.triangles
-        .extend(b.triangles.iter().map(|t| t.map(|v| v + offset)));
-    let mut cfg = config(Domain::Auto, 10.0);
-    cfg.fit.components.mode = "all".parse().expect("a mode");
-    let out = run_input(&both, None, &cfg).expect("fits");
-    assert_eq!(out.parts.len(), 2);
-    for part in &out.parts {
-        assert_eq!(part.outputs.report["path"], "object");
-        assert_eq!(part.outputs.report["topology"]["control"]["genus"], 1);
-    }
 }
 
 #[test]

@@ -1,13 +1,14 @@
-//! The component policy: `largest` fits one surface, `all` one per component big enough,
-//! ids suffixed, each warm-started from the previous version's piece in the same place;
-//! through the library, the CLI, the daemon and on a Stanford scan.
+//! The component policy: `largest` fits one surface and says what it left out, `all` one
+//! per component big enough, ids suffixed, each warm-started from the previous version's
+//! piece in the same place; scans and whole objects, through the library, the CLI, the
+//! daemon and on a Stanford scan.
 
 use crate::daemon_support::*;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::pipeline::scan::components::ComponentMode;
 use trispline::pipeline::worker::{run_input, ComponentsConfig, FitConfig, WorkerConfig};
 use trispline::pipeline::SurfaceKind;
-use trispline::testdata::shared_data;
+use trispline::testdata::{shared_data, torus};
 use trispline::{DVec3, TriMesh};
 
 /// An n x n height field shifted by `offset`, appended to `mesh`.
@@ -84,6 +85,84 @@ fn all_fits_every_big_component_and_largest_only_the_largest() {
     assert_eq!(largest.parts[0].suffix, "");
     assert_eq!(largest.parts[0].outputs.report["data_points"], 900);
     assert_eq!(largest.parts[0].outputs.report["components"], 3);
+}
+
+/// Two tori apart (384 and 240 vertices; closed, so each goes the object path) and the
+/// smaller one's vertex count.
+fn two_tori() -> (TriMesh, usize) {
+    let a = torus(32, 12);
+    let mut b = torus(24, 10);
+    for p in &mut b.positions {
+        *p += DVec3::new(4.0, 0.0, 0.0);
+    }
+    let offset = a.positions.len() as u32;
+    let mut both = a;
+    both.positions.extend(&b.positions);
+    both.triangles
+        .extend(b.triangles.iter().map(|t| t.map(|v| v + offset)));
+    (both, b.positions.len())
+}
+
+fn objects(mode: ComponentMode) -> WorkerConfig {
+    let mut cfg = worker(mode);
+    cfg.fit.scan.target_controls_pct = 10.0;
+    cfg
+}
+
+#[test]
+fn all_fits_each_whole_object() {
+    let (both, _) = two_tori();
+    let out = run_input(&both, None, &objects(ComponentMode::All)).expect("fits");
+    assert_eq!(out.parts.len(), 2);
+    for part in &out.parts {
+        assert_eq!(part.outputs.report["path"], "object");
+        assert_eq!(part.outputs.report["topology"]["control"]["genus"], 1);
+        assert_eq!(part.outputs.report["dropped"]["pieces"], 0);
+    }
+}
+
+#[test]
+fn largest_says_which_whole_objects_it_left_out() {
+    let (both, smaller) = two_tori();
+    let out = run_input(&both, None, &objects(ComponentMode::Largest)).expect("fits");
+    assert_eq!(out.parts.len(), 1);
+    let report = &out.parts[0].outputs.report;
+    assert_eq!(report["path"], "object");
+    assert_eq!(report["data_points"], 384);
+    let dropped = &report["dropped"];
+    assert_eq!(dropped["pieces"], 1);
+    assert_eq!(dropped["vertices"], smaller);
+    assert_eq!(dropped["largest"], smaller);
+    let share = dropped["share"].as_f64().unwrap_or(0.0);
+    assert!((share - 240.0 / 624.0).abs() < 1e-12, "share {share}");
+    let alone = run_input(&torus(32, 12), None, &objects(ComponentMode::Largest)).expect("fits");
+    assert_eq!(alone.parts[0].outputs.report["dropped"]["pieces"], 0);
+
+    // `trispline fit`'s line says it too, with the remedy.
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("two_tori.obj");
+    trispline::io::write_mesh_file(&input, &both).expect("write");
+    let out = tmp.path().join("out");
+    let run = bin()
+        .args(["fit", &input.display().to_string()])
+        .args([
+            "--target-controls-pct",
+            "10",
+            "--out",
+            &out.display().to_string(),
+        ])
+        .output()
+        .expect("runs");
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(
+        stdout.contains("1 piece not fitted (240 vertices, 38.5 %; --components all"),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -21,6 +21,11 @@ pub struct ObjectInput {
     pub mesh: TriMesh,
     /// What the first cleaning pass changed.
     pub cleaning: CleanReport,
+    /// The cleaned input's other components, left out of the fit: their vertex counts,
+    /// largest first ...
+    pub left_out: Vec<usize>,
+    /// ... of this many vertices in all the cleaned input's components.
+    pub cleaned_vertices: usize,
     /// Its topology; `None` where the repairs left it no manifold.
     pub topology: Option<Topology>,
     /// Time taken to prepare it, in milliseconds.
@@ -31,26 +36,38 @@ impl ObjectInput {
     /// `mesh` prepared for the object path; `None` when cleaning leaves nothing.
     pub fn of(mesh: &TriMesh, opts: &CleanOptions) -> Option<Self> {
         let start = Instant::now();
-        let (mesh, cleaning) = largest_component(mesh, opts)?;
+        let (mesh, cleaning, parts) = largest_component(mesh, opts)?;
         let topology = Topology::from_mesh(&mesh).ok();
         Some(Self {
             mesh,
             cleaning,
+            left_out: parts.left_out,
+            cleaned_vertices: parts.vertices,
             topology,
             prepare_ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
 }
 
+/// The cleaned input's components besides the one fitted.
+pub(super) struct OtherParts {
+    /// Their vertex counts, largest first.
+    pub left_out: Vec<usize>,
+    /// Vertices of all components, the fitted one's included.
+    pub vertices: usize,
+}
+
 /// The largest manifold, oriented component of `mesh` (see the module comment), its
 /// vertices and faces in spatial order (`spatially_ordered`: the stages after walk it
-/// faster, and the fit does not depend on the file's order), and what the first cleaning
-/// pass changed, or `None` if nothing is left.
+/// faster, and the fit does not depend on the file's order), what the first cleaning
+/// pass changed and the components it left out, or `None` if nothing is left. Pieces the
+/// repairs cut off a broken component are not counted as left out: they were never
+/// components of their own.
 pub(super) fn largest_component(
     mesh: &TriMesh,
     opts: &CleanOptions,
-) -> Option<(TriMesh, CleanReport)> {
-    let (mut part, report) = largest_cleaned(mesh, opts)?;
+) -> Option<(TriMesh, CleanReport, OtherParts)> {
+    let (mut part, report, others) = largest_cleaned(mesh, opts)?;
     for _ in 0..REPAIR_PASSES {
         if Topology::from_mesh(&part).is_ok() {
             break;
@@ -61,7 +78,7 @@ pub(super) fn largest_component(
         }
         part = largest_cleaned(&kept, opts)?.0;
     }
-    Some((spatially_ordered(&part), report))
+    Some((spatially_ordered(&part), report, others))
 }
 
 /// Drops every face that runs a directed edge an earlier face already runs.
@@ -82,8 +99,11 @@ fn without_repeated_directed_edges(mesh: &TriMesh) -> TriMesh {
 }
 
 /// The cleaned mesh's largest edge-connected component (most faces; the lowest label on a
-/// tie), its vertices in cleaned order, and what cleaning changed.
-fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<(TriMesh, CleanReport)> {
+/// tie), its vertices in cleaned order, what cleaning changed and the other components.
+fn largest_cleaned(
+    mesh: &TriMesh,
+    opts: &CleanOptions,
+) -> Option<(TriMesh, CleanReport, OtherParts)> {
     let cleaned = clean(mesh, opts);
     let labels = &cleaned.face_component;
     let mut counts = vec![0usize; cleaned.mesh.triangles.len()];
@@ -97,6 +117,7 @@ fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<(TriMesh, Clea
     if size == 0 {
         return None;
     }
+    let others = other_parts(&cleaned.mesh, labels, best);
     let mut index = vec![u32::MAX; cleaned.mesh.positions.len()];
     let mut triangles = Vec::with_capacity(size);
     for (t, &l) in cleaned.mesh.triangles.iter().zip(labels) {
@@ -117,5 +138,33 @@ fn largest_cleaned(mesh: &TriMesh, opts: &CleanOptions) -> Option<(TriMesh, Clea
     for t in &mut triangles {
         *t = t.map(|v| index[v as usize]);
     }
-    Some((TriMesh::new(positions, triangles), cleaned.report))
+    Some((TriMesh::new(positions, triangles), cleaned.report, others))
+}
+
+/// The vertex counts of the components of `mesh` (faces labelled by `labels`) other than
+/// `kept`, and the vertices of all. Cleaning splits the vertices where components touch,
+/// so each vertex is in one.
+fn other_parts(mesh: &TriMesh, labels: &[u32], kept: usize) -> OtherParts {
+    let mut label_of = vec![u32::MAX; mesh.positions.len()];
+    let mut vertices = vec![0usize; mesh.triangles.len()];
+    for (t, &l) in mesh.triangles.iter().zip(labels) {
+        for &v in t {
+            if label_of[v as usize] == u32::MAX {
+                label_of[v as usize] = l;
+                vertices[l as usize] += 1;
+            }
+        }
+    }
+    let all = vertices.iter().sum();
+    let mut left_out: Vec<usize> = vertices
+        .iter()
+        .enumerate()
+        .filter(|&(l, &n)| l != kept && n > 0)
+        .map(|(_, &n)| n)
+        .collect();
+    left_out.sort_unstable_by(|a, b| b.cmp(a));
+    OtherParts {
+        left_out,
+        vertices: all,
+    }
 }

@@ -18,8 +18,9 @@ pub use config::{
     DEFAULT_CREASE_RELATIVE_RATIO, DEFAULT_TESSELLATION,
 };
 pub use fitted::FittedPatch;
-pub use object::{ObjectInfo, ObjectWarm, TessellationCheck, WarmDecision};
+pub use object::{ObjectInfo, ObjectWarm, WarmDecision};
 pub use report::{PartWarm, Refinement, WarmStart};
+pub use shown::TessellationCheck;
 pub use stray_guard::StrayReport;
 pub(crate) use stray_guard::{stray_refusal, MAX_STRAY_GROWTH, MAX_STRAY_SHARE};
 
@@ -359,7 +360,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         || {
             if object_info.is_some() {
                 let t = Instant::now();
-                let check = object::object_tessellation(&fitted, object_start(&fitted, cfg));
+                let check = shown::object_tessellation(&fitted, object_start(&fitted, cfg));
                 let tess = tessellate_mesh_faces(&fitted, check.per_face);
                 let glb = tessellated_glb(&fitted, &tess, budget.tolerance);
                 let shown_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -398,6 +399,8 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         report["path"] = json!("object");
         report["topology"] = object_report["topology"].clone();
         report["object"] = object_report;
+        // Under the same key as the scan path's, which `trispline fit`'s line reads.
+        report["dropped"] = json!(info.dropped);
         if let Some((check, shown_ms)) = check {
             report["tessellation"] = json!(check);
             // The tessellation and its GLB (beside the report, in parallel with it).

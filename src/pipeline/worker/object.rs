@@ -17,7 +17,7 @@ use crate::pipeline::object::{
     LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectInput, ObjectOptions, ObjectTimes,
     PreviousFit, RefineRound, RoundReport, RoundStop, StrayBudget,
 };
-use crate::pipeline::scan::WarmFeet;
+use crate::pipeline::scan::{Dropped, WarmFeet};
 use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::boundary_loops;
 use crate::surface::SurfaceParam;
@@ -185,6 +185,8 @@ pub struct ObjectInfo {
     pub cleaning: Option<CleanReport>,
     /// The whole fits at growing budgets when the first strayed (empty otherwise).
     pub stray_budgets: Vec<StrayBudget>,
+    /// The input's components left out (the `components` policy's `largest`).
+    pub dropped: Dropped,
 }
 
 /// Whether a warm start was used.
@@ -235,6 +237,8 @@ pub(super) fn fit_as_object(
             .ok_or(ObjectError::Empty)
             .map_err(object)?,
     };
+    let dropped = Dropped::of(&input.left_out, input.cleaned_vertices);
+    warn_left_out(&dropped);
     let (fit, warm) = match previous {
         Some(w) => match from_previous(input.mesh.clone(), w, previous_controls, &opts)
             .and_then(|fit| stays_on_data(fit, &w.faces, &w.crease_edges, previous_controls))
@@ -272,6 +276,7 @@ pub(super) fn fit_as_object(
         stray: Some(StrayReport::of(&fit)),
         cleaning: fit.cleaning.clone(),
         stray_budgets: fit.stray_budgets.clone(),
+        dropped,
     };
     if let Some(stray) = info.stray.filter(|s| !s.within) {
         tracing::warn!(
@@ -290,6 +295,26 @@ pub(super) fn fit_as_object(
         out_of_time,
     );
     Ok((patch, info))
+}
+
+/// Said where it happens, as on the scan path: half an object left out without a word
+/// (one of CGAL's two interlinked knots) looks like a fit of the whole.
+fn warn_left_out(dropped: &Dropped) {
+    if dropped.pieces == 0 {
+        return;
+    }
+    tracing::warn!(
+        pieces = dropped.pieces,
+        vertices = dropped.vertices,
+        share_pct = format!("{:.1}", 100.0 * dropped.share),
+        largest_piece = dropped.largest,
+        "{} components not fitted: {} vertices ({:.1} %), the largest piece left out has {}; \
+         `--components all` fits every sizeable piece",
+        dropped.pieces,
+        dropped.vertices,
+        100.0 * dropped.share,
+        dropped.largest,
+    );
 }
 
 /// A new version's fit from the previous control mesh: refitted where the data changed
@@ -660,60 +685,5 @@ fn initial_positions(info: &ObjectInfo) -> &'static str {
         (WarmDecision::Used, _) => "previous version",
         (_, 0) => "simplification",
         _ => "simplification, valence flips, tangential relaxation",
-    }
-}
-
-/// The tessellation of an object fit is refined until its flat triangles' own error (RMS
-/// at their centroids) is at most this share of the fit's RMS: the shown surface then
-/// differs from the fitted one far less than the fitted one from the data.
-const CHORD_SHARE_OF_RMS: f64 = 0.1;
-/// Segments per control-face side at most ...
-const MAX_PER_FACE: usize = 64;
-/// ... and triangles in all at most (about 30 MB of GLB; beyond that the file grows past
-/// what a viewer opens quickly for a gain nobody sees).
-const MAX_TRIANGLES: usize = 1_000_000;
-/// Control faces sampled for the chord error.
-const CHORD_SAMPLE_FACES: usize = 150;
-
-/// How fine an object's tessellation is and what its triangles' own error measured.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
-pub struct TessellationCheck {
-    /// Segments per control-face side.
-    pub per_face: usize,
-    /// RMS of the chord error at the triangles' centroids (sampled faces).
-    pub chord_rms: f64,
-    /// Its largest value.
-    pub chord_max: f64,
-    /// The fit's geometric RMS it is held against.
-    pub fit_rms: f64,
-}
-
-/// Segments per control-face side for an object fit: from `start` (what the configured
-/// tessellation gives), refined until the chord error is a small share of the fit's RMS.
-/// The chord error of a smooth surface falls with the square of the segments, so each
-/// measurement predicts the count the next one checks.
-pub(super) fn object_tessellation(fitted: &PatchFit, start: usize) -> TessellationCheck {
-    let faces = match &fitted.model {
-        SurfaceModel::Mesh(m) => m.faces().len().max(1),
-        _ => 1,
-    };
-    let cap = ((MAX_TRIANGLES as f64 / faces as f64).sqrt() as usize).clamp(2, MAX_PER_FACE);
-    let fit_rms = fitted.geometric_rms();
-    let target = CHORD_SHARE_OF_RMS * fit_rms;
-    let mut per_face = start.clamp(2, cap);
-    loop {
-        let errors = crate::pipeline::output::chord_errors(fitted, per_face, CHORD_SAMPLE_FACES);
-        let n = errors.len().max(1) as f64;
-        let check = TessellationCheck {
-            per_face,
-            chord_rms: (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
-            chord_max: errors.iter().cloned().fold(0.0, f64::max),
-            fit_rms,
-        };
-        if check.chord_rms <= target || per_face >= cap {
-            return check;
-        }
-        let predicted = (per_face as f64 * (check.chord_rms / target).sqrt()).ceil() as usize;
-        per_face = predicted.clamp(per_face + 1, cap);
     }
 }

@@ -1,13 +1,14 @@
 //! What a grid or exact-subdivision surface's GLB shows, and how far that strays from the
 //! data: measured once after the fit (a grid surface under `domain auto` by the stray
 //! check, `grid_stray`, which may give it up for the object path's) and handed on to the
-//! outputs (`FittedPatch`), which write the stray into report.json.
+//! outputs (`FittedPatch`), which write the stray into report.json. And how fine a whole
+//! object's tessellation is made (`object_tessellation`).
 
 use super::stray_guard::MAX_STRAY_SHARE;
 use crate::mesh::distance::MeshDistance;
 use crate::pipeline::output::{tessellate, Coverage, Tessellation};
 use crate::pipeline::scan::ScanFit;
-use crate::pipeline::PatchFit;
+use crate::pipeline::{PatchFit, SurfaceModel};
 use crate::TriMesh;
 use rayon::prelude::*;
 
@@ -111,5 +112,60 @@ impl ShownStray {
             100.0 * self.share_of_diagonal,
             100.0 * MAX_STRAY_SHARE
         )
+    }
+}
+
+/// The tessellation of an object fit is refined until its flat triangles' own error (RMS
+/// at their centroids) is at most this share of the fit's RMS: the shown surface then
+/// differs from the fitted one far less than the fitted one from the data.
+const CHORD_SHARE_OF_RMS: f64 = 0.1;
+/// Segments per control-face side at most ...
+const MAX_PER_FACE: usize = 64;
+/// ... and triangles in all at most (about 30 MB of GLB; beyond that the file grows past
+/// what a viewer opens quickly for a gain nobody sees).
+const MAX_TRIANGLES: usize = 1_000_000;
+/// Control faces sampled for the chord error.
+const CHORD_SAMPLE_FACES: usize = 150;
+
+/// How fine an object's tessellation is and what its triangles' own error measured.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct TessellationCheck {
+    /// Segments per control-face side.
+    pub per_face: usize,
+    /// RMS of the chord error at the triangles' centroids (sampled faces).
+    pub chord_rms: f64,
+    /// Its largest value.
+    pub chord_max: f64,
+    /// The fit's geometric RMS it is held against.
+    pub fit_rms: f64,
+}
+
+/// Segments per control-face side for an object fit: from `start` (what the configured
+/// tessellation gives), refined until the chord error is a small share of the fit's RMS.
+/// The chord error of a smooth surface falls with the square of the segments, so each
+/// measurement predicts the count the next one checks.
+pub(super) fn object_tessellation(fitted: &PatchFit, start: usize) -> TessellationCheck {
+    let faces = match &fitted.model {
+        SurfaceModel::Mesh(m) => m.faces().len().max(1),
+        _ => 1,
+    };
+    let cap = ((MAX_TRIANGLES as f64 / faces as f64).sqrt() as usize).clamp(2, MAX_PER_FACE);
+    let fit_rms = fitted.geometric_rms();
+    let target = CHORD_SHARE_OF_RMS * fit_rms;
+    let mut per_face = start.clamp(2, cap);
+    loop {
+        let errors = crate::pipeline::output::chord_errors(fitted, per_face, CHORD_SAMPLE_FACES);
+        let n = errors.len().max(1) as f64;
+        let check = TessellationCheck {
+            per_face,
+            chord_rms: (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt(),
+            chord_max: errors.iter().cloned().fold(0.0, f64::max),
+            fit_rms,
+        };
+        if check.chord_rms <= target || per_face >= cap {
+            return check;
+        }
+        let predicted = (per_face as f64 * (check.chord_rms / target).sqrt()).ceil() as usize;
+        per_face = predicted.clamp(per_face + 1, cap);
     }
 }
