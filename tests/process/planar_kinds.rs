@@ -91,6 +91,7 @@ fn fit_dms_writes_the_dms_kind_and_curvature_reads_it() {
             .as_array()
             .is_some_and(|a| a.len() > 10));
         assert_eq!(report["surface"], "dms");
+        assert_eq!(report["path"], "planar");
         assert_eq!(report["domain"]["triangles"], triangles);
         // The dome spans 2.83 units.
         let rms = report["final"]["geometric_rms_error"]
@@ -104,6 +105,7 @@ fn fit_dms_writes_the_dms_kind_and_curvature_reads_it() {
 fn fit_bpatch_writes_the_bpatch_kind_and_curvature_reads_it() {
     let (surface, report) = fit_dome(&["--surface", "bpatch", "--bpatch-degree", "6"]);
     assert_eq!(surface["kind"], "bpatch");
+    assert_eq!(report["path"], "planar");
     assert_eq!(surface["degree"], 6);
     assert_eq!(pairs(&surface["domain_triangle"]), 3);
     for seq in ["r", "s", "t"] {

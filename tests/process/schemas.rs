@@ -101,38 +101,61 @@ fn outputs_of_every_kind_follow_the_schemas() {
     write_obj(&scan, &scan_patch(25, 30)).expect("write");
     let lattice = tmp.path().join("lattice.obj");
     write_obj(&lattice, &lattice_patch()).expect("write");
-    // (arguments, input, expected kind and layout)
-    let cases: [(&[&str], &Path, &str, Option<&str>); 6] = [
-        (&["fit"], &scan, "loop", Some("grid")),
+    // (arguments, input, expected kind, layout and report.json's path)
+    type Case<'a> = (
+        &'a [&'a str],
+        &'a Path,
+        &'a str,
+        Option<&'a str>,
+        Option<&'a str>,
+    );
+    let cases: [Case; 6] = [
+        (&["fit"], &scan, "loop", Some("grid"), Some("scan")),
         (
             &["fit", "--surface", "bezier"],
             &scan,
             "bezier",
             Some("patches"),
+            Some("scan"),
         ),
-        (&["fit", "--domain", "mesh"], &scan, "loop", Some("mesh")),
+        (
+            &["fit", "--domain", "mesh"],
+            &scan,
+            "loop",
+            Some("mesh"),
+            Some("object"),
+        ),
         (
             &["fit", "--surface", "bezier", "--levels", "2"],
             &lattice,
             "bezier",
             None,
+            Some("subdivided"),
         ),
-        (&["fit", "--levels", "2"], &lattice, "loop", Some("mesh")),
+        (
+            &["fit", "--levels", "2"],
+            &lattice,
+            "loop",
+            Some("mesh"),
+            Some("subdivided"),
+        ),
         (
             &["bspline-fit", "--grid", "25x30", "--control", "8x9"],
             &scan,
             "bspline",
             None,
+            None,
         ),
     ];
     let mut failures = Vec::new();
-    for (k, (args, input, kind, layout)) in cases.iter().enumerate() {
+    for (k, (args, input, kind, layout, path)) in cases.iter().enumerate() {
         let out = tmp.path().join(format!("out{k}"));
         run(args, input, &out);
         let surface = read_json(&out.join("surface.json"));
         assert_eq!(surface["kind"], *kind, "{args:?}");
         assert_eq!(surface["layout"].as_str(), *layout, "{args:?}");
         let report = read_json(&out.join("report.json"));
+        assert_eq!(report["path"].as_str(), *path, "{args:?}");
         for (name, validator, doc) in [
             ("surface.json", &surface_schema, &surface),
             ("report.json", &report_schema, &report),

@@ -33,6 +33,22 @@ pub struct FittedPatch {
 }
 
 impl FittedPatch {
+    /// Which path fitted the input, as report.json's `path` says it: `subdivided` (exact
+    /// subdivision connectivity: the input's own coarse net), `scan` (a disk-like scan on
+    /// its grid), `planar` (B-patch or DMS over a planar map of the input) or `object` (a
+    /// whole object over a simplified control mesh).
+    pub fn path(&self) -> &'static str {
+        if self.object.is_some() {
+            "object"
+        } else if self.scan.is_some() {
+            "scan"
+        } else if self.scattered.is_some() {
+            "planar"
+        } else {
+            "subdivided"
+        }
+    }
+
     /// `fit` at `budget` with nothing beside it (no levels, refinement or path details):
     /// what each path fills in.
     pub(crate) fn bare(fit: PatchFit, budget: Budget) -> Self {

@@ -341,6 +341,7 @@ fn set_cloud_report(report: &mut serde_json::Value, cloud: serde_json::Value) {
 /// The outputs of a fit (`fit_patch`'s result): surface.json, report.json, the GLB and the
 /// warm start; `wall` is when the work on the input began (report.json's `wall_ms`).
 pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> PatchOutputs {
+    let path = fitted.path();
     let FittedPatch {
         fit: fitted,
         scan: scan_info,
@@ -396,7 +397,6 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
     }
     if let Some(info) = &object_info {
         let object_report = object::object_report(&fitted, info);
-        report["path"] = json!("object");
         report["topology"] = object_report["topology"].clone();
         report["object"] = object_report;
         // Under the same key as the scan path's, which `trispline fit`'s line reads.
@@ -426,6 +426,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
     if let Some(reason) = object_tried {
         report["object_path_tried"] = json!({ "reason": reason, "kept": false });
     }
+    report["path"] = json!(path);
     report["wall_ms"] = json!(wall.elapsed().as_secs_f64() * 1e3);
     PatchOutputs {
         surface,
