@@ -442,6 +442,7 @@ impl Writer {
         }
         let mut line = json!({
             "patch": id, "version": a.version, "input": a.label, "status": outputs.status,
+            "path": outputs.report["path"],
             "errors": outputs.report["final"],
             "iterations": outputs.report["iterations"].as_array().map_or(0, |i| i.len().saturating_sub(1)),
             "warm_start": warm_start, "wall_ms": latency_ms,
@@ -449,12 +450,16 @@ impl Writer {
                 "parse_ms": timings.parse_ms, "fit_ms": timings.fit_ms, "outputs_ms": outputs_ms, "write_ms": write_ms},
             "paths": paths,
         });
-        // A whole object's surface that strays past its bound from the data (over a
-        // coarse mesh's large triangles, over a hole): said where the fits are followed,
-        // not only in report.json.
-        let stray = &outputs.report["object"]["stray"];
+        // A surface that strays past its bound from the data (over a coarse mesh's large
+        // triangles, over a hole), and pieces of the input left out of it: said where the
+        // fits are followed, not only in report.json.
+        let stray = &outputs.report["stray"];
         if stray["within"] == json!(false) {
             line["stray"] = stray.clone();
+        }
+        let dropped = &outputs.report["dropped"];
+        if dropped["pieces"].as_u64().is_some_and(|p| p > 0) {
+            line["dropped"] = dropped.clone();
         }
         if let Some(scans) = outputs.report["session"]["scans"].as_array() {
             // An object's update: which scans its surface is fitted to.

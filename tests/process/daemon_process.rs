@@ -256,7 +256,7 @@ fn coarse_sphere_obj(around: usize, rings: usize) -> String {
 }
 
 #[test]
-fn an_event_says_when_a_whole_object_strays_past_its_bound() {
+fn an_event_says_when_a_whole_object_strays_past_its_bound_or_pieces_are_left_out() {
     let tmp = tempfile::tempdir().expect("tmp");
     let (inbox, out, cfg) = (
         tmp.path().join("in"),
@@ -270,6 +270,15 @@ fn an_event_says_when_a_whole_object_strays_past_its_bound() {
     std::fs::write(inbox.join("coarse.obj"), coarse_sphere_obj(16, 10)).expect("write");
     // 1,298 points of the same sphere: its 39 controls hold it within the bound.
     std::fs::write(inbox.join("fine.obj"), coarse_sphere_obj(48, 28)).expect("write");
+    // Two tori apart, of 384 and 240 vertices: the default policy fits the larger.
+    let mut pair = trispline::testdata::torus(32, 12);
+    let small = trispline::testdata::torus(24, 10);
+    let offset = pair.positions.len() as u32;
+    pair.positions
+        .extend(small.positions.iter().map(|p| *p + glam::DVec3::X * 4.0));
+    pair.triangles
+        .extend(small.triangles.iter().map(|t| t.map(|v| v + offset)));
+    trispline::io::write_mesh_file(&inbox.join("pair.obj"), &pair).expect("write");
     let done = bin()
         .args(["watch", &inbox.display().to_string(), "--out"])
         .arg(&out)
@@ -290,6 +299,7 @@ fn an_event_says_when_a_whole_object_strays_past_its_bound() {
             .unwrap_or_else(|| panic!("no event for {patch}: {all:?}"))
     };
     let coarse = of("coarse");
+    assert_eq!(coarse["path"], "object", "{coarse}");
     assert_eq!(coarse["stray"]["within"], false, "{coarse}");
     let share = coarse["stray"]["share_of_diagonal"]
         .as_f64()
@@ -298,7 +308,11 @@ fn an_event_says_when_a_whole_object_strays_past_its_bound() {
     assert!(share > limit, "{coarse}");
     let fine = of("fine");
     assert!(
-        fine["status"].is_string() && fine.get("stray").is_none(),
+        fine["status"].is_string() && fine.get("stray").is_none() && fine.get("dropped").is_none(),
         "{fine}"
     );
+    // Pieces left out are said there too.
+    let pair = of("pair");
+    assert_eq!(pair["dropped"]["pieces"], 1, "{pair}");
+    assert_eq!(pair["dropped"]["vertices"], 240, "{pair}");
 }
