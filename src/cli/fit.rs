@@ -341,22 +341,11 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
     let number = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let status = match out.status {
         FitStatus::Met => "met: every target holds".to_string(),
-        FitStatus::Stalled => {
-            // A whole object's max error is held up by its control budget as much as by
-            // the data's noise: the remedy differs, so the line says which applies.
-            let why = if r["object"].is_object() {
-                "usual for whole objects: detail finer than the control budget can follow, \
-                and scan noise, keep the max error above the tolerance; judge it by the RMS, \
-                or raise --target-controls-pct;"
-            } else {
-                "usual for scans, whose noise and rims keep the max error above the \
-                tolerance; judge it by the RMS,"
-            };
-            format!(
-                "stalled: further steps stopped improving the fit before every target held \
-                ({why} see the README)"
-            )
-        }
+        FitStatus::Stalled => format!(
+            "stalled: further steps stopped improving the fit before every target held \
+            ({} see the README)",
+            stall_reason(r)
+        ),
         FitStatus::Capped => "capped: the step or time limit came first (raise --iterations or \
             --max-time-ms)"
             .to_string(),
@@ -393,6 +382,29 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         line.push_str(&said);
     }
     line
+}
+
+/// Why a fit of the path report.json names usually stalls, and its remedy: a whole
+/// object's max error is held up by its control budget as much as by the data's noise, an
+/// exact-subdivision fit's by its coarse net (refined down to `--min-levels` already), a
+/// scan's by its noise and rims.
+fn stall_reason(report: &serde_json::Value) -> &'static str {
+    match report["path"].as_str() {
+        Some("object") => {
+            "usual for whole objects: detail finer than the control budget can follow, and \
+            scan noise, keep the max error above the tolerance; judge it by the RMS, or raise \
+            --target-controls-pct;"
+        }
+        Some("subdivided") => {
+            "usual for inputs with subdivision connectivity whose detail or noise is finer \
+            than the coarsest net tried (--min-levels); judge it by the RMS, or lower \
+            --min-levels;"
+        }
+        _ => {
+            "usual for scans, whose noise and rims keep the max error above the tolerance; \
+            judge it by the RMS,"
+        }
+    }
 }
 
 /// What the line says of a surface straying past the bound (report.json `stray`, which
@@ -484,8 +496,20 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
 
 #[cfg(test)]
 mod tests {
-    use super::{escalation_summary, stray_clause};
+    use super::{escalation_summary, stall_reason, stray_clause};
     use serde_json::json;
+
+    #[test]
+    fn a_stall_is_explained_with_its_own_path_s_remedy() {
+        let of = |path: &str| stall_reason(&json!({ "path": path }));
+        assert!(of("object").contains("--target-controls-pct"));
+        assert!(of("subdivided").contains("lower --min-levels"));
+        for scan in ["scan", "planar"] {
+            assert!(of(scan).starts_with("usual for scans"), "{scan}");
+        }
+        let all = ["object", "subdivided", "scan"].map(of);
+        assert!(all[0] != all[1] && all[1] != all[2] && all[0] != all[2]);
+    }
 
     fn object(within: bool, kept: usize) -> serde_json::Value {
         let budgets: Vec<_> = [(22, 28), (56, 62), (124, 124)]

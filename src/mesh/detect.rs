@@ -461,16 +461,16 @@ impl Hierarchy {
     }
 
     /// Location of every finest vertex on the coarsest mesh: (coarse face, u, v) with
-    /// barycentric weights (u, v, 1 - u - v) for the face's corners 0, 1, 2.
+    /// barycentric weights (u, v, 1 - u - v) for the face's corners 0, 1, 2. With no level
+    /// the coarsest mesh is the fine one, and each vertex sits at a corner of one of its
+    /// own faces.
     pub fn fine_vertex_params(&self, fine: &Topology) -> Vec<(u32, f64, f64)> {
+        const OWN_CORNERS: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
         let mut out = vec![(NONE, 0.0, 0.0); fine.vertex_count];
-        if self.levels.is_empty() {
-            return out;
-        }
         for (f, tri) in fine.triangles.iter().enumerate() {
             // Corner weights of this face in the coarsest face, composing the parents.
-            let (mut face, mut corners) = self.levels[0].face_parent[f];
-            for lvl in &self.levels[1..] {
+            let (mut face, mut corners) = (f as u32, OWN_CORNERS);
+            for lvl in &self.levels {
                 let (pf, pc) = lvl.face_parent[face as usize];
                 let mut composed = [[0.0; 3]; 3];
                 for (c, row) in corners.iter().enumerate() {

@@ -126,6 +126,26 @@ fn a_known_irregular_net_is_recovered_from_its_limit_surface() {
 }
 
 #[test]
+fn at_level_zero_the_input_is_its_own_net() {
+    // Each input vertex sits at a corner of one of its faces: the net whose limit points
+    // the input's vertices are is recovered. Every vertex used to land nowhere (RMS about
+    // the radius on a unit icosphere).
+    let net = irregular_disc();
+    let data = limit_samples(&net, 0);
+    let fit = fit_subdivided(&data, &options(Method::Direct, 0), None).expect("fits");
+    assert_eq!(fit.controls.len(), net.positions.len());
+    let worst = fit
+        .controls
+        .iter()
+        .zip(&net.positions)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    assert_eq!(fit.outcome.status, FitStatus::Met);
+    assert!(worst < 1e-6, "controls off by {worst}");
+    assert!(fit.geometric_max() < 1e-8);
+}
+
+#[test]
 fn the_exact_path_writes_the_control_faces_and_warm_starts() {
     let net = irregular_disc();
     let mut data = limit_samples(&net, 2);
