@@ -252,10 +252,20 @@ impl FitArgs {
 /// Runs `fit`: reads the mesh, fits it, writes the outputs.
 pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     let started = std::time::Instant::now();
-    let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
-    let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let cfg = args.worker_config();
     check_ranges(args)?;
+    // The daemon's config refuses these values; the flags that set them do too. For
+    // `loop`, --lattice is the grid's segments (`grid_segments`, checked as such), not a
+    // Bezier degree.
+    let mut checked = cfg.fit.clone();
+    if checked.surface == SurfaceKind::Loop {
+        checked.scan.lattice = ScanConfig::default().lattice;
+    }
+    if let Some((key, value, rule)) = crate::daemon::config::fit_out_of_range(&checked) {
+        anyhow::bail!("out of range: {value} for {key} (the flag of that name): {rule}");
+    }
+    let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
+    let read_ms = started.elapsed().as_secs_f64() * 1e3;
     let progress = Progress::new(cfg.fit.budget.max_iterations);
     let on_step = |s: &crate::fit::StepStats| progress.on_step(s);
     let fitted = run_input_with(&mesh, None, &cfg, Some(&on_step));

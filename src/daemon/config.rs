@@ -521,6 +521,13 @@ fn validate_fit(f: &FitConfig) -> Check {
     )
 }
 
+/// The `[fit]` table's range checks for a `FitConfig` built elsewhere (`trispline fit`'s
+/// flags), so that both refuse the same values: the key, value and rule of the first one
+/// out of range.
+pub fn fit_out_of_range(f: &FitConfig) -> Option<(&'static str, String, &'static str)> {
+    validate_fit(f).err()
+}
+
 /// Ranges of `[fit.scan]`.
 fn validate_scan(s: &ScanConfig) -> Check {
     check(

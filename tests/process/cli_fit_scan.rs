@@ -89,6 +89,39 @@ fn closed_and_higher_genus_meshes_are_refused_by_the_grid_domain() {
 }
 
 #[test]
+fn flags_are_refused_where_the_config_refuses_their_values() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let out = dir.path().join("out");
+    let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/patches/dome.obj");
+    for (args, key) in [
+        (
+            &["--target-controls-pct", "0"][..],
+            "fit.scan.target_controls_pct",
+        ),
+        (
+            &["--target-controls-pct", "150"][..],
+            "fit.scan.target_controls_pct",
+        ),
+        (
+            &["--min-component-fraction", "2"][..],
+            "fit.components.min_fraction",
+        ),
+    ] {
+        let mut all = vec!["fit", input.to_str().unwrap_or_default()];
+        all.extend_from_slice(args);
+        all.extend_from_slice(&["--out", out.to_str().unwrap_or_default()]);
+        let o = trispline(&all);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains(key) && err.contains("must be"),
+            "{args:?}: {err}"
+        );
+        assert!(!out.join("surface.json").exists());
+    }
+}
+
+#[test]
 fn absurd_resolutions_are_refused_before_allocating() {
     let dir = tempfile::tempdir().expect("tmp");
     let out = dir.path().join("out");
@@ -105,8 +138,10 @@ fn absurd_resolutions_are_refused_before_allocating() {
         let o = trispline(&all);
         assert_eq!(o.status.code(), Some(2), "{args:?}");
         let err = String::from_utf8_lossy(&o.stderr);
+        // Refused by the config's range where it has one (the grid's segments), else by
+        // the pipeline's size check.
         assert!(
-            err.contains("too fine") || err.contains("at most"),
+            err.contains("too fine") || err.contains("at most") || err.contains("must be 1..="),
             "{args:?}: {err}"
         );
         assert!(!out.join("surface.json").exists());
