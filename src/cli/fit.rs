@@ -287,7 +287,10 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         .with_context(|| format!("creating {}", args.out.display()))?;
     if args.components == ComponentMode::Largest {
         for part in input.parts {
-            println!("{}", summary(&label, &part.outputs, &args.out));
+            println!(
+                "{}",
+                summary(&label, &part.outputs, &args.out, args.surface)
+            );
             write_outputs(&args.out, part.outputs, &source)?;
         }
         return Ok(ExitCode::SUCCESS);
@@ -304,7 +307,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
         let dir = args.out.join(&name);
         println!(
             "{}",
-            summary(&format!("{label} [{name}]"), &part.outputs, &dir)
+            summary(
+                &format!("{label} [{name}]"),
+                &part.outputs,
+                &dir,
+                args.surface
+            )
         );
         write_outputs(&dir, part.outputs, &source)?;
     }
@@ -346,7 +354,7 @@ fn check_ranges(args: &FitArgs) -> anyhow::Result<()> {
 
 /// The line `fit` prints per fitted surface: how it ended (and what that means), its
 /// errors, size and time, and what was left out. Errors are in the input's unit.
-fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
+fn summary(label: &str, out: &PatchOutputs, dir: &Path, asked: SurfaceKind) -> String {
     let r = &out.report;
     let number = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
     let status = match out.status {
@@ -379,6 +387,9 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
             100.0 * number(&dropped["share"]),
         ));
     }
+    if let Some(said) = other_kind_clause(r, asked) {
+        line.push_str(&said);
+    }
     if let Some(said) = escalation_summary(&r["object"], &r["control_points"]) {
         line.push_str(&said);
     }
@@ -392,6 +403,22 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path) -> String {
         line.push_str(&said);
     }
     line
+}
+
+/// What the line says when the surface written is not the kind asked for: a whole object
+/// (closed, holed, with handles) is fitted as a Loop surface whatever kind was asked, and
+/// report.json's `surface` says so; `None` when it is the kind asked for.
+fn other_kind_clause(report: &serde_json::Value, asked: SurfaceKind) -> Option<String> {
+    let written = report["surface"].as_str()?;
+    (written != asked.name()).then(|| {
+        format!(
+            "; written as a {written} surface, not {}: the {} path fits Loop surfaces only \
+            (--surface {} takes disk-like scans and inputs with subdivision connectivity)",
+            asked.name(),
+            report["path"].as_str().unwrap_or("fit's"),
+            asked.name()
+        )
+    })
 }
 
 /// Why a fit of the path report.json names usually stalls, and its remedy: a whole
@@ -506,8 +533,21 @@ fn write_outputs(dir: &Path, mut out: PatchOutputs, source: &Source) -> anyhow::
 
 #[cfg(test)]
 mod tests {
-    use super::{escalation_summary, stall_reason, stray_clause};
+    use super::{escalation_summary, other_kind_clause, stall_reason, stray_clause};
+    use crate::pipeline::SurfaceKind;
     use serde_json::json;
+
+    #[test]
+    fn a_surface_of_another_kind_than_asked_is_said() {
+        let report = json!({"surface": "loop", "path": "object"});
+        let said = other_kind_clause(&report, SurfaceKind::Bezier).unwrap_or_default();
+        assert!(
+            said.contains("written as a loop surface, not bezier"),
+            "{said}"
+        );
+        assert!(said.contains("object path"), "{said}");
+        assert_eq!(other_kind_clause(&report, SurfaceKind::Loop), None);
+    }
 
     #[test]
     fn a_stall_is_explained_with_its_own_path_s_remedy() {

@@ -252,6 +252,13 @@ fn object_patch(
     budget: Budget,
     reason: String,
 ) -> Result<FittedPatch, PipelineError> {
+    if cfg.fit.surface != SurfaceKind::Loop {
+        // Written as it is (report.json `surface`), and said where the fits are logged.
+        tracing::warn!(
+            asked = cfg.fit.surface.name(),
+            "a whole object is fitted as a Loop surface: the object path fits no other kind"
+        );
+    }
     let warm = previous.and_then(|w| w.object.as_ref().map(|o| (o, w.controls.as_slice())));
     let (fit, info) = object::fit_as_object(
         mesh,
