@@ -130,6 +130,31 @@ fn report(path: &Path) -> serde_json::Value {
 }
 
 #[test]
+fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("torus.obj");
+    trispline::io::write_mesh_file(&input, &trispline::testdata::torus(32, 12)).expect("write");
+    let out = tmp.path().join("fit");
+    let p = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let o = under_umask("022", &["fit", &p(&input), "--out", &p(&out)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let surface = report(&out.join("surface.json"));
+    assert_eq!(surface["layout"], "mesh");
+    let step = tmp.path().join("x/torus.stp");
+    let o = under_umask(
+        "022",
+        &["export", &p(&out.join("surface.json")), "--step", &p(&step)],
+    );
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("genus 1, 0 boundary loops) is no topological disk"),
+        "{err}"
+    );
+    assert!(!step.exists());
+}
+
+#[test]
 fn export_writes_a_bspline_as_is_and_converts_a_triangular_fit_with_its_deviation() {
     let tmp = tempfile::tempdir().expect("tmp");
     let input = tmp.path().join("grid.obj");
