@@ -64,9 +64,28 @@ pub fn inspect(args: &InspectArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// Runs `subdivide`.
+/// Faces a subdivision writes at most: as many as the finest lattice `fit` resamples
+/// (1e8 points), some 5 GB of mesh in memory before the file. Nine levels of a 320-face
+/// sphere (84M faces) ran past a minute before this refused it.
+const MAX_SUBDIVIDED_FACES: usize = 100_000_000;
+
+/// Runs `subdivide`; refuses, before any work, a result over `MAX_SUBDIVIDED_FACES`.
 pub fn subdivide_cmd(args: &SubdivideArgs) -> anyhow::Result<ExitCode> {
     let mesh = read_mesh_file(&args.input, &LoadOptions::default())?.mesh;
+    let faces = u32::try_from(args.levels)
+        .ok()
+        .and_then(|l| 4usize.checked_pow(l))
+        .and_then(|k| k.checked_mul(mesh.triangles.len()));
+    if faces.is_none_or(|f| f > MAX_SUBDIVIDED_FACES) {
+        anyhow::bail!(
+            "{}: {} levels would make {} faces from {}, over the limit of {MAX_SUBDIVIDED_FACES} \
+            (lower --levels)",
+            args.input.display(),
+            args.levels,
+            faces.map_or("more than usize::MAX".into(), |f| f.to_string()),
+            mesh.triangles.len()
+        );
+    }
     let fine = subdivide(&mesh, args.levels)
         .with_context(|| format!("{}: cannot subdivide", args.input.display()))?;
     write_mesh_file(&args.output, &fine)?;

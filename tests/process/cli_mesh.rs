@@ -14,6 +14,32 @@ fn trispline(args: &[&str]) -> std::process::Output {
 }
 
 #[test]
+fn a_subdivision_past_the_face_limit_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let tetra = TriMesh::new(
+        vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z],
+        vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]],
+    );
+    let (c, f) = (dir.path().join("c.obj"), dir.path().join("f.ply"));
+    write_obj(&c, &tetra).expect("write");
+    let s = |p: &std::path::Path| p.to_str().unwrap_or_default().to_string();
+    // 4 faces x 4^13 = 268M faces: over the limit; 4^64 overflows.
+    for levels in ["13", "64"] {
+        let o = trispline(&["subdivide", &s(&c), "--levels", levels, "-o", &s(&f)]);
+        assert_eq!(o.status.code(), Some(2), "{levels}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            err.contains("over the limit") && err.contains("lower --levels"),
+            "{err}"
+        );
+        assert!(!f.exists());
+    }
+    // Under it, a subdivision goes ahead.
+    let o = trispline(&["subdivide", &s(&c), "--levels", "3", "-o", &s(&f)]);
+    assert!(o.status.success());
+}
+
+#[test]
 fn subdivide_then_coarsen_round_trips_and_inspect_reports_depth() {
     let dir = tempfile::tempdir().expect("tmp");
     let coarse = TriMesh::new(
