@@ -180,6 +180,22 @@ fn grid_points(args: &BsplineFitArgs, rows: usize, cols: usize) -> anyhow::Resul
 
 fn scattered_points(args: &BsplineFitArgs) -> anyhow::Result<Vec<DVec3>> {
     let loaded = read_mesh_file(&args.input, &LoadOptions::default())?;
+    // A closed surface, or one with handles, projects onto no plane without folding: one
+    // patch over planar parameters came out as a folded sheet (CGAL's two knots). Scans
+    // with stray pieces, and meshes whose topology cannot be told, go ahead.
+    if let Ok(t) = crate::mesh::simplify::SurfaceTopology::of(&loaded.mesh) {
+        if !loaded.mesh.triangles.is_empty() && (t.boundary_loops == 0 || t.genus > 0) {
+            bail!(
+                "{}: a closed surface or one with handles ({} components, genus {}, {} \
+                boundary loops) has no planar parameters, so one B-spline patch cannot take \
+                it; `trispline fit` fits whole objects",
+                args.input.display(),
+                t.components,
+                t.genus,
+                t.boundary_loops
+            );
+        }
+    }
     // Range grids: the valid cells (vertices of the triangulation may be a subset).
     Ok(match loaded.grid {
         Some(g) => g.points.into_iter().flatten().collect(),

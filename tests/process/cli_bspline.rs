@@ -171,6 +171,28 @@ fn scattered_fit_of_a_mesh() {
 }
 
 #[test]
+fn a_closed_surface_is_refused_by_the_one_patch_fit() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("torus.obj");
+    trispline::io::write_mesh_file(&input, &trispline::testdata::torus(32, 12)).expect("write");
+    let out = tmp.path().join("out");
+    let st = bin()
+        .arg("bspline-fit")
+        .arg(&input)
+        .args(["--scattered", "--control", "8x8", "--out"])
+        .arg(&out)
+        .output()
+        .expect("run");
+    assert_eq!(st.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&st.stderr);
+    assert!(
+        err.contains("genus 1, 0 boundary loops) has no planar parameters"),
+        "{err}"
+    );
+    assert!(!out.join("surface.json").exists());
+}
+
+#[test]
 fn bad_arguments_fail_with_a_reason() {
     let tmp = tempfile::tempdir().expect("tmp");
     let input = tmp.path().join("grid.obj");
