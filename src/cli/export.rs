@@ -99,20 +99,21 @@ fn triangular(d: SurfaceDescription) -> Result<Box<dyn DerivativeSurface>, BSpli
     })
 }
 
-/// Why a mesh-layout Loop surface over `faces` (of `vertices` controls) is no
-/// topological disk, the only shape one tensor-product patch has (`None`: it is one).
-/// Sampled and fitted all the same, a whole object came out as a folded sheet: fertility
-/// (genus 4, 196 across) at a deviation of 15.7 max, and a B-spline 7548 across.
-fn not_a_disk(faces: &[[u32; 3]], vertices: usize) -> Option<String> {
+/// Why a mesh-layout Loop surface over `faces` (of `vertices` controls) has no planar
+/// parameters, which one tensor-product patch needs: it is closed or has handles (`None`:
+/// it is open and without handles; holes are fine, the B-spline spans them as it spans a
+/// grid surface's). Sampled and fitted all the same, a whole object came out as a folded
+/// sheet: fertility (genus 4, 196 across) at a deviation of 15.7 max, and a B-spline
+/// 7548 across.
+fn why_no_planar_parameters(faces: &[[u32; 3]], vertices: usize) -> Option<String> {
     let mesh = crate::TriMesh::new(vec![DVec3::ZERO; vertices], faces.to_vec());
     let Ok(t) = crate::mesh::simplify::SurfaceTopology::of(&mesh) else {
         return Some("its control faces are no manifold".into());
     };
-    let disk = t.components == 1 && t.boundary_loops == 1 && t.genus == 0;
-    (!disk).then(|| {
+    (t.boundary_loops == 0 || t.genus > 0).then(|| {
         format!(
-            "a whole object ({} components, genus {}, {} boundary loops) is no topological \
-            disk",
+            "a whole object ({} components, genus {}, {} boundary loops) is closed or has \
+            handles",
             t.components, t.genus, t.boundary_loops
         )
     })
@@ -266,10 +267,10 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     }
     let description = read_surface_json(&args.surface)?;
     if let SurfaceDescription::LoopMesh { surface, controls } = &description {
-        if let Some(why) = not_a_disk(surface.faces(), controls.len()) {
+        if let Some(why) = why_no_planar_parameters(surface.faces(), controls.len()) {
             bail!(
                 "{}: {why}, so no single B-spline patch can take it (its STEP would be a \
-                folded sheet); export converts surfaces of disk-like patches and B-splines",
+                folded sheet); export converts open surfaces and B-splines",
                 args.surface.display()
             );
         }

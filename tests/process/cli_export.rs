@@ -130,7 +130,7 @@ fn report(path: &Path) -> serde_json::Value {
 }
 
 #[test]
-fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take() {
+fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take_but_not_a_holed_sheet() {
     let tmp = tempfile::tempdir().expect("tmp");
     let input = tmp.path().join("torus.obj");
     trispline::io::write_mesh_file(&input, &trispline::testdata::torus(32, 12)).expect("write");
@@ -148,10 +148,39 @@ fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take() {
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("genus 1, 0 boundary loops) is no topological disk"),
+        err.contains("genus 1, 0 boundary loops) is closed or has handles"),
         "{err}"
     );
     assert!(!step.exists());
+
+    // An open sheet with a hole, fitted on the same path, still exports.
+    let mut sheet = trispline::testdata::height_grid(20, |x, y| 0.1 * (3.0 * x).sin() * y);
+    let hole = |t: &[u32; 3]| {
+        t.iter().all(|&v| {
+            let (i, j) = (v % 21, v / 21);
+            (7..=12).contains(&i) && (7..=12).contains(&j)
+        })
+    };
+    sheet.triangles.retain(|t| !hole(t));
+    let input = tmp.path().join("holed.obj");
+    trispline::io::write_mesh_file(&input, &sheet).expect("write");
+    let out = tmp.path().join("holed");
+    let o = under_umask(
+        "022",
+        &["fit", &p(&input), "--domain", "mesh", "--out", &p(&out)],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        report(&out.join("report.json"))["topology"]["control"]["boundary_loops"],
+        2
+    );
+    let step = tmp.path().join("x/holed.stp");
+    let o = under_umask(
+        "022",
+        &["export", &p(&out.join("surface.json")), "--step", &p(&step)],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(step.exists());
 }
 
 #[test]
