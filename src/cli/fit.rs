@@ -231,14 +231,20 @@ impl FitArgs {
                 min_vertices: self.min_component_vertices,
                 min_fraction: self.min_component_fraction,
             },
+            // --knot-spread sets the spread of the kind asked for only: the two kinds'
+            // ranges differ, and the config's check holds each kind to its own.
             dms: DmsConfig {
                 degree: self.dms_degree,
-                knot_spread: self.knot_spread.unwrap_or(DmsConfig::default().knot_spread),
+                knot_spread: self
+                    .knot_spread
+                    .filter(|_| self.surface == SurfaceKind::Dms)
+                    .unwrap_or(DmsConfig::default().knot_spread),
             },
             bpatch: BPatchConfig {
                 degree: self.bpatch_degree,
                 knot_spread: self
                     .knot_spread
+                    .filter(|_| self.surface == SurfaceKind::Bpatch)
                     .unwrap_or(BPatchConfig::default().knot_spread),
             },
         };
@@ -331,8 +337,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The flags whose range their parsers do not check: `--curvature-floor` within the
-/// config's range, `--knot-spread` within the range of the kind asked for.
+/// Ranges said in the flags' own names: `--curvature-floor` within the config's range,
+/// `--knot-spread` within the range of the kind asked for. Every other flag is held to the
+/// config's ranges after it (`fit_out_of_range`), under the config's key.
 fn check_ranges(args: &FitArgs) -> anyhow::Result<()> {
     let floor = args.curvature_floor;
     if !(0.0..1.0).contains(&floor) {

@@ -149,6 +149,19 @@ fn degrees_and_spreads_out_of_range_are_refused() {
             assert!(stderr.contains("needs a value in [0, 1)"), "{stderr}");
         }
     }
+    // A spread out of the dms range is the bpatch kind's to take: each kind is held to its
+    // own range only.
+    let o = trispline(&[
+        "fit",
+        s(&input),
+        "--surface",
+        "bpatch",
+        "--knot-spread",
+        "1.5",
+        "--out",
+        s(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, DMS_CONFIG.replace("degree = 2", "degree = 5")).expect("write");
     let o = trispline(&[
