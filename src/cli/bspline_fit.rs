@@ -12,6 +12,7 @@ use crate::io::iges::{iges_bytes, IgesOptions, IgesUnits};
 use crate::io::step::{step_bytes, StepOptions};
 use crate::io::surface_json::bspline_json;
 use crate::io::{read_mesh_file, write_atomic, LoadOptions};
+use crate::mesh::simplify::SurfaceTopology;
 use anyhow::{bail, Context};
 use glam::DVec3;
 use serde_json::json;
@@ -183,16 +184,14 @@ fn scattered_points(args: &BsplineFitArgs) -> anyhow::Result<Vec<DVec3>> {
     // A closed surface, or one with handles, projects onto no plane without folding: one
     // patch over planar parameters came out as a folded sheet (CGAL's two knots). Scans
     // with stray pieces, and meshes whose topology cannot be told, go ahead.
-    if let Ok(t) = crate::mesh::simplify::SurfaceTopology::of(&loaded.mesh) {
-        if !loaded.mesh.triangles.is_empty() && (t.boundary_loops == 0 || t.genus > 0) {
+    let topology = SurfaceTopology::of(&loaded.mesh).ok();
+    if let Some(t) = topology.filter(|_| !loaded.mesh.triangles.is_empty()) {
+        if let Some(topology) = folding_topology(&t) {
             bail!(
-                "{}: a closed surface or one with handles ({} components, genus {}, {} \
-                boundary loops) has no planar parameters, so one B-spline patch cannot take \
-                it; `trispline fit` fits whole objects",
-                args.input.display(),
-                t.components,
-                t.genus,
-                t.boundary_loops
+                "{}: a closed surface or one with handles {topology} has no planar \
+                parameters, so one B-spline patch cannot take it; `trispline fit` fits whole \
+                objects",
+                args.input.display()
             );
         }
     }
@@ -200,6 +199,19 @@ fn scattered_points(args: &BsplineFitArgs) -> anyhow::Result<Vec<DVec3>> {
     Ok(match loaded.grid {
         Some(g) => g.points.into_iter().flatten().collect(),
         None => loaded.mesh.positions,
+    })
+}
+
+/// `t` in words, when a surface of that topology projects onto no plane without folding
+/// (closed, or with handles), the rule one tensor-product patch over planar parameters
+/// needs both for points (`bspline-fit --scattered`) and for a surface (`export`); holes
+/// and stray pieces are fine. `None` when it does not fold.
+pub(crate) fn folding_topology(t: &SurfaceTopology) -> Option<String> {
+    (t.boundary_loops == 0 || t.genus > 0).then(|| {
+        format!(
+            "({} components, genus {}, {} boundary loops)",
+            t.components, t.genus, t.boundary_loops
+        )
     })
 }
 

@@ -9,7 +9,7 @@
 //! the triangular surface covers. Beyond it (the corners of the B-spline's rectangle that
 //! hold no samples) the B-spline is an extrapolation; CAD users trim it there.
 
-use super::bspline_fit::{largest_side, units_parser};
+use super::bspline_fit::{folding_topology, largest_side, units_parser};
 use crate::bspline::scattered::ScatteredSolver;
 use crate::bspline::scattered::{fit_scattered, planar_parameters, ScatteredOptions};
 use crate::bspline::BSplineSurface;
@@ -110,13 +110,8 @@ fn why_no_planar_parameters(faces: &[[u32; 3]], vertices: usize) -> Option<Strin
     let Ok(t) = crate::mesh::simplify::SurfaceTopology::of(&mesh) else {
         return Some("its control faces are no manifold".into());
     };
-    (t.boundary_loops == 0 || t.genus > 0).then(|| {
-        format!(
-            "a whole object ({} components, genus {}, {} boundary loops) is closed or has \
-            handles",
-            t.components, t.genus, t.boundary_loops
-        )
-    })
+    folding_topology(&t)
+        .map(|topology| format!("a whole object {topology} is closed or has handles"))
 }
 
 /// The data region of a fitted patch: `surface.json`'s `trim` polygons, in the surface's

@@ -101,6 +101,14 @@ fn options(method: Method, levels: usize) -> FitOptions<'static> {
     }
 }
 
+/// The largest distance between corresponding points of `a` and `b`.
+fn farthest_apart(a: &[DVec3], b: &[DVec3]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| p.distance(*q))
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn a_known_irregular_net_is_recovered_from_its_limit_surface() {
     let net = irregular_disc();
@@ -108,12 +116,7 @@ fn a_known_irregular_net_is_recovered_from_its_limit_surface() {
     for method in [Method::Cg, Method::Direct, Method::Pia] {
         let fit = fit_subdivided(&data, &options(method, 2), None).expect("fits");
         assert_eq!(fit.controls.len(), net.positions.len());
-        let worst = fit
-            .controls
-            .iter()
-            .zip(&net.positions)
-            .map(|(a, b)| a.distance(*b))
-            .fold(0.0, f64::max);
+        let worst = farthest_apart(&fit.controls, &net.positions);
         let last = fit.outcome.steps.last().expect("steps");
         eprintln!(
             "{method:?}: {} steps, max error {:.2e}, controls off by {worst:.2e}",
@@ -134,12 +137,7 @@ fn at_level_zero_the_input_is_its_own_net() {
     let data = limit_samples(&net, 0);
     let fit = fit_subdivided(&data, &options(Method::Direct, 0), None).expect("fits");
     assert_eq!(fit.controls.len(), net.positions.len());
-    let worst = fit
-        .controls
-        .iter()
-        .zip(&net.positions)
-        .map(|(a, b)| a.distance(*b))
-        .fold(0.0, f64::max);
+    let worst = farthest_apart(&fit.controls, &net.positions);
     assert_eq!(fit.outcome.status, FitStatus::Met);
     assert!(worst < 1e-6, "controls off by {worst}");
     assert!(fit.geometric_max() < 1e-8);

@@ -88,6 +88,17 @@ fn closed_and_higher_genus_meshes_are_refused_by_the_grid_domain() {
     }
 }
 
+/// `fit input args --out out`, which must exit 2 and write no surface: its stderr.
+fn refused(input: &Path, args: &[&str], out: &Path) -> String {
+    let mut all = vec!["fit", input.to_str().unwrap_or_default()];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--out", out.to_str().unwrap_or_default()]);
+    let o = trispline(&all);
+    assert_eq!(o.status.code(), Some(2), "{args:?}");
+    assert!(!out.join("surface.json").exists(), "{args:?}");
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 #[test]
 fn flags_are_refused_where_the_config_refuses_their_values() {
     let dir = tempfile::tempdir().expect("tmp");
@@ -107,17 +118,11 @@ fn flags_are_refused_where_the_config_refuses_their_values() {
             "fit.components.min_fraction",
         ),
     ] {
-        let mut all = vec!["fit", input.to_str().unwrap_or_default()];
-        all.extend_from_slice(args);
-        all.extend_from_slice(&["--out", out.to_str().unwrap_or_default()]);
-        let o = trispline(&all);
-        assert_eq!(o.status.code(), Some(2), "{args:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
+        let err = refused(&input, args, &out);
         assert!(
             err.contains(key) && err.contains("must be"),
             "{args:?}: {err}"
         );
-        assert!(!out.join("surface.json").exists());
     }
 }
 
@@ -132,18 +137,12 @@ fn absurd_resolutions_are_refused_before_allocating() {
         &["--surface", "bezier", "--levels", "14"][..],
         &["--surface", "bezier", "--lattice", "500"][..],
     ] {
-        let mut all = vec!["fit", input.to_str().unwrap_or_default()];
-        all.extend_from_slice(args);
-        all.extend_from_slice(&["--out", out.to_str().unwrap_or_default()]);
-        let o = trispline(&all);
-        assert_eq!(o.status.code(), Some(2), "{args:?}");
-        let err = String::from_utf8_lossy(&o.stderr);
+        let err = refused(&input, args, &out);
         // Refused by the config's range where it has one (the grid's segments), else by
         // the pipeline's size check.
         assert!(
             err.contains("too fine") || err.contains("at most") || err.contains("must be 1..="),
             "{args:?}: {err}"
         );
-        assert!(!out.join("surface.json").exists());
     }
 }

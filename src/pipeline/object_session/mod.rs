@@ -414,11 +414,7 @@ impl ObjectSession {
             }
         };
         times.fit_ms = ms_since(t);
-        let path = if fitted.object.is_some() {
-            "object"
-        } else {
-            "scan"
-        };
+        let path = fitted.path();
         self.last = if self.opts.cold {
             None
         } else {

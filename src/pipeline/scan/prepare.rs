@@ -49,23 +49,7 @@ pub(crate) fn prepare(
     }
     let sizes: Vec<usize> = parts.map(|p| p.positions.len()).collect();
     let dropped = Dropped::of(&sizes, total);
-    if dropped.pieces > 0 {
-        // Said where it happens: a piece of a third of the scan left out without a word
-        // looks like a fit that ignored the data.
-        tracing::warn!(
-            pieces = dropped.pieces,
-            vertices = dropped.vertices,
-            share_pct = format!("{:.1}", 100.0 * dropped.share),
-            largest_piece = dropped.largest,
-            "{} of {} components not fitted: {} of {} vertices ({:.1} %), the largest piece left out has {}; `--components all` fits every sizeable piece",
-            dropped.pieces,
-            components,
-            dropped.vertices,
-            total,
-            100.0 * dropped.share,
-            dropped.largest,
-        );
-    }
+    dropped.warn(components, total);
     let edge_length = median_edge_length(&part);
     let cold_start = warm.and_then(|w| refuse_warm(&part, &dropped, edge_length, w));
     if let Some(reason) = &cold_start {

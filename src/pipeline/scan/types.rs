@@ -253,6 +253,28 @@ impl Dropped {
             largest: sizes.iter().copied().max().unwrap_or(0),
         }
     }
+
+    /// Logs the pieces left out, if any, of `components` in all and `total` vertices: said
+    /// where it happens, on every path (a piece of a third of a scan, or one of two
+    /// interlinked knots, left out without a word looks like a fit of the whole).
+    pub fn warn(&self, components: usize, total: usize) {
+        if self.pieces == 0 {
+            return;
+        }
+        tracing::warn!(
+            pieces = self.pieces,
+            vertices = self.vertices,
+            share_pct = format!("{:.1}", 100.0 * self.share),
+            largest_piece = self.largest,
+            "{} of {} components not fitted: {} of {} vertices ({:.1} %), the largest piece left out has {}; `--components all` fits every sizeable piece",
+            self.pieces,
+            components,
+            self.vertices,
+            total,
+            100.0 * self.share,
+            self.largest,
+        );
+    }
 }
 
 /// The patch's map to the plane.

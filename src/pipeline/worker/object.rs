@@ -238,7 +238,7 @@ pub(super) fn fit_as_object(
             .map_err(object)?,
     };
     let dropped = Dropped::of(&input.left_out, input.cleaned_vertices);
-    warn_left_out(&dropped);
+    dropped.warn(input.left_out.len() + 1, input.cleaned_vertices);
     let (fit, warm) = match previous {
         Some(w) => match from_previous(input.mesh.clone(), w, previous_controls, &opts)
             .and_then(|fit| stays_on_data(fit, &w.faces, &w.crease_edges, previous_controls))
@@ -295,26 +295,6 @@ pub(super) fn fit_as_object(
         out_of_time,
     );
     Ok((patch, info))
-}
-
-/// Said where it happens, as on the scan path: half an object left out without a word
-/// (one of CGAL's two interlinked knots) looks like a fit of the whole.
-fn warn_left_out(dropped: &Dropped) {
-    if dropped.pieces == 0 {
-        return;
-    }
-    tracing::warn!(
-        pieces = dropped.pieces,
-        vertices = dropped.vertices,
-        share_pct = format!("{:.1}", 100.0 * dropped.share),
-        largest_piece = dropped.largest,
-        "{} components not fitted: {} vertices ({:.1} %), the largest piece left out has {}; \
-         `--components all` fits every sizeable piece",
-        dropped.pieces,
-        dropped.vertices,
-        100.0 * dropped.share,
-        dropped.largest,
-    );
 }
 
 /// A new version's fit from the previous control mesh: refitted where the data changed
