@@ -9,6 +9,7 @@ pub mod basis;
 pub mod curve;
 mod error;
 pub mod fit;
+pub mod loop_patches;
 pub mod lsq;
 pub mod scattered;
 pub mod surface;

@@ -1,15 +1,17 @@
 //! `trispline export`: any `surface.json` to STEP AP214 (and IGES) for CAD tools.
 //!
-//! A B-spline surface is written as it is. A triangular surface (Bezier, Loop lattice,
-//! grid or mesh) has no tensor-product form over its domain in general (a Loop mesh has
-//! extraordinary vertices, a grid surface holes), so it is sampled densely over its whole
+//! A B-spline surface is written as it is. A Loop surface over a control mesh (a whole
+//! object, of any topology) is written as one Bezier patch per control face, or per
+//! sub-triangle (`export_patches`). Any other triangular surface (Bezier, Loop lattice,
+//! grid) has no tensor-product form over its domain in general (a grid surface has
+//! holes and ragged rims), so it is sampled densely over its whole
 //! domain and a cubic B-spline is least-squares fitted to the samples, with parameters by
 //! projection onto their best-fit plane and foot-point correction. The deviation reported
 //! is the distance from every sample to the B-spline: the conversion error on the region
 //! the triangular surface covers. Beyond it (the corners of the B-spline's rectangle that
 //! hold no samples) the B-spline is an extrapolation; CAD users trim it there.
 
-use super::bspline_fit::{folding_topology, largest_side, units_parser};
+use super::bspline_fit::{largest_side, units_parser};
 use crate::bspline::scattered::ScatteredSolver;
 use crate::bspline::scattered::{fit_scattered, planar_parameters, ScatteredOptions};
 use crate::bspline::BSplineSurface;
@@ -58,6 +60,17 @@ pub struct ExportArgs {
     /// that CAD tools read true size; coordinates are written unscaled.
     #[arg(long, value_parser = units_parser(), default_value = "m")]
     pub units: IgesUnits,
+    /// Loop surfaces over a control mesh (whole objects): split each control face this
+    /// many times (4^depth patches per face, 0..=3). By default the smallest depth up
+    /// to 2 whose deviation meets --tolerance.
+    #[arg(long, value_name = "N")]
+    pub depth: Option<u32>,
+    /// Loop surfaces over a control mesh: the largest deviation of the patches from the
+    /// surface that the default depth aims for, in the surface's unit. Default: the
+    /// fit's own RMS error from surface.json (the conversion adds at its worst point no
+    /// more than the fit's typical error), or 1e-4 of the bounding-box diagonal.
+    #[arg(long, value_name = "DISTANCE")]
+    pub tolerance: Option<f64>,
 }
 
 fn parse_counts(s: &str) -> Result<(usize, usize), String> {
@@ -97,21 +110,6 @@ fn triangular(d: SurfaceDescription) -> Result<Box<dyn DerivativeSurface>, BSpli
         }),
         SurfaceDescription::Dms { spline, controls } => Box::new(DmsPatch { spline, controls }),
     })
-}
-
-/// Why a mesh-layout Loop surface over `faces` (of `vertices` controls) has no planar
-/// parameters, which one tensor-product patch needs: it is closed or has handles (`None`:
-/// it is open and without handles; holes are fine, the B-spline spans them as it spans a
-/// grid surface's). Sampled and fitted all the same, a whole object came out as a folded
-/// sheet: fertility (genus 4, 196 across) at a deviation of 15.7 max, and a B-spline
-/// 7548 across.
-fn why_no_planar_parameters(faces: &[[u32; 3]], vertices: usize) -> Option<String> {
-    let mesh = crate::TriMesh::new(vec![DVec3::ZERO; vertices], faces.to_vec());
-    let Ok(t) = crate::mesh::simplify::SurfaceTopology::of(&mesh) else {
-        return Some("its control faces are no manifold".into());
-    };
-    folding_topology(&t)
-        .map(|topology| format!("a whole object {topology} is closed or has handles"))
 }
 
 /// The data region of a fitted patch: `surface.json`'s `trim` polygons, in the surface's
@@ -239,7 +237,48 @@ fn convert(
     ))
 }
 
-fn beside(path: &Path, suffix: &str) -> PathBuf {
+/// Writes the STEP file (and IGES if asked) of these surfaces, after warning when their
+/// size makes the declared unit implausible.
+pub(super) fn write_cad(args: &ExportArgs, surfaces: &[&BSplineSurface]) -> anyhow::Result<()> {
+    let controls: Vec<DVec3> = surfaces
+        .iter()
+        .flat_map(|s| s.controls().iter().copied())
+        .collect();
+    if let Some(w) = args.units.size_warning(largest_side(&controls)) {
+        eprintln!("warning: {w}");
+    }
+    let file_name = |p: &Path| {
+        p.file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default()
+    };
+    let now = Some(std::time::SystemTime::now());
+    let step = step_bytes(
+        surfaces,
+        &StepOptions {
+            units: args.units,
+            file_name: file_name(&args.step),
+            time: now,
+        },
+    );
+    write_atomic(&args.step, &step)?;
+    if let Some(path) = &args.iges {
+        let iges = iges_bytes(
+            surfaces,
+            &[],
+            &IgesOptions {
+                units: args.units,
+                file_name: file_name(path),
+                author: "trispline".into(),
+                time: now,
+            },
+        );
+        write_atomic(path, &iges)?;
+    }
+    Ok(())
+}
+
+pub(super) fn beside(path: &Path, suffix: &str) -> PathBuf {
     let stem = path
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -261,24 +300,19 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<ExitCode> {
         bail!("--samples must be in 4..=2000");
     }
     let description = read_surface_json(&args.surface)?;
-    if let SurfaceDescription::LoopMesh { surface, controls } = &description {
-        if let Some(why) = why_no_planar_parameters(surface.faces(), controls.len()) {
-            bail!(
-                "{}: {why}, so no single B-spline patch can take it (its STEP would be a \
-                folded sheet); export converts open surfaces and B-splines",
-                args.surface.display()
-            );
-        }
-    }
-    // Mesh-layout Loop surfaces pack (face, u, v) into their parameters: their trim (if
-    // any) is not in that packing, and their control faces are the data region anyway.
-    let trim = match description {
-        SurfaceDescription::LoopMesh { .. } | SurfaceDescription::BSpline(_) => None,
-        _ => Trim::read(&args.surface)?,
-    };
     if let Some(dir) = args.step.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    // A Loop surface over a control mesh (any topology) goes patch by patch, exactly
+    // where its faces are regular; one tensor-product patch could not take a closed
+    // surface or one with handles, and would span holes by extrapolation.
+    if let SurfaceDescription::LoopMesh { surface, controls } = &description {
+        return super::export_patches::run(args, surface, controls, t0);
+    }
+    let trim = match description {
+        SurfaceDescription::BSpline(_) => None,
+        _ => Trim::read(&args.surface)?,
+    };
     let (bspline, conversion, kind) = match triangular(description) {
         Err(s) => (s, None, "bspline"),
         Ok(tri) => {
@@ -286,37 +320,7 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<ExitCode> {
             (s, Some(c), "triangular")
         }
     };
-    if let Some(w) = args.units.size_warning(largest_side(bspline.controls())) {
-        eprintln!("warning: {w}");
-    }
-    let file_name = |p: &Path| {
-        p.file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default()
-    };
-    let now = Some(std::time::SystemTime::now());
-    let step = step_bytes(
-        &[&bspline],
-        &StepOptions {
-            units: args.units,
-            file_name: file_name(&args.step),
-            time: now,
-        },
-    );
-    write_atomic(&args.step, &step)?;
-    if let Some(path) = &args.iges {
-        let iges = iges_bytes(
-            &[&bspline],
-            &[],
-            &IgesOptions {
-                units: args.units,
-                file_name: file_name(path),
-                author: "trispline".into(),
-                time: now,
-            },
-        );
-        write_atomic(path, &iges)?;
-    }
+    write_cad(args, &[&bspline])?;
     write_atomic(
         &beside(&args.step, ".json"),
         &serde_json::to_vec_pretty(&bspline_json(&bspline))?,

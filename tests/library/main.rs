@@ -17,6 +17,7 @@ mod loop_crease;
 mod loop_fit;
 mod loop_limit;
 mod loop_limit_irregular;
+mod loop_patchwork;
 mod mesh_clean;
 mod mesh_elephant;
 mod mesh_roundtrip;
