@@ -9,14 +9,26 @@ use trispline::io::surface_json::{read_surface_json, SurfaceDescription};
 
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
-    let path = args.next().ok_or_else(|| anyhow::anyhow!("usage: patchwork SURFACE.json [MAX_DEPTH]"))?;
+    let path = args
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("usage: patchwork SURFACE.json [MAX_DEPTH]"))?;
     let max_depth: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(2);
-    let SurfaceDescription::LoopMesh { surface, controls } = read_surface_json(path.as_ref())? else {
+    let SurfaceDescription::LoopMesh { surface, controls } = read_surface_json(path.as_ref())?
+    else {
         anyhow::bail!("{path}: not a mesh-layout Loop surface");
     };
-    let (lo, hi) = controls.iter().fold((controls[0], controls[0]), |(l, h), p| (l.min(*p), h.max(*p)));
+    let (lo, hi) = controls
+        .iter()
+        .fold((controls[0], controls[0]), |(l, h), p| {
+            (l.min(*p), h.max(*p))
+        });
     let diagonal = (hi - lo).length();
-    println!("{path}: {} controls, {} faces ({} irregular), diagonal {diagonal:.4e}", controls.len(), surface.faces().len(), surface.irregular_face_count());
+    println!(
+        "{path}: {} controls, {} faces ({} irregular), diagonal {diagonal:.4e}",
+        controls.len(),
+        surface.faces().len(),
+        surface.irregular_face_count()
+    );
     for depth in 0..=max_depth {
         let t = Instant::now();
         let p = loop_patchwork(&surface, &controls, depth)?;

@@ -171,7 +171,7 @@ fn triangle_foot(b: &[DVec3; 15], target: DVec3, (mut x, mut y): (f64, f64)) -> 
         let r = target - p;
         let (a11, a12, a22) = (dx.dot(dx), dx.dot(dy), dy.dot(dy));
         let det = a11 * a22 - a12 * a12;
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             break;
         }
         let (g1, g2) = (dx.dot(r), dy.dot(r));
@@ -201,13 +201,14 @@ fn curve_foot(c: &[DVec3; 5], target: DVec3, mut t: f64) -> f64 {
         let (pt, ps) = (powers(t), powers(1.0 - t));
         let d: DVec3 = (0..4)
             .map(|m| {
-                (c[m + 1] - c[m]) * (4.0 * factorial(3) / (factorial(m) * factorial(3 - m)))
+                (c[m + 1] - c[m])
+                    * (4.0 * factorial(3) / (factorial(m) * factorial(3 - m)))
                     * pt[m]
                     * ps[3 - m]
             })
             .sum();
         let dd = d.length_squared();
-        if !(dd > 0.0) {
+        if dd.is_nan() || dd <= 0.0 {
             break;
         }
         t = (t + (target - p).dot(d) / dd).clamp(0.0, 1.0);
@@ -271,7 +272,13 @@ impl Fits {
     fn edge(&self, [start, end]: [DVec3; 2], p: impl Fn(f64) -> DVec3) -> [DVec3; 5] {
         let samples: Vec<DVec3> = self.edge.iter().map(|&t| p(t)).collect();
         let mut params = self.edge.clone();
-        let mut c = [start, (start * 3.0 + end) / 4.0, (start + end) / 2.0, (start + end * 3.0) / 4.0, end];
+        let mut c = [
+            start,
+            (start * 3.0 + end) / 4.0,
+            (start + end) / 2.0,
+            (start + end * 3.0) / 4.0,
+            end,
+        ];
         for round in 0..=CORRECTION_ROUNDS {
             if round > 0 {
                 for (t, x) in params.iter_mut().zip(&samples) {
@@ -334,6 +341,9 @@ impl Fits {
         }
     }
 }
+
+/// A patch edge's ends in its face's parameters (u, v).
+type Span = ((f64, f64), (f64, f64));
 
 /// A sub-triangle's corners in its face's parameters (u, v).
 type Corners = [(f64, f64); 3];
@@ -402,7 +412,9 @@ pub fn loop_patchwork(
     Ok(Patchwork {
         patches,
         depth,
-        exact_faces: (0..faces.len()).filter(|&f| surface.is_regular_face(f)).count(),
+        exact_faces: (0..faces.len())
+            .filter(|&f| surface.is_regular_face(f))
+            .count(),
         deviation: total.finish(),
     })
 }
@@ -418,7 +430,7 @@ fn edge_curves(
 ) -> HashMap<(Node, Node), [DVec3; 5]> {
     let param = |(i, j): (u32, u32)| (i as f64 / n as f64, j as f64 / n as f64);
     let mut nodes: HashMap<Node, (usize, (f64, f64))> = HashMap::new();
-    let mut edges: HashMap<(Node, Node), (usize, (f64, f64), (f64, f64))> = HashMap::new();
+    let mut edges: HashMap<(Node, Node), (usize, Span)> = HashMap::new();
     for (f, &corners) in faces.iter().enumerate() {
         for tri in sub_triangles(n) {
             for k in 0..3 {
@@ -430,7 +442,7 @@ fn edge_curves(
                 } else {
                     ((nb, na), b, a)
                 };
-                edges.entry(key).or_insert((f, param(pa), param(pb)));
+                edges.entry(key).or_insert((f, (param(pa), param(pb))));
             }
         }
     }
@@ -440,7 +452,7 @@ fn edge_curves(
         .collect();
     edges
         .into_par_iter()
-        .map(|(key, (f, pa, pb))| {
+        .map(|(key, (f, (pa, pb)))| {
             let along = |t: f64| limit(f, (pa.0 + (pb.0 - pa.0) * t, pa.1 + (pb.1 - pa.1) * t));
             let ends = [key.0, key.1].map(|k| positions.get(&k).copied().unwrap_or(DVec3::ZERO));
             (key, fits.edge(ends, along))
@@ -450,7 +462,10 @@ fn edge_curves(
 
 /// The 12 boundary ordinates of the sub-triangle with these corner nodes, from the shared
 /// edge curves (the interior three are left zero).
-fn boundary_ordinates(nodes: &[Node; 3], curves: &HashMap<(Node, Node), [DVec3; 5]>) -> [DVec3; 15] {
+fn boundary_ordinates(
+    nodes: &[Node; 3],
+    curves: &HashMap<(Node, Node), [DVec3; 5]>,
+) -> [DVec3; 15] {
     // From corner `from` to corner `to`: the stored curve, reversed when stored the
     // other way.
     let curve = |from: usize, to: usize| -> [DVec3; 5] {
@@ -491,9 +506,11 @@ impl Stats {
         self.normal_deg.sort_by(f32::total_cmp);
         let at = |q: f64| {
             let n = self.normal_deg.len();
-            (n > 0)
-                .then(|| f64::from(self.normal_deg[((n - 1) as f64 * q).round() as usize]))
-                .unwrap_or(0.0)
+            if n == 0 {
+                0.0
+            } else {
+                f64::from(self.normal_deg[((n - 1) as f64 * q).round() as usize])
+            }
         };
         PatchDeviation {
             samples: self.samples,
@@ -520,7 +537,11 @@ fn measure(b: &[DVec3; 15], limit: impl Fn(f64, f64) -> Derivatives) -> Stats {
             let exact = limit(x, y);
             let same = triangle_point(b, x, y)[0].distance(exact.position);
             let (foot, along) = triangle_foot(b, exact.position, (x, y));
-            let (d, (fx, fy)) = if along < same { (along, foot) } else { (same, (x, y)) };
+            let (d, (fx, fy)) = if along < same {
+                (along, foot)
+            } else {
+                (same, (x, y))
+            };
             s.samples += 1;
             s.sum_sq += d * d;
             s.max = s.max.max(d);
@@ -544,9 +565,7 @@ fn tensor_form(b: &[DVec3; 15]) -> Result<BSplineSurface, BSplineError> {
     let mut grid = Vec::with_capacity(25);
     for a in 0..=4usize {
         let degree = 4 - a;
-        let mut row: Vec<DVec3> = (0..=degree)
-            .map(|j| b[ordinate(a, j)])
-            .collect();
+        let mut row: Vec<DVec3> = (0..=degree).map(|j| b[ordinate(a, j)]).collect();
         // The row's curve runs from t = 0 (ordinate (a, 0, c): corner z's side) to t = 1.
         // The last row is corner x alone, repeated exactly (elevation would round it).
         if row.len() == 1 {
@@ -575,9 +594,8 @@ mod tests {
 
     #[test]
     fn the_tensor_form_is_the_triangle() {
-        let b: [DVec3; 15] = std::array::from_fn(|k| {
-            DVec3::new(k as f64, (k * k) as f64 * 0.1, (k as f64).sin())
-        });
+        let b: [DVec3; 15] =
+            std::array::from_fn(|k| DVec3::new(k as f64, (k * k) as f64 * 0.1, (k as f64).sin()));
         let t = tensor_form(&b).expect("finite");
         for &(s, tt) in &[(0.0, 0.0), (0.3, 0.7), (0.9, 0.2), (0.5, 1.0), (1.0, 0.4)] {
             let (x, y) = (s, (1.0 - s) * tt);

@@ -3,7 +3,7 @@
 //! tolerance (or as asked), written as STEP (and IGES), with the patches as JSON and a
 //! report beside.
 
-use super::export::{beside, write_cad, ExportArgs};
+use super::export_args::{beside, write_cad, ExportArgs};
 use crate::bspline::loop_patches::{loop_patchwork, Patchwork};
 use crate::io::surface_json::bspline_json;
 use crate::io::write_atomic;
@@ -28,8 +28,8 @@ const DIAGONAL_SHARE: f64 = 1e-4;
 /// surface.json, else a share of the controls' diagonal.
 fn default_tolerance(path: &Path, controls: &[DVec3]) -> anyhow::Result<(f64, &'static str)> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let v: serde_json::Value = serde_json::from_slice(&bytes)
-        .with_context(|| format!("{}: not JSON", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_slice(&bytes).with_context(|| format!("{}: not JSON", path.display()))?;
     let fit_rms = v
         .pointer("/fit/rms_error")
         .and_then(|x| x.as_f64())
@@ -45,7 +45,10 @@ fn default_tolerance(path: &Path, controls: &[DVec3]) -> anyhow::Result<(f64, &'
     if !(diagonal.is_finite() && diagonal > 0.0) {
         bail!("{}: the control points span no volume", path.display());
     }
-    Ok((diagonal * DIAGONAL_SHARE, "1e-4 of the controls' bounding-box diagonal"))
+    Ok((
+        diagonal * DIAGONAL_SHARE,
+        "1e-4 of the controls' bounding-box diagonal",
+    ))
 }
 
 /// The patchwork at the asked depth, or at the smallest depth up to `MAX_AUTO_DEPTH`

@@ -2,6 +2,7 @@
 pub mod bspline_fit;
 pub mod curvature;
 pub mod export;
+mod export_args;
 mod export_patches;
 pub mod fit;
 pub mod mesh_tools;

@@ -128,7 +128,10 @@ fn extraordinary_vertices_converge_under_splits_and_stay_watertight() {
             assert_eq!(work.exact_faces, 0);
             let uses = edge_uses(&work.patches);
             assert_eq!(uses.len(), 30 << (2 * depth), "edges of the split");
-            assert!(uses.values().all(|&n| n == 2), "watertight at depth {depth}");
+            assert!(
+                uses.values().all(|&n| n == 2),
+                "watertight at depth {depth}"
+            );
             if depth == 0 {
                 // The reported maximum is measured on a lattice; points off it agree.
                 let sampled = sampled_distance(&surface, &controls, &work, 200);
@@ -155,7 +158,10 @@ fn crease_edges_and_boundaries_stay_shared_edges() {
     let (mesh, creases) = faceted_prism(6, 3, 2);
     let top = mesh.positions.iter().map(|p| p.z).fold(f64::MIN, f64::max);
     let mut faces = mesh.triangles.clone();
-    faces.retain(|t| !t.iter().all(|&v| mesh.positions[v as usize].z >= top - 1e-9));
+    faces.retain(|t| {
+        !t.iter()
+            .all(|&v| mesh.positions[v as usize].z >= top - 1e-9)
+    });
     let creases: Vec<[u32; 2]> = creases
         .into_iter()
         .filter(|e| e.iter().all(|&v| faces.iter().any(|t| t.contains(&v))))
@@ -192,10 +198,7 @@ fn crease_edges_and_boundaries_stay_shared_edges() {
     // Each boundary control edge is two patch edges at depth 1, held once; all others twice.
     assert_eq!(uses.values().filter(|&&n| n == 1).count(), 2 * boundary);
     assert!(uses.values().all(|&n| n == 1 || n == 2));
-    let size = controls
-        .iter()
-        .map(|p| p.length())
-        .fold(0.0, f64::max);
+    let size = controls.iter().map(|p| p.length()).fold(0.0, f64::max);
     assert!(work.deviation.max < 1e-2 * size, "{:?}", work.deviation);
 }
 

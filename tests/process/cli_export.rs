@@ -2,7 +2,7 @@
 //! export` of B-spline and triangular surface.json files to STEP.
 
 use std::os::unix::fs::PermissionsExt;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// A rows x cols grid of a smooth bump (metres, 1.2 m x 1.45 m), as OBJ.
@@ -129,31 +129,99 @@ fn report(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).expect("report")).expect("json")
 }
 
-#[test]
-fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take_but_not_a_holed_sheet() {
-    let tmp = tempfile::tempdir().expect("tmp");
-    let input = tmp.path().join("torus.obj");
-    trispline::io::write_mesh_file(&input, &trispline::testdata::torus(32, 12)).expect("write");
-    let out = tmp.path().join("fit");
+/// A Python that imports OpenCASCADE's bindings: $TRISPLINE_OCP_PYTHON or the virtual
+/// environment scripts/install_ocp.sh makes. Required under CI.
+fn ocp_python() -> Option<PathBuf> {
+    let from_env = std::env::var_os("TRISPLINE_OCP_PYTHON").map(PathBuf::from);
+    let cache = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
+        .map(|c| c.join("trispline/ocp/bin/python"));
+    crate::cluster::first_file(
+        [from_env, cache],
+        "OpenCASCADE",
+        "scripts/install_ocp.sh",
+        "TRISPLINE_OCP_PYTHON",
+    )
+}
+
+/// Fits `input` (on the object path with `extra` flags), exports the surface, and checks
+/// the report and, with OpenCASCADE, the STEP file: one B-spline face per patch, equal
+/// to the patches' JSON, sewn at a tolerance of 1e-9 of the size into a shell whose free
+/// boundary is `free_loops` closed wires.
+fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loops: usize) {
     let p = |p: &Path| p.to_str().expect("utf-8").to_string();
-    let o = under_umask("022", &["fit", &p(&input), "--out", &p(&out)]);
+    let out = dir.join(name);
+    let mut args = vec!["fit".to_string(), p(input), "--out".into(), p(&out)];
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = under_umask("022", &args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let surface = report(&out.join("surface.json"));
     assert_eq!(surface["layout"], "mesh");
-    let step = tmp.path().join("x/torus.stp");
+    let faces = surface["control_faces"].as_array().expect("faces").len();
+    let step = dir.join(format!("x/{name}.stp"));
     let o = under_umask(
         "022",
         &["export", &p(&out.join("surface.json")), "--step", &p(&step)],
     );
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let line = String::from_utf8_lossy(&o.stdout);
+    let r = report(&step.with_file_name(format!("{name}.report.json")));
+    let depth = r["depth"].as_u64().expect("depth");
+    let patches = r["patches"].as_u64().expect("patches") as usize;
+    assert_eq!(patches, faces << (2 * depth), "{line}");
     assert!(
-        err.contains("genus 1, 0 boundary loops) is closed or has handles"),
-        "{err}"
+        line.contains(&format!("{patches} Bezier patches")),
+        "{line}"
     );
-    assert!(!step.exists());
+    // The default depth meets the fit's own RMS as the largest deviation.
+    let fit_rms = surface["fit"]["rms_error"].as_f64().expect("fit rms");
+    assert_eq!(r["tolerance"]["value"].as_f64(), Some(fit_rms));
+    assert_eq!(r["tolerance"]["met"], true, "{r}");
+    assert!(r["deviation"]["max"].as_f64().expect("max") <= fit_rms);
+    let Some(python) = ocp_python() else {
+        return;
+    };
+    let size = 3.0; // the test objects are under 3 across
+    let o = Command::new(python)
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scripts/occ_patchwork.py"
+        ))
+        .arg(&step)
+        .arg(step.with_file_name(format!("{name}.json")))
+        .arg(format!("{:e}", 1e-9 * size))
+        .output()
+        .expect("run python");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let occ: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(occ["read"], true);
+    assert_eq!(occ["faces"].as_u64(), Some(patches as u64), "{occ}");
+    assert_eq!(occ["degrees"], serde_json::json!(["4x4"]), "{occ}");
+    assert!(
+        occ["max_difference_from_json"]
+            .as_f64()
+            .expect("difference")
+            < 1e-12 * size
+    );
+    assert_eq!(
+        occ["closed_free_wires"].as_u64(),
+        Some(free_loops as u64),
+        "{occ}"
+    );
+    assert_eq!(occ["open_free_wires"].as_u64(), Some(0), "{occ}");
+}
 
-    // An open sheet with a hole, fitted on the same path, still exports.
+#[test]
+fn export_writes_whole_objects_as_watertight_patchworks_that_opencascade_sews() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    // A torus: closed, genus 1; no free boundary at all.
+    let input = tmp.path().join("torus.obj");
+    trispline::io::write_mesh_file(&input, &trispline::testdata::torus(32, 12)).expect("write");
+    export_object(tmp.path(), "torus", &input, &[], 0);
+
+    // An open sheet with a hole: its rim and the hole are the free boundary.
     let mut sheet = trispline::testdata::height_grid(20, |x, y| 0.1 * (3.0 * x).sin() * y);
     let hole = |t: &[u32; 3]| {
         t.iter().all(|&v| {
@@ -164,23 +232,28 @@ fn export_refuses_a_whole_object_one_b_spline_patch_cannot_take_but_not_a_holed_
     sheet.triangles.retain(|t| !hole(t));
     let input = tmp.path().join("holed.obj");
     trispline::io::write_mesh_file(&input, &sheet).expect("write");
-    let out = tmp.path().join("holed");
+    export_object(tmp.path(), "holed", &input, &["--domain", "mesh"], 2);
+
+    // An explicit depth is taken as asked, and one beyond the cap is refused.
+    let p = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let surface = tmp.path().join("torus/surface.json");
+    let step = tmp.path().join("x/deep.stp");
     let o = under_umask(
         "022",
-        &["fit", &p(&input), "--domain", "mesh", "--out", &p(&out)],
+        &["export", &p(&surface), "--step", &p(&step), "--depth", "1"],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(report(&tmp.path().join("x/deep.report.json"))["depth"], 1);
+    let o = under_umask(
+        "022",
+        &["export", &p(&surface), "--step", &p(&step), "--depth", "4"],
+    );
     assert_eq!(
-        report(&out.join("report.json"))["topology"]["control"]["boundary_loops"],
-        2
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
     );
-    let step = tmp.path().join("x/holed.stp");
-    let o = under_umask(
-        "022",
-        &["export", &p(&out.join("surface.json")), "--step", &p(&step)],
-    );
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(step.exists());
 }
 
 #[test]

@@ -19,18 +19,28 @@ pub(crate) fn nats_server() -> Option<PathBuf> {
             .find(|c| c.is_file())
     });
     let user = std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".local/bin/nats-server"));
-    let found = [from_env, on_path, user]
-        .into_iter()
-        .flatten()
-        .find(|c| c.is_file());
+    first_file(
+        [from_env, on_path, user],
+        "nats-server",
+        "scripts/install_nats.sh",
+        "TRISPLINE_NATS_SERVER",
+    )
+}
+
+/// The first of `candidates` that is a file. None is an error under CI (where the
+/// installer `script` has run) and a skip elsewhere, said on stderr.
+pub(crate) fn first_file<const N: usize>(
+    candidates: [Option<PathBuf>; N],
+    what: &str,
+    script: &str,
+    variable: &str,
+) -> Option<PathBuf> {
+    let found = candidates.into_iter().flatten().find(|c| c.is_file());
     let required = std::env::var("TRISPLINE_REQUIRE_DATA").is_ok_and(|v| v == "1")
         || std::env::var("CI").is_ok_and(|v| v == "true");
     if found.is_none() {
-        assert!(
-            !required,
-            "no nats-server (run scripts/install_nats.sh or set TRISPLINE_NATS_SERVER)"
-        );
-        eprintln!("skipped: no nats-server (scripts/install_nats.sh installs one)");
+        assert!(!required, "no {what} (run {script} or set {variable})");
+        eprintln!("skipped: no {what} ({script} installs it)");
     }
     found
 }
