@@ -22,7 +22,8 @@ pub struct ExportArgs {
     #[arg(long, value_name = "OUT.igs")]
     pub iges: Option<PathBuf>,
     /// Triangular surfaces: control points U x V of the B-spline fitted to them (more
-    /// follow the surface more closely; the deviation is reported). Ignored for bspline.
+    /// follow the surface more closely; the deviation is reported). Ignored for bspline and for
+    /// Loop surfaces over a control mesh (written as patches).
     #[arg(long, value_name = "UxV", value_parser = parse_counts, default_value = "24x24")]
     pub control: (usize, usize),
     /// Triangular surfaces: samples across the domain (each triangle or cell side is cut
@@ -39,12 +40,17 @@ pub struct ExportArgs {
     #[arg(long, value_parser = units_parser(), default_value = "m")]
     pub units: IgesUnits,
     /// Loop surfaces over a control mesh (whole objects): split each control face this
-    /// many times (4^depth patches per face, 0..=3). By default the smallest depth up
-    /// to 2 whose deviation meets --tolerance.
+    /// many times uniformly (4^depth patches per face, 0..=3; default 0).
     #[arg(long, value_name = "N")]
     pub depth: Option<u32>,
+    /// Loop surfaces over a control mesh: then halve the edges at irregular vertices this
+    /// many times (0..=8; each level adds two patches per face corner there and about
+    /// halves the largest deviation, which sits there). By default the fewest levels, up
+    /// to 6, whose largest deviation meets --tolerance.
+    #[arg(long, value_name = "L")]
+    pub corner_levels: Option<u32>,
     /// Loop surfaces over a control mesh: the largest deviation of the patches from the
-    /// surface that the default depth aims for, in the surface's unit. Default: the
+    /// surface that the default corner levels aim for, in the surface's unit. Default: the
     /// fit's own RMS error from surface.json (the conversion adds at its worst point no
     /// more than the fit's typical error), or 1e-4 of the bounding-box diagonal.
     #[arg(long, value_name = "DISTANCE")]

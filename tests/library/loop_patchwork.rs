@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use std::collections::HashMap;
-use trispline::bspline::loop_patches::{loop_patchwork, Patchwork};
+use trispline::bspline::loop_patches::{loop_patchwork, Patchwork, Split};
 use trispline::bspline::BSplineSurface;
 use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
@@ -50,7 +50,7 @@ fn sampled_distance(
     work: &Patchwork,
     per_face: usize,
 ) -> f64 {
-    assert_eq!(work.depth, 0);
+    assert_eq!(work.split, Split::default());
     let mut seed = 7u64;
     let mut worst = 0.0f64;
     for (f, patch) in work.patches.iter().enumerate() {
@@ -107,7 +107,7 @@ fn edge_uses(patches: &[BSplineSurface]) -> HashMap<Vec<[u64; 3]>, usize> {
 fn regular_faces_are_written_exactly() {
     let (controls, faces) = regular_torus(12, 8);
     let surface = LoopLimitSurface::new(controls.len(), &faces).expect("manifold");
-    let work = loop_patchwork(&surface, &controls, 0).expect("patchwork");
+    let work = loop_patchwork(&surface, &controls, Split::default()).expect("patchwork");
     assert_eq!(work.patches.len(), faces.len());
     assert_eq!(work.exact_faces, faces.len());
     assert!(work.deviation.max < 1e-12, "{:?}", work.deviation);
@@ -123,7 +123,11 @@ fn extraordinary_vertices_converge_under_splits_and_stay_watertight() {
     let surface = LoopLimitSurface::new(controls.len(), &faces).expect("manifold");
     let deviations: Vec<f64> = (0..3)
         .map(|depth| {
-            let work = loop_patchwork(&surface, &controls, depth).expect("patchwork");
+            let split = Split {
+                depth,
+                corner_levels: 0,
+            };
+            let work = loop_patchwork(&surface, &controls, split).expect("patchwork");
             assert_eq!(work.patches.len(), faces.len() << (2 * depth));
             assert_eq!(work.exact_faces, 0);
             let uses = edge_uses(&work.patches);
@@ -184,7 +188,11 @@ fn crease_edges_and_boundaries_stay_shared_edges() {
         .collect();
     let surface =
         LoopLimitSurface::with_creases(controls.len(), &faces, &creases).expect("manifold");
-    let work = loop_patchwork(&surface, &controls, 1).expect("patchwork");
+    let split = Split {
+        depth: 1,
+        corner_levels: 0,
+    };
+    let work = loop_patchwork(&surface, &controls, split).expect("patchwork");
     let uses = edge_uses(&work.patches);
     let mut edge_faces: HashMap<(u32, u32), usize> = HashMap::new();
     for t in &faces {
@@ -206,5 +214,45 @@ fn crease_edges_and_boundaries_stay_shared_edges() {
 fn a_control_count_that_does_not_match_is_refused() {
     let (controls, faces) = icosahedron();
     let surface = LoopLimitSurface::new(controls.len(), &faces).expect("manifold");
-    assert!(loop_patchwork(&surface, &controls[..11], 0).is_err());
+    assert!(loop_patchwork(&surface, &controls[..11], Split::default()).is_err());
+}
+
+#[test]
+fn splits_at_irregular_vertices_conform_and_shrink_the_largest_deviation() {
+    // The icosahedron's vertices are all extraordinary: level 1 cuts each face in four,
+    // every later level cuts each of the three corner triangles in three.
+    let (controls, faces) = icosahedron();
+    let surface = LoopLimitSurface::new(controls.len(), &faces).expect("manifold");
+    let mut last = f64::INFINITY;
+    for corner_levels in 0..4 {
+        let split = Split {
+            depth: 0,
+            corner_levels,
+        };
+        let work = loop_patchwork(&surface, &controls, split).expect("patchwork");
+        let per_face = match corner_levels {
+            0 => 1,
+            l => 4 + 6 * (l as usize - 1),
+        };
+        assert_eq!(work.patches.len(), 20 * per_face);
+        assert!(
+            edge_uses(&work.patches).values().all(|&n| n == 2),
+            "watertight at {corner_levels} levels"
+        );
+        assert!(
+            work.deviation.max < 0.7 * last,
+            "{corner_levels}: {:?} after {last:e}",
+            work.deviation
+        );
+        last = work.deviation.max;
+    }
+    // A regular mesh has no irregular vertex: corner levels change nothing.
+    let (controls, faces) = regular_torus(12, 8);
+    let surface = LoopLimitSurface::new(controls.len(), &faces).expect("manifold");
+    let split = Split {
+        depth: 0,
+        corner_levels: 3,
+    };
+    let work = loop_patchwork(&surface, &controls, split).expect("patchwork");
+    assert_eq!(work.patches.len(), faces.len());
 }

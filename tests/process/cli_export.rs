@@ -168,14 +168,16 @@ fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loop
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let line = String::from_utf8_lossy(&o.stdout);
     let r = report(&step.with_file_name(format!("{name}.report.json")));
-    let depth = r["depth"].as_u64().expect("depth");
     let patches = r["patches"].as_u64().expect("patches") as usize;
-    assert_eq!(patches, faces << (2 * depth), "{line}");
+    match r["corner_levels"].as_u64().expect("corner levels") {
+        0 => assert_eq!(patches, faces, "{line}"),
+        _ => assert!(patches > faces, "{line}"),
+    }
     assert!(
         line.contains(&format!("{patches} Bezier patches")),
         "{line}"
     );
-    // The default depth meets the fit's own RMS as the largest deviation.
+    // The default corner levels meet the fit's own RMS as the largest deviation.
     let fit_rms = surface["fit"]["rms_error"].as_f64().expect("fit rms");
     assert_eq!(r["tolerance"]["value"].as_f64(), Some(fit_rms));
     assert_eq!(r["tolerance"]["met"], true, "{r}");
@@ -234,16 +236,34 @@ fn export_writes_whole_objects_as_watertight_patchworks_that_opencascade_sews() 
     trispline::io::write_mesh_file(&input, &sheet).expect("write");
     export_object(tmp.path(), "holed", &input, &["--domain", "mesh"], 2);
 
-    // An explicit depth is taken as asked, and one beyond the cap is refused.
+    // An explicit split is taken as asked, and one beyond the cap is refused.
     let p = |p: &Path| p.to_str().expect("utf-8").to_string();
     let surface = tmp.path().join("torus/surface.json");
     let step = tmp.path().join("x/deep.stp");
     let o = under_umask(
         "022",
-        &["export", &p(&surface), "--step", &p(&step), "--depth", "1"],
+        &[
+            "export",
+            &p(&surface),
+            "--step",
+            &p(&step),
+            "--depth",
+            "1",
+            "--corner-levels",
+            "0",
+        ],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert_eq!(report(&tmp.path().join("x/deep.report.json"))["depth"], 1);
+    let r = report(&tmp.path().join("x/deep.report.json"));
+    let faces = report(&surface)["control_faces"]
+        .as_array()
+        .expect("faces")
+        .len();
+    assert_eq!(
+        (r["depth"].as_u64(), r["corner_levels"].as_u64()),
+        (Some(1), Some(0))
+    );
+    assert_eq!(r["patches"].as_u64(), Some(4 * faces as u64));
     let o = under_umask(
         "022",
         &["export", &p(&surface), "--step", &p(&step), "--depth", "4"],
