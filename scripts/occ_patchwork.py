@@ -1,13 +1,14 @@
 #!/usr/bin/env python3
-"""Reads a STEP patchwork written by `trispline export` with OpenCASCADE (pip package
-cadquery-ocp; scripts/install_ocp.sh), an independent reader, and prints what it found as
-one JSON object: the faces it made, their surface degrees, the largest distance between
+"""Reads a STEP or IGES patchwork written by `trispline export` with OpenCASCADE (pip
+package cadquery-ocp; scripts/install_ocp.sh), an independent reader, and prints what it
+found as one JSON object: the faces it made, their surface degrees, the millimetres per
+declared unit (OpenCASCADE converts to millimetres on transfer), the largest distance between
 OpenCASCADE's S(u, v) and the patches' JSON (NAME.json beside the STEP file, evaluated
 here as Bezier patches) at a lattice of parameters, and the free boundary of the shell that
 BRepBuilderAPI_Sewing makes of the faces at a tight tolerance: a watertight patchwork of a
 closed object has none, one of an object with holes one closed wire per hole.
 
-usage: occ_patchwork.py FILE.stp PATCHES.json SEWING_TOLERANCE(in the file's unit)
+usage: occ_patchwork.py FILE.stp|FILE.igs PATCHES.json SEWING_TOLERANCE(in the file's unit)
 """
 import json
 import math
@@ -17,6 +18,7 @@ from OCP.BRep import BRep_Tool
 from OCP.BRepBuilderAPI import BRepBuilderAPI_Sewing
 from OCP.Geom import Geom_BSplineSurface
 from OCP.IFSelect import IFSelect_RetDone
+from OCP.IGESControl import IGESControl_Reader
 from OCP.ShapeAnalysis import ShapeAnalysis_FreeBounds
 from OCP.STEPControl import STEPControl_Reader
 from OCP.TopAbs import TopAbs_FACE, TopAbs_WIRE
@@ -51,27 +53,32 @@ def bezier(controls, s, t):
 
 
 def main():
-    step, patches_json, tolerance = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    text = open(step).read()
-    # OpenCASCADE converts to millimetres on transfer.
-    mm = 25.4 if "CONVERSION_BASED_UNIT('INCH'" in text else (
-        1.0 if ".MILLI.,.METRE." in text else 1000.0)
+    path, patches_json, tolerance = sys.argv[1], sys.argv[2], float(sys.argv[3])
     patches = json.load(open(patches_json))["patches"]
-    reader = STEPControl_Reader()
-    if reader.ReadFile(step) != IFSelect_RetDone:
+    iges = path.lower().endswith((".igs", ".iges"))
+    reader = IGESControl_Reader() if iges else STEPControl_Reader()
+    if reader.ReadFile(path) != IFSelect_RetDone:
         print(json.dumps({"read": False}))
         return
     reader.TransferRoots()
     shape = reader.OneShape()
     faces = [as_face(f) for f in shapes(shape, TopAbs_FACE)]
-    degrees = set()
+    surfaces = [BRep_Tool.Surface_s(face) for face in faces]
+    degrees = sorted({
+        f"{s.UDegree()}x{s.VDegree()}" if isinstance(s, Geom_BSplineSurface) else "not a B-spline"
+        for s in surfaces
+    })
+    if not faces or degrees != ["4x4"]:
+        print(json.dumps({"read": True, "faces": len(faces), "degrees": degrees}))
+        return
+    # The unit as OpenCASCADE understood it: its pole over ours, at the largest of ours.
+    first = patches[0]["control_points"]
+    k = max(range(25), key=lambda k: sum(x * x for x in first[k]))
+    pole = surfaces[0].Pole(k // 5 + 1, k % 5 + 1)
+    mm = math.sqrt(pole.X() ** 2 + pole.Y() ** 2 + pole.Z() ** 2) / math.sqrt(
+        sum(x * x for x in first[k]))
     worst = 0.0
-    for face, ours in zip(faces, patches):
-        surface = BRep_Tool.Surface_s(face)
-        if not isinstance(surface, Geom_BSplineSurface):
-            degrees.add("not a B-spline")
-            continue
-        degrees.add(f"{surface.UDegree()}x{surface.VDegree()}")
+    for surface, ours in zip(surfaces, patches):
         for a in range(5):
             for c in range(5):
                 s, t = a / 4 * 0.98 + 0.01, c / 4 * 0.98 + 0.01
@@ -86,7 +93,8 @@ def main():
     print(json.dumps({
         "read": True,
         "faces": len(faces),
-        "degrees": sorted(degrees),
+        "degrees": degrees,
+        "mm_per_unit": mm,
         "max_difference_from_json": worst,
         "free_edges": sewing.NbFreeEdges(),
         "closed_free_wires": sum(1 for _ in shapes(free.GetClosedWires(), TopAbs_WIRE)),

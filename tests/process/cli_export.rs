@@ -146,9 +146,9 @@ fn ocp_python() -> Option<PathBuf> {
 }
 
 /// Fits `input` (on the object path with `extra` flags), exports the surface, and checks
-/// the report and, with OpenCASCADE, the STEP file: one B-spline face per patch, equal
-/// to the patches' JSON, sewn at a tolerance of 1e-9 of the size into a shell whose free
-/// boundary is `free_loops` closed wires.
+/// the report and, with OpenCASCADE, the STEP and IGES files: one B-spline face per
+/// patch, in metres, equal to the patches' JSON, sewn at a tolerance of 1e-9 of the size
+/// into a shell whose free boundary is `free_loops` closed wires.
 fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loops: usize) {
     let p = |p: &Path| p.to_str().expect("utf-8").to_string();
     let out = dir.join(name);
@@ -163,7 +163,14 @@ fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loop
     let step = dir.join(format!("x/{name}.stp"));
     let o = under_umask(
         "022",
-        &["export", &p(&out.join("surface.json")), "--step", &p(&step)],
+        &[
+            "export",
+            &p(&out.join("surface.json")),
+            "--step",
+            &p(&step),
+            "--iges",
+            &p(&step.with_extension("igs")),
+        ],
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let line = String::from_utf8_lossy(&o.stdout);
@@ -185,34 +192,52 @@ fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loop
     let Some(python) = ocp_python() else {
         return;
     };
-    let size = 3.0; // the test objects are under 3 across
+    for cad in [step.clone(), step.with_extension("igs")] {
+        let occ = read_by_opencascade(&python, &cad, &step.with_extension("json"));
+        assert_eq!(occ["faces"].as_u64(), Some(patches as u64), "{occ}");
+        assert_eq!(occ["degrees"], serde_json::json!(["4x4"]), "{occ}");
+        let mm = occ["mm_per_unit"].as_f64().expect("unit");
+        assert!((mm - 1000.0).abs() < 1e-9, "metres read as {mm} mm: {occ}");
+        let difference = occ["max_difference_from_json"]
+            .as_f64()
+            .expect("difference");
+        assert!(difference < 1e-12 * OBJECT_SIZE, "{occ}");
+        assert_eq!(
+            occ["closed_free_wires"].as_u64(),
+            Some(free_loops as u64),
+            "{occ}"
+        );
+        assert_eq!(occ["open_free_wires"].as_u64(), Some(0), "{occ}");
+    }
+}
+
+/// The test objects are under this across (in metres, the fits' default unit).
+const OBJECT_SIZE: f64 = 3.0;
+
+/// What scripts/occ_patchwork.py says of `cad` (STEP or IGES) and the patches' JSON, sewn
+/// at a tolerance of 1e-9 of the objects' size.
+fn read_by_opencascade(python: &Path, cad: &Path, patches: &Path) -> serde_json::Value {
     let o = Command::new(python)
         .arg(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/scripts/occ_patchwork.py"
         ))
-        .arg(&step)
-        .arg(step.with_file_name(format!("{name}.json")))
-        .arg(format!("{:e}", 1e-9 * size))
+        .arg(cad)
+        .arg(patches)
+        .arg(format!("{:e}", 1e-9 * OBJECT_SIZE))
         .output()
         .expect("run python");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let occ: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
-    assert_eq!(occ["read"], true);
-    assert_eq!(occ["faces"].as_u64(), Some(patches as u64), "{occ}");
-    assert_eq!(occ["degrees"], serde_json::json!(["4x4"]), "{occ}");
-    assert!(
-        occ["max_difference_from_json"]
-            .as_f64()
-            .expect("difference")
-            < 1e-12 * size
-    );
-    assert_eq!(
-        occ["closed_free_wires"].as_u64(),
-        Some(free_loops as u64),
-        "{occ}"
-    );
-    assert_eq!(occ["open_free_wires"].as_u64(), Some(0), "{occ}");
+    // OpenCASCADE's IGES reader prints a line of its own before the JSON.
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let last = stdout
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("");
+    let occ: serde_json::Value = serde_json::from_str(last).expect("json");
+    assert_eq!(occ["read"], true, "{cad:?}");
+    occ
 }
 
 #[test]
