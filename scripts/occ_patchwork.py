@@ -8,7 +8,8 @@ here as Bezier patches) at a lattice of parameters, and the free boundary of the
 BRepBuilderAPI_Sewing makes of the faces at a tight tolerance: a watertight patchwork of a
 closed object has none, one of an object with holes one closed wire per hole.
 
-usage: occ_patchwork.py FILE.stp|FILE.igs PATCHES.json SEWING_TOLERANCE(in the file's unit)
+usage: occ_patchwork.py FILE.stp|FILE.igs PATCHES.json|- SEWING_TOLERANCE(in the file's unit)
+With - (the daemon writes no patches' JSON) the comparison and the unit are left out.
 """
 import json
 import math
@@ -54,7 +55,7 @@ def bezier(controls, s, t):
 
 def main():
     path, patches_json, tolerance = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    patches = json.load(open(patches_json))["patches"]
+    patches = json.load(open(patches_json))["patches"] if patches_json != "-" else None
     iges = path.lower().endswith((".igs", ".iges"))
     reader = IGESControl_Reader() if iges else STEPControl_Reader()
     if reader.ReadFile(path) != IFSelect_RetDone:
@@ -71,35 +72,38 @@ def main():
     if not faces or degrees != ["4x4"]:
         print(json.dumps({"read": True, "faces": len(faces), "degrees": degrees}))
         return
-    # The unit as OpenCASCADE understood it: its pole over ours, at the largest of ours.
-    first = patches[0]["control_points"]
-    k = max(range(25), key=lambda k: sum(x * x for x in first[k]))
-    pole = surfaces[0].Pole(k // 5 + 1, k % 5 + 1)
-    mm = math.sqrt(pole.X() ** 2 + pole.Y() ** 2 + pole.Z() ** 2) / math.sqrt(
-        sum(x * x for x in first[k]))
-    worst = 0.0
-    for surface, ours in zip(surfaces, patches):
-        for a in range(5):
-            for c in range(5):
-                s, t = a / 4 * 0.98 + 0.01, c / 4 * 0.98 + 0.01
-                p = surface.Value(s, t)
-                q = bezier(ours["control_points"], s, t)
-                worst = max(worst, max(abs(x / mm - y) for x, y in zip((p.X(), p.Y(), p.Z()), q)))
+    found = {"read": True, "faces": len(faces), "degrees": degrees}
+    mm = 1.0
+    if patches is not None:
+        # The unit as OpenCASCADE understood it: its pole over ours, at the largest of ours.
+        first = patches[0]["control_points"]
+        k = max(range(25), key=lambda k: sum(x * x for x in first[k]))
+        pole = surfaces[0].Pole(k // 5 + 1, k % 5 + 1)
+        mm = math.sqrt(pole.X() ** 2 + pole.Y() ** 2 + pole.Z() ** 2) / math.sqrt(
+            sum(x * x for x in first[k]))
+        worst = 0.0
+        for surface, ours in zip(surfaces, patches):
+            for a in range(5):
+                for c in range(5):
+                    s, t = a / 4 * 0.98 + 0.01, c / 4 * 0.98 + 0.01
+                    p = surface.Value(s, t)
+                    q = bezier(ours["control_points"], s, t)
+                    worst = max(worst, max(abs(x / mm - y) for x, y in zip((p.X(), p.Y(), p.Z()), q)))
+        found["mm_per_unit"] = mm
+        found["max_difference_from_json"] = worst
+    else:
+        # Only the sewing tolerance needs it: the unit the file declares.
+        text = open(path, errors="replace").read()
+        mm = 25.4 if "'INCH'" in text else 1.0 if ".MILLI." in text else 1000.0
     sewing = BRepBuilderAPI_Sewing(tolerance * mm)
     for face in faces:
         sewing.Add(face)
     sewing.Perform()
     free = ShapeAnalysis_FreeBounds(sewing.SewedShape(), tolerance * mm)
-    print(json.dumps({
-        "read": True,
-        "faces": len(faces),
-        "degrees": degrees,
-        "mm_per_unit": mm,
-        "max_difference_from_json": worst,
-        "free_edges": sewing.NbFreeEdges(),
-        "closed_free_wires": sum(1 for _ in shapes(free.GetClosedWires(), TopAbs_WIRE)),
-        "open_free_wires": sum(1 for _ in shapes(free.GetOpenWires(), TopAbs_WIRE)),
-    }))
+    found["free_edges"] = sewing.NbFreeEdges()
+    found["closed_free_wires"] = sum(1 for _ in shapes(free.GetClosedWires(), TopAbs_WIRE))
+    found["open_free_wires"] = sum(1 for _ in shapes(free.GetOpenWires(), TopAbs_WIRE))
+    print(json.dumps(found))
 
 
 if __name__ == "__main__":

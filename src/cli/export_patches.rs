@@ -4,8 +4,10 @@
 //! report beside.
 
 use super::export_args::{beside, write_cad, ExportArgs};
-use crate::bspline::loop_patches::{loop_patchwork, Patchwork, Split, MAX_CORNER_LEVELS};
-use crate::io::surface_json::bspline_json;
+use crate::bspline::loop_patches::{
+    default_tolerance, loop_patchwork, loop_patchwork_within, Patchwork, Split, MAX_CORNER_LEVELS,
+};
+use crate::io::surface_json::{bspline_json, patchwork_json};
 use crate::io::write_atomic;
 use crate::surface::loop_limit::LoopLimitSurface;
 use anyhow::{bail, Context};
@@ -18,64 +20,37 @@ use std::time::Instant;
 /// Deepest uniform split `--depth` takes: 64 patches per control face (bun_zipper's fit:
 /// 212k patches, a STEP file of some 200 MB).
 const MAX_ASKED_DEPTH: u32 = 3;
-/// Most levels of splitting at irregular vertices that the default goes to in search of
-/// the tolerance. Each level adds two patches per face corner at an irregular vertex and
-/// about halves the largest deviation, which sits at those vertices (bun_zipper's fit:
-/// 3311 patches at level 0, 9392 at 1, 24488 at 3; 62, 34 and 11 um).
-const MAX_AUTO_LEVELS: u32 = 6;
-/// Default tolerance without a fit's RMS, as a share of the controls' bounding-box
-/// diagonal (the fits' own default tolerance is 1e-3 of it).
-const DIAGONAL_SHARE: f64 = 1e-4;
-
-/// The tolerance `--tolerance` leaves to the default: the fit's RMS error recorded in
-/// surface.json, else a share of the controls' diagonal.
-fn default_tolerance(path: &Path, controls: &[DVec3]) -> anyhow::Result<(f64, &'static str)> {
+/// The tolerance `--tolerance` leaves to the default (`loop_patches::default_tolerance`
+/// over the fit's RMS error recorded in surface.json).
+fn tolerance_of(path: &Path, controls: &[DVec3]) -> anyhow::Result<(f64, &'static str)> {
     let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
     let v: serde_json::Value =
         serde_json::from_slice(&bytes).with_context(|| format!("{}: not JSON", path.display()))?;
-    let fit_rms = v
-        .pointer("/fit/rms_error")
-        .and_then(|x| x.as_f64())
-        .filter(|x| x.is_finite() && *x > 0.0);
-    if let Some(rms) = fit_rms {
-        return Ok((rms, "the fit's RMS error (surface.json fit.rms_error)"));
-    }
-    let (lo, hi) = controls.iter().fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
-    );
-    let diagonal = (hi - lo).length();
-    if !(diagonal.is_finite() && diagonal > 0.0) {
-        bail!("{}: the control points span no volume", path.display());
-    }
-    Ok((
-        diagonal * DIAGONAL_SHARE,
-        "1e-4 of the controls' bounding-box diagonal",
-    ))
+    let fit_rms = v.pointer("/fit/rms_error").and_then(|x| x.as_f64());
+    default_tolerance(fit_rms, controls)
+        .with_context(|| format!("{}: the control points span no volume", path.display()))
 }
 
-/// The patchwork at the asked depth and corner levels, or, without `--corner-levels`, at
-/// the fewest corner levels (up to `MAX_AUTO_LEVELS`) whose largest deviation is within
-/// `tolerance`.
+/// The patchwork at the asked split, or, without `--corner-levels`, at the fewest corner
+/// levels whose largest deviation is within `tolerance`.
 fn patchwork(
     surface: &LoopLimitSurface,
     controls: &[DVec3],
     args: &ExportArgs,
     tolerance: f64,
 ) -> anyhow::Result<Patchwork> {
-    let mut split = Split {
-        depth: args.depth.unwrap_or(0),
-        corner_levels: args.corner_levels.unwrap_or(0),
-    };
-    let mut work = loop_patchwork(surface, controls, split)?;
-    while args.corner_levels.is_none()
-        && work.deviation.max > tolerance
-        && split.corner_levels < MAX_AUTO_LEVELS
-    {
-        split.corner_levels += 1;
-        work = loop_patchwork(surface, controls, split)?;
-    }
-    Ok(work)
+    let depth = args.depth.unwrap_or(0);
+    Ok(match args.corner_levels {
+        Some(corner_levels) => loop_patchwork(
+            surface,
+            controls,
+            Split {
+                depth,
+                corner_levels,
+            },
+        )?,
+        None => loop_patchwork_within(surface, controls, depth, tolerance)?,
+    })
 }
 
 /// Exports the Loop surface over `surface`'s control faces with these controls.
@@ -94,7 +69,7 @@ pub(super) fn run(
     let (tolerance, tolerance_source) = match args.tolerance {
         Some(t) if t.is_finite() && t > 0.0 => (t, "--tolerance"),
         Some(t) => bail!("--tolerance {t}: must be a positive distance"),
-        None => default_tolerance(&args.surface, controls)?,
+        None => tolerance_of(&args.surface, controls)?,
     };
     let work = patchwork(surface, controls, args, tolerance)?;
     let refs: Vec<_> = work.patches.iter().collect();
@@ -109,29 +84,18 @@ pub(super) fn run(
     )?;
     let d = work.deviation;
     let met = d.max <= tolerance;
-    let report = json!({
-        "input": args.surface.display().to_string(),
-        "input_kind": "loop_mesh",
-        "step": args.step.display().to_string(),
-        "units": args.units.name(),
-        "patches": work.patches.len(),
-        "patch_degrees": [4, 4],
-        "depth": work.split.depth,
-        "corner_levels": work.split.corner_levels,
-        "corner_levels_chosen": if args.corner_levels.is_some() { "--corner-levels" } else { "fewest meeting the tolerance" },
-        "control_faces": surface.faces().len(),
-        "exact_faces": work.exact_faces,
-        "tolerance": { "value": tolerance, "from": tolerance_source, "met": met },
-        "deviation": {
-            "samples": d.samples,
-            "max": d.max,
-            "rms": d.rms,
-            "normal_p99_deg": d.normal_p99_deg,
-            "normal_max_deg": d.normal_max_deg,
-            "measure": "distance from points of the limit surface (a lattice over every patch) to the patch, and the angle between the two normals there, in the surface's unit and degrees; patches of regular control faces are the surface itself",
-        },
-        "wall_ms": t0.elapsed().as_secs_f64() * 1e3,
+    let mut report = patchwork_json(&work, tolerance, tolerance_source);
+    report["input"] = json!(args.surface.display().to_string());
+    report["input_kind"] = json!("loop_mesh");
+    report["step"] = json!(args.step.display().to_string());
+    report["units"] = json!(args.units.name());
+    report["control_faces"] = json!(surface.faces().len());
+    report["corner_levels_chosen"] = json!(if args.corner_levels.is_some() {
+        "--corner-levels"
+    } else {
+        "fewest meeting the tolerance"
     });
+    report["wall_ms"] = json!(t0.elapsed().as_secs_f64() * 1e3);
     write_atomic(
         &beside(&args.step, ".report.json"),
         &serde_json::to_vec_pretty(&report)?,

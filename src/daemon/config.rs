@@ -2,6 +2,7 @@
 
 pub use super::cluster_config::ClusterSection;
 pub use super::object_config::ObjectSection;
+use crate::io::iges::IgesUnits;
 use crate::pipeline::scan::{CorrectionConfig, ScanConfig};
 use crate::pipeline::worker::{FitConfig, WorkerConfig, DEFAULT_TESSELLATION};
 use std::path::PathBuf;
@@ -142,6 +143,14 @@ pub struct OutputSection {
     /// What happens to an input once its content was fitted.
     #[serde(default)]
     pub processed: ProcessedPolicy,
+    /// Write `surface.stp` (STEP AP214) for surfaces over a control mesh (whole objects,
+    /// inputs with subdivision connectivity): `trispline export`'s patchwork at its default
+    /// split.
+    #[serde(default)]
+    pub step: bool,
+    /// The length unit surface.stp declares (coordinates are written as fitted).
+    #[serde(default = "metres")]
+    pub step_units: IgesUnits,
 }
 
 impl Default for OutputSection {
@@ -152,8 +161,14 @@ impl Default for OutputSection {
             glb: true,
             report: true,
             processed: ProcessedPolicy::Leave,
+            step: false,
+            step_units: IgesUnits::M,
         }
     }
+}
+
+fn metres() -> IgesUnits {
+    IgesUnits::M
 }
 
 fn default_tessellation() -> usize {
@@ -397,6 +412,9 @@ impl DaemonConfig {
         }
         if self.output.report {
             files.push("report.json".into());
+        }
+        if self.output.step {
+            files.push("surface.stp".into());
         }
         files
     }

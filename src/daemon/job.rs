@@ -44,7 +44,11 @@ pub(crate) fn run_job(job: Job, store: &StateStore, sessions: &ObjectSessions) -
         ..Timings::default()
     };
     let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        fit_one(&job, (store, sessions), &mut timings)
+        let mut outcome = fit_one(&job, (store, sessions), &mut timings);
+        if job.cfg.output.step {
+            super::cad::add_step_files(&mut outcome, job.cfg.output.step_units);
+        }
+        outcome
     }))
     .unwrap_or_else(|payload| {
         let what = payload

@@ -3,6 +3,7 @@
 //! for the threads and their invariants.
 #![warn(missing_docs)]
 
+mod cad;
 mod cluster_config;
 pub mod config;
 mod confine;

@@ -388,12 +388,18 @@ impl Writer {
             hashes["legend.svg"] =
                 json!(format!("{:016x}", content_hash(outputs.legend.as_bytes())));
         }
+        if let Some(step) = &outputs.step {
+            hashes["surface.stp"] = json!(format!("{:016x}", content_hash(step)));
+        }
         outputs.report["output_hashes"] = hashes;
         let report_bytes = out.report.then(|| to_json(&outputs.report));
         let mut group: Vec<(&str, &[u8])> = Vec::with_capacity(4);
         if out.glb {
             group.push(("surface.glb", &outputs.glb));
             group.push(("legend.svg", outputs.legend.as_bytes()));
+        }
+        if let Some(step) = &outputs.step {
+            group.push(("surface.stp", step));
         }
         if let Some(r) = &report_bytes {
             group.push(("report.json", r));
@@ -439,6 +445,9 @@ impl Writer {
         }
         if out.report {
             paths["report"] = json!(report);
+        }
+        if outputs.step.is_some() {
+            paths["step"] = json!(dir.join("surface.stp"));
         }
         let mut line = json!({
             "patch": id, "version": a.version, "input": a.label, "status": outputs.status,

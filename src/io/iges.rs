@@ -11,7 +11,8 @@ use glam::DVec3;
 use std::time::SystemTime;
 
 /// The length unit an IGES file declares (coordinates are written unscaled).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum IgesUnits {
     /// Millimetres.
     Mm,

@@ -106,6 +106,33 @@ fn int_rows<const N: usize>(v: &Value, key: &str, name: &str) -> Result<Vec<[i64
 }
 
 /// The JSON object of a B-spline surface (without fit statistics, which callers add).
+/// What a patchwork is (split, patches, exact faces) and how far from its surface, against
+/// `tolerance` (from `source`): the part of report.json that `trispline export` and the
+/// daemon's surface.stp share.
+pub(crate) fn patchwork_json(
+    work: &crate::bspline::loop_patches::Patchwork,
+    tolerance: f64,
+    source: &str,
+) -> Value {
+    let d = work.deviation;
+    json!({
+        "patches": work.patches.len(),
+        "patch_degrees": [4, 4],
+        "depth": work.split.depth,
+        "corner_levels": work.split.corner_levels,
+        "exact_faces": work.exact_faces,
+        "tolerance": { "value": tolerance, "from": source, "met": d.max <= tolerance },
+        "deviation": {
+            "samples": d.samples,
+            "max": d.max,
+            "rms": d.rms,
+            "normal_p99_deg": d.normal_p99_deg,
+            "normal_max_deg": d.normal_max_deg,
+            "measure": "distance from points of the limit surface (a lattice over every patch) to the patch, and the angle between the two normals there, in the surface's unit and degrees; patches of regular control faces are the surface itself",
+        },
+    })
+}
+
 pub(crate) fn bspline_json(s: &BSplineSurface) -> Value {
     let (p, q) = s.degrees();
     let (nu, nv) = s.counts();

@@ -214,8 +214,8 @@ fn export_object(dir: &Path, name: &str, input: &Path, extra: &[&str], free_loop
 /// The test objects are under this across (in metres, the fits' default unit).
 const OBJECT_SIZE: f64 = 3.0;
 
-/// What scripts/occ_patchwork.py says of `cad` (STEP or IGES) and the patches' JSON, sewn
-/// at a tolerance of 1e-9 of the objects' size.
+/// What scripts/occ_patchwork.py says of `cad` (STEP or IGES) and the patches' JSON (`-`:
+/// none), sewn at a tolerance of 1e-9 of the objects' size.
 fn read_by_opencascade(python: &Path, cad: &Path, patches: &Path) -> serde_json::Value {
     let o = Command::new(python)
         .arg(concat!(
@@ -373,4 +373,76 @@ fn export_writes_a_bspline_as_is_and_converts_a_triangular_fit_with_its_deviatio
     }
     let stp = std::fs::read_to_string(tmp.path().join("x/tri.stp")).expect("stp");
     assert_eq!(stp.matches("B_SPLINE_SURFACE_WITH_KNOTS(").count(), 1);
+}
+
+#[test]
+fn the_daemon_writes_surface_stp_beside_whole_objects_when_asked() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let (input, out) = (tmp.path().join("in"), tmp.path().join("out"));
+    std::fs::create_dir_all(&input).expect("in");
+    trispline::io::write_mesh_file(
+        &input.join("torus.obj"),
+        &trispline::testdata::torus(32, 12),
+    )
+    .expect("write");
+    write_bump_obj(&input.join("bump.obj"), 25, 30);
+    let config = trispline::daemon::config::DEFAULT_CONFIG
+        .replace("step = false", "step = true")
+        .replace("step_units = \"m\"", "step_units = \"mm\"");
+    assert!(config.contains("step = true") && config.contains("step_units = \"mm\""));
+    std::fs::write(tmp.path().join("cfg.toml"), config).expect("config");
+    let p = |p: &Path| p.to_str().expect("utf-8").to_string();
+    let o = under_umask(
+        "022",
+        &[
+            "watch",
+            &p(&input),
+            "--out",
+            &p(&out),
+            "--config",
+            &p(&tmp.path().join("cfg.toml")),
+            "--once",
+        ],
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The whole object: surface.stp, with the patchwork in report.json and the event.
+    let r = report(&out.join("torus/report.json"));
+    let cad = &r["cad"];
+    assert_eq!(cad["written"], true, "{cad}");
+    assert_eq!(cad["units"], "mm");
+    assert_eq!(cad["tolerance"]["met"], true, "{cad}");
+    let stp = out.join("torus/surface.stp");
+    let text = std::fs::read_to_string(&stp).expect("surface.stp");
+    assert!(text.starts_with("ISO-10303-21;") && text.contains("SI_UNIT(.MILLI.,.METRE.)"));
+    assert_eq!(mode(&stp), 0o644);
+    let hash = r["output_hashes"]["surface.stp"].as_str().expect("hash");
+    assert_eq!(hash.len(), 16);
+    let events = std::fs::read_to_string(out.join("events.ndjson")).expect("events");
+    assert!(events
+        .lines()
+        .any(|l| l.contains("\"step\"") && l.contains("torus/surface.stp")));
+    let validator = crate::schemas::schema("report.schema.json");
+    assert_eq!(
+        crate::schemas::violations(&validator, &r),
+        Vec::<String>::new()
+    );
+    // The disk-like scan fits on its grid: no STEP, and report.json says why.
+    let r = report(&out.join("bump/report.json"));
+    assert_eq!(
+        crate::schemas::violations(&validator, &r),
+        Vec::<String>::new()
+    );
+    assert_eq!(r["cad"]["written"], false);
+    assert!(r["cad"]["reason"]
+        .as_str()
+        .expect("reason")
+        .contains("trispline export"));
+    assert!(!out.join("bump/surface.stp").exists());
+    let Some(python) = ocp_python() else {
+        return;
+    };
+    let occ = read_by_opencascade(&python, &stp, Path::new("-"));
+    assert_eq!(occ["faces"], cad["patches"], "{occ}");
+    assert_eq!(occ["closed_free_wires"].as_u64(), Some(0), "{occ}");
+    assert_eq!(occ["open_free_wires"].as_u64(), Some(0), "{occ}");
 }

@@ -9,7 +9,7 @@ use trispline::io::writers::write_obj;
 use trispline::surface::bezier::{lattice_points, lattice_triangles};
 use trispline::TriMesh;
 
-fn schema(name: &str) -> jsonschema::Validator {
+pub(crate) fn schema(name: &str) -> jsonschema::Validator {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("schemas")
         .join(name);
@@ -23,7 +23,10 @@ fn read_json(p: &Path) -> serde_json::Value {
 }
 
 /// Every violation of `doc` against `validator`, as text.
-fn violations(validator: &jsonschema::Validator, doc: &serde_json::Value) -> Vec<String> {
+pub(crate) fn violations(
+    validator: &jsonschema::Validator,
+    doc: &serde_json::Value,
+) -> Vec<String> {
     validator
         .iter_errors(doc)
         .map(|e| format!("{} at {}", e, e.instance_path()))

@@ -31,6 +31,16 @@ pub const MAX_DEPTH: u32 = 4;
 /// Most levels of splitting at irregular vertices.
 pub const MAX_CORNER_LEVELS: u32 = 8;
 
+/// Most corner levels [`loop_patchwork_within`] goes to in search of its tolerance. Each
+/// level adds two patches per face corner at an irregular vertex and about halves the
+/// largest deviation, which sits at those vertices (bun_zipper's fit: 3311 patches at
+/// level 0, 9392 at 1, 24488 at 3; 62, 34 and 11 um).
+pub const MAX_AUTO_CORNER_LEVELS: u32 = 6;
+
+/// Default tolerance without a fit's RMS, as a share of the controls' bounding-box
+/// diagonal (the fits' own default tolerance is 1e-3 of it).
+const DIAGONAL_SHARE: f64 = 1e-4;
+
 /// Side of the lattice (boundary included) on which the deviation is measured: not a
 /// divisor of the fit's lattices, so the check sees points the fit did not.
 const CHECK_LATTICE: usize = 11;
@@ -189,6 +199,45 @@ pub fn loop_patchwork(
             .count(),
         deviation: total.finish(),
     })
+}
+
+/// The patchwork cut uniformly `depth` times and then at the fewest corner levels (up to
+/// [`MAX_AUTO_CORNER_LEVELS`]) whose largest deviation is within `tolerance`.
+pub fn loop_patchwork_within(
+    surface: &LoopLimitSurface,
+    controls: &[DVec3],
+    depth: u32,
+    tolerance: f64,
+) -> Result<Patchwork, BSplineError> {
+    let mut split = Split {
+        depth,
+        corner_levels: 0,
+    };
+    let mut work = loop_patchwork(surface, controls, split)?;
+    while work.deviation.max > tolerance && split.corner_levels < MAX_AUTO_CORNER_LEVELS {
+        split.corner_levels += 1;
+        work = loop_patchwork(surface, controls, split)?;
+    }
+    Ok(work)
+}
+
+/// The default tolerance of a patchwork and where it comes from: the fit's RMS error when
+/// known (the conversion then adds at its worst point no more than the fit's typical
+/// error), else 1e-4 of the controls' bounding-box diagonal; `None` when the controls span
+/// nothing.
+pub fn default_tolerance(fit_rms: Option<f64>, controls: &[DVec3]) -> Option<(f64, &'static str)> {
+    if let Some(rms) = fit_rms.filter(|x| x.is_finite() && *x > 0.0) {
+        return Some((rms, "the fit's RMS error (surface.json fit.rms_error)"));
+    }
+    let (lo, hi) = controls.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let diagonal = (hi - lo).length();
+    (diagonal.is_finite() && diagonal > 0.0).then_some((
+        diagonal * DIAGONAL_SHARE,
+        "1e-4 of the controls' bounding-box diagonal",
+    ))
 }
 
 /// Every patch edge of the cuts, once, in the direction from its lower node to its

@@ -53,6 +53,9 @@ pub struct PatchOutputs {
     pub glb: Vec<u8>,
     /// legend.svg: what surface.glb's colours mean.
     pub legend: String,
+    /// surface.stp, when asked for and the surface has a CAD form (the daemon adds it:
+    /// `daemon::cad`).
+    pub step: Option<Vec<u8>>,
     /// What the next version of the patch starts from; callers store it opaquely.
     pub warm: WarmStart,
     /// How the fit ended.
@@ -440,6 +443,7 @@ pub fn outputs_of(fitted: FittedPatch, cfg: &WorkerConfig, wall: Instant) -> Pat
         report,
         glb,
         legend: error_legend(budget.tolerance),
+        step: None,
         warm,
         status: fitted.outcome.status,
     }
