@@ -44,8 +44,8 @@ pub struct ExportArgs {
     #[arg(long, value_name = "N")]
     pub depth: Option<u32>,
     /// Loop surfaces over a control mesh: then halve the edges at irregular vertices this
-    /// many times (0..=8; each level adds two patches per face corner there and about
-    /// halves the largest deviation, which sits there). By default the fewest levels, up
+    /// many times (0..=8; each level adds two patches per face corner there and
+    /// shrinks the largest deviation, which sits there). By default the fewest levels, up
     /// to 6, whose largest deviation meets --tolerance.
     #[arg(long, value_name = "L")]
     pub corner_levels: Option<u32>,

@@ -128,7 +128,7 @@ pub(crate) fn patchwork_json(
             "rms": d.rms,
             "normal_p99_deg": d.normal_p99_deg,
             "normal_max_deg": d.normal_max_deg,
-            "measure": "distance from points of the limit surface (a lattice over every patch) to the patch, and the angle between the two normals there, in the surface's unit and degrees; patches of regular control faces are the surface itself",
+            "measure": "distance from points of the limit surface (a lattice over every patch) to the patchwork (their own patch, or the one across the edge their foot reaches), and the angle between the two normals there, in the surface's unit and degrees; patches of regular control faces are the surface itself",
         },
     })
 }

@@ -42,8 +42,9 @@ fn tensor_param(u: f64, v: f64) -> (f64, f64) {
     (u, if u < 1.0 { v / (1.0 - u) } else { 0.0 })
 }
 
-/// Largest distance from random limit points of each face to that face's (depth 0) patch,
-/// by the B-spline's own closest-point search.
+/// Largest distance from random limit points of each face to the (depth 0) patchwork: the
+/// nearest of the face's own patch (searched from the point's parameter) and every other
+/// patch (from its middle), by the B-spline's own closest-point search.
 fn sampled_distance(
     surface: &LoopLimitSurface,
     controls: &[DVec3],
@@ -69,8 +70,13 @@ fn sampled_distance(
                     },
                 )
                 .position;
-            let (_, d) = patch.closest_point(limit, tensor_param(u, v));
-            worst = worst.max(d);
+            let own = patch.closest_point(limit, tensor_param(u, v)).1;
+            let nearest = work
+                .patches
+                .iter()
+                .map(|other| other.closest_point(limit, (0.3, 0.5)).1)
+                .fold(own, f64::min);
+            worst = worst.max(nearest);
         }
     }
     worst

@@ -175,9 +175,9 @@ impl Fits {
     }
 
     /// The quartic from `start` to `end` (the limit curve's ends) nearest the limit curve
-    /// `p` over [0, 1]: its middle points
-    /// fitted at the samples' parameters, then at their foot points on the curve (the
-    /// limit curve's own parameter is not the polynomial's near an extraordinary vertex).
+    /// `p` over [0, 1]: its middle points fitted at the samples' parameters, then at their
+    /// foot points on the curve (near an extraordinary vertex the limit curve's own
+    /// parameter is not the polynomial's).
     pub(super) fn edge(&self, [start, end]: [DVec3; 2], p: impl Fn(f64) -> DVec3) -> [DVec3; 5] {
         let samples: Vec<DVec3> = self.edge.iter().map(|&t| p(t)).collect();
         let mut params = self.edge.clone();
@@ -210,19 +210,14 @@ impl Fits {
         c
     }
 
-    /// The interior ordinates of a quartic triangle whose boundary is set, nearest the
-    /// limit surface `limit` over the triangle: fitted at the samples' parameters, then at
-    /// their foot points on the patch.
+    /// The interior ordinates of a quartic triangle whose boundary is set (the interior
+    /// ones are overwritten), nearest the limit surface `limit` over the triangle: fitted at
+    /// the samples' parameters, then at their foot points on the patch.
     pub(super) fn interior(&self, b: &mut [DVec3; 15], limit: impl Fn(f64, f64) -> DVec3) {
         let samples: Vec<DVec3> = self.inner.iter().map(|&(x, y)| limit(x, y)).collect();
         let mut params = self.inner.clone();
-        for slot in INNER {
-            b[slot] = DVec3::ZERO;
-        }
-        // A start that is a plane through the boundary's average, so the first feet land.
-        let mut fitted = false;
         for round in 0..=CORRECTION_ROUNDS {
-            if round > 0 && fitted {
+            if round > 0 {
                 for (q, x) in params.iter_mut().zip(&samples) {
                     *q = triangle_foot(b, *x, *q).0;
                 }
@@ -243,8 +238,9 @@ impl Fits {
                     for (slot, p) in INNER.iter().zip(inner) {
                         b[*slot] = p;
                     }
-                    fitted = true;
                 }
+                // Distinct lattice parameters keep the normal matrix regular; feet that
+                // all fell together would not, and the last fit stays.
                 None => break,
             }
         }
