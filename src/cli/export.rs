@@ -197,6 +197,7 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<ExitCode> {
     if !(4..=2000).contains(&args.samples) {
         bail!("--samples must be in 4..=2000");
     }
+    super::export_patches::check_flags(args)?;
     let description = read_surface_json(&args.surface)?;
     if let Some(dir) = args.step.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;

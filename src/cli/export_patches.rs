@@ -53,6 +53,20 @@ fn patchwork(
     })
 }
 
+/// Refuses the patchwork flags out of their ranges, before anything is read or made.
+pub(super) fn check_flags(args: &ExportArgs) -> anyhow::Result<()> {
+    if let Some(d) = args.depth.filter(|&d| d > MAX_ASKED_DEPTH) {
+        bail!("--depth {d}: must be in 0..={MAX_ASKED_DEPTH}");
+    }
+    if let Some(l) = args.corner_levels.filter(|&l| l > MAX_CORNER_LEVELS) {
+        bail!("--corner-levels {l}: must be in 0..={MAX_CORNER_LEVELS}");
+    }
+    if let Some(t) = args.tolerance.filter(|t| !(t.is_finite() && *t > 0.0)) {
+        bail!("--tolerance {t}: must be a positive distance");
+    }
+    Ok(())
+}
+
 /// Exports the Loop surface over `surface`'s control faces with these controls.
 pub(super) fn run(
     args: &ExportArgs,
@@ -60,15 +74,8 @@ pub(super) fn run(
     controls: &[DVec3],
     t0: Instant,
 ) -> anyhow::Result<ExitCode> {
-    if let Some(d) = args.depth.filter(|&d| d > MAX_ASKED_DEPTH) {
-        bail!("--depth {d}: must be in 0..={MAX_ASKED_DEPTH}");
-    }
-    if let Some(l) = args.corner_levels.filter(|&l| l > MAX_CORNER_LEVELS) {
-        bail!("--corner-levels {l}: must be in 0..={MAX_CORNER_LEVELS}");
-    }
     let (tolerance, tolerance_source) = match args.tolerance {
-        Some(t) if t.is_finite() && t > 0.0 => (t, "--tolerance"),
-        Some(t) => bail!("--tolerance {t}: must be a positive distance"),
+        Some(t) => (t, "--tolerance"),
         None => tolerance_of(&args.surface, controls)?,
     };
     let work = patchwork(surface, controls, args, tolerance)?;

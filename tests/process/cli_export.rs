@@ -289,9 +289,14 @@ fn export_writes_whole_objects_as_watertight_patchworks_that_opencascade_sews() 
         (Some(1), Some(0))
     );
     assert_eq!(r["patches"].as_u64(), Some(4 * faces as u64));
+    let fresh = tmp.path().join("not_made/deep.stp");
     let o = under_umask(
         "022",
-        &["export", &p(&surface), "--step", &p(&step), "--depth", "4"],
+        &["export", &p(&surface), "--step", &p(&fresh), "--depth", "4"],
+    );
+    assert!(
+        !fresh.parent().expect("folder").exists(),
+        "refused before making anything"
     );
     assert_eq!(
         o.status.code(),
