@@ -194,6 +194,17 @@ pub fn faceted_prism(sides: usize, rows: usize, per_side: usize) -> (TriMesh, Ve
 /// diagonals: a closed genus-1 mesh without subdivision connectivity, so the worker fits
 /// it on the object path.
 pub fn torus(n: usize, m: usize) -> TriMesh {
+    torus_grid(n, m, |i, j| (i + j) % 2 == 0)
+}
+
+/// The same torus with every quad split along one diagonal: valence 6 everywhere, so every
+/// face of it as a Loop control mesh is a box-spline patch.
+pub fn regular_torus(n: usize, m: usize) -> TriMesh {
+    torus_grid(n, m, |_, _| true)
+}
+
+/// The torus grid, quad (i, j) split along (i, j)-(i+1, j+1) where `along_first` says so.
+fn torus_grid(n: usize, m: usize, along_first: impl Fn(usize, usize) -> bool) -> TriMesh {
     use std::f64::consts::TAU;
     let mut positions = Vec::new();
     for i in 0..n {
@@ -207,7 +218,7 @@ pub fn torus(n: usize, m: usize) -> TriMesh {
     let mut triangles = Vec::new();
     for i in 0..n {
         for j in 0..m {
-            if (i + j) % 2 == 0 {
+            if along_first(i, j) {
                 triangles.push([at(i, j), at(i + 1, j), at(i, j + 1)]);
                 triangles.push([at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)]);
             } else {

@@ -11,29 +11,10 @@ use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::{faceted_prism, icosahedron, uniform};
 
-/// A torus grid with every quad split along the same diagonal: valence 6 everywhere, so
-/// every face is a box-spline patch.
+/// `testdata::regular_torus` as a control net.
 fn regular_torus(n: usize, m: usize) -> (Vec<DVec3>, Vec<[u32; 3]>) {
-    use std::f64::consts::TAU;
-    let mut positions = Vec::new();
-    for i in 0..n {
-        for j in 0..m {
-            let (a, b) = (TAU * i as f64 / n as f64, TAU * j as f64 / m as f64);
-            let r = 1.0 + 0.35 * b.cos();
-            positions.push(DVec3::new(r * a.cos(), r * a.sin(), 0.35 * b.sin()));
-        }
-    }
-    let at = |i: usize, j: usize| ((i % n) * m + j % m) as u32;
-    let faces = (0..n)
-        .flat_map(|i| (0..m).map(move |j| (i, j)))
-        .flat_map(|(i, j)| {
-            [
-                [at(i, j), at(i + 1, j), at(i, j + 1)],
-                [at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)],
-            ]
-        })
-        .collect();
-    (positions, faces)
+    let mesh = trispline::testdata::regular_torus(n, m);
+    (mesh.positions, mesh.triangles)
 }
 
 /// The tensor-form parameter of face parameter (u, v) on a depth-0 patch: u = s,

@@ -108,24 +108,12 @@ fn at(c: &Corners, x: f64, y: f64) -> (f64, f64) {
 /// interior vertex of valence other than 6, a boundary vertex with other than 3 faces, any
 /// vertex on a crease).
 fn irregular_vertices(surface: &LoopLimitSurface) -> Vec<bool> {
-    let count = surface.control_count();
-    let (mut faces, mut edge_faces) = (vec![0usize; count], HashMap::new());
-    for t in surface.faces() {
-        for k in 0..3 {
-            faces[t[k] as usize] += 1;
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            *edge_faces.entry((a.min(b), a.max(b))).or_insert(0usize) += 1;
-        }
-    }
-    let mut boundary = vec![false; count];
-    for (&(a, b), &n) in &edge_faces {
-        if n == 1 {
-            boundary[a as usize] = true;
-            boundary[b as usize] = true;
-        }
-    }
-    let mut irregular: Vec<bool> = (0..count)
-        .map(|v| faces[v] != if boundary[v] { 3 } else { 6 })
+    let topology = surface.topology();
+    let mut irregular: Vec<bool> = topology
+        .face_valence
+        .iter()
+        .zip(&topology.boundary)
+        .map(|(&faces, &boundary)| faces != if boundary { 3 } else { 6 })
         .collect();
     for e in surface.crease_edges() {
         for &v in e {
