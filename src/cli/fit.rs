@@ -174,6 +174,10 @@ pub struct FitArgs {
     /// this many times as much as the edges beside it, in a feature line of its own (0: off).
     #[arg(long, default_value_t = DEFAULT_CREASE_RELATIVE_RATIO)]
     pub crease_relative_ratio: f64,
+    /// Whole objects with sharp edges: also fit the faceted surface (every control edge a
+    /// crease: the surface is the control mesh) and keep it where it is nearer the data.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub faceted: bool,
     /// Tessellation segments per side of the domain triangle in surface.glb.
     #[arg(long, default_value_t = DEFAULT_TESSELLATION)]
     pub tessellation: usize,
@@ -226,6 +230,7 @@ impl FitArgs {
             },
             crease_angle_deg: self.crease_angle_deg,
             crease_relative_ratio: self.crease_relative_ratio,
+            faceted: self.faceted,
             components: ComponentsConfig {
                 mode: self.components,
                 min_vertices: self.min_component_vertices,
@@ -400,6 +405,9 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path, asked: SurfaceKind) -> S
     if let Some(said) = escalation_summary(&r["object"], &r["control_points"]) {
         line.push_str(&said);
     }
+    if let Some(said) = faceted_clause(&r["object"]["faceted"]) {
+        line.push_str(&said);
+    }
     if let Some(added) = stray_repair_controls(&r["object"]["refinement"]) {
         line.push_str(&format!(
             "; {added} control points added where the surface strayed from the data (the \
@@ -498,6 +506,22 @@ fn escalation_summary(object: &serde_json::Value, controls: &serde_json::Value) 
          ({outcome}; report.json object.stray_budgets)",
         budgets[0]["controls"],
         again.join(" and "),
+    ))
+}
+
+/// What the line says when the faceted surface was kept (`object.faceted`): a user who
+/// asked for a smooth surface should hear that this one has sharp edges everywhere.
+fn faceted_clause(faceted: &serde_json::Value) -> Option<String> {
+    if faceted["kept_faceted"].as_bool() != Some(true) {
+        return None;
+    }
+    let rms = |key: &str| faceted[key].as_f64().unwrap_or(f64::NAN);
+    Some(format!(
+        "; faceted: every control edge is a crease, so the surface is its control mesh, \
+         {:.3e} RMS from the data against the smooth surface's {:.3e} (report.json \
+         object.faceted; --faceted false keeps the smooth one)",
+        rms("faceted_rms"),
+        rms("smooth_rms"),
     ))
 }
 

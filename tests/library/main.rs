@@ -22,6 +22,7 @@ mod mesh_clean;
 mod mesh_elephant;
 mod mesh_roundtrip;
 mod object_crease;
+mod object_faceted;
 mod object_fit;
 mod object_pipeline;
 mod object_session;

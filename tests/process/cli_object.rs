@@ -316,3 +316,48 @@ fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
     );
     assert!(line.contains(&least), "{line}");
 }
+
+/// A finely faceted part (a 32-sided prism, whose sides turn by too little for a crease):
+/// the faceted surface is kept and the line says so; `--faceted false` keeps the smooth one.
+#[test]
+fn fit_keeps_the_facets_of_a_faceted_part_unless_told_not_to() {
+    let tmp = tempfile::tempdir().expect("tmp");
+    let input = tmp.path().join("prism.ply");
+    let (prism, _) = trispline::testdata::faceted_prism(32, 6, 2);
+    trispline::io::write_mesh_file(&input, &prism).expect("write");
+    let fit_with = |name: &str, faceted: &str| {
+        let dir = tmp.path().join(name);
+        let out = run(bin()
+            .arg("fit")
+            .arg(&input)
+            .args(["--target-controls-pct", "25", "--faceted", faceted])
+            .arg("--out")
+            .arg(&dir));
+        let line = String::from_utf8_lossy(&out.stdout).into_owned();
+        (
+            line,
+            read_json(&dir.join("report.json")),
+            read_json(&dir.join("surface.json")),
+        )
+    };
+    let (line, report, surface) = fit_with("faceted", "true");
+    let choice = &report["object"]["faceted"];
+    assert_eq!(choice["kept_faceted"], true, "{choice}");
+    assert!(
+        line.contains("faceted: every control edge is a crease"),
+        "{line}"
+    );
+    let number = |v: &serde_json::Value| v.as_f64().expect("a number");
+    assert!(number(&choice["faceted_rms"]) < 1e-3 * number(&choice["smooth_rms"]));
+    assert_eq!(report["final"]["rms_error"], choice["faceted_rms"]);
+    // Every interior control edge is written as a crease.
+    let faces: Vec<[u32; 3]> =
+        serde_json::from_value(surface["control_faces"].clone()).expect("control faces");
+    let creases: Vec<[u32; 2]> =
+        serde_json::from_value(surface["crease_edges"].clone()).expect("crease edges");
+    assert!(trispline::pipeline::object::is_faceted(&faces, &creases));
+
+    let (line, report, _) = fit_with("smooth", "false");
+    assert_eq!(report["object"]["faceted"], serde_json::Value::Null);
+    assert!(!line.contains("faceted"), "{line}");
+}

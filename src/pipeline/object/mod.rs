@@ -21,6 +21,7 @@ mod component;
 mod corners;
 mod data_side;
 mod extend;
+mod faceted;
 mod fit_parts;
 mod layout;
 mod local;
@@ -48,15 +49,17 @@ pub use component::ObjectInput;
 use corners::rim_corners;
 use data_side::DataSide;
 pub use extend::{extend_over_new_ground, NotExtended, PreviousFit};
+pub use faceted::is_faceted;
 use fit_parts::{declined, FitStart, GoOn, RoundContext, Setup};
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
-use model::{control_target, ms_since, MAX_REFUSALS};
+use model::{control_target, landing_params, ms_since, MAX_REFUSALS};
 pub use model::{
-    LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport, RoundStop,
-    StrayBudget, CURVATURE_FLOOR, STRAY_BUDGET_STEPS, STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
+    FacetedChoice, LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
+    RoundStop, StrayBudget, CURVATURE_FLOOR, STRAY_BUDGET_STEPS, STRAY_LATTICE_SEGMENTS,
+    STRAY_LIMIT_SHARE,
 };
 use refine::{faces_beyond, refined_mesh, Fitted, Splits, MIN_FACES_BEYOND_SHARE};
 pub use refine::{RefineOptions, RefineRound};
@@ -65,6 +68,7 @@ use simplification::simplify_for_control;
 use solve::{point_fit, rows_at, Feet, Rim};
 use std::cell::Cell;
 use std::time::Instant;
+use stray::grow_budget_while_straying;
 pub use stray::{farthest_from, farthest_from_data};
 pub use version::refit_where_changed;
 
@@ -106,105 +110,18 @@ pub fn fit_object_input(
     let side_ms = ms_since(t);
     let asked = control_target(component.positions.len(), opts);
     let fit = fit_at_target(&side, data_topo.as_ref(), asked, opts)?;
-    let mut fit =
-        grow_budget_while_straying(fit, asked, opts, &side, data_topo.as_ref(), |target| {
-            fit_at_target(&side, data_topo.as_ref(), target, opts)
-        });
+    let fit = grow_budget_while_straying(fit, asked, opts, &side, data_topo.as_ref(), |target| {
+        fit_at_target(&side, data_topo.as_ref(), target, opts)
+    });
+    let mut fit = faceted::keep_nearer(fit, &side, data_topo.as_ref(), opts, |start, o| {
+        fit_from(&side, start, o)
+    });
     // The data side is built once for every fit: reported with the kept fit's setup.
     fit.times.surface_ms += side_ms;
     fit.cleaning = Some(cleaning);
     fit.times.clean_ms = prepare_ms;
     fit.times.total_ms = prepare_ms + ms_since(start);
     Ok(fit)
-}
-
-/// See `model::STRAY_BUDGET_STEPS`.
-const STRAY_BUDGET_GROWTH: usize = 2;
-
-/// `fit` (at the `asked` budget; the data are `side`'s, of topology `data_topo` where it
-/// is a manifold) or, when its surface strays past the bound, a fit `fit_at` makes at
-/// `STRAY_BUDGET_GROWTH` times the controls the fit before spent (its budget, where it
-/// spent fewer), step after step until one is within the bound. Each step runs only
-/// while a decimation of the data to the last fit's control count strays past the bound
-/// as well (`stray::decimation_strays`: where such a mesh stays within it, the surface
-/// strays by its own making, a boundary curve past a jagged rim, and more controls do
-/// not mend it: chin_tri on the object path, 0.53 % at 2x as at 1x), and stops at a fit
-/// that strays no less than the one before. The least straying fit is kept, within the
-/// bound or not: where the steps run out first, each brought the surface closer (elk,
-/// 4.3 % of the diagonal at 82 controls, 0.67 % at 772), which a user asking for a
-/// surface on the data would rather have than the budget. The fits tried are listed in
-/// `stray_budgets`, the time beside the kept fit in `times.stray_budget_ms`.
-fn grow_budget_while_straying(
-    fit: ObjectFit,
-    asked: usize,
-    opts: &ObjectOptions,
-    side: &DataSide,
-    data_topo: Option<&Topology>,
-    fit_at: impl Fn(usize) -> Result<ObjectFit, ObjectError>,
-) -> ObjectFit {
-    let Some(share) = opts.max_stray_share else {
-        return fit;
-    };
-    let limit = share * fit.component.bounds_diagonal();
-    let points = fit.data.len();
-    let stray_of = |f: &ObjectFit| f.stray.unwrap_or(f64::INFINITY);
-    let mut tried = vec![StrayBudget::of(asked, &fit)];
-    let start = Instant::now();
-    // The last fit that strayed less than the one before (the least straying), and where
-    // it is in `tried`.
-    let mut closer = None;
-    let mut last_stray = stray_of(&fit);
-    let mut last_controls = fit.controls.len();
-    let mut target = asked;
-    for _ in 0..opts.stray_budget_steps {
-        // Twice what the last fit spent: holes and handles can force more controls than
-        // the budget asked (pinion: 68 for 17), and doubling the budget alone spent the
-        // steps on budgets that fit had passed already.
-        target = (target.max(last_controls) * STRAY_BUDGET_GROWTH).min(points);
-        let late = opts.stop.deadline.is_some_and(|d| Instant::now() >= d);
-        if last_stray <= limit || late || target <= last_controls {
-            break;
-        }
-        let budget_holds_shape = !stray::decimation_strays(
-            side.nearest(),
-            side.mesh,
-            data_topo,
-            last_controls,
-            limit,
-            STRAY_LATTICE_SEGMENTS,
-        );
-        if budget_holds_shape {
-            break;
-        }
-        let Ok(next) = fit_at(target) else {
-            break;
-        };
-        tried.push(StrayBudget::of(target, &next));
-        let next_stray = stray_of(&next);
-        if next_stray >= last_stray {
-            break;
-        }
-        (last_stray, last_controls) = (next_stray, next.controls.len());
-        closer = Some((tried.len() - 1, next));
-    }
-    // Everything but the kept fit's own time: the checks and the fits dropped.
-    let mut spent_ms = ms_since(start);
-    let mut kept = match closer {
-        Some((at, next)) => {
-            tried[at].kept = true;
-            spent_ms += fit.times.total_ms - next.times.total_ms;
-            next
-        }
-        None => {
-            tried[0].kept = true;
-            fit
-        }
-    };
-    kept.times.stray_budget_ms = spent_ms;
-    if tried.len() > 1 {
-        kept.stray_budgets = tried;
-    }
-    kept
 }
 
 /// The whole fit at `target` controls of the data `side` holds (`data_topo`: its topology,
@@ -272,14 +189,7 @@ fn fit_at_target(
         ),
         None => Vec::new(),
     };
-    let params: Vec<SurfaceParam> = landing
-        .iter()
-        .map(|l| SurfaceParam {
-            face: l.face,
-            u: l.u,
-            v: l.v,
-        })
-        .collect();
+    let params = landing_params(&landing);
     let t = Instant::now();
     let (control_mesh, params, crease_edges, mut layout) = improve_layout(
         component,
@@ -522,6 +432,7 @@ fn fit_from(
         stray: None,
         cleaning: None,
         stray_budgets: Vec::new(),
+        faceted: None,
     })
 }
 

@@ -6,7 +6,7 @@ use super::refine::{Fitted, RefineOptions, RefineRound};
 use crate::fit::budget::{Budget, StepStats};
 use crate::mesh::clean::{CleanOptions, CleanReport};
 use crate::mesh::crease::CreaseOptions;
-use crate::mesh::simplify::{SimplifyError, SimplifyOptions, SurfaceTopology};
+use crate::mesh::simplify::{Landing, SimplifyError, SimplifyOptions, SurfaceTopology};
 use crate::mesh::topology::TopologyError;
 use crate::surface::loop_limit::{LoopLimitError, LoopLimitSurface};
 use crate::surface::SurfaceParam;
@@ -42,6 +42,18 @@ pub(super) fn control_target(n: usize, opts: &ObjectOptions) -> usize {
         .unwrap_or((opts.target_controls_pct / 100.0 * n as f64).round() as usize)
         .max(4)
         .min(n)
+}
+
+/// Each data point's landing on a simplified mesh as its parameter on the control faces.
+pub(super) fn landing_params(landing: &[Landing]) -> Vec<SurfaceParam> {
+    landing
+        .iter()
+        .map(|l| SurfaceParam {
+            face: l.face,
+            u: l.u,
+            v: l.v,
+        })
+        .collect()
 }
 
 /// Budget, cleaning, simplification and fitting settings of [`fit_object`].
@@ -105,6 +117,10 @@ pub struct ObjectOptions {
     /// the repair leaves the surface straying past `max_stray_share` and the budget cannot
     /// hold the shape (`fit_object_input`; the least straying fit is kept); 0: none.
     pub stray_budget_steps: usize,
+    /// On data with sharp edges, also fit the faceted candidate (every control edge a
+    /// crease: the limit surface is the control mesh) at the kept fit's control count,
+    /// and keep it where it fits the data better (`faceted`).
+    pub faceted_candidate: bool,
 }
 
 /// The tangential share of the rounds' squared-distance term where the curvature gives
@@ -211,6 +227,7 @@ impl Default for ObjectOptions {
             stop: RoundStop::default(),
             max_stray_share: Some(STRAY_LIMIT_SHARE),
             stray_budget_steps: STRAY_BUDGET_STEPS,
+            faceted_candidate: true,
         }
     }
 }
@@ -270,6 +287,10 @@ pub struct ObjectTimes {
     /// The stray escalation beside the fit kept: its decimation checks and the whole fits
     /// it dropped (`ObjectFit::stray_budgets`); part of `total_ms`.
     pub stray_budget_ms: f64,
+    /// The faceted candidate of a sharp-edged object, its decimation, fit and stray
+    /// measurement (`ObjectFit::faceted`); part of `total_ms`. The other stages are the
+    /// smooth fit's, whichever was kept.
+    pub faceted_ms: f64,
 }
 
 /// RMS and max distance of the data to the surface after a stage.
@@ -330,6 +351,33 @@ pub struct ObjectFit {
     /// The whole fits tried when the first strayed past the bound, that one first, each at
     /// a larger budget (empty when the first stayed within it or was not measured).
     pub stray_budgets: Vec<StrayBudget>,
+    /// Which of the smooth and the faceted fit was kept, on data with sharp edges
+    /// (`None`: the faceted candidate was not tried).
+    pub faceted: Option<FacetedChoice>,
+}
+
+/// Which fit of a sharp-edged object was kept, and the figures it was chosen on
+/// (`faceted::keep_nearer`).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct FacetedChoice {
+    /// Control points of both fits.
+    pub controls: usize,
+    /// The smooth fit's RMS distance from the data ...
+    pub smooth_rms: f64,
+    /// ... its largest distance ...
+    pub smooth_max: f64,
+    /// ... and how far it strays from the data (`None`: not measured).
+    pub smooth_stray: Option<f64>,
+    /// The faceted fit's RMS distance from the data ...
+    pub faceted_rms: f64,
+    /// ... its largest distance ...
+    pub faceted_max: f64,
+    /// ... and how far it strays from the data.
+    pub faceted_stray: f64,
+    /// Whether the faceted fit was kept.
+    pub kept_faceted: bool,
+    /// Time the faceted fit and its measurement took.
+    pub ms: f64,
 }
 
 /// One whole fit of a stray escalation (`ObjectFit::stray_budgets`).

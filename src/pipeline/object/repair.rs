@@ -165,6 +165,7 @@ fn repaired_locally(fit: &ObjectFit, refined: Refined, opts: &ObjectOptions) -> 
         stray: None,
         cleaning: fit.cleaning.clone(),
         stray_budgets: Vec::new(),
+        faceted: None,
     })
 }
 

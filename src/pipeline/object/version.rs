@@ -370,6 +370,7 @@ impl Refitted {
             stray: None,
             cleaning: None,
             stray_budgets: Vec::new(),
+            faceted: None,
         }
     }
 }

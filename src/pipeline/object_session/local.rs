@@ -342,6 +342,7 @@ impl LastFit {
             stray: None,
             cleaning: None,
             stray_budgets: Vec::new(),
+            faceted: None,
             // The merged data's components were counted by the whole fit this refit
             // started from; a local refit keeps its control mesh's.
             dropped: Default::default(),

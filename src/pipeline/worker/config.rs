@@ -101,6 +101,16 @@ pub struct FitConfig {
     /// (`mesh::crease`); 0 turns this rule off.
     #[serde(default = "default_crease_relative_ratio")]
     pub crease_relative_ratio: f64,
+    /// Whole objects with sharp edges: also fit the faceted surface (every control edge a
+    /// crease, so the surface is the control mesh) at the same control count, and keep it
+    /// where it is nearer the data (`pipeline::object::faceted`); false keeps the smooth
+    /// surface always.
+    #[serde(default = "default_faceted")]
+    pub faceted: bool,
+}
+
+fn default_faceted() -> bool {
+    true
 }
 
 fn default_min_levels() -> usize {
@@ -139,6 +149,7 @@ impl Default for FitConfig {
             bpatch: BPatchConfig::default(),
             crease_angle_deg: DEFAULT_CREASE_ANGLE_DEG,
             crease_relative_ratio: DEFAULT_CREASE_RELATIVE_RATIO,
+            faceted: default_faceted(),
         }
     }
 }

@@ -13,9 +13,10 @@ use crate::mesh::edge_table::EdgeTable;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;
 use crate::pipeline::object::{
-    extend_over_new_ground, fit_object_input, fit_on_creased_control_mesh, refit_where_changed,
-    LayoutReport, LocalUpdate, ObjectError, ObjectFit, ObjectInput, ObjectOptions, ObjectTimes,
-    PreviousFit, RefineRound, RoundReport, RoundStop, StrayBudget,
+    extend_over_new_ground, fit_object_input, fit_on_creased_control_mesh, is_faceted,
+    refit_where_changed, FacetedChoice, LayoutReport, LocalUpdate, ObjectError, ObjectFit,
+    ObjectInput, ObjectOptions, ObjectTimes, PreviousFit, RefineRound, RoundReport, RoundStop,
+    StrayBudget,
 };
 use crate::pipeline::scan::{Dropped, WarmFeet};
 use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
@@ -185,6 +186,8 @@ pub struct ObjectInfo {
     pub cleaning: Option<CleanReport>,
     /// The whole fits at growing budgets when the first strayed (empty otherwise).
     pub stray_budgets: Vec<StrayBudget>,
+    /// The smooth and the faceted fit of a sharp-edged object, and which was kept.
+    pub faceted: Option<FacetedChoice>,
     /// The input's components left out (the `components` policy's `largest`).
     pub dropped: Dropped,
 }
@@ -209,6 +212,7 @@ fn options(cfg: &WorkerConfig) -> ObjectOptions {
         },
         smoothing: cfg.fit.scan.smoothing,
         stray_budget_steps: cfg.fit.scan.stray_budget_steps,
+        faceted_candidate: cfg.fit.faceted,
         rounds: cfg.fit.correction.rounds,
         curvature_floor: cfg.fit.correction.curvature_floor(),
         ..ObjectOptions::default()
@@ -276,6 +280,7 @@ pub(super) fn fit_as_object(
         stray: Some(StrayReport::of(&fit)),
         cleaning: fit.cleaning.clone(),
         stray_budgets: fit.stray_budgets.clone(),
+        faceted: fit.faceted,
         dropped,
     };
     if let Some(stray) = info.stray.filter(|s| !s.within) {
@@ -311,6 +316,16 @@ fn warm_fit(
         params,
         reference,
     } = start;
+    let faceted_opts;
+    let opts = if is_faceted(&control_mesh.triangles, creases) {
+        faceted_opts = ObjectOptions {
+            smoothing: 0.0,
+            ..opts.clone()
+        };
+        &faceted_opts
+    } else {
+        opts
+    };
     let local = refit_where_changed(
         component.clone(),
         control_mesh.clone(),
@@ -655,6 +670,7 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
         "local": info.local,
         "stray": info.stray,
         "stray_budgets": info.stray_budgets,
+        "faceted": info.faceted,
         "cleaning": info.cleaning,
     })
 }

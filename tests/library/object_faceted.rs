@@ -1,0 +1,184 @@
+//! The faceted candidate of sharp-edged objects (`pipeline::object::faceted`): a Loop
+//! surface with every control edge a crease is its control mesh, and it is kept where it
+//! is nearer the data than the smooth surface.
+
+use glam::DVec3;
+use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
+use trispline::mesh::distance::MeshDistance;
+use trispline::mesh::simplify::baseline::decimation_baselines;
+use trispline::pipeline::object::{fit_object, is_faceted, ObjectFit, ObjectOptions};
+use trispline::pipeline::worker::{run_patch, Domain, WorkerConfig};
+use trispline::surface::{SurfaceParam, TriSurface};
+use trispline::testdata::{faceted_prism, torus};
+use trispline::TriMesh;
+
+/// A 32-sided prism: its sides turn by 11.25 degrees, too little for a crease, so the
+/// smooth surface rounds them, while 66 vertices hold it exactly.
+fn fine_prism() -> TriMesh {
+    faceted_prism(32, 6, 2).0
+}
+
+fn rms_max(points: &[DVec3], mesh: &TriMesh) -> (f64, f64) {
+    let near = MeshDistance::new(mesh);
+    let d: Vec<f64> = points
+        .iter()
+        .map(|p| near.distance(*p).expect("a finite distance"))
+        .collect();
+    let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+    (rms, d.iter().copied().fold(0.0, f64::max))
+}
+
+fn control_mesh(fit: &ObjectFit) -> TriMesh {
+    TriMesh::new(fit.controls.clone(), fit.surface.faces().to_vec())
+}
+
+/// The limit surface at scattered parameters of every face against the flat triangle of
+/// its three controls: the largest gap.
+fn gap_to_control_mesh(fit: &ObjectFit) -> f64 {
+    let evaluate = fit.surface.evaluator(&fit.controls);
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut uniform = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut worst = 0.0f64;
+    for (f, t) in fit.surface.faces().iter().enumerate() {
+        for _ in 0..8 {
+            let (a, b) = (uniform(), uniform());
+            let (u, v) = if a + b > 1.0 {
+                (1.0 - a, 1.0 - b)
+            } else {
+                (a, b)
+            };
+            let [p0, p1, p2] = t.map(|c| fit.controls[c as usize]);
+            let flat = p0 * u + p1 * v + p2 * (1.0 - u - v);
+            let on = evaluate(SurfaceParam {
+                face: f as u32,
+                u,
+                v,
+            })
+            .position;
+            worst = worst.max(on.distance(flat));
+        }
+    }
+    worst
+}
+
+#[test]
+fn a_finely_faceted_part_is_fitted_by_its_facets() {
+    let mesh = fine_prism();
+    let opts = ObjectOptions {
+        target_controls: Some(100),
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let diag = fit.component.bounds_diagonal();
+    let choice = fit
+        .faceted
+        .expect("a part with sharp rims tries the candidate");
+    let smooth = fit_object(
+        &mesh,
+        &ObjectOptions {
+            faceted_candidate: false,
+            ..opts.clone()
+        },
+    )
+    .expect("fitted");
+    let (rms, max) = rms_max(&fit.data, &control_mesh(&fit));
+    let [_, plain] = decimation_baselines(&fit.component, fit.controls.len())
+        .map(|qem| qem.expect("the decimation baseline").mesh);
+    let (qem_rms, qem_max) = rms_max(&fit.data, &plain);
+    let gap = gap_to_control_mesh(&fit);
+    println!(
+        "32-sided prism {} points, {} controls: faceted RMS {rms:.3e} max {max:.3e}, surface to \
+         control mesh {gap:.1e}; smooth RMS {:.3e} max {:.3e}; plain QEM RMS {qem_rms:.3e} max \
+         {qem_max:.3e}; candidate {:.0} ms",
+        fit.data.len(),
+        fit.controls.len(),
+        smooth.rms,
+        smooth.max,
+        choice.ms
+    );
+    assert!(choice.kept_faceted, "{choice:?}");
+    assert!(
+        smooth.faceted.is_none(),
+        "the candidate ran while switched off"
+    );
+    assert!(is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
+    assert_eq!(
+        choice.smooth_rms, smooth.rms,
+        "the same smooth fit was compared"
+    );
+    // Every vertex a corner and every edge a crease: the limit surface is the mesh.
+    assert!(
+        gap < 1e-12 * diag,
+        "the surface is {gap} off its control mesh"
+    );
+    assert_eq!(fit.controls.len(), plain.positions.len());
+    let floor = 1e-9 * diag;
+    assert!(rms <= qem_rms.max(floor), "RMS {rms} vs QEM {qem_rms}");
+    assert!(
+        max <= 1.5 * qem_max.max(floor),
+        "max {max} vs QEM {qem_max}"
+    );
+    assert!(
+        smooth.rms > 100.0 * rms.max(floor),
+        "the smooth surface ({}) is as near as the facets ({rms})",
+        smooth.rms
+    );
+}
+
+#[test]
+fn smooth_data_never_pays_for_the_faceted_candidate() {
+    let fit = fit_object(&torus(24, 12), &ObjectOptions::default()).expect("fitted");
+    assert!(fit.faceted.is_none(), "{:?}", fit.faceted);
+    assert_eq!(fit.times.faceted_ms, 0.0);
+    assert!(!is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
+}
+
+/// The report says which surface was kept, and a new version of a faceted part is refitted
+/// from the faceted control mesh (without the fairness term, which would draw its corners
+/// together): it stays faceted and on the facets.
+#[test]
+fn a_new_version_of_a_faceted_part_stays_faceted() {
+    let mesh = fine_prism();
+    let mut cfg = WorkerConfig::default();
+    cfg.fit.domain = Domain::Auto;
+    cfg.fit.scan.target_controls_pct = 25.0;
+    // A tolerance only the facets can meet: the rounds run on to their stall.
+    cfg.fit.budget.tolerance_rel = 1e-8;
+    let first = run_patch(&mesh, None, &cfg).expect("the prism fits");
+    let faceted = &first.report["object"]["faceted"];
+    assert_eq!(faceted["kept_faceted"], true, "{faceted}");
+    assert!(first.report["object"]["stages"]["faceted_ms"].as_f64() > Some(0.0));
+    let faceted_surface = |s: &serde_json::Value| {
+        let bytes = serde_json::to_vec(s).expect("json");
+        match parse_surface_json(&bytes, "prism").expect("reads back") {
+            SurfaceDescription::LoopMesh { surface, .. } => {
+                is_faceted(surface.faces(), surface.crease_edges())
+            }
+            _ => panic!("a whole object reads back as another kind"),
+        }
+    };
+    assert!(faceted_surface(&first.surface));
+    // Stretched by 0.2 % along x: every point moves, the facets stay planes.
+    let stretched = TriMesh::new(
+        mesh.positions
+            .iter()
+            .map(|p| DVec3::new(1.002 * p.x, p.y, p.z))
+            .collect(),
+        mesh.triangles.clone(),
+    );
+    let second = run_patch(&stretched, Some(&first.warm), &cfg).expect("fits warm");
+    assert_eq!(second.report["object"]["warm"]["used"], true);
+    assert!(faceted_surface(&second.surface));
+    let rms = second.report["final"]["rms_error"]
+        .as_f64()
+        .expect("an RMS");
+    let diag = stretched.bounds_diagonal();
+    // The foot points slide along the stretched facets a little each round: 4e-6 of the
+    // diagonal at the stall; the smooth surface stands near 1e-3 of it off.
+    assert!(rms < 1e-5 * diag, "the refit stands {rms} off the facets");
+}
