@@ -11,7 +11,9 @@
 //! loops, the stray (how far the tessellation strays from the data, in percent of the
 //! diagonal: overall, inside the rim, and the decimated mesh's own on a lattice of its
 //! triangles, which says whether the budget lets any mesh stay within the bound), and the
-//! stage times; `q1` marks a control mesh simplified without the triangle-quality guard.
+//! stage times; `q1` marks a control mesh simplified without the triangle-quality guard,
+//! `f1` a faceted fit kept (`f0` one tried and dropped, with its time; `OBJ_FACETED=0`
+//! switches the candidate off).
 //!
 //!     cargo run --release --example object_table [-- DATA_DIR [PCT [REFINE_ROUNDS]]]
 //!
@@ -119,6 +121,9 @@ fn main() {
         if let Some(w) = env("OBJ_WARM_REFINE") {
             opts.refine.warm = w != 0.0;
         }
+        if let Some(f) = env("OBJ_FACETED") {
+            opts.faceted_candidate = f != 0.0;
+        }
         if let Some(s) = env("OBJ_SAMPLES") {
             opts.surface_samples = s != 0.0;
         }
@@ -192,7 +197,7 @@ fn main() {
             diagnose(&fit, tess_rms);
         }
         println!(
-            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner, qem {:.3}) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} k{} s{} q{} {}",
+            "{:<22} {:>7} {:>6} {:>5.2} | {:>9.3e} {:>9.3e} | {:>9.3e} {:>9.3e} | {:>6} {:>9.3e} {:>9.3e} | {:>6.3} | {:>2} {:>2} | {:>7.3} ({:.3} inner, qem {:.3}) | {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} {:.0} ({}) {:.0} | cpu {:.0} ms | {}/{} c{} k{} s{} q{} f{} {}",
             name.trim_start_matches("models/"),
             n,
             m,
@@ -226,6 +231,11 @@ fn main() {
             fit.surface.crease_edges().len(),
             fit.sampled_faces,
             u8::from(fit.layout.quality_guard_dropped),
+            match fit.faceted {
+                Some(c) if c.kept_faceted => format!("1 ({:.0} ms)", c.ms),
+                Some(c) => format!("0 ({:.0} ms)", c.ms),
+                None => "-".to_string(),
+            },
             fit.refinement
                 .iter()
                 .map(|r| format!("{}:{:.3e}", r.controls, r.rms))
