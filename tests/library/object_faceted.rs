@@ -163,6 +163,17 @@ fn a_new_version_of_a_faceted_part_stays_faceted() {
         }
     };
     assert!(faceted_surface(&first.surface));
+    // Flat faces fitted exactly: the shown tessellation stays at the configured density,
+    // not refined for the chord errors' rounding.
+    let per_face = first.report["tessellation"]["per_face"]
+        .as_f64()
+        .expect("segments per face");
+    let faces = first.surface["control_faces"]
+        .as_array()
+        .expect("control faces")
+        .len() as f64;
+    let start = (cfg.tessellation as f64 / faces.sqrt()).ceil().max(2.0);
+    assert_eq!(per_face, start);
     // Stretched by 0.2 % along x: every point moves, the facets stay planes.
     let stretched = TriMesh::new(
         mesh.positions
