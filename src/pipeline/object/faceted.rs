@@ -28,8 +28,8 @@ use super::model::{
     STRAY_LATTICE_SEGMENTS,
 };
 use super::stray::farthest_from;
-use crate::mesh::crease::{detect_creases, CreaseOptions};
-use crate::mesh::simplify::{simplify, simplify_with_topology, SimplifyOptions};
+use crate::mesh::edge_table::EdgeTable;
+use crate::mesh::simplify::{simplify_with_topology, SimplifyOptions};
 use crate::mesh::topology::Topology;
 use crate::surface::TriSurface;
 use crate::TriMesh;
@@ -47,37 +47,37 @@ const SHARP_SHARE: f64 = 0.05;
 /// 2-3 times the candidate's time.
 const ROUNDS: usize = 2;
 
-/// Share of the vertices of `mesh` on an edge `crease` finds sharp.
-pub(super) fn sharp_share(mesh: &TriMesh, topo: &Topology, crease: &CreaseOptions) -> f64 {
-    if mesh.positions.is_empty() || crease.angle_deg <= 0.0 {
-        return 0.0;
+/// Share of `vertices` on one of the `sharp` edges.
+fn sharp_share(vertices: usize, sharp: &[[u32; 2]]) -> f64 {
+    let mut on = vec![false; vertices];
+    for &v in sharp.iter().flatten() {
+        if let Some(on) = on.get_mut(v as usize) {
+            *on = true;
+        }
     }
-    let mut on = vec![false; mesh.positions.len()];
-    for [a, b] in detect_creases(mesh, topo, crease) {
-        on[a as usize] = true;
-        on[b as usize] = true;
-    }
-    on.iter().filter(|&&s| s).count() as f64 / on.len() as f64
+    on.iter().filter(|&&s| s).count() as f64 / vertices.max(1) as f64
 }
 
 /// `smooth`, or the faceted fit at its control count where that fits the data better
-/// (module docs); `data_topo` is the data's topology, when it is a manifold, and
-/// `fit_from` fits a control mesh to `side`'s data.
+/// (module docs); `data_topo` is the data's topology, when it is a manifold, `sharp` its
+/// sharp edges (`detect_creases`), and `fit_from` fits a control mesh to `side`'s data.
 pub(super) fn keep_nearer(
     smooth: ObjectFit,
     side: &DataSide,
     data_topo: Option<&Topology>,
+    sharp: &[[u32; 2]],
     opts: &ObjectOptions,
     fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
 ) -> ObjectFit {
     let Some(topo) = data_topo else {
         return smooth;
     };
-    if !opts.faceted_candidate || sharp_share(side.mesh, topo, &opts.crease) < SHARP_SHARE {
+    let vertices = side.mesh.positions.len();
+    if !opts.faceted_candidate || sharp_share(vertices, sharp) < SHARP_SHARE {
         return smooth;
     }
     let t = Instant::now();
-    let fitted = faceted_fit(side, Some(topo), smooth.controls.len(), opts, fit_from);
+    let fitted = faceted_fit(side, topo, smooth.controls.len(), opts, fit_from);
     let Ok(mut faceted) = fitted else {
         return smooth;
     };
@@ -128,7 +128,7 @@ pub(super) fn keep_nearer(
 /// `fit_from`.
 fn faceted_fit(
     side: &DataSide,
-    data_topo: Option<&Topology>,
+    topo: &Topology,
     controls: usize,
     opts: &ObjectOptions,
     fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
@@ -141,11 +141,8 @@ fn faceted_fit(
         isotropy: 0.0,
         ..SimplifyOptions::default()
     };
-    let decimated = match data_topo {
-        Some(topo) => simplify_with_topology(side.mesh, topo, &simplify_opts, &[]),
-        None => simplify(side.mesh, &simplify_opts),
-    }
-    .map_err(ObjectError::Simplify)?;
+    let decimated = simplify_with_topology(side.mesh, topo, &simplify_opts, &[])
+        .map_err(ObjectError::Simplify)?;
     let creases = every_edge(&decimated.mesh);
     let params = landing_params(&decimated.landing);
     let fit_opts = ObjectOptions {
@@ -160,29 +157,16 @@ fn faceted_fit(
 /// index first, sorted, as `LoopLimitSurface::crease_edges` keeps them: interior edges
 /// only): the faceted surface, whose refits take no fairness term either.
 pub fn is_faceted(faces: &[[u32; 3]], creases: &[[u32; 2]]) -> bool {
-    let mut edges: Vec<[u32; 2]> = faces
-        .iter()
-        .flat_map(|t| (0..3).map(move |k| [t[k], t[(k + 1) % 3]]))
-        .map(|[a, b]| [a.min(b), a.max(b)])
-        .collect();
-    edges.sort_unstable();
-    // An edge listed twice is interior.
-    let interior = edges.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]);
+    let vertices = faces.iter().flatten().max().map_or(0, |&v| v as usize + 1);
+    let edges = EdgeTable::new(faces, vertices);
     !faces.is_empty()
-        && interior
-            .into_iter()
-            .all(|e| creases.binary_search(&e).is_ok())
+        && (0..edges.len())
+            .filter(|&e| edges.halves(e).len() == 2)
+            .all(|e| creases.binary_search(&edges.ends(e)).is_ok())
 }
 
 /// Every edge of `mesh`, low index first, sorted.
 fn every_edge(mesh: &TriMesh) -> Vec<[u32; 2]> {
-    let mut edges: Vec<[u32; 2]> = mesh
-        .triangles
-        .iter()
-        .flat_map(|t| (0..3).map(move |k| [t[k], t[(k + 1) % 3]]))
-        .map(|[a, b]| [a.min(b), a.max(b)])
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
-    edges
+    let edges = EdgeTable::new(&mesh.triangles, mesh.positions.len());
+    (0..edges.len()).map(|e| edges.ends(e)).collect()
 }

@@ -109,11 +109,16 @@ pub fn fit_object_input(
     };
     let side_ms = ms_since(t);
     let asked = control_target(component.positions.len(), opts);
-    let fit = fit_at_target(&side, data_topo.as_ref(), asked, opts)?;
-    let fit = grow_budget_while_straying(fit, asked, opts, &side, data_topo.as_ref(), |target| {
-        fit_at_target(&side, data_topo.as_ref(), target, opts)
+    // The data's sharp edges, found once for every fit of the object.
+    let sharp = data_topo.as_ref().map_or_else(Vec::new, |topo| {
+        detect_creases(&component, topo, &opts.crease)
     });
-    let mut fit = faceted::keep_nearer(fit, &side, data_topo.as_ref(), opts, |start, o| {
+    let topo = data_topo.as_ref();
+    let fit = fit_at_target(&side, topo, &sharp, asked, opts)?;
+    let fit = grow_budget_while_straying(fit, asked, opts, &side, topo, |target| {
+        fit_at_target(&side, topo, &sharp, target, opts)
+    });
+    let mut fit = faceted::keep_nearer(fit, &side, topo, &sharp, opts, |start, o| {
         fit_from(&side, start, o)
     });
     // The data side is built once for every fit: reported with the kept fit's setup.
@@ -125,10 +130,12 @@ pub fn fit_object_input(
 }
 
 /// The whole fit at `target` controls of the data `side` holds (`data_topo`: its topology,
-/// when it is a manifold), repaired where it strays.
+/// when it is a manifold; `sharp`: its sharp edges, `detect_creases`), repaired where it
+/// strays.
 fn fit_at_target(
     side: &DataSide,
     data_topo: Option<&Topology>,
+    sharp: &[[u32; 2]],
     target: usize,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
@@ -161,10 +168,7 @@ fn fit_at_target(
         ..opts.simplify.clone()
     };
     let data_creases = match data_topo {
-        Some(topo) => {
-            let found = detect_creases(component, topo, &opts.crease);
-            feature_line_creases(component, topo, found, &simplify_opts)
-        }
+        Some(topo) => feature_line_creases(component, topo, sharp, &simplify_opts),
         None => Vec::new(),
     };
     let (simplified, guard_dropped) =
@@ -239,12 +243,12 @@ fn fit_at_target(
 fn feature_line_creases(
     component: &TriMesh,
     topo: &Topology,
-    creases: Vec<[u32; 2]>,
+    creases: &[[u32; 2]],
     simplify_opts: &SimplifyOptions,
 ) -> Vec<[u32; 2]> {
-    let fixed = fixed_crease_vertices(component, topo, &creases, simplify_opts);
+    let fixed = fixed_crease_vertices(component, topo, creases, simplify_opts);
     let mut kept = Vec::new();
-    for set in crease_sets(&creases, &component.positions) {
+    for set in crease_sets(creases, &component.positions) {
         let mut vertices: Vec<u32> = set.iter().flatten().copied().collect();
         vertices.sort_unstable();
         vertices.dedup();
