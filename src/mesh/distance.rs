@@ -12,6 +12,8 @@ pub struct MeshDistance<'a> {
     mean_edge: f64,
     cell: f64,
     buckets: FxHashMap<(i64, i64, i64), Vec<u32>>,
+    /// The lowest and highest cell keys holding a triangle (per axis).
+    occupied: [(i64, i64, i64); 2],
 }
 
 impl<'a> MeshDistance<'a> {
@@ -26,11 +28,25 @@ impl<'a> MeshDistance<'a> {
             / mesh.triangles.len().max(1) as f64;
         let cell = (2.0 * mean_edge).max(1e-12);
         let mut buckets: FxHashMap<(i64, i64, i64), Vec<u32>> = FxHashMap::default();
+        let mut occupied = [
+            (i64::MAX, i64::MAX, i64::MAX),
+            (i64::MIN, i64::MIN, i64::MIN),
+        ];
         for (f, t) in mesh.triangles.iter().enumerate() {
             let pts = t.map(|v| p[v as usize]);
             let lo = pts[0].min(pts[1]).min(pts[2]);
             let hi = pts[0].max(pts[1]).max(pts[2]);
             let (a, b) = (Self::key(cell, lo), Self::key(cell, hi));
+            occupied[0] = (
+                occupied[0].0.min(a.0),
+                occupied[0].1.min(a.1),
+                occupied[0].2.min(a.2),
+            );
+            occupied[1] = (
+                occupied[1].0.max(b.0),
+                occupied[1].1.max(b.1),
+                occupied[1].2.max(b.2),
+            );
             for x in a.0..=b.0 {
                 for y in a.1..=b.1 {
                     for z in a.2..=b.2 {
@@ -44,6 +60,7 @@ impl<'a> MeshDistance<'a> {
             mean_edge,
             cell,
             buckets,
+            occupied,
         }
     }
 
@@ -74,8 +91,20 @@ impl<'a> MeshDistance<'a> {
         let inside = q / self.cell - (q / self.cell).floor();
         let margin = inside.min(DVec3::ONE - inside).min_element() * self.cell;
         let mut best: Option<(f64, Closest)> = None;
-        for r in 0i64.. {
-            for cell in shell(c, r) {
+        // Only the shells that meet the occupied cells are searched, and only where they
+        // meet them: a query far off the mesh (a surface point a diverged fit threw away)
+        // costs the occupied block, not every empty cell between it and the mesh.
+        let [lo, hi] = self.occupied;
+        let gap = |c: i64, lo: i64, hi: i64| lo.saturating_sub(c).max(c.saturating_sub(hi)).max(0);
+        let reach = |c: i64, lo: i64, hi: i64| c.saturating_sub(lo).max(hi.saturating_sub(c));
+        let first = gap(c.0, lo.0, hi.0)
+            .max(gap(c.1, lo.1, hi.1))
+            .max(gap(c.2, lo.2, hi.2));
+        let last = reach(c.0, lo.0, hi.0)
+            .max(reach(c.1, lo.1, hi.1))
+            .max(reach(c.2, lo.2, hi.2));
+        for r in first..=last {
+            for cell in shell_within(c, r, self.occupied) {
                 // A cell no nearer than the best point found holds no nearer point (a
                 // triangle is in every cell its box meets, so in the cell of its point
                 // nearest q): most queries of a surface near its data end in the first
@@ -105,9 +134,20 @@ impl<'a> MeshDistance<'a> {
             // Every triangle with a point nearer than the block's margin has that point,
             // and so its bounding box, in a searched cell: no farther shell can beat it.
             let reached = best.as_ref().map_or(f64::MAX, |(d, _)| *d);
-            if reached <= r as f64 * self.cell + margin || r > 10_000 {
+            if reached <= r as f64 * self.cell + margin {
                 break;
             }
+        }
+        if best.is_none() {
+            // Cell keys saturate for queries beyond i64 cells (1e150 m): every triangle then.
+            best = (0..self.mesh.triangles.len() as u32)
+                .map(|f| {
+                    let t =
+                        self.mesh.triangles[f as usize].map(|v| self.mesh.positions[v as usize]);
+                    let point = closest_on_triangle(q, t[0], t[1], t[2]);
+                    ((point - q).length(), Closest { point, triangle: f })
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
         }
         best.map(|(_, c)| c)
     }
@@ -122,17 +162,28 @@ impl MeshDistance<'_> {
     }
 }
 
-/// The cells at Chebyshev distance exactly `r` from `c` (only `c` for r = 0).
-fn shell(c: (i64, i64, i64), r: i64) -> impl Iterator<Item = (i64, i64, i64)> {
-    (-r..=r).flat_map(move |dx| {
-        (-r..=r).flat_map(move |dy| {
+/// The cells at Chebyshev distance exactly `r` from `c` (only `c` for r = 0) inside the
+/// block `within` (lowest and highest key per axis).
+fn shell_within(
+    c: (i64, i64, i64),
+    r: i64,
+    within: [(i64, i64, i64); 2],
+) -> impl Iterator<Item = (i64, i64, i64)> {
+    let [lo, hi] = within;
+    let span =
+        move |c: i64, lo: i64, hi: i64| lo.max(c.saturating_sub(r))..=hi.min(c.saturating_add(r));
+    let on_shell = move |v: i64, c: i64| v.abs_diff(c) == r as u64;
+    span(c.0, lo.0, hi.0).flat_map(move |x| {
+        span(c.1, lo.1, hi.1).flat_map(move |y| {
             // On a face of the block in x or y every z is on the shell; inside, only the
             // two z faces are.
-            let full = dx.abs() == r || dy.abs() == r;
-            let step = if full || r == 0 { 1 } else { 2 * r as usize };
-            (-r..=r)
-                .step_by(step)
-                .map(move |dz| (c.0 + dx, c.1 + dy, c.2 + dz))
+            let full = on_shell(x, c.0) || on_shell(y, c.1);
+            let dense = span(c.2, lo.2, hi.2).take(if full { usize::MAX } else { 0 });
+            // (Not full only for r > 0: at r = 0 the one column is c's own.)
+            let faces = [c.2.saturating_sub(r), c.2.saturating_add(r)]
+                .into_iter()
+                .filter(move |z| !full && (lo.2..=hi.2).contains(z));
+            dense.chain(faces).map(move |z| (x, y, z))
         })
     })
 }
@@ -256,6 +307,28 @@ mod tests {
             let t = mesh.triangles[c.triangle as usize].map(|v| mesh.positions[v as usize]);
             let on = closest_on_triangle(q, t[0], t[1], t[2]);
             assert!(on.distance(c.point) < 1e-12, "{q}: {on} vs {}", c.point);
+        }
+    }
+
+    #[test]
+    fn a_query_far_off_the_mesh_is_answered_at_the_cost_of_the_mesh() {
+        // Millions of empty cells lie between these points and the two-triangle square:
+        // the search visits only the cells that hold triangles.
+        let mesh = TriMesh::new(
+            vec![DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::new(1.0, 1.0, 0.0)],
+            vec![[0, 1, 2], [1, 3, 2]],
+        );
+        let md = MeshDistance::new(&mesh);
+        for (q, want) in [
+            (DVec3::new(0.5, 0.5, 3e6), 3e6),
+            (DVec3::new(-4e6, 0.5, 0.0), 4e6),
+            (DVec3::new(1.0, 1.0, -1e150), 1e150),
+        ] {
+            let got = md.distance(q).expect("a finite query has a distance");
+            assert!(
+                (got - want).abs() <= 1e-9 * want,
+                "{q}: {got} against {want}"
+            );
         }
     }
 }
