@@ -167,15 +167,16 @@ pub struct FitArgs {
     #[arg(long)]
     pub knot_spread: Option<f64>,
     /// Whole objects: data edges whose faces turn by more than this many degrees become
-    /// sharp crease edges of the surface (0: none).
+    /// sharp crease edges of the surface (0: none, nor the faceted surface).
     #[arg(long, default_value_t = DEFAULT_CREASE_ANGLE_DEG)]
     pub crease_angle_deg: f64,
     /// Whole objects: a shallower data edge (over 15 degrees) is a crease too where it turns
     /// this many times as much as the edges beside it, in a feature line of its own (0: off).
     #[arg(long, default_value_t = DEFAULT_CREASE_RELATIVE_RATIO)]
     pub crease_relative_ratio: f64,
-    /// Whole objects with sharp edges: also fit the faceted surface (every control edge a
-    /// crease: the surface is the control mesh) and keep it where it is nearer the data.
+    /// Whole objects with sharp edges, or whose smooth surface strays past the bound: also
+    /// fit the faceted surface (every control edge a crease: the surface is the control
+    /// mesh) and keep it where it is nearer the data.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub faceted: bool,
     /// Tessellation segments per side of the domain triangle in surface.glb.

@@ -59,6 +59,13 @@ pub struct CreaseOptions {
     pub relative_ratio: f64,
 }
 
+impl CreaseOptions {
+    /// Whether crease edges are wanted at all (`angle_deg` above 0).
+    pub fn on(&self) -> bool {
+        self.angle_deg > 0.0
+    }
+}
+
 impl Default for CreaseOptions {
     fn default() -> Self {
         Self {
@@ -90,7 +97,7 @@ pub fn dihedral_deg(mesh: &TriMesh, topo: &Topology, h: u32) -> Option<f64> {
 
 /// The crease edges of `mesh` (pairs of vertex indices, low first, sorted).
 pub fn detect_creases(mesh: &TriMesh, topo: &Topology, opts: &CreaseOptions) -> Vec<[u32; 2]> {
-    if opts.angle_deg.is_nan() || opts.angle_deg <= 0.0 {
+    if !opts.on() {
         return Vec::new();
     }
     let turn = signed_turns(mesh, topo);

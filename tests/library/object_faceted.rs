@@ -130,9 +130,20 @@ fn a_finely_faceted_part_is_fitted_by_its_facets() {
     );
 }
 
+/// Smooth data that the smooth surface holds within the stray bound: no candidate.
 #[test]
 fn smooth_data_never_pays_for_the_faceted_candidate() {
-    let fit = fit_object(&torus(24, 12), &ObjectOptions::default()).expect("fitted");
+    let opts = ObjectOptions {
+        target_controls_pct: 20.0,
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&torus(24, 12), &opts).expect("fitted");
+    let limit = 0.005 * fit.component.bounds_diagonal();
+    assert!(
+        fit.stray.is_some_and(|s| s <= limit),
+        "the smooth fit strays {:?} (bound {limit})",
+        fit.stray
+    );
     assert!(fit.faceted.is_none(), "{:?}", fit.faceted);
     assert_eq!(fit.times.faceted_ms, 0.0);
     assert!(!is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
@@ -192,4 +203,68 @@ fn a_new_version_of_a_faceted_part_stays_faceted() {
     // The foot points slide along the stretched facets a little each round: 4e-6 of the
     // diagonal at the stall; the smooth surface stands near 1e-3 of it off.
     assert!(rms < 1e-5 * diag, "the refit stands {rms} off the facets");
+}
+
+/// A coarse torus whose vertices are jolted off the smooth torus (a low-poly model of a
+/// rough part, no edge sharp enough for a crease) at a control count near its vertex
+/// count: the smooth surface cannot follow the jolts and bulges off the facets.
+fn jolted_torus() -> TriMesh {
+    let mut mesh = torus(32, 12);
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for p in &mut mesh.positions {
+        let centre = DVec3::new(p.x, p.y, 0.0).normalize();
+        let off = *p - centre;
+        *p = centre + off * (1.0 + 0.5 * (trispline::testdata::uniform(&mut seed) - 0.5));
+    }
+    mesh
+}
+
+#[test]
+fn a_smooth_fit_that_strays_tries_the_facets_even_without_sharp_edges() {
+    let mesh = jolted_torus();
+    let opts = ObjectOptions {
+        target_controls: Some(100),
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let smooth = fit_object(
+        &mesh,
+        &ObjectOptions {
+            faceted_candidate: false,
+            ..opts.clone()
+        },
+    )
+    .expect("fitted");
+    let limit = 0.005 * fit.component.bounds_diagonal();
+    let choice = fit
+        .faceted
+        .expect("a smooth fit past the stray bound tries the candidate");
+    let smooth_stray = smooth.stray.expect("measured");
+    let (rms, _) = rms_max(&fit.data, &control_mesh(&fit));
+    println!(
+        "jolted torus, {} points, {} controls: smooth RMS {:.3e} stray {smooth_stray:.3e}; \
+         faceted RMS {rms:.3e} (own feet {:.3e}) stray {:.3e}; bound {limit:.3e}",
+        fit.data.len(),
+        fit.controls.len(),
+        smooth.rms,
+        choice.faceted_rms,
+        choice.faceted_stray
+    );
+    assert!(
+        smooth_stray > limit,
+        "the smooth fit stays within the bound"
+    );
+    assert_eq!(
+        choice.smooth_rms, smooth.rms,
+        "the same smooth fit was compared"
+    );
+    assert!(choice.kept_faceted, "{choice:?}");
+    assert!(is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
+    // Measured independently: the data to the kept surface, which is its control mesh.
+    assert!(
+        rms < smooth.rms,
+        "faceted {rms} against smooth {}",
+        smooth.rms
+    );
+    assert!(choice.faceted_stray < smooth_stray);
 }

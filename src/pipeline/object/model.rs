@@ -117,9 +117,10 @@ pub struct ObjectOptions {
     /// the repair leaves the surface straying past `max_stray_share` and the budget cannot
     /// hold the shape (`fit_object_input`; the least straying fit is kept); 0: none.
     pub stray_budget_steps: usize,
-    /// On data with sharp edges, also fit the faceted candidate (every control edge a
-    /// crease: the limit surface is the control mesh) at the kept fit's control count,
-    /// and keep it where it fits the data better (`faceted`).
+    /// On data with sharp edges, and where the smooth fit strays past the bound, also fit
+    /// the faceted candidate (every control edge a crease: the limit surface is the
+    /// control mesh) at the kept fit's control count, and keep it where it fits the data
+    /// better (`faceted`).
     pub faceted_candidate: bool,
 }
 
@@ -351,12 +352,12 @@ pub struct ObjectFit {
     /// The whole fits tried when the first strayed past the bound, that one first, each at
     /// a larger budget (empty when the first stayed within it or was not measured).
     pub stray_budgets: Vec<StrayBudget>,
-    /// Which of the smooth and the faceted fit was kept, on data with sharp edges
-    /// (`None`: the faceted candidate was not tried).
+    /// Which of the smooth and the faceted fit was kept, on data with sharp edges or a
+    /// smooth fit past the stray bound (`None`: the faceted candidate was not tried).
     pub faceted: Option<FacetedChoice>,
 }
 
-/// Which fit of a sharp-edged object was kept, and the figures it was chosen on
+/// Which fit of a sharp-edged or straying object was kept, and the figures it was chosen on
 /// (`faceted::keep_nearer`).
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct FacetedChoice {
