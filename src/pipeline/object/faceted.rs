@@ -65,8 +65,9 @@ fn sharp_share(vertices: usize, sharp: &[[u32; 2]]) -> f64 {
 }
 
 /// `smooth`, or the faceted fit at its control count where that fits the data better
-/// (module docs; tried on sharp data and where `smooth` strays past the bound); `data_topo` is the data's topology, when it is a manifold, `sharp` its
-/// sharp edges (`detect_creases`), and `fit_from` fits a control mesh to `side`'s data.
+/// (module docs; tried on sharp data and where `smooth` strays past the bound);
+/// `data_topo` is the data's topology, when it is a manifold, `sharp` its sharp edges
+/// (`detect_creases`), and `fit_from` fits a control mesh to `side`'s data.
 pub(super) fn keep_nearer(
     smooth: ObjectFit,
     side: &DataSide,
