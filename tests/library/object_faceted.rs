@@ -206,8 +206,8 @@ fn a_new_version_of_a_faceted_part_stays_faceted() {
 }
 
 /// A coarse torus whose vertices are jolted off the smooth torus (a low-poly model of a
-/// rough part, no edge sharp enough for a crease) at a control count near its vertex
-/// count: the smooth surface cannot follow the jolts and bulges off the facets.
+/// rough part, no edge sharp enough for a crease): even with over half its vertices as
+/// controls the smooth surface cannot follow the jolts and bulges off the facets.
 fn jolted_torus() -> TriMesh {
     let mut mesh = torus(32, 12);
     let mut seed = 0x2545_f491_4f6c_dd1du64;
@@ -260,7 +260,10 @@ fn a_smooth_fit_that_strays_tries_the_facets_even_without_sharp_edges() {
     );
     assert!(choice.kept_faceted, "{choice:?}");
     assert!(is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
-    // Measured independently: the data to the kept surface, which is its control mesh.
+    // The kept surface measured independently (the data to its control mesh, which it
+    // is) against the smooth fit's own RMS to its foot points, which is at least its
+    // nearest-point RMS: the faceted surface comes 26 % nearer, far more than the two
+    // measures of one surface differ (a few percent on the smooth fits measured).
     assert!(
         rms < smooth.rms,
         "faceted {rms} against smooth {}",
