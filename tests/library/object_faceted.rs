@@ -66,26 +66,32 @@ fn gap_to_control_mesh(fit: &ObjectFit) -> f64 {
     worst
 }
 
-#[test]
-fn a_finely_faceted_part_is_fitted_by_its_facets() {
-    let mesh = fine_prism();
+/// `mesh` fitted with `target` controls at the defaults, and the same without the faceted
+/// candidate: the smooth fit the candidate was weighed against.
+fn with_and_without_candidate(mesh: &TriMesh, target: usize) -> (ObjectFit, ObjectFit) {
     let opts = ObjectOptions {
-        target_controls: Some(100),
+        target_controls: Some(target),
         ..ObjectOptions::default()
     };
-    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let fit = fit_object(mesh, &opts).expect("fitted");
+    let smooth = fit_object(
+        mesh,
+        &ObjectOptions {
+            faceted_candidate: false,
+            ..opts
+        },
+    )
+    .expect("fitted");
+    (fit, smooth)
+}
+
+#[test]
+fn a_finely_faceted_part_is_fitted_by_its_facets() {
+    let (fit, smooth) = with_and_without_candidate(&fine_prism(), 100);
     let diag = fit.component.bounds_diagonal();
     let choice = fit
         .faceted
         .expect("a part with sharp rims tries the candidate");
-    let smooth = fit_object(
-        &mesh,
-        &ObjectOptions {
-            faceted_candidate: false,
-            ..opts.clone()
-        },
-    )
-    .expect("fitted");
     let (rms, max) = rms_max(&fit.data, &control_mesh(&fit));
     let [_, plain] = decimation_baselines(&fit.component, fit.controls.len())
         .map(|qem| qem.expect("the decimation baseline").mesh);
@@ -221,20 +227,7 @@ fn jolted_torus() -> TriMesh {
 
 #[test]
 fn a_smooth_fit_that_strays_tries_the_facets_even_without_sharp_edges() {
-    let mesh = jolted_torus();
-    let opts = ObjectOptions {
-        target_controls: Some(100),
-        ..ObjectOptions::default()
-    };
-    let fit = fit_object(&mesh, &opts).expect("fitted");
-    let smooth = fit_object(
-        &mesh,
-        &ObjectOptions {
-            faceted_candidate: false,
-            ..opts.clone()
-        },
-    )
-    .expect("fitted");
+    let (fit, smooth) = with_and_without_candidate(&jolted_torus(), 100);
     let limit = 0.005 * fit.component.bounds_diagonal();
     let choice = fit
         .faceted
