@@ -155,6 +155,9 @@ fn main() {
         if let Some(r) = env("OBJ_CREASE_MIN_EDGES") {
             opts.crease.min_edges = r as usize;
         }
+        if let Some(i) = env("OBJ_ISOTROPY") {
+            opts.simplify.isotropy = i;
+        }
         if let Some(r) = env("OBJ_RELAX_STEPS") {
             opts.layout.relax_steps = r as usize;
         }

@@ -150,8 +150,9 @@ pub struct FitArgs {
     pub hole_bridge_edges: f64,
     /// Whole objects: a surface still straying past 0.5 % of the diagonal after its repair,
     /// where a decimation of as many vertices strays too, is fitted again at twice the
-    /// controls it spent, at most this many times, and the least straying fit kept (0: the
-    /// budget holds).
+    /// controls it spent, at most this many times, and the least straying fit kept; then,
+    /// where that still strays, faceted surfaces at twice the controls until one holds the
+    /// bound (0: the budget holds).
     #[arg(long, default_value_t = ScanConfig::default().stray_budget_steps as u8, value_parser = clap::value_parser!(u8).range(0..=4))]
     pub stray_budget_steps: u8,
     /// `--surface dms`: the degree, 2 or 3 (C1 or C2 surfaces; 6 or 10 controls per domain
@@ -176,7 +177,8 @@ pub struct FitArgs {
     pub crease_relative_ratio: f64,
     /// Whole objects with sharp edges, or whose smooth surface strays past the bound: also
     /// fit the faceted surface (every control edge a crease: the surface is the control
-    /// mesh) and keep it where it is nearer the data.
+    /// mesh) and keep it where it is nearer the data; where no fit holds the stray bound,
+    /// the faceted surface at more controls is the last resort.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub faceted: bool,
     /// Tessellation segments per side of the domain triangle in surface.glb.
@@ -489,10 +491,16 @@ fn stray_clause(report: &serde_json::Value) -> Option<String> {
 /// was kept; `None` without one.
 fn escalation_summary(object: &serde_json::Value, controls: &serde_json::Value) -> Option<String> {
     let budgets = object["stray_budgets"].as_array().filter(|b| b.len() > 1)?;
-    let again: Vec<String> = budgets[1..]
+    // The last resort's faceted surfaces (fitted, then as decimated, at one count) are
+    // named once per count.
+    let mut again: Vec<String> = budgets[1..]
         .iter()
-        .map(|b| b["target"].to_string())
+        .map(|b| match b["faceted"].as_bool() {
+            Some(true) => format!("{} faceted", b["target"]),
+            _ => b["target"].to_string(),
+        })
         .collect();
+    again.dedup();
     let outcome = if object["stray"]["within"].as_bool() == Some(true) {
         format!("the surface of {controls} kept")
     } else if budgets[0]["kept"].as_bool() == Some(true) {
@@ -617,6 +625,17 @@ mod tests {
         assert!(said(false, 1, 62).contains(
             "(none came within the bound; the surface of 62, which strays least, is kept;"
         ));
+        let mut last_resort = object(true, 2);
+        last_resort["stray_budgets"][2]["faceted"] = json!(true);
+        let faceted = json!({"target": 124, "controls": 124, "faceted": true, "kept": false});
+        if let Some(b) = last_resort["stray_budgets"].as_array_mut() {
+            b.insert(2, faceted);
+        }
+        let said = escalation_summary(&last_resort, &json!(124)).unwrap_or_default();
+        assert!(
+            said.contains("fitted again at 56 and 124 faceted ("),
+            "{said}"
+        );
         let one = json!({"stray_budgets": [{"target": 22, "controls": 28, "kept": true}]});
         assert_eq!(escalation_summary(&one, &json!(28)), None);
         assert_eq!(escalation_summary(&json!({}), &json!(28)), None);

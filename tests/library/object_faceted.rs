@@ -264,3 +264,66 @@ fn a_smooth_fit_that_strays_tries_the_facets_even_without_sharp_edges() {
     );
     assert!(choice.faceted_stray < smooth_stray);
 }
+
+/// The farthest point of a faceted fit's surface (its control mesh) from the data mesh,
+/// on an 8-segment lattice of every face: measured here, not by the fit.
+fn faceted_stray(fit: &ObjectFit) -> f64 {
+    let data = MeshDistance::new(&fit.component);
+    let mut worst = 0.0f64;
+    for t in fit.surface.faces() {
+        let [a, b, c] = t.map(|v| fit.controls[v as usize]);
+        for i in 0..=8 {
+            for j in 0..=8 - i {
+                let (u, v) = (i as f64 / 8.0, j as f64 / 8.0);
+                let p = a * (1.0 - u - v) + b * u + c * v;
+                worst = worst.max(data.distance(p).expect("a finite distance"));
+            }
+        }
+    }
+    worst
+}
+
+/// Where neither the smooth fits of the budget's growth nor the faceting at the kept
+/// fit's count come within the stray bound, the faceted last resort doubles the controls
+/// until a faceting does, and the bound holds. The jolted torus at 100 controls: the
+/// faceting at 220 strays 4.4e-2 past a 2.0e-2 bound, and the smooth fit strays 7.0e-2
+/// even with a control at every one of its 384 vertices (between coarse vertices a
+/// smooth surface leaves the facets whatever its count). Without the growth
+/// (`stray_budget_steps` 0) the budget holds instead and the surface strays.
+#[test]
+fn the_stray_bound_holds_by_facets_where_no_smooth_fit_can() {
+    let mesh = jolted_torus();
+    let opts = ObjectOptions {
+        target_controls: Some(100),
+        ..ObjectOptions::default()
+    };
+    let fit = fit_object(&mesh, &opts).expect("fitted");
+    let limit = 0.005 * fit.component.bounds_diagonal();
+    let budgets = &fit.stray_budgets;
+    let last = budgets.last().expect("an escalation");
+    assert!(last.kept && last.faceted, "{budgets:?}");
+    assert_eq!(budgets.iter().filter(|b| b.kept).count(), 1, "{budgets:?}");
+    assert_eq!(fit.controls.len(), last.controls);
+    assert!(is_faceted(fit.surface.faces(), fit.surface.crease_edges()));
+    let stray = faceted_stray(&fit);
+    println!(
+        "jolted torus: {} controls faceted, stray {stray:.3e} (bound {limit:.3e}); tries {budgets:?}",
+        fit.controls.len()
+    );
+    assert!(stray <= limit, "{stray} past {limit}");
+    assert!(
+        budgets.iter().all(|b| b.kept || b.stray > limit),
+        "{budgets:?}"
+    );
+
+    let held = fit_object(
+        &mesh,
+        &ObjectOptions {
+            stray_budget_steps: 0,
+            ..opts
+        },
+    )
+    .expect("fitted");
+    assert!(held.stray_budgets.iter().all(|b| !b.faceted));
+    assert!(held.stray.is_some_and(|s| s > limit), "{:?}", held.stray);
+}

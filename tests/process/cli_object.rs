@@ -202,7 +202,14 @@ fn fit_says_when_the_surface_strays_from_the_data() {
     };
     let tmp = tempfile::tempdir().expect("tmp");
     let over = tmp.path().join("over");
-    let out = run(bin().arg("fit").arg(&broken).arg("--out").arg(&over));
+    // Without the faceted last resort, which holds the bound on this broken mesh
+    // (`fit_grows_the_budget_where_it_cannot_hold_the_shape`).
+    let out = run(bin()
+        .arg("fit")
+        .arg(&broken)
+        .args(["--faceted", "false"])
+        .arg("--out")
+        .arg(&over));
     let line = String::from_utf8_lossy(&out.stdout);
     let stray = read_json(&over.join("report.json"))["object"]["stray"].clone();
     assert_eq!(stray["within"], false, "{stray}");
@@ -251,8 +258,9 @@ fn fit_says_when_the_surface_strays_from_the_data() {
 /// and a decimation of as many vertices strays as far: `trispline fit` fits it again at
 /// twice the controls it spent, keeps that surface (within the bound) and says so; with
 /// `--stray-budget-steps 0` the budget holds and the line says the surface strays. On
-/// bun_zipper_res4 (2 %) no step comes within the bound, and the line says the least
-/// straying fit is kept.
+/// bun_zipper_res4 (2 %) no smooth step comes within the bound: the faceted last resort
+/// does, at more controls, and the line says so; with `--faceted false` the line says
+/// the least straying smooth fit is kept.
 #[test]
 fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
     let (Some(genus_four), Some(broken)) = (
@@ -262,17 +270,19 @@ fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
         return;
     };
     let tmp = tempfile::tempdir().expect("tmp");
-    let fit_at = |name: &str, input: &Path, steps: &str| {
+    let fit_with = |name: &str, input: &Path, steps: &str, faceted: &str| {
         let dir = tmp.path().join(name);
         let out = run(bin()
             .arg("fit")
             .arg(input)
             .args(["--target-controls-pct", "2", "--stray-budget-steps", steps])
+            .args(["--faceted", faceted])
             .arg("--out")
             .arg(&dir));
         let line = String::from_utf8_lossy(&out.stdout).into_owned();
         (line, read_json(&dir.join("report.json")))
     };
+    let fit_at = |name: &str, input: &Path, steps: &str| fit_with(name, input, steps, "true");
 
     let (line, report) = fit_at("grown", &genus_four, "2");
     let object = &report["object"];
@@ -301,7 +311,37 @@ fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
     assert!(!line.contains("fitted again"), "{line}");
     assert!(line.contains("strays up to"), "{line}");
 
-    let (line, report) = fit_at("kept", &broken, "2");
+    let (line, report) = fit_at("last resort", &broken, "2");
+    let budgets = report["object"]["stray_budgets"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    let (smooth, faceted): (Vec<_>, Vec<_>) = budgets.iter().partition(|b| b["faceted"] != true);
+    assert_eq!(smooth.len(), 3, "{budgets:?}");
+    assert!(!faceted.is_empty(), "{budgets:?}");
+    assert_eq!(report["object"]["stray"]["within"], true);
+    let kept = budgets.last().cloned().unwrap_or_default();
+    assert_eq!(
+        (&kept["kept"], &kept["faceted"]),
+        (&serde_json::json!(true), &serde_json::json!(true))
+    );
+    assert_eq!(report["control_points"], kept["controls"]);
+    assert!(
+        kept["controls"].as_u64() > smooth[2]["controls"].as_u64(),
+        "{budgets:?}"
+    );
+    assert_eq!(report["object"]["faceted"]["kept_faceted"], true);
+    let grown = format!(
+        "{} faceted (the surface of {} kept",
+        kept["target"], report["control_points"]
+    );
+    assert!(line.contains(&grown), "{line}");
+    assert!(
+        line.contains("faceted: every control edge is a crease"),
+        "{line}"
+    );
+
+    let (line, report) = fit_with("kept", &broken, "2", "false");
     let budgets = report["object"]["stray_budgets"]
         .as_array()
         .cloned()

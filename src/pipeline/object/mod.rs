@@ -118,9 +118,10 @@ pub fn fit_object_input(
     let fit = grow_budget_while_straying(fit, asked, opts, &side, topo, |target| {
         fit_at_target(&side, topo, &sharp, target, opts)
     });
-    let mut fit = faceted::keep_nearer(fit, &side, topo, &sharp, opts, |start, o| {
+    let fit = faceted::keep_nearer(fit, &side, topo, &sharp, opts, |start, o| {
         fit_from(&side, start, o)
     });
+    let mut fit = faceted::hold_bound(fit, &side, topo, opts, |start, o| fit_from(&side, start, o));
     // The data side is built once for every fit: reported with the kept fit's setup.
     fit.times.surface_ms += side_ms;
     fit.cleaning = Some(cleaning);

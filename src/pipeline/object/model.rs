@@ -394,6 +394,8 @@ pub struct StrayBudget {
     pub stray: f64,
     /// Whether it is the fit kept (the least straying).
     pub kept: bool,
+    /// Whether it is a faceted fit, the escalation's last resort (`faceted::hold_bound`).
+    pub faceted: bool,
 }
 
 impl StrayBudget {
@@ -404,6 +406,7 @@ impl StrayBudget {
             rms: fit.rms,
             stray: fit.stray.unwrap_or(f64::INFINITY),
             kept: false,
+            faceted: false,
         }
     }
 }
