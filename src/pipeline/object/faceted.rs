@@ -80,9 +80,7 @@ pub(super) fn keep_nearer(
         return smooth;
     };
     let vertices = side.mesh.positions.len();
-    let limit = opts
-        .max_stray_share
-        .map_or(f64::INFINITY, |s| s * side.mesh.bounds_diagonal());
+    let limit = opts.stray_limit(side.mesh).unwrap_or(f64::INFINITY);
     let smooth_strays = smooth.stray.is_some_and(|s| s > limit);
     // Creases turned off rule out the surface whose every edge is one.
     let wanted = opts.faceted_candidate && opts.crease.on();
@@ -176,10 +174,9 @@ pub(super) fn hold_bound(
     opts: &ObjectOptions,
     fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
 ) -> ObjectFit {
-    let (Some(share), Some(topo)) = (opts.max_stray_share, data_topo) else {
+    let (Some(limit), Some(topo)) = (opts.stray_limit(side.mesh), data_topo) else {
         return fit;
     };
-    let limit = share * side.mesh.bounds_diagonal();
     let stray = fit.stray.unwrap_or(f64::INFINITY);
     let wanted = opts.faceted_candidate && opts.crease.on() && opts.stray_budget_steps > 0;
     let vertices = side.mesh.positions.len();

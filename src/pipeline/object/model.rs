@@ -195,6 +195,15 @@ impl RoundStop {
     }
 }
 
+impl ObjectOptions {
+    /// The stray bound for `data` (`max_stray_share` of its bounding-box diagonal), which
+    /// the stray repair, the budget's growth and the faceted surfaces all hold the fit
+    /// to; `None` when the fit is not held to one.
+    pub(super) fn stray_limit(&self, data: &TriMesh) -> Option<f64> {
+        self.max_stray_share.map(|s| s * data.bounds_diagonal())
+    }
+}
+
 impl Default for ObjectOptions {
     fn default() -> Self {
         Self {

@@ -45,11 +45,10 @@ pub(super) fn keep_near_data(
     opts: &ObjectOptions,
     side: &DataSide,
 ) -> ObjectFit {
-    let Some(share) = opts.max_stray_share else {
+    let Some(limit) = opts.stray_limit(&fit.component) else {
         return fit;
     };
     let t = Instant::now();
-    let limit = share * fit.component.bounds_diagonal();
     // A broken mesh's holes can force more controls than the target (each boundary loop
     // keeps a few): the extra share counts from where the fit is.
     let start = target.max(fit.controls.len());

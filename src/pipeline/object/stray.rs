@@ -241,10 +241,9 @@ pub(super) fn grow_budget_while_straying(
     data_topo: Option<&Topology>,
     fit_at: impl Fn(usize) -> Result<ObjectFit, ObjectError>,
 ) -> ObjectFit {
-    let Some(share) = opts.max_stray_share else {
+    let Some(limit) = opts.stray_limit(&fit.component) else {
         return fit;
     };
-    let limit = share * fit.component.bounds_diagonal();
     let points = fit.data.len();
     let stray_of = |f: &ObjectFit| f.stray.unwrap_or(f64::INFINITY);
     let mut tried = vec![StrayBudget::of(asked, &fit)];
