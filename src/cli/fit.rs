@@ -407,6 +407,12 @@ fn summary(label: &str, out: &PatchOutputs, dir: &Path, asked: SurfaceKind) -> S
     }
     if let Some(said) = escalation_summary(&r["object"], &r["control_points"]) {
         line.push_str(&said);
+        if r["control_points"] == r["data_points"] && r["object"]["faceted"]["kept_faceted"] == true
+        {
+            line.push_str(
+                "; no fewer controls held the bound: the surface is the cleaned input mesh itself",
+            );
+        }
     }
     if let Some(said) = faceted_clause(&r["object"]["faceted"]) {
         line.push_str(&said);

@@ -340,6 +340,12 @@ fn fit_grows_the_budget_where_it_cannot_hold_the_shape() {
         line.contains("faceted: every control edge is a crease"),
         "{line}"
     );
+    // Named when the last resort went all the way to the data's own vertices.
+    assert_eq!(
+        line.contains("the surface is the cleaned input mesh itself"),
+        report["control_points"] == report["data_points"],
+        "{line}"
+    );
 
     let (line, report) = fit_with("kept", &broken, "2", "false");
     let budgets = report["object"]["stray_budgets"]
