@@ -32,11 +32,10 @@ use super::model::{
     landing_params, ms_since, FacetedChoice, ObjectError, ObjectFit, ObjectOptions, StrayBudget,
     STRAY_LATTICE_SEGMENTS,
 };
-use super::stray::{decimation_strays, farthest_from};
+use super::stray::{decimation_strays, farthest_of};
 use crate::mesh::edge_table::EdgeTable;
-use crate::mesh::simplify::{simplify_with_topology, SimplifyOptions};
+use crate::mesh::simplify::{simplify_with_topology, Simplified, SimplifyOptions};
 use crate::mesh::topology::Topology;
-use crate::surface::TriSurface;
 use crate::TriMesh;
 use std::time::Instant;
 
@@ -92,14 +91,7 @@ pub(super) fn keep_nearer(
     let Ok(mut faceted) = fitted else {
         return smooth;
     };
-    let faces: Vec<u32> = (0..faceted.surface.domain_face_count() as u32).collect();
-    let faceted_stray = farthest_from(
-        &faceted.surface,
-        &faceted.controls,
-        side.nearest(),
-        STRAY_LATTICE_SEGMENTS,
-        &faces,
-    );
+    let faceted_stray = farthest_of(&faceted, side.nearest(), STRAY_LATTICE_SEGMENTS);
     let smooth_stray = smooth.stray;
     let kept_faceted = faceted.rms < smooth.rms
         && stray_allows(
@@ -199,21 +191,16 @@ pub(super) fn hold_bound(
     let mut count = fit.controls.len();
     while count < vertices && !opts.stop.out_of_time() {
         count = (2 * count).min(vertices);
+        let Ok(decimated) = decimation(side, topo, count) else {
+            continue;
+        };
         // The fitted faceting first (nearer the data where it holds), the decimation as
         // it is where the fit strays.
         for how in [Faceting::Fitted, Faceting::AsDecimated] {
-            let Ok(mut faceted) = faceting(side, topo, count, opts, &fit_from, how) else {
+            let Ok(mut faceted) = faceting(&decimated, opts, &fit_from, how) else {
                 continue;
             };
-            let faces: Vec<u32> = (0..faceted.surface.domain_face_count() as u32).collect();
-            let nearest = side.nearest();
-            let stray = farthest_from(
-                &faceted.surface,
-                &faceted.controls,
-                nearest,
-                segments,
-                &faces,
-            );
+            let stray = farthest_of(&faceted, side.nearest(), segments);
             faceted.stray = Some(stray);
             let mut budget = StrayBudget::of(count, &faceted);
             budget.faceted = true;
@@ -282,7 +269,8 @@ fn faceted_fit(
     opts: &ObjectOptions,
     fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
 ) -> Result<ObjectFit, ObjectError> {
-    faceting(side, topo, controls, opts, fit_from, Faceting::Fitted)
+    let decimated = decimation(side, topo, controls)?;
+    faceting(&decimated, opts, fit_from, Faceting::Fitted)
 }
 
 /// What a faceting does with the decimation.
@@ -299,25 +287,30 @@ enum Faceting {
     AsDecimated,
 }
 
-/// The faceted surface of `side`'s data at `controls` control points, as `how` says.
-fn faceting(
+/// The plain quadric decimation of `side`'s data to `controls` vertices a faceting is
+/// made of. Plain Garland-Heckbert: the smooth fit's isotropy term and triangle-quality
+/// guard trade the facets' planes for even faces, which only a smooth surface needs.
+fn decimation(
     side: &DataSide,
     topo: &Topology,
     controls: usize,
-    opts: &ObjectOptions,
-    fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
-    how: Faceting,
-) -> Result<ObjectFit, ObjectError> {
-    // Plain Garland-Heckbert: the smooth fit's isotropy term and triangle-quality guard
-    // trade the facets' planes for even faces, which only a smooth surface needs.
+) -> Result<Simplified, ObjectError> {
     let simplify_opts = SimplifyOptions {
         target_vertices: controls,
         min_quality: 0.0,
         isotropy: 0.0,
         ..SimplifyOptions::default()
     };
-    let decimated = simplify_with_topology(side.mesh, topo, &simplify_opts, &[])
-        .map_err(ObjectError::Simplify)?;
+    simplify_with_topology(side.mesh, topo, &simplify_opts, &[]).map_err(ObjectError::Simplify)
+}
+
+/// The faceted surface of `decimated` (every edge a crease), as `how` says.
+fn faceting(
+    decimated: &Simplified,
+    opts: &ObjectOptions,
+    fit_from: impl Fn(FitStart, &ObjectOptions) -> Result<ObjectFit, ObjectError>,
+    how: Faceting,
+) -> Result<ObjectFit, ObjectError> {
     let creases = every_edge(&decimated.mesh);
     let params = landing_params(&decimated.landing);
     let as_is = how == Faceting::AsDecimated;
@@ -336,7 +329,7 @@ fn faceting(
     let warm = as_is.then(|| decimated.mesh.positions.clone());
     let start = FitStart {
         warm,
-        ..FitStart::new(decimated.mesh, &creases, params)
+        ..FitStart::new(decimated.mesh.clone(), &creases, params)
     };
     fit_from(start, &fit_opts)
 }

@@ -21,14 +21,14 @@ use std::time::Instant;
 /// lattice of `segments` segments per control face edge, and the local maxima above its
 /// farthest samples; infinite when the data mesh is empty or a sample is not finite).
 pub fn farthest_from_data(fit: &ObjectFit, segments: usize) -> f64 {
+    farthest_of(fit, &MeshDistance::new(&fit.component), segments)
+}
+
+/// [`farthest_from_data`] against a data mesh whose index the caller has built already
+/// (`DataSide::nearest`), over every face of the fit's surface.
+pub(super) fn farthest_of(fit: &ObjectFit, data: &MeshDistance, segments: usize) -> f64 {
     let faces: Vec<u32> = (0..fit.surface.domain_face_count() as u32).collect();
-    farthest_from(
-        &fit.surface,
-        &fit.controls,
-        &MeshDistance::new(&fit.component),
-        segments,
-        &faces,
-    )
+    farthest_from(&fit.surface, &fit.controls, data, segments, &faces)
 }
 
 /// [`farthest_from_data`] for any Loop limit surface and data mesh, over `faces` only
