@@ -6,7 +6,9 @@
 //!
 //! Prints per model and version 2: wall time cold and warm, their ratio, control points,
 //! geometric RMS and max, whether the warm start was used, the warm fit's stages, and
-//! what its local refit touched (`null`: the whole fit ran from the previous control mesh).
+//! what its local refit touched (`null`: the whole fit ran from the previous control mesh);
+//! then the warm report's `prepare_ms`, `fit_ms` and `wall_ms`, which show how much of the
+//! warm wall is the fit and how much the checks and outputs every version pays for.
 //!
 //!     cargo run --release --example object_warm [-- MODEL...]
 //!
@@ -128,6 +130,13 @@ fn main() {
                 .map_or(0, |r| r.len().saturating_sub(1)),
             warm.report["object"]["stages"],
             warm.report["object"]["local"],
+        );
+        let ms = |key: &str| warm.report[key].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "  warm report ms: prepare {:.1}, fit {:.1}, wall {:.1} (the rest of the wall: the stray guard, the whole surface's stray measure for the report, the tessellation, the GLB and the report)",
+            ms("prepare_ms"),
+            ms("fit_ms"),
+            ms("wall_ms"),
         );
     }
 }
