@@ -229,14 +229,14 @@ const STRAY_BUDGET_GROWTH: usize = 2;
 /// strays by its own making, a boundary curve past a jagged rim, and more controls do
 /// not mend it: chin_tri on the object path, 0.53 % at 2x as at 1x). Once a step has
 /// brought the surface closer, more controls are shown to mend it and the steps go on
-/// whatever a decimation does: femur (closed, genus 2) strayed 1.39 / 0.90 / 0.71 % at
-/// 215 / 430 / 860 controls, where a decimation to 860 holds the bound, and 0.40 % at
-/// 1722. The steps stop at a fit that strays no less than the one before. The least
-/// straying fit is kept, within the bound or not: where the steps run out first, each
-/// brought the surface closer (elk, 4.3 % of the diagonal at 82 controls, 0.67 % at
-/// 772), which a user asking for a surface on the data would rather have than the
-/// budget. The fits tried are listed in `stray_budgets`, the time beside the kept fit in
-/// `times.stray_budget_ms`.
+/// whatever a decimation does: femur (closed, genus 2) strayed 1.24 / 0.79 / 0.63 % of
+/// its diagonal at 215 / 430 / 860 controls, where a decimation to 860 holds the bound,
+/// and 0.49 % at 1721. The steps stop at a fit that strays no less than the one before.
+/// The least straying fit is kept, within the bound or not: where the steps run out
+/// first, each brought the surface closer (elk, 4.3 % of the diagonal at 82 controls,
+/// 0.67 % at 772), which a user asking for a surface on the data would rather have than
+/// the budget. The fits tried are listed in `stray_budgets`, the time beside the kept fit
+/// in `times.stray_budget_ms`.
 pub(super) fn grow_budget_while_straying(
     fit: ObjectFit,
     asked: usize,
