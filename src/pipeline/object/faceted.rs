@@ -81,8 +81,7 @@ pub(super) fn keep_nearer(
     let vertices = side.mesh.positions.len();
     let limit = opts.stray_limit(side.mesh).unwrap_or(f64::INFINITY);
     let smooth_strays = smooth.stray.is_some_and(|s| s > limit);
-    // Creases turned off rule out the surface whose every edge is one.
-    let wanted = opts.faceted_candidate && opts.crease.on();
+    let wanted = faceting_allowed(opts);
     if !wanted || (sharp_share(vertices, sharp) < SHARP_SHARE && !smooth_strays) {
         return smooth;
     }
@@ -155,10 +154,11 @@ fn stray_allows(
 /// within the bound is kept. A smooth surface cannot get there on such data: between
 /// the vertices of a coarse mesh it leaves the flat facets by their sag whatever its
 /// count (a jolted 384-vertex torus: 3.5 times the bound with a control at every
-/// vertex), while a faceting converges to the data mesh itself, whose stray is nought. So the bound the user was promised holds
-/// on every input, at the cost of controls and of smoothness, which the report says
-/// (`stray_budgets` entries marked `faceted`, and `faceted`). Where none gets within
-/// the bound, the fit is kept as it was with the tries listed.
+/// vertex), while a faceting converges to the data mesh itself, whose stray is nought.
+/// So the bound the user was promised holds on every input, at the cost of controls and
+/// of smoothness, which the report says (`stray_budgets` entries marked `faceted`, and
+/// `faceted`). Where none gets within the bound, the fit is kept as it was with the tries
+/// listed.
 pub(super) fn hold_bound(
     fit: ObjectFit,
     side: &DataSide,
@@ -170,7 +170,7 @@ pub(super) fn hold_bound(
         return fit;
     };
     let stray = fit.stray.unwrap_or(f64::INFINITY);
-    let wanted = opts.faceted_candidate && opts.crease.on() && opts.stray_budget_steps > 0;
+    let wanted = faceting_allowed(opts) && opts.stray_budget_steps > 0;
     let vertices = side.mesh.positions.len();
     if !wanted || stray <= limit || fit.controls.len() >= vertices {
         return fit;
@@ -214,6 +214,12 @@ pub(super) fn hold_bound(
     fit.times.stray_budget_ms += ms_since(t);
     fit.stray_budgets.extend(tried);
     fit
+}
+
+/// Whether `opts` let a faceted surface be fitted at all: the candidate asked for, and
+/// creases on (turned off, they rule out the surface whose every edge is one).
+fn faceting_allowed(opts: &ObjectOptions) -> bool {
+    opts.faceted_candidate && opts.crease.on()
 }
 
 /// `faceted`, the last resort `hold_bound` keeps in place of `fit`, with the escalation's
