@@ -1,5 +1,5 @@
-//! The control-mesh simplification alone (`mesh::simplify`, as the whole-object fit runs
-//! it: isotropy 1e-3, boundary loops of at least 6 edges), best of RUNS, with a
+//! The control-mesh simplification alone (`mesh::simplify` with the whole-object fit's
+//! default guards, `ObjectOptions::default().simplify`), best of RUNS, with a
 //! fingerprint of its output (positions' bits, faces, every landing) so that a change
 //! meant to be faster only can be checked to give the same mesh bit for bit.
 //!
@@ -15,7 +15,7 @@ use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::CleanOptions;
 use trispline::mesh::simplify::{simplify, SimplifyOptions};
-use trispline::pipeline::object::fitted_component;
+use trispline::pipeline::object::{fitted_component, ObjectOptions};
 
 type Res<T> = Result<T, Box<dyn std::error::Error>>;
 
@@ -33,9 +33,7 @@ fn main() -> Res<()> {
     let n = component.positions.len();
     let opts = SimplifyOptions {
         target_vertices: ((share / 100.0) * n as f64).round() as usize,
-        isotropy: 1e-3,
-        min_boundary_loop: 6,
-        ..Default::default()
+        ..ObjectOptions::default().simplify
     };
     let mut best = f64::INFINITY;
     let mut last = None;
