@@ -12,6 +12,7 @@ use trispline::pipeline::object::{
     extend_over_new_ground, farthest_from_data, fit_object, refit_where_changed, NotExtended,
     ObjectFit, ObjectOptions, PreviousFit, RoundStop, CURVATURE_FLOOR,
 };
+use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::TriMesh;
 
@@ -302,7 +303,8 @@ fn the_rounds_and_the_refinement_stop_where_the_budget_holds_or_time_is_up() {
 
 /// A new version refitted locally stops as a whole fit does: with the deadline already
 /// past only its first round runs (a whole fit's first fit runs too) and neither further
-/// rounds nor refinement; without one they take the bump in further.
+/// rounds nor refinement; without one they take the bump in further. Taking over the
+/// previous surface's quadtrees changes nothing in the result.
 #[test]
 fn a_local_refit_takes_no_round_once_time_is_up() {
     let fit = fit_object(&torus(96, 40), &ObjectOptions::default()).expect("fitted");
@@ -315,27 +317,38 @@ fn a_local_refit_takes_no_round_once_time_is_up() {
         let ring = DVec3::new(p.x, p.y, 0.0).normalize() * MAJOR;
         *p += (*p - ring).normalize() * 20.0 * fit.rms;
     }
-    let refit = |opts: &ObjectOptions| {
+    let refit = |opts: &ObjectOptions, reusing: Option<&LoopLimitSurface>| {
+        let control_mesh = fit.control_mesh();
+        let previous = PreviousFit {
+            control_mesh: &control_mesh,
+            crease_edges: fit.surface.crease_edges(),
+            rms: fit.rms,
+            surface: reusing,
+        };
         refit_where_changed(
             bumped.clone(),
-            fit.control_mesh(),
-            fit.surface.crease_edges(),
+            previous,
             fit.params.clone(),
             &fit.data,
-            fit.rms,
             opts,
         )
         .expect("refits")
         .expect("a local change")
     };
-    let free = refit(&ObjectOptions::default());
-    let late = refit(&ObjectOptions {
-        stop: RoundStop {
-            budget: None,
-            deadline: Some(Instant::now()),
+    let free = refit(&ObjectOptions::default(), None);
+    let reusing = refit(&ObjectOptions::default(), Some(&fit.surface));
+    assert_eq!(reusing.controls, free.controls);
+    assert_eq!(reusing.distances, free.distances);
+    let late = refit(
+        &ObjectOptions {
+            stop: RoundStop {
+                budget: None,
+                deadline: Some(Instant::now()),
+            },
+            ..ObjectOptions::default()
         },
-        ..ObjectOptions::default()
-    });
+        None,
+    );
     eprintln!(
         "local refit: {} rounds, {} controls, rms {:.3e}; past deadline: {} rounds, {} controls, rms {:.3e}",
         free.rounds.len(),
@@ -370,6 +383,7 @@ fn new_ground_away_from_any_rim_is_refused_with_its_reason() {
         control_mesh: &control_mesh,
         crease_edges: fit.surface.crease_edges(),
         rms: fit.rms,
+        surface: Some(&fit.surface),
     };
     let extended = extend_over_new_ground(
         fit.component.clone(),

@@ -21,7 +21,7 @@
 
 use super::local::{free_controls, refit_around, LocalFeet, LocalOptions};
 use super::model::ObjectOptions;
-use super::model::{control_target, limit_surface, ms_since, ObjectError, ObjectFit};
+use super::model::{control_target, limit_surface, ms_since, ObjectError, ObjectFit, PreviousFit};
 use super::refine::limit_positions;
 use super::seam::{region_faces, seams, strip, Rims, Run, Seam, SeamMiss};
 use super::version::{changed_points, Refitted, CHANGE_FACTOR};
@@ -31,16 +31,6 @@ use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
 use std::time::Instant;
-
-/// The previous fit the extension keeps.
-pub struct PreviousFit<'a> {
-    /// Its control mesh at the fitted positions.
-    pub control_mesh: &'a TriMesh,
-    /// Its crease edges.
-    pub crease_edges: &'a [[u32; 2]],
-    /// Its RMS distance (to tell changed old points from noise).
-    pub rms: f64,
-}
 
 /// Why an object was not extended over its new ground (`extend_over_new_ground`); the
 /// caller fits the whole object instead.
@@ -168,7 +158,7 @@ pub fn extend_over_new_ground(
     if params.iter().any(|p| p.face as usize >= old_faces) {
         return Ok(Err(NotExtended::StartOffFaces));
     }
-    let old_surface = limit_surface(old_mesh, previous.crease_edges, None)?;
+    let old_surface = limit_surface(old_mesh, previous.crease_edges, previous.surface)?;
     let t = Instant::now();
     let joined = match joined_mesh(&component, is_new, old_mesh, &old_surface) {
         Ok(joined) => joined,

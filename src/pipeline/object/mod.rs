@@ -48,7 +48,7 @@ use crate::TriMesh;
 pub use component::ObjectInput;
 use corners::rim_corners;
 use data_side::DataSide;
-pub use extend::{extend_over_new_ground, NotExtended, PreviousFit};
+pub use extend::{extend_over_new_ground, NotExtended};
 pub use faceted::is_faceted;
 use fit_parts::{declined, FitStart, GoOn, RoundContext, Setup};
 use glam::DVec3;
@@ -57,9 +57,9 @@ pub use layout::{LayoutOptions, LayoutReport};
 pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
 use model::{control_target, landing_params, ms_since, MAX_REFUSALS};
 pub use model::{
-    FacetedChoice, LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, RoundReport,
-    RoundStop, StrayBudget, CURVATURE_FLOOR, STRAY_BUDGET_STEPS, STRAY_LATTICE_SEGMENTS,
-    STRAY_LIMIT_SHARE,
+    FacetedChoice, LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, PreviousFit,
+    RoundReport, RoundStop, StrayBudget, CURVATURE_FLOOR, STRAY_BUDGET_STEPS,
+    STRAY_LATTICE_SEGMENTS, STRAY_LIMIT_SHARE,
 };
 use refine::{faces_beyond, refined_mesh, Fitted, Splits, MIN_FACES_BEYOND_SHARE};
 pub use refine::{RefineOptions, RefineRound};
@@ -281,24 +281,26 @@ pub fn fit_on_control_mesh(
     params: Vec<SurfaceParam>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
-    fit_on_creased_control_mesh(component, control_mesh, &[], params, opts)
+    fit_on_creased_control_mesh(component, control_mesh, &[], params, None, opts)
 }
 
 /// [`fit_on_control_mesh`] with crease edges (pairs of control indices) on the limit
-/// surface.
+/// surface, taking over the quadtrees of `reusing` (a surface of an earlier control mesh,
+/// such as the previous version's) where they fit.
 pub fn fit_on_creased_control_mesh(
     component: TriMesh,
     control_mesh: TriMesh,
     crease_edges: &[[u32; 2]],
     params: Vec<SurfaceParam>,
+    reusing: Option<&LoopLimitSurface>,
     opts: &ObjectOptions,
 ) -> Result<ObjectFit, ObjectError> {
     let side = DataSide::new(&component, opts)?;
-    fit_from(
-        &side,
-        FitStart::new(control_mesh, crease_edges, params),
-        opts,
-    )
+    let start = FitStart {
+        previous: reusing,
+        ..FitStart::new(control_mesh, crease_edges, params)
+    };
+    fit_from(&side, start, opts)
 }
 
 /// [`fit_on_creased_control_mesh`] from `start`, on the data of `side`.

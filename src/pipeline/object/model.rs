@@ -438,6 +438,20 @@ impl ObjectFit {
     }
 }
 
+/// A previous fit a new version starts from (a local refit, an extension over new ground).
+pub struct PreviousFit<'a> {
+    /// Its control mesh at the fitted positions.
+    pub control_mesh: &'a TriMesh,
+    /// Its crease edges.
+    pub crease_edges: &'a [[u32; 2]],
+    /// Its RMS distance (to tell changed old points from noise).
+    pub rms: f64,
+    /// Its limit surface, when the caller kept it: the new surfaces take over its
+    /// quadtrees of child nets (`LoopLimitSurface::with_creases_reusing`), which a fit of
+    /// a coarse irregular control mesh otherwise spends much of its time building again.
+    pub surface: Option<&'a LoopLimitSurface>,
+}
+
 /// The limit surface of `control_mesh`, taking over the unchanged patches of `previous`.
 pub(super) fn limit_surface(
     control_mesh: &TriMesh,

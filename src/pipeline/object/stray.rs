@@ -67,12 +67,21 @@ pub fn face_strays(
     let k = segments.max(1);
     let evaluate = surface.evaluator(controls);
     let count = surface.domain_face_count() as u32;
-    let distance_at = |p: SurfaceParam| {
-        data.distance(evaluate(p).position)
-            .filter(|d| d.is_finite())
-            .unwrap_or(f64::INFINITY)
+    // Successive samples of a face lie close together, so each query starts from the
+    // data triangle nearest the one before (`MeshDistance::closest_near`).
+    let distance_at = |p: SurfaceParam, hint: &mut Option<u32>| {
+        let q = evaluate(p).position;
+        match data.closest_near(q, *hint) {
+            Some(c) => {
+                *hint = Some(c.triangle);
+                Some((c.point - q).length())
+                    .filter(|d| d.is_finite())
+                    .unwrap_or(f64::INFINITY)
+            }
+            None => f64::INFINITY,
+        }
     };
-    let lattice: Vec<(f64, SurfaceParam)> = faces
+    let lattice: Vec<(f64, SurfaceParam, Option<u32>)> = faces
         .par_iter()
         .with_min_len(64)
         .map(|&f| {
@@ -83,10 +92,12 @@ pub fn face_strays(
                     u: 0.0,
                     v: 0.0,
                 },
+                None,
             );
             if f >= count {
                 return farthest;
             }
+            let mut hint = None;
             for j in 0..=k {
                 for i in 0..=k - j {
                     let p = SurfaceParam {
@@ -94,9 +105,9 @@ pub fn face_strays(
                         u: i as f64 / k as f64,
                         v: j as f64 / k as f64,
                     };
-                    let d = distance_at(p);
+                    let d = distance_at(p, &mut hint);
                     if d > farthest.0 {
-                        farthest = (d, p);
+                        farthest = (d, p, hint);
                     }
                 }
             }
@@ -110,9 +121,9 @@ pub fn face_strays(
     lattice
         .into_par_iter()
         .with_min_len(64)
-        .map(|(d, at)| {
+        .map(|(d, at, hint)| {
             if d > 0.0 && d >= 0.5 * largest {
-                ascend(&distance_at, at, d, 1.0 / k as f64)
+                ascend(&distance_at, (at, hint), d, 1.0 / k as f64)
             } else {
                 d
             }
@@ -127,11 +138,12 @@ const ASCENT_LEVELS: usize = 7;
 const ASCENT_MOVES: usize = 8;
 
 /// The local maximum of `distance_at` over the face of `start` (u, v >= 0, u + v <= 1)
-/// near `start`, whose distance is `d`: a compass search along the lattice's three edge
-/// directions, from `step` down by halves. It never returns less than `d`.
+/// near `start`, whose distance is `d` (with the data triangle nearest it, the queries'
+/// hint): a compass search along the lattice's three edge directions, from `step` down by
+/// halves. It never returns less than `d`.
 fn ascend(
-    distance_at: &(impl Fn(SurfaceParam) -> f64 + Sync),
-    start: SurfaceParam,
+    distance_at: &(impl Fn(SurfaceParam, &mut Option<u32>) -> f64 + Sync),
+    (start, mut hint): (SurfaceParam, Option<u32>),
     d: f64,
     step: f64,
 ) -> f64 {
@@ -158,7 +170,7 @@ fn ascend(
                     u,
                     v,
                 };
-                let e = distance_at(p);
+                let e = distance_at(p, &mut hint);
                 if e > best {
                     (at, best, moved) = (p, e, true);
                 }

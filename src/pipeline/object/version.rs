@@ -7,7 +7,7 @@ use super::local::{
 };
 use super::model::{
     control_target, limit_surface, ms_since, LocalUpdate, ObjectError, ObjectFit, ObjectOptions,
-    RoundReport,
+    PreviousFit, RoundReport,
 };
 use super::refine::{refined_mesh, Fitted, RefineRound, Splits};
 use super::solve::rms;
@@ -38,23 +38,26 @@ const ROUNDING_SHARE: f64 = 1e-3;
 /// surface where no data point sees it.
 const MAX_FREE_SHARE: f64 = 0.5;
 
-/// A new version of a fitted object refitted where it changed: `control_mesh` is the
-/// previous fit's (at its fitted positions) with `crease_edges`, `params` each point's
-/// start on it (the previous foot of the previous data point nearest to it, `reference`)
-/// and `previous_rms` the previous fit's RMS. Which points changed: `changed_points`.
+/// A new version of a fitted object refitted where it changed from `previous` (its
+/// control mesh at the fitted positions, crease edges and RMS), `params` each point's
+/// start on it (the previous foot of the previous data point nearest to it, `reference`). Which points changed: `changed_points`.
 /// Where the update leaves points beyond `opts.refine.tolerance`, their control faces are
 /// split (up to the control budget) and refitted locally again. `None` when the change
 /// frees more than `MAX_FREE_SHARE` of the controls, or the previous RMS is not known: the
 /// whole fit then runs.
 pub fn refit_where_changed(
     component: TriMesh,
-    control_mesh: TriMesh,
-    crease_edges: &[[u32; 2]],
+    previous: PreviousFit,
     params: Vec<SurfaceParam>,
     reference: &[DVec3],
-    previous_rms: f64,
     opts: &ObjectOptions,
 ) -> Result<Option<ObjectFit>, ObjectError> {
+    let PreviousFit {
+        control_mesh,
+        crease_edges,
+        rms: previous_rms,
+        surface: previous_surface,
+    } = previous;
     let start = Instant::now();
     let n = component.positions.len();
     if params.len() != n || reference.len() != n {
@@ -69,9 +72,9 @@ pub fn refit_where_changed(
     }
     let topologies = [
         SurfaceTopology::of(&component).map_err(ObjectError::NotManifold)?,
-        SurfaceTopology::of(&control_mesh).map_err(ObjectError::NotManifold)?,
+        SurfaceTopology::of(control_mesh).map_err(ObjectError::NotManifold)?,
     ];
-    let surface = limit_surface(&control_mesh, crease_edges, None)?;
+    let surface = limit_surface(control_mesh, crease_edges, previous_surface)?;
     let surface_ms = ms_since(start);
     let controls = control_mesh.positions.clone();
     let data = &component.positions;
@@ -105,7 +108,13 @@ pub fn refit_where_changed(
         &free,
         &LocalOptions::of(opts),
     );
-    let mut state = Refitted::new(surface, control_mesh, first, free, opts.refine.tolerance);
+    let mut state = Refitted::new(
+        surface,
+        control_mesh.clone(),
+        first,
+        free,
+        opts.refine.tolerance,
+    );
     let rounds_ms = ms_since(t);
     let t = Instant::now();
     state.refine_where_changed(

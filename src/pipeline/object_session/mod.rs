@@ -423,6 +423,10 @@ impl ObjectSession {
         let fit = fitted.fit.clone();
         let t = Instant::now();
         let mut outputs = outputs_of(fitted, &worker, t);
+        // The session keeps its own last fit, on a surface built afresh (`LastFit::of`):
+        // the fitted one, with every quadtree node its fit and tessellation reached, would
+        // stay in memory with the warm start.
+        outputs.warm.drop_surfaces();
         times.outputs_ms = ms_since(t);
         let t = Instant::now();
         let scans = self.measure(&fit);

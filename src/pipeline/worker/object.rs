@@ -21,6 +21,7 @@ use crate::pipeline::object::{
 use crate::pipeline::scan::{Dropped, WarmFeet};
 use crate::pipeline::{PatchFit, PipelineError, SurfaceKind, SurfaceModel};
 use crate::remesh::boundary_loops;
+use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::SurfaceParam;
 use crate::TriMesh;
 use glam::DVec3;
@@ -149,6 +150,11 @@ pub struct ObjectWarm {
     /// The control mesh's crease edges.
     #[serde(default)]
     pub crease_edges: Vec<[u32; 2]>,
+    /// The fitted limit surface, in memory only: the next version's surfaces take over
+    /// its quadtrees of child nets, whose building was a third of a warm refit of a coarse
+    /// irregular control mesh (fertility). Not stored: a restarted daemon builds them anew.
+    #[serde(skip)]
+    pub surface: Option<Arc<LoopLimitSurface>>,
 }
 
 /// A new version starts from the previous control mesh only when its vertex count is
@@ -326,18 +332,24 @@ fn warm_fit(
     } else {
         opts
     };
-    let local = refit_where_changed(
+    let reusing = warm.surface.as_deref();
+    let previous = PreviousFit {
+        control_mesh: &control_mesh,
+        crease_edges: creases,
+        rms: warm.feet.rms,
+        surface: reusing,
+    };
+    match refit_where_changed(
         component.clone(),
-        control_mesh.clone(),
-        creases,
+        previous,
         params.clone(),
         &reference,
-        warm.feet.rms,
         opts,
-    )?;
-    match local {
+    )? {
         Some(fit) => Ok(fit),
-        None => fit_on_creased_control_mesh(component, control_mesh, creases, params, opts),
+        None => {
+            fit_on_creased_control_mesh(component, control_mesh, creases, params, reusing, opts)
+        }
     }
 }
 
@@ -479,6 +491,7 @@ fn extend_fit(
         control_mesh: &start.control_mesh,
         crease_edges: &warm.crease_edges,
         rms: warm.feet.rms,
+        surface: warm.surface.as_deref(),
     };
     extend_over_new_ground(
         start.component.clone(),
@@ -632,6 +645,7 @@ pub(super) fn object_warm(fit: &PatchFit, info: &ObjectInfo) -> Option<ObjectWar
         boundary_loops: info.data_topology.boundary_loops,
         bounds: bounds_of(&fit.data),
         crease_edges: surface.crease_edges().to_vec(),
+        surface: Some(surface.clone()),
     })
 }
 

@@ -65,6 +65,27 @@ pub struct WarmStart {
     pub scattered: Option<crate::pipeline::scattered::ScatteredWarm>,
 }
 
+impl WarmStart {
+    /// Whether this warm start, or a part's, keeps a fitted surface in memory
+    /// (`ObjectWarm::surface`).
+    pub fn holds_surface(&self) -> bool {
+        self.object.as_ref().is_some_and(|o| o.surface.is_some())
+            || self.parts.iter().any(|p| p.warm.holds_surface())
+    }
+
+    /// Drops the fitted surfaces kept in memory for the next version, here and in the
+    /// parts (the next version then builds its quadtrees anew): a holder of many warm
+    /// starts, or of one for long, bounds its memory this way.
+    pub fn drop_surfaces(&mut self) {
+        if let Some(object) = &mut self.object {
+            object.surface = None;
+        }
+        for part in &mut self.parts {
+            part.warm.drop_surfaces();
+        }
+    }
+}
+
 /// A component's warm start and where the component was, so that the pieces of the next
 /// version find theirs even when their sizes (and so their order) change.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]

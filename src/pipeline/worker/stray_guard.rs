@@ -22,8 +22,11 @@ pub(crate) const MAX_STRAY_SHARE: f64 = crate::pipeline::object::STRAY_LIMIT_SHA
 /// farther, the whole fit runs. The fit's own errors (data to surface) cannot see a bulge.
 pub(crate) const MAX_STRAY_GROWTH: f64 = 1.5;
 
-/// Lattice segments per control face edge the stray check of a warm result samples
-/// (coarser than the report's: it runs on every warm update, and compares like with like).
+/// Lattice segments per control face edge the stray check of an object session's local
+/// refit samples (`stray_refusal`; coarser than the report's: it runs on every update
+/// and measures nothing the report reads, and it compares like with like). A warm
+/// version of a patch samples the report's lattice (`stays_on_data`), whose figures the
+/// report takes over.
 const STRAY_SEGMENTS: usize = 3;
 
 /// How far an object's surface strays from its data, in the report: a fit minimises the
@@ -67,15 +70,18 @@ impl StrayReport {
 
 /// `fit` unless its surface strays from the data farther than `MAX_STRAY_SHARE` and
 /// `MAX_STRAY_GROWTH` allow (a failed fit passes through: its error is reported as it is).
-/// Only the faces an update can have moved are sampled: those around a control that moved
-/// or is new (a patch depends on the controls of its face's 1-ring).
+/// Only the faces an update can have moved are held to that: those around a control that
+/// moved or is new (a patch depends on the controls of its face's 1-ring). They are
+/// sampled on the report's lattice, and a fit let through has the other faces measured
+/// too, with the same data index, as its `stray`: the report's whole-surface figure
+/// (`StrayReport::of`) then costs nothing more, where it measured the guard's faces again.
 pub(super) fn stays_on_data(
     fit: Result<ObjectFit, ObjectError>,
     previous_faces: &[[u32; 3]],
     previous_creases: &[[u32; 2]],
     previous_controls: &[DVec3],
 ) -> Result<Result<ObjectFit, ObjectError>, String> {
-    let Ok(fit) = fit else {
+    let Ok(mut fit) = fit else {
         return Ok(fit);
     };
     // The previous surface over the faces of the same indices (those it has; an update
@@ -89,16 +95,32 @@ pub(super) fn stays_on_data(
         )
         .ok()
     };
-    match stray_refusal(
-        &fit.surface,
-        &fit.controls,
-        &fit.component,
-        previous_controls,
-        previous,
-    ) {
-        Some(why) => Err(why),
-        None => Ok(Ok(fit)),
+    let (surface, controls) = (&fit.surface, &fit.controls);
+    let faces = faces_around_moved(surface.faces(), controls, previous_controls);
+    let data = MeshDistance::new(&fit.component);
+    let segments = STRAY_LATTICE_SEGMENTS;
+    let farthest = farthest_from(surface, controls, &data, segments, &faces);
+    let diagonal = fit.component.bounds_diagonal();
+    let before = || {
+        previous()
+            .map(|s| farthest_from(&s, previous_controls, &data, segments, &faces))
+            .unwrap_or(0.0)
+    };
+    if let Some(why) = refusal(farthest, diagonal, before) {
+        return Err(why);
     }
+    if fit.stray.is_none() {
+        let mut unmoved = vec![true; surface.faces().len()];
+        for &f in &faces {
+            unmoved[f as usize] = false;
+        }
+        let rest: Vec<u32> = (0..unmoved.len() as u32)
+            .filter(|&f| unmoved[f as usize])
+            .collect();
+        let others = farthest_from(surface, controls, &data, segments, &rest);
+        fit.stray = Some(farthest.max(others));
+    }
+    Ok(Ok(fit))
 }
 
 /// Why the surface `controls` give `surface` strays from the data mesh farther than
@@ -118,13 +140,22 @@ pub(crate) fn stray_refusal<S: Borrow<LoopLimitSurface>>(
     }
     let data = MeshDistance::new(data_mesh);
     let farthest = farthest_from(surface, controls, &data, STRAY_SEGMENTS, &faces);
-    let share = MAX_STRAY_SHARE * data_mesh.bounds_diagonal();
+    refusal(farthest, data_mesh.bounds_diagonal(), || {
+        previous_surface()
+            .map(|s| farthest_from(s.borrow(), previous_controls, &data, STRAY_SEGMENTS, &faces))
+            .unwrap_or(0.0)
+    })
+}
+
+/// Why a surface straying `farthest` from data of bounding-box diagonal `diagonal` over the
+/// faces an update moved is refused, if it is, where the previous surface strayed
+/// `before()` over the same faces (measured only when `farthest` is past the share).
+fn refusal(farthest: f64, diagonal: f64, before: impl FnOnce() -> f64) -> Option<String> {
+    let share = MAX_STRAY_SHARE * diagonal;
     if farthest <= share {
         return None;
     }
-    let before = previous_surface()
-        .map(|s| farthest_from(s.borrow(), previous_controls, &data, STRAY_SEGMENTS, &faces))
-        .unwrap_or(0.0);
+    let before = before();
     if farthest <= MAX_STRAY_GROWTH * before {
         return None;
     }
