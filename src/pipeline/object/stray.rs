@@ -71,14 +71,15 @@ pub fn face_strays(
     // data triangle nearest the one before (`MeshDistance::closest_near`).
     let distance_at = |p: SurfaceParam, hint: &mut Option<u32>| {
         let q = evaluate(p).position;
-        match data.closest_near(q, *hint) {
-            Some(c) => {
-                *hint = Some(c.triangle);
-                Some((c.point - q).length())
-                    .filter(|d| d.is_finite())
-                    .unwrap_or(f64::INFINITY)
-            }
-            None => f64::INFINITY,
+        let Some(c) = data.closest_near(q, *hint) else {
+            return f64::INFINITY;
+        };
+        *hint = Some(c.triangle);
+        let d = (c.point - q).length();
+        if d.is_finite() {
+            d
+        } else {
+            f64::INFINITY
         }
     };
     let lattice: Vec<(f64, SurfaceParam, Option<u32>)> = faces
