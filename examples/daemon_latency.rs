@@ -6,7 +6,9 @@
 //!     cargo run --release --example daemon_latency [-- N [REPS]]
 //!
 //! Uses `../shared/data/range_scans/bun000_tri.ply` when present, else a generated 40k-vertex
-//! height field. Each fit's share inside `run_patch` comes from the daemon's event line, so
+//! height field; `DAEMON_LATENCY_MESH=FILE` times another mesh (a whole object such as
+//! `../shared/data/models/fertility.off`, whose warm version starts from the fitted
+//! surface the daemon keeps in memory). Each fit's share inside `run_patch` comes from the daemon's event line, so
 //! the daemon's own overhead (detection, queueing, read, parse, writes, fsyncs) is the rest.
 
 use std::os::unix::fs::MetadataExt;
@@ -21,6 +23,10 @@ mod common;
 use common::{binary, Res};
 
 fn source_mesh() -> Res<(TriMesh, String)> {
+    if let Ok(file) = std::env::var("DAEMON_LATENCY_MESH") {
+        let m = read_mesh_file(Path::new(&file), &LoadOptions::default())?.mesh;
+        return Ok((m, file));
+    }
     let bun =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/range_scans/bun000_tri.ply");
     if bun.exists() {
@@ -104,8 +110,13 @@ impl Daemon {
             .spawn()?;
         let mut buf = [0u8; 64];
         let n = sock.recv(&mut buf)?;
-        if &buf[..n] != b"READY=1" {
-            return Err("unexpected notification".into());
+        // sd-notify ends each state with a newline.
+        if buf[..n].trim_ascii_end() != b"READY=1" {
+            return Err(format!(
+                "unexpected notification {:?}",
+                String::from_utf8_lossy(&buf[..n])
+            )
+            .into());
         }
         Ok(Daemon {
             child,
