@@ -110,12 +110,9 @@ pub(super) fn stays_on_data(
         return Err(why);
     }
     if fit.stray.is_none() {
-        let mut unmoved = vec![true; surface.faces().len()];
-        for &f in &faces {
-            unmoved[f as usize] = false;
-        }
-        let rest: Vec<u32> = (0..unmoved.len() as u32)
-            .filter(|&f| unmoved[f as usize])
+        // `faces` is in ascending order (`faces_around_moved`).
+        let rest: Vec<u32> = (0..surface.faces().len() as u32)
+            .filter(|f| faces.binary_search(f).is_err())
             .collect();
         let others = farthest_from(surface, controls, &data, segments, &rest);
         fit.stray = Some(farthest.max(others));
@@ -167,7 +164,7 @@ fn refusal(farthest: f64, diagonal: f64, before: impl FnOnce() -> f64) -> Option
 }
 
 /// The control faces with a vertex next to (or at) a control that is new or moved against
-/// `previous`.
+/// `previous`, in ascending order.
 fn faces_around_moved(faces: &[[u32; 3]], controls: &[DVec3], previous: &[DVec3]) -> Vec<u32> {
     let moved: Vec<bool> = (0..controls.len())
         .map(|v| previous.get(v) != Some(&controls[v]))
