@@ -80,9 +80,12 @@ struct Recent {
 impl Recent {
     fn insert(&mut self, id: &str, state: Arc<PatchState>) {
         let holds_surface = state.warm.holds_surface();
-        if self.states.insert(id.to_string(), state).is_none() {
-            self.order.push_back(id.to_string());
+        // Least recently saved first: a patch updated often must not be evicted because it
+        // was first seen long ago (its next version would read its file again).
+        if self.states.insert(id.to_string(), state).is_some() {
+            self.order.retain(|k| k != id);
         }
+        self.order.push_back(id.to_string());
         while self.order.len() > RECENT_STATES {
             if let Some(old) = self.order.pop_front() {
                 self.states.remove(&old);
@@ -189,6 +192,7 @@ impl StateStore {
         let mut recent = self.recent();
         recent.states.remove(id);
         recent.order.retain(|k| k != id);
+        recent.with_surface.retain(|k| k != id);
         drop(recent);
         let _ = std::fs::remove_file(self.path(id));
     }
@@ -305,6 +309,30 @@ mod tests {
         assert_eq!(again.warm.controls, first.warm.controls);
         let restarted = StateStore::new(dir.path().to_path_buf());
         assert_eq!(restarted.load("p3").expect("from disk").version, "p");
+    }
+
+    /// The memory evicts the state saved least recently, not the one first seen: a patch
+    /// updated all along stays while patches saved once before its last version go.
+    #[test]
+    fn the_least_recently_saved_state_is_evicted_first() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let store = StateStore::new(dir.path().to_path_buf());
+        store.save("busy", state("busy@1")).expect("saves");
+        for k in 0..RECENT_STATES - 1 {
+            store.save(&format!("p{k}"), state("p")).expect("saves");
+        }
+        store.save("busy", state("busy@2")).expect("saves");
+        store.save("late", state("late")).expect("saves");
+        let recent = store.recent();
+        assert!(recent.states.contains_key("busy"), "saved again: recent");
+        assert!(
+            !recent.states.contains_key("p0"),
+            "the least recently saved"
+        );
+        assert!(recent.states.contains_key("p1"));
+        assert_eq!(recent.states.len(), RECENT_STATES);
+        assert_eq!(recent.order.len(), RECENT_STATES);
+        assert_eq!(recent.order.back().map(String::as_str), Some("late"));
     }
 
     /// A state whose warm start keeps a fitted surface (an icosahedron's).
