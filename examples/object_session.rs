@@ -35,7 +35,9 @@
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
 //! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls), `OBJ_SESSION_ROUNDS` (correction rounds); `OBJ_SESSION_MEASURE=1` measures every scan against the
-//! surface in each update, as the daemon does.
+//! surface in each update, as the daemon does; `OBJ_SESSION_SAVE_MERGED=DIR` writes each
+//! update's merged mesh (from scratch) to `DIR/merged_<vertices>.ply`, so that its fit can
+//! be studied alone (`object_table` with `OBJ_FILES`).
 
 use std::path::{Path, PathBuf};
 use trispline::io::registration::registration_for;
@@ -327,6 +329,12 @@ fn check_merge(session: &ObjectSession, opts: &SessionOptions, update: &SessionU
     let all: Vec<_> = session.scans().values().map(|s| &s.samples).collect();
     let (t, cpu) = (std::time::Instant::now(), process_cpu_ms());
     let cold = merge(&all, cell, &opts.merge);
+    if let Ok(dir) = std::env::var("OBJ_SESSION_SAVE_MERGED") {
+        let file = Path::new(&dir).join(format!("merged_{vertices}.ply"));
+        if let Err(e) = trispline::io::write_mesh_file(&file, &cold.mesh) {
+            eprintln!("{}: {e}", file.display());
+        }
+    }
     println!(
         "        merge from scratch: {:.0} ms wall {:.0} ms cpu, {} vertices ({})",
         t.elapsed().as_secs_f64() * 1e3,

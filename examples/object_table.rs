@@ -18,7 +18,9 @@
 //!     cargo run --release --example object_table [-- DATA_DIR [PCT [REFINE_ROUNDS]]]
 //!
 //! `OBJ_MODELS=a,b` keeps the models whose name contains one of the parts; `OBJ_FILES=p,q`
-//! adds mesh files by path.
+//! adds mesh files by path. `OBJ_REFINE_TOLERANCE=T` caps each refinement round at the
+//! faces holding a point farther than T, as `trispline fit` and the daemon do with their
+//! error budget's tolerance (the library default has no cap: each round spends its share).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -138,6 +140,9 @@ fn main() {
         }
         if let Some(t) = env("OBJ_TANGENTIAL") {
             opts.tangential = t;
+        }
+        if let Some(t) = env("OBJ_REFINE_TOLERANCE") {
+            opts.refine.tolerance = Some(t);
         }
         if let Some(f) = env("OBJ_CURVATURE_FLOOR") {
             // A negative floor: a constant tangential share, no curvature term.
