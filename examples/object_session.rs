@@ -11,7 +11,9 @@
 //! 3. At the end: each scan's distance to the surface beside its distance to bun_zipper;
 //!    how much of bun_zipper lies within 0.5 mm of the surface where the scans cover it
 //!    (a scan point within 1 mm), and of that, inside the scans' rim (scan points all
-//!    around it).
+//!    around it); the misses inside the rim split by whether some scan's own triangles
+//!    pass within 0.5 mm of them (else no view of the five has data there) and whether
+//!    the merged data does (else the merge, not the fit, left them).
 //! 4. A new version of bun045 (its registration corrected by 30 um): the local update
 //!    (merge around the scan, refit of the controls around it) beside the same update
 //!    from scratch (`SessionOptions::cold`), their times and RMS and the two surfaces'
@@ -188,8 +190,8 @@ fn main() {
     for ((id, ..), (m, p)) in scans.iter().zip(&ratios) {
         println!("{id:7} ratio to VRIP: median {m:.2}x  p95 {p:.2}x");
     }
-    coverage_check(&scans, &surface, &zipper);
-    merged_coverage(&session, &opts, &surface, &zipper);
+    let missed_inside = coverage_check(&scans, &surface, &zipper);
+    merged_coverage(&session, &opts, &surface, &zipper, &missed_inside);
 
     let reversed: Vec<_> = scans.iter().rev().cloned().collect();
     let (backward, _) = run(&reversed, opts, "reverse order");
@@ -434,7 +436,7 @@ fn folder_changes(scans: &[Scan], session: &mut ObjectSession) {
 
 /// bun_zipper's vertices where some scan covers them (a scan point within 1 mm): the share
 /// within 0.5 mm of the surface and the largest distance.
-fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
+fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) -> Vec<DVec3> {
     const COVER: f64 = 1e-3;
     let key = |p: DVec3| {
         let q = (p / COVER).floor();
@@ -485,6 +487,7 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
     // scans' rim lies where the surface, stopping at the rim, cannot be.
     let normals = zipper.vertex_normals();
     let (mut inside, mut inside_within, mut inside_max) = (0, 0, 0.0f64);
+    let mut missed = Vec::new();
     for (p, n) in zipper.positions.iter().zip(&normals) {
         let around = near(*p);
         if around.is_empty() || !surrounded(*p, *n, &around) {
@@ -496,11 +499,47 @@ fn coverage_check(scans: &[Scan], surface: &TriMesh, zipper: &TriMesh) {
         inside += 1;
         inside_within += usize::from(d <= 5e-4);
         inside_max = inside_max.max(d);
+        if d > 5e-4 {
+            missed.push(*p);
+        }
     }
     println!(
         "  of which inside the scans' rim ({inside} vertices): {:.2} % within 0.5 mm, max {:.3} mm",
         100.0 * inside_within as f64 / inside.max(1) as f64,
         inside_max * 1e3
+    );
+    misses_by_scan(scans, &missed);
+    missed
+}
+
+/// Whether any scan's own surface (its triangles, registered) passes within 0.5 mm of each
+/// bun_zipper vertex the surface misses: where none does, VRIP's ten views put the surface
+/// where these five views have no data, and no fit of them can reach it.
+fn misses_by_scan(scans: &[Scan], missed: &[DVec3]) {
+    let moved: Vec<TriMesh> = scans
+        .iter()
+        .map(|(_, mesh, t, _)| {
+            let mut moved = mesh.clone();
+            for p in &mut moved.positions {
+                *p = t.apply(*p);
+            }
+            moved
+        })
+        .collect();
+    let registered: Vec<MeshDistance> = moved.iter().map(MeshDistance::new).collect();
+    let nearest_scan = |p: DVec3| {
+        registered
+            .iter()
+            .filter_map(|m| m.distance(p))
+            .fold(f64::INFINITY, f64::min)
+    };
+    let near: Vec<f64> = missed.iter().map(|p| nearest_scan(*p)).collect();
+    let supported = near.iter().filter(|&&d| d <= 5e-4).count();
+    println!(
+        "  its {} misses: {supported} have a scan's own surface within 0.5 mm (the merge's \
+         or the fit's), {} have none (no view of these five puts data there)",
+        missed.len(),
+        missed.len() - supported
     );
 }
 
@@ -532,6 +571,7 @@ fn merged_coverage(
     opts: &SessionOptions,
     surface: &TriMesh,
     zipper: &TriMesh,
+    missed_inside: &[DVec3],
 ) {
     let Some(cell) = session.cell() else {
         return;
@@ -541,6 +581,21 @@ fn merged_coverage(
     let to_merged = MeshDistance::new(&merged);
     let to_surface = MeshDistance::new(surface);
     let to_zipper = MeshDistance::new(zipper);
+    let mut merge_gaps: Vec<f64> = missed_inside
+        .iter()
+        .map(|p| to_merged.distance(*p).unwrap_or(f64::INFINITY))
+        .filter(|&d| d > 5e-4)
+        .collect();
+    merge_gaps.sort_by(f64::total_cmp);
+    let merge_misses = merge_gaps.len();
+    println!(
+        "  of the misses inside the rim, {merge_misses} are over 0.5 mm from the merged data \
+         as well (the merge's; median {:.2} mm, max {:.2} mm from it), {} only from the \
+         surface (the fit's)",
+        merge_gaps.get(merge_misses / 2).map_or(0.0, |d| d * 1e3),
+        merge_gaps.last().map_or(0.0, |d| d * 1e3),
+        missed_inside.len() - merge_misses
+    );
     let (mut fit_only, mut both, mut merge_only, mut near) = (0, 0, 0, 0);
     let mut dump = String::new();
     for p in &zipper.positions {
