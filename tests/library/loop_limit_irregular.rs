@@ -598,3 +598,35 @@ fn boundary_vertex_rows_are_kept_with_the_tree_and_a_hair_from_it_are_its_own() 
         assert!(gap > 1e-9 && gap < 1e-4, "{faces} faces: {gap:e}");
     }
 }
+
+#[test]
+fn a_step_out_of_a_corner_between_two_boundary_edges_stays_at_the_corner() {
+    // A square of two faces: vertex 1 lies on face 0 alone, between two boundary edges.
+    let faces = [[0, 1, 2], [0, 2, 3]];
+    let s = LoopLimitSurface::new(4, &faces).expect("a disk");
+    let at = |face: u32, u: f64, v: f64| SurfaceParam { face, u, v };
+    // Out of both edges at the corner (u, v) = (0, 1): each slide along one edge points
+    // out of the other, so the point is pinned there.
+    let q = s.step(at(0, 0.0, 1.0), -0.3, 0.3);
+    assert_eq!((q.face, q.u, q.v), (0, 0.0, 1.0), "{q:?}");
+    // Along one of the two edges, inwards: it slides away from the corner.
+    let q = s.step(at(0, 0.0, 1.0), 0.2, -0.2);
+    assert_eq!(q.face, 0);
+    assert!(
+        (q.u - 0.2).abs() < 1e-15 && (q.v - 0.8).abs() < 1e-15,
+        "{q:?}"
+    );
+    // On a boundary edge, out of it and along it: one zero-length slide, then the point
+    // moves along the edge.
+    let q = s.step(at(0, 0.0, 0.5), -0.2, 0.3);
+    assert_eq!(q.face, 0);
+    assert!(q.u.abs() < 1e-15 && (q.v - 0.7).abs() < 1e-12, "{q:?}");
+    // From inside, onto a boundary edge and along it towards the corner, short of it: one
+    // slide after a move, not pinned.
+    let q = s.step(at(0, 0.2, 0.6), -0.5, 0.5);
+    assert_eq!(q.face, 0);
+    assert!(q.u.abs() < 1e-15 && (q.v - 0.95).abs() < 1e-12, "{q:?}");
+    // Far past the corner from inside: it reaches the corner and stays.
+    let q = s.step(at(0, 0.2, 0.6), -2.0, 2.0);
+    assert_eq!((q.face, q.u, q.v), (0, 0.0, 1.0), "{q:?}");
+}

@@ -594,6 +594,10 @@ impl TriSurface for LoopLimitSurface {
             if dv.is_finite() { dv } else { 0.0 },
         );
         let mut d = [du, dv, -du - dv];
+        // Zero-length slides along boundary edges of one face in a row: at a corner between
+        // two boundary edges with the step pointing out of both, each slide halves the
+        // step and hands it to the other edge, so the point never moves again.
+        let mut pinned = 0;
         // Each crossing enters a new face or removes a component at the boundary; the bound
         // only guards against a cycle through rounding at a vertex.
         for _ in 0..(4 * self.patches.len()).clamp(64, 100_000) {
@@ -622,11 +626,21 @@ impl TriSurface for LoopLimitSurface {
             let (j, k) = ((i + 1) % 3, (i + 2) % 3);
             let twin = self.topo.twin[3 * f + j];
             if twin == NONE {
+                // The second zero-length slide in a row leaves a step that points out of the
+                // first edge again (half of a component pointing out): the point is pinned
+                // and would only repeat this until the step underflows (thousands of
+                // rounds per such foot-point trial on a scan's rim corners, 7 % of a
+                // whole fit's time), ending where it is now.
+                pinned = if t_exit == 0.0 { pinned + 1 } else { 0 };
+                if pinned == 2 {
+                    break;
+                }
                 d[j] += 0.5 * d[i];
                 d[k] += 0.5 * d[i];
                 d[i] = 0.0;
                 continue;
             }
+            pinned = 0;
             // Half-edge 3f + j runs corner j -> corner k; its twin runs k -> j in face g.
             let g = (twin / 3) as usize;
             let gk = (twin % 3) as usize;
