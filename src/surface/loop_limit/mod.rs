@@ -626,11 +626,11 @@ impl TriSurface for LoopLimitSurface {
             let (j, k) = ((i + 1) % 3, (i + 2) % 3);
             let twin = self.topo.twin[3 * f + j];
             if twin == NONE {
-                // The second zero-length slide in a row leaves a step that points out of the
+                // After the second zero-length slide in a row the step points out of the
                 // first edge again (half of a component pointing out): the point is pinned
-                // and would only repeat this until the step underflows (thousands of
-                // rounds per such foot-point trial on a scan's rim corners, 7 % of a
-                // whole fit's time), ending where it is now.
+                // and would only repeat this until the step underflows, about a thousand
+                // rounds per foot-point trial at a rim corner (7 % of the merged bunny's
+                // whole fit), ending where it is now.
                 pinned = if t_exit == 0.0 { pinned + 1 } else { 0 };
                 if pinned == 2 {
                     break;
