@@ -89,6 +89,8 @@ impl Recent {
         while self.order.len() > RECENT_STATES {
             if let Some(old) = self.order.pop_front() {
                 self.states.remove(&old);
+                // Gone from memory, it no longer takes one of the surfaces' places.
+                self.with_surface.retain(|k| *k != old);
             }
         }
         self.with_surface.retain(|k| k != id);
@@ -390,6 +392,28 @@ mod tests {
         let from_disk = restarted.load("p3").expect("from disk");
         assert!(!from_disk.warm.holds_surface());
         assert!(from_disk.warm.object.is_some());
+    }
+
+    /// A state evicted from memory no longer counts among those keeping a surface: the
+    /// next `KEPT_SURFACES` states with one all keep theirs.
+    #[test]
+    fn an_evicted_state_gives_up_its_place_among_the_surfaces() {
+        let dir = tempfile::tempdir().expect("tmp");
+        let store = StateStore::new(dir.path().to_path_buf());
+        store.save("old", state_with_surface("old")).expect("saves");
+        for k in 0..RECENT_STATES {
+            store.save(&format!("p{k}"), state("p")).expect("saves");
+        }
+        assert!(store.recent().with_surface.is_empty());
+        for k in 0..KEPT_SURFACES {
+            store
+                .save(&format!("s{k}"), state_with_surface("s"))
+                .expect("saves");
+        }
+        for k in 0..KEPT_SURFACES {
+            let s = store.load(&format!("s{k}")).expect("memory");
+            assert!(s.warm.holds_surface(), "s{k}");
+        }
     }
 
     /// A remembered state is served before its file exists (a newer version starts from it

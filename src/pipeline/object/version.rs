@@ -40,7 +40,8 @@ const MAX_FREE_SHARE: f64 = 0.5;
 
 /// A new version of a fitted object refitted where it changed from `previous` (its
 /// control mesh at the fitted positions, crease edges and RMS), `params` each point's
-/// start on it (the previous foot of the previous data point nearest to it, `reference`). Which points changed: `changed_points`.
+/// start on it (the previous foot of the previous data point nearest to it,
+/// `reference`). Which points changed: `changed_points`.
 /// Where the update leaves points beyond `opts.refine.tolerance`, their control faces are
 /// split (up to the control budget) and refitted locally again. `None` when the change
 /// frees more than `MAX_FREE_SHARE` of the controls, or the previous RMS is not known: the
