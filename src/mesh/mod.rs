@@ -10,6 +10,7 @@ pub mod distance;
 pub(crate) mod edge_table;
 pub mod inverse;
 pub mod loop_subdiv;
+pub mod point_grid;
 mod repeats;
 pub mod rigid;
 pub mod simplify;

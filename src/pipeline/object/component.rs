@@ -36,8 +36,7 @@ impl ObjectInput {
     /// `mesh` prepared for the object path; `None` when cleaning leaves nothing.
     pub fn of(mesh: &TriMesh, opts: &CleanOptions) -> Option<Self> {
         let start = Instant::now();
-        let (mesh, cleaning, parts) = largest_component(mesh, opts)?;
-        let topology = Topology::from_mesh(&mesh).ok();
+        let (mesh, cleaning, parts, topology) = largest_component(mesh, opts)?;
         Some(Self {
             mesh,
             cleaning,
@@ -60,14 +59,20 @@ pub(super) struct OtherParts {
 /// The largest manifold, oriented component of `mesh` (see the module comment), its
 /// vertices and faces in spatial order (`spatially_ordered`: the stages after walk it
 /// faster, and the fit does not depend on the file's order), what the first cleaning
-/// pass changed and the components it left out, or `None` if nothing is left. Pieces the
-/// repairs cut off a broken component are not counted as left out: they were never
-/// components of their own.
+/// pass changed, the components it left out, and its topology (`None` where the repairs
+/// left no manifold), or `None` if nothing is left. Pieces the repairs cut off a broken
+/// component are not counted as left out: they were never components of their own.
 pub(super) fn largest_component(
     mesh: &TriMesh,
     opts: &CleanOptions,
-) -> Option<(TriMesh, CleanReport, OtherParts)> {
+) -> Option<(TriMesh, CleanReport, OtherParts, Option<Topology>)> {
     let (mut part, report, others) = largest_cleaned(mesh, opts)?;
+    // Whether a mesh is a manifold does not depend on its order: a component that is one
+    // as cleaned has its topology built once, in the order the fit takes.
+    let ordered = spatially_ordered(&part);
+    if let Ok(topology) = Topology::from_mesh(&ordered) {
+        return Some((ordered, report, others, Some(topology)));
+    }
     for _ in 0..REPAIR_PASSES {
         if Topology::from_mesh(&part).is_ok() {
             break;
@@ -78,7 +83,9 @@ pub(super) fn largest_component(
         }
         part = largest_cleaned(&kept, opts)?.0;
     }
-    Some((spatially_ordered(&part), report, others))
+    let ordered = spatially_ordered(&part);
+    let topology = Topology::from_mesh(&ordered).ok();
+    Some((ordered, report, others, topology))
 }
 
 /// Drops every face that runs a directed edge an earlier face already runs.
