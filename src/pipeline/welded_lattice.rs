@@ -70,19 +70,45 @@ pub fn welded_lattices(
     creases: &[[u32; 2]],
     n: usize,
 ) -> (Vec<SurfaceParam>, Vec<[u32; 3]>) {
+    let local_triangles = lattice_triangles(n.max(1));
+    let mut triangles = Vec::with_capacity(topo.triangles.len() * local_triangles.len());
+    let params = weld_lattices(
+        topo,
+        creases,
+        n,
+        0..topo.triangles.len() as u32,
+        |_, ids| {
+            triangles.extend(local_triangles.iter().map(|t| t.map(|k| ids[k as usize])));
+        },
+    );
+    (params, triangles)
+}
+
+/// The shared lattice points of `faces` (of `topo`; a face past its faces has no lattice)
+/// at `n` segments per side, as `welded_lattices` shares them; `visit` is given each face
+/// with the indices of its lattice points, in `lattice_points` order. Each point keeps
+/// the parameter of the first face that reaches it.
+pub fn weld_lattices(
+    topo: &Topology,
+    creases: &[[u32; 2]],
+    n: usize,
+    faces: impl IntoIterator<Item = u32>,
+    mut visit: impl FnMut(u32, &[u32]),
+) -> Vec<SurfaceParam> {
     let n = n.max(1);
-    let faces = &topo.triangles;
     let edge = |a: u32, b: u32| (a.min(b), a.max(b));
     let crease: FxHashSet<(u32, u32)> = creases.iter().map(|c| edge(c[0], c[1])).collect();
     let mut sectors = Sectors::new(topo, |a, b| crease.contains(&edge(a, b)));
     let local = lattice_points(n);
-    let local_triangles = lattice_triangles(n);
     let mut ids: FxHashMap<Key, u32> = FxHashMap::default();
     let mut params = Vec::new();
-    let mut triangles = Vec::with_capacity(faces.len() * local_triangles.len());
     let mut vertex_of = Vec::with_capacity(local.len());
-    for (f, t) in faces.iter().enumerate() {
-        let face = f as u32;
+    for face in faces {
+        let f = face as usize;
+        let Some(t) = topo.triangles.get(f) else {
+            visit(face, &[]);
+            continue;
+        };
         let corner_sectors: [usize; 3] = std::array::from_fn(|c| sectors.of(f, c));
         vertex_of.clear();
         for &(i, j) in &local {
@@ -90,23 +116,26 @@ pub fn welded_lattices(
                 crease.contains(&edge(a, b))
             });
             let next = params.len() as u32;
-            let id = *ids.entry(key).or_insert_with(|| {
-                params.push(SurfaceParam {
-                    face,
-                    u: i as f64 / n as f64,
-                    v: j as f64 / n as f64,
-                });
+            let param = SurfaceParam {
+                face,
+                u: i as f64 / n as f64,
+                v: j as f64 / n as f64,
+            };
+            // A face's own points are nobody else's: no need to look them up.
+            let id = if matches!(key, Key::Own(..)) {
+                params.push(param);
                 next
-            });
+            } else {
+                *ids.entry(key).or_insert_with(|| {
+                    params.push(param);
+                    next
+                })
+            };
             vertex_of.push(id);
         }
-        triangles.extend(
-            local_triangles
-                .iter()
-                .map(|tri| tri.map(|k| vertex_of[k as usize])),
-        );
+        visit(face, &vertex_of);
     }
-    (params, triangles)
+    params
 }
 
 /// The key of lattice point (i, j) of face `t` (number `face`, its corners in the
@@ -161,6 +190,44 @@ mod tests {
             }
         }
         uses
+    }
+
+    #[test]
+    fn a_subset_of_faces_sees_each_its_whole_lattice_and_shared_points_once() {
+        let (vertices, faces) = crate::testdata::octahedron();
+        let topo = octahedron();
+        let point = |p: SurfaceParam| {
+            let t = faces[p.face as usize];
+            vertices[t[0] as usize] * p.u
+                + vertices[t[1] as usize] * p.v
+                + vertices[t[2] as usize] * (1.0 - p.u - p.v)
+        };
+        // Faces 0 and 1 share an edge (vertices 2, 4); face 2 shares vertex 4 with both and
+        // an edge (1, 4) with face 1; 99 is past the mesh.
+        let subset = [0u32, 1, 2, 99];
+        for n in [1, 2, 3, 6] {
+            let mut seen = Vec::new();
+            let params =
+                weld_lattices(&topo, &[], n, subset, |f, ids| seen.push((f, ids.to_vec())));
+            assert_eq!(seen.iter().map(|s| s.0).collect::<Vec<_>>(), subset);
+            for (f, ids) in &seen[..3] {
+                let own = lattice_points(n).into_iter().map(|(i, j)| SurfaceParam {
+                    face: *f,
+                    u: i as f64 / n as f64,
+                    v: j as f64 / n as f64,
+                });
+                assert_eq!(ids.len(), (n + 1) * (n + 2) / 2);
+                for (p, &id) in own.zip(ids) {
+                    let gap = point(p).distance(point(params[id as usize]));
+                    assert!(gap < 1e-12, "n {n} face {f}: {gap}");
+                }
+            }
+            assert!(seen[3].1.is_empty());
+            // Three lattices less the two edges face 1 shares (n + 1 points each; face 2's
+            // corner 4 lies on the second).
+            let per_face = (n + 1) * (n + 2) / 2;
+            assert_eq!(params.len(), 3 * per_face - 2 * (n + 1), "n {n}");
+        }
     }
 
     #[test]

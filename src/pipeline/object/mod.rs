@@ -34,7 +34,6 @@ mod shares;
 mod simplification;
 mod solve;
 mod stray;
-mod stray_lattice;
 mod version;
 
 use crate::fit::distance::CholeskyPattern;

@@ -7,10 +7,11 @@ use super::data_side::DataSide;
 use super::model::{
     ms_since, ObjectError, ObjectFit, ObjectOptions, StrayBudget, STRAY_LATTICE_SEGMENTS,
 };
-use super::stray_lattice::{lattice_params, SharedLattice};
 use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::{simplify, simplify_with_topology, SimplifyOptions};
 use crate::mesh::topology::Topology;
+use crate::pipeline::welded_lattice::weld_lattices;
+use crate::surface::bezier::lattice_points;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -49,7 +50,7 @@ pub fn farthest_from(
 /// Per face of `faces`, the largest distance from the surface to the data mesh (0 for
 /// indices past the surface's faces, infinite where a sample is not finite or the data
 /// mesh is empty): the farthest sample of a lattice of `segments` segments per edge (each
-/// sample shared by neighbouring faces measured once, `stray_lattice`), and on the faces
+/// sample shared by neighbouring faces measured once, `weld_lattices`), and on the faces
 /// that may hold the surface's farthest point, the local maximum above it.
 ///
 /// A lattice alone misses the top of a bulge between its samples: on decimated-max (5 %
@@ -84,11 +85,19 @@ pub fn face_strays(
             f64::INFINITY
         }
     };
-    // Each distinct lattice point once (`stray_lattice`), in the order the faces give
-    // them, so that a run of samples lies on one face or its neighbour.
-    let shared = SharedLattice::new(surface.faces(), faces, k);
-    let measured: Vec<(f64, Option<u32>)> = shared
-        .samples
+    // Each lattice point shared by neighbouring faces once (`weld_lattices`, as the
+    // shown tessellation shares them; across a crease too: the surface is continuous
+    // there), in the order the faces give them, so that a run of samples lies on one face
+    // or its neighbour.
+    let mut of_face: Vec<Vec<u32>> = Vec::with_capacity(faces.len());
+    let samples = weld_lattices(
+        surface.topology(),
+        &[],
+        k,
+        faces.iter().copied(),
+        |_, ids| of_face.push(ids.to_vec()),
+    );
+    let measured: Vec<(f64, Option<u32>)> = samples
         .par_chunks(LATTICE_CHUNK)
         .flat_map_iter(|chunk| {
             let mut hint = None;
@@ -105,9 +114,10 @@ pub fn face_strays(
                 .collect::<Vec<_>>()
         })
         .collect();
+    let steps = lattice_points(k);
     let lattice: Vec<(f64, SurfaceParam, Option<u32>)> = faces
         .iter()
-        .zip(&shared.of_face)
+        .zip(&of_face)
         .map(|(&f, indices)| {
             // The face's own parameters of its samples: a shared one was measured as the
             // parameter of another face, and the ascent climbs in this face.
@@ -116,11 +126,17 @@ pub fn face_strays(
                 u: 0.0,
                 v: 0.0,
             };
-            lattice_params(f, k)
+            steps
+                .iter()
                 .zip(indices)
-                .fold((0.0f64, start, None), |farthest, (p, &s)| {
+                .fold((0.0f64, start, None), |farthest, (&(i, j), &s)| {
                     let (d, hint) = measured[s as usize];
                     if d > farthest.0 {
+                        let p = SurfaceParam {
+                            face: f,
+                            u: i as f64 / k as f64,
+                            v: j as f64 / k as f64,
+                        };
                         (d, p, hint)
                     } else {
                         farthest
