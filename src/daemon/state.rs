@@ -78,6 +78,13 @@ struct Recent {
 }
 
 impl Recent {
+    /// Drops state `id` from memory (its place in `order` is the caller's): gone, it no
+    /// longer takes one of the surfaces' places.
+    fn remove(&mut self, id: &str) {
+        self.states.remove(id);
+        self.with_surface.retain(|k| k != id);
+    }
+
     fn insert(&mut self, id: &str, state: Arc<PatchState>) {
         let holds_surface = state.warm.holds_surface();
         // Least recently saved first: a patch updated often must not be evicted because it
@@ -88,9 +95,7 @@ impl Recent {
         self.order.push_back(id.to_string());
         while self.order.len() > RECENT_STATES {
             if let Some(old) = self.order.pop_front() {
-                self.states.remove(&old);
-                // Gone from memory, it no longer takes one of the surfaces' places.
-                self.with_surface.retain(|k| *k != old);
+                self.remove(&old);
             }
         }
         self.with_surface.retain(|k| k != id);
@@ -192,9 +197,8 @@ impl StateStore {
     /// what the shared store says (which may be nothing).
     pub(crate) fn forget(&self, id: &str) {
         let mut recent = self.recent();
-        recent.states.remove(id);
         recent.order.retain(|k| k != id);
-        recent.with_surface.retain(|k| k != id);
+        recent.remove(id);
         drop(recent);
         let _ = std::fs::remove_file(self.path(id));
     }
