@@ -107,6 +107,23 @@ impl<'a> Landings<'a> {
         }
     }
 
+    /// Points already landed on a mesh of `faces` faces (an earlier simplification's
+    /// landings: `halves`).
+    pub fn landed(input: &'a [DVec3], face: Vec<u32>, bary: Vec<[f64; 3]>, faces: usize) -> Self {
+        let mut face_points = vec![Vec::new(); faces];
+        for (p, &f) in face.iter().enumerate() {
+            face_points[f as usize].push(p as u32);
+        }
+        Self {
+            input,
+            face,
+            bary,
+            face_points,
+            balls: Vec::new(),
+            moving: Vec::new(),
+        }
+    }
+
     /// Replays the fans in the order they come until the sender is dropped.
     pub fn carry_all(mut self, batches: Receiver<Fans>) -> (Vec<u32>, Vec<[f64; 3]>) {
         for batch in batches {

@@ -20,10 +20,15 @@
 //!
 //! The order is deterministic: costs tie-break on the vertex indices, stale queue entries
 //! are recognised by per-vertex versions (lazy invalidation).
+//!
+//! A large mesh is simplified in two halves side by side and then as a whole (`halves`):
+//! the same guards, the collapses in another order, the points landed locally between
+//! the stages.
 
 pub mod baseline;
 mod carry;
 mod crease;
+mod halves;
 mod options;
 mod quadric;
 mod state;
@@ -32,8 +37,9 @@ mod vertex;
 
 use super::topology::Topology;
 use super::TriMesh;
-use carry::Landings;
+use carry::{Fans, Landings};
 use crease::Creases;
+use crossbeam_channel::Receiver;
 use glam::DVec3;
 pub use options::{Landing, Simplified, SimplifyError, SimplifyOptions, REMOVED};
 use state::State;
@@ -144,32 +150,66 @@ fn simplify_centred(
     if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
+    if halves::worth_halving(mesh, opts, crease_edges, keep) {
+        if let Some(simplified) = halves::simplify_in_halves(mesh, topo, opts) {
+            return Ok(simplified);
+        }
+    }
+    Ok(simplify_in_one_piece(mesh, topo, opts, crease_edges, keep))
+}
+
+/// `simplify_centred` on one thread of collapses (and one carrying the points).
+fn simplify_in_one_piece(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &SimplifyOptions,
+    crease_edges: &[[u32; 2]],
+    keep: &[bool],
+) -> Simplified {
     let (carrier, carried) = crossbeam_channel::bounded(FAN_BATCHES);
     let creases = Creases::new(topo, crease_edges);
-    let mut state = State::new(mesh, topo, opts, creases, carrier);
+    let mut state = State::new(mesh, topo, opts, creases, Some(carrier));
     for (v, _) in keep.iter().enumerate().filter(|(_, &kept)| kept) {
         state.lock(v);
     }
     let landings = Landings::new(&mesh.positions, &state.faces, &state.vfaces);
-    let target = opts.target_vertices.max(4);
-    let simplified = std::thread::scope(|scope| {
+    let (state, land_face, land_bary) = collapse(state, landings, carried, opts.target_vertices);
+    state.finish(&land_face, &land_bary)
+}
+
+/// The collapse passes of `state` down to `target` vertices (at least 4), with the input
+/// points carried beside them on a thread of their own (`carried` is the receiving end
+/// of `state`'s carrier): the state after the last collapse and every point's landing
+/// (a face of `state` and barycentric weights).
+fn collapse<'a>(
+    state: State<'a>,
+    landings: Landings<'_>,
+    carried: Receiver<Fans>,
+    target: usize,
+) -> (State<'a>, Vec<u32>, Vec<[f64; 3]>) {
+    let target = target.max(4);
+    std::thread::scope(|scope| {
         let carrier = scope.spawn(move || landings.carry_all(carried));
         // Owned here so that a panic drops it, and with it the sender the carrier waits
         // on, before the scope waits for the carrier.
         let mut state = state;
-        // Edges refused in one pass may be allowed after their neighbourhood changed.
-        for _ in 0..4 {
-            if state.alive_vertices <= target || state.run_pass(target) == 0 {
-                break;
-            }
-        }
+        run_passes(&mut state, target);
         state.stop_carrying();
         let (land_face, land_bary) = carrier
             .join()
             .unwrap_or_else(|panic| std::panic::resume_unwind(panic));
-        state.finish(&land_face, &land_bary)
-    });
-    Ok(simplified)
+        (state, land_face, land_bary)
+    })
+}
+
+/// Collapse passes down to `target` vertices: edges refused in one pass may be allowed
+/// after their neighbourhood changed.
+fn run_passes(state: &mut State<'_>, target: usize) {
+    for _ in 0..4 {
+        if state.alive_vertices <= target || state.run_pass(target) == 0 {
+            break;
+        }
+    }
 }
 
 /// Batches of collapses the collapsing thread may run ahead of the carrying one: enough

@@ -1,6 +1,9 @@
 //! Garland-Heckbert error quadrics: the sum of squared distances to a set of weighted
 //! planes, `x^T A x + 2 b.x + c`.
 
+use super::SimplifyOptions;
+use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::{triangle_area_normal, TriMesh};
 use glam::{DMat3, DVec3};
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -83,6 +86,37 @@ impl Quadric {
             .min_by(|x, y| self.error(*x).total_cmp(&self.error(*y)))
             .unwrap_or(mid)
     }
+}
+
+/// Every vertex's quadric: the planes of its faces, weighted by their areas, and the
+/// constraint planes of its boundary edges (perpendicular to their face through the
+/// edge), which keep a hole's rim in shape.
+pub(super) fn initial_quadrics(
+    mesh: &TriMesh,
+    topo: &Topology,
+    opts: &SimplifyOptions,
+) -> Vec<Quadric> {
+    let pos = &mesh.positions;
+    let mut quadric = vec![Quadric::default(); pos.len()];
+    for (f, t) in mesh.triangles.iter().enumerate() {
+        let p = t.map(|v| pos[v as usize]);
+        let n = triangle_area_normal(p);
+        let area = 0.5 * n.length();
+        let unit = n.normalize_or_zero();
+        let plane = Quadric::plane(unit, p[0], area);
+        for (k, &v) in t.iter().enumerate() {
+            quadric[v as usize].add(&plane);
+            if topo.twin[3 * f + k] == NONE {
+                let (a, b) = (p[k], p[(k + 1) % 3]);
+                let side = (b - a).cross(unit).normalize_or_zero();
+                let weight = opts.boundary_weight * (b - a).length_squared();
+                let constraint = Quadric::plane(side, a, weight);
+                quadric[v as usize].add(&constraint);
+                quadric[t[(k + 1) % 3] as usize].add(&constraint);
+            }
+        }
+    }
+    quadric
 }
 
 #[cfg(test)]

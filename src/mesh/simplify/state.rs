@@ -5,9 +5,9 @@
 use super::carry::Fans;
 use super::crease::Creases;
 use super::options::{Landing, Simplified, SimplifyOptions, REMOVED};
-use super::quadric::Quadric;
+use super::quadric::{initial_quadrics, Quadric};
 use super::vertex::{FaceList, Vertex};
-use crate::mesh::topology::{Topology, NONE};
+use crate::mesh::topology::Topology;
 use crate::mesh::{triangle_area_normal, triangle_quality, TriMesh};
 use crossbeam_channel::Sender;
 use dary_heap::QuaternaryHeap;
@@ -89,8 +89,12 @@ pub(super) struct State<'a> {
     pub(super) alive_vertices: usize,
     /// Collapses not yet sent to be carried ...
     fans: Fans,
-    /// ... and where they go (`carry`); `None` once the last went.
+    /// ... and where they go (`carry`); `None` once the last went, or when the points
+    /// are not carried.
     carrier: Option<Sender<Fans>>,
+    /// Without a carrier, per vertex the one its collapse kept (`REMOVED`: alive), so
+    /// that every input vertex's representative is known at the end.
+    absorbed_by: Vec<u32>,
     collapses: usize,
     /// A collapse's changed faces and the faces it removes (buffers only).
     affected: Vec<u32>,
@@ -103,55 +107,58 @@ impl<'a> State<'a> {
         topo: &Topology,
         opts: &'a SimplifyOptions,
         creases: Creases,
-        carrier: Sender<Fans>,
+        carrier: Option<Sender<Fans>>,
     ) -> Self {
-        let nv = mesh.positions.len();
-        let nf = mesh.triangles.len();
         let pos = &mesh.positions;
-        let mut quadric = vec![Quadric::default(); nv];
-        let mut vfaces: Vec<FaceList> = (0..nv)
-            .map(|v| FaceList::with_capacity(topo.face_valence[v] as usize))
-            .collect();
-        for (f, t) in mesh.triangles.iter().enumerate() {
-            let p = t.map(|v| pos[v as usize]);
-            let n = triangle_area_normal(p);
-            let area = 0.5 * n.length();
-            let unit = n.normalize_or_zero();
-            let plane = Quadric::plane(unit, p[0], area);
-            for (k, &v) in t.iter().enumerate() {
-                quadric[v as usize].add(&plane);
-                vfaces[v as usize].push(f as u32);
-                if topo.twin[3 * f + k] == NONE {
-                    let (a, b) = (p[k], p[(k + 1) % 3]);
-                    let side = (b - a).cross(unit).normalize_or_zero();
-                    let weight = opts.boundary_weight * (b - a).length_squared();
-                    let constraint = Quadric::plane(side, a, weight);
-                    quadric[v as usize].add(&constraint);
-                    quadric[t[(k + 1) % 3] as usize].add(&constraint);
-                }
-            }
-        }
-        creases.add_planes(&mesh.positions, topo, opts.boundary_weight, &mut quadric);
+        let mut quadric = initial_quadrics(mesh, topo, opts);
+        creases.add_planes(pos, topo, opts.boundary_weight, &mut quadric);
         let corners = Self::corners(mesh, topo, opts.corner_turn_deg);
-        let crease_corners = creases.corners(&mesh.positions, topo, opts.corner_turn_deg);
-        let verts = (0..nv)
-            .map(|v| Vertex {
-                locked: corners[v] || crease_corners[v],
-                quadric: quadric[v],
+        let crease_corners = creases.corners(pos, topo, opts.corner_turn_deg);
+        let locked = (0..pos.len()).map(|v| corners[v] || crease_corners[v]);
+        let verts = quadric.into_iter().zip(locked).enumerate();
+        let verts = verts
+            .map(|(v, (quadric, locked))| Vertex {
+                locked,
+                quadric,
                 ..Vertex::new(pos[v], topo.boundary[v])
             })
             .collect();
+        Self::with_vertices(mesh, topo, opts, creases, verts, carrier)
+    }
+
+    /// The state of `mesh` with its vertices' records given (positions, quadrics and
+    /// locks from an earlier simplification: `halves`).
+    pub(super) fn with_vertices(
+        mesh: &TriMesh,
+        topo: &Topology,
+        opts: &'a SimplifyOptions,
+        creases: Creases,
+        verts: Vec<Vertex>,
+        carrier: Option<Sender<Fans>>,
+    ) -> Self {
+        let nf = mesh.triangles.len();
+        let mut vfaces: Vec<FaceList> = topo
+            .face_valence
+            .iter()
+            .map(|&n| FaceList::with_capacity(n as usize))
+            .collect();
+        for (f, t) in mesh.triangles.iter().enumerate() {
+            for &v in t {
+                vfaces[v as usize].push(f as u32);
+            }
+        }
         State {
             opts,
             cos_turn: opts.max_normal_turn_deg.to_radians().cos(),
+            alive_vertices: verts.len(),
             verts,
             faces: mesh.triangles.clone(),
             face_alive: vec![true; nf],
             vfaces,
             creases,
-            alive_vertices: nv,
             fans: Fans::default(),
-            carrier: Some(carrier),
+            carrier,
+            absorbed_by: Vec::new(),
             collapses: 0,
             affected: Vec::new(),
             shared: Vec::new(),
@@ -165,9 +172,50 @@ impl<'a> State<'a> {
         }
     }
 
+    /// Takes vertex `v` out of every collapse (`Vertex::frozen`).
+    pub(super) fn freeze(&mut self, v: usize) {
+        if let Some(vertex) = self.verts.get_mut(v) {
+            vertex.frozen = true;
+        }
+    }
+
+    /// The records of the vertices left, in their order (that of `finish`'s mesh), frozen
+    /// ones freed.
+    pub(super) fn survivors(&self) -> Vec<Vertex> {
+        let alive = self.verts.iter().filter(|v| v.alive);
+        alive
+            .map(|v| Vertex {
+                frozen: false,
+                ..*v
+            })
+            .collect()
+    }
+
+    /// Per vertex, the alive vertex its collapses led into (itself while alive): where its
+    /// point lies when the points were not carried.
+    pub(super) fn representatives(&self) -> Vec<u32> {
+        let n = self.verts.len();
+        let mut rep: Vec<u32> = (0..n as u32)
+            .map(|v| match self.absorbed_by.get(v as usize) {
+                Some(&k) if k != REMOVED => k,
+                _ => v,
+            })
+            .collect();
+        // Path halving: every step points a vertex at its grandparent.
+        for v in 0..n {
+            let mut r = v;
+            while rep[r] as usize != r {
+                rep[r] = rep[rep[r] as usize];
+                r = rep[r] as usize;
+            }
+            rep[v] = r as u32;
+        }
+        rep
+    }
+
     /// Boundary vertices where the boundary turns by more than `turn_deg` (the angle
     /// between the two boundary edges, seen from inside, is below 180 - turn).
-    fn corners(mesh: &TriMesh, topo: &Topology, turn_deg: f64) -> Vec<bool> {
+    pub(super) fn corners(mesh: &TriMesh, topo: &Topology, turn_deg: f64) -> Vec<bool> {
         let min_angle = (180.0 - turn_deg).to_radians();
         (0..mesh.positions.len() as u32)
             .map(|v| {
@@ -306,7 +354,7 @@ impl<'a> State<'a> {
     /// stays and moves to the quadric's minimiser (on the edge where that is singular).
     fn candidate(&self, a: u32, b: u32) -> Option<Candidate> {
         let (va, vb) = (&self.verts[a as usize], &self.verts[b as usize]);
-        if va.locked && vb.locked {
+        if (va.locked && vb.locked) || va.frozen || vb.frozen {
             return None;
         }
         let q = va.quadric.sum(&vb.quadric);
@@ -531,7 +579,14 @@ impl<'a> State<'a> {
         self.creases.merge(k, r);
         self.alive_vertices -= 1;
         self.collapses += 1;
-        self.carry_points(k, &affected);
+        if self.carrier.is_some() {
+            self.carry_points(k, &affected);
+        } else {
+            if self.absorbed_by.is_empty() {
+                self.absorbed_by = vec![REMOVED; self.verts.len()];
+            }
+            self.absorbed_by[ri] = k;
+        }
         self.affected = affected;
         self.shared = shared;
     }

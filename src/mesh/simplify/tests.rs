@@ -25,7 +25,7 @@ pub(crate) fn torus(n: usize, m: usize) -> TriMesh {
 }
 
 /// A wavy square sheet of `k x k` cells with the middle cells cut out (one hole).
-fn holed_sheet(k: usize) -> TriMesh {
+pub(super) fn holed_sheet(k: usize) -> TriMesh {
     let at = |i: usize, j: usize| (j * (k + 1) + i) as u32;
     let mut positions = Vec::new();
     for j in 0..=k {
@@ -65,7 +65,7 @@ fn holed_sheet(k: usize) -> TriMesh {
     TriMesh::new(kept, triangles)
 }
 
-fn check_result(input: &TriMesh, out: &Simplified, opts: &SimplifyOptions) {
+pub(super) fn check_result(input: &TriMesh, out: &Simplified, opts: &SimplifyOptions) {
     let topo = Topology::from_mesh(&out.mesh).expect("manifold result");
     for v in 0..out.mesh.positions.len() as u32 {
         let faces = topo.face_valence[v as usize] as usize;

@@ -18,6 +18,9 @@ pub(super) struct Vertex {
     pub alive: bool,
     /// Stays in place: a corner, or kept by the caller.
     pub locked: bool,
+    /// Takes part in no collapse at all, not even as the end that stays (`halves`: a
+    /// vertex the other half shares).
+    pub frozen: bool,
     pub boundary: bool,
     pub quadric: Quadric,
 }
@@ -29,6 +32,7 @@ impl Vertex {
             version: 0,
             alive: true,
             locked: false,
+            frozen: false,
             boundary,
             quadric: Quadric::default(),
         }
