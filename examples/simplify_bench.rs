@@ -7,13 +7,15 @@
 //!
 //! Defaults: `../shared/data/models/bun_zipper.ply`, 5 runs, 3 % of the vertices (the
 //! simplification's share of a 5 % budget when refinement spends the rest). The mesh is
-//! cleaned and renumbered as the object fit takes it (`fitted_component`).
+//! cleaned and renumbered as the object fit takes it (`fitted_component`). Then the data's
+//! RMS and largest distance to the simplified mesh and to where each point landed on it.
 
 use std::hash::{Hash, Hasher};
 use std::path::PathBuf;
 use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::CleanOptions;
+use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::{simplify, SimplifyOptions};
 use trispline::pipeline::object::{fitted_component, ObjectOptions};
 
@@ -58,6 +60,27 @@ fn main() -> Res<()> {
         simplified.mesh.positions.len(),
         simplified.collapses,
         hasher.finish()
+    );
+    // How well the mesh and the landings (the fit's first parameters) stand for the data.
+    let query = MeshDistance::new(&simplified.mesh);
+    let rms = |d: &[f64]| (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+    let to_mesh: Vec<f64> = component
+        .positions
+        .iter()
+        .filter_map(|p| query.distance(*p))
+        .collect();
+    let to_landing: Vec<f64> = component
+        .positions
+        .iter()
+        .zip(&simplified.landing)
+        .filter_map(|(p, l)| Some(l.position_on(&simplified.mesh)?.distance(*p)))
+        .collect();
+    println!(
+        "data to the mesh: RMS {:.4e}, max {:.4e}; data to its landing: RMS {:.4e}, max {:.4e}",
+        rms(&to_mesh),
+        to_mesh.iter().copied().fold(0.0, f64::max),
+        rms(&to_landing),
+        to_landing.iter().copied().fold(0.0, f64::max)
     );
     Ok(())
 }
