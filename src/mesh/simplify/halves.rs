@@ -43,8 +43,10 @@ use crate::mesh::TriMesh;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Meshes below this many vertices are simplified in one piece: the halves' fixed costs
-/// (two topologies, the glue) would eat the gain.
+/// Meshes below this many vertices are simplified in one piece: the time saved is a few
+/// milliseconds, and the cut is a larger share of the mesh. Tried at 5000 on CGAL's
+/// object meshes of 5-20k vertices, the fits moved by -5 to +19 % in RMS (the collapse
+/// order feeding the refinement's path), against about 1 % either way on larger meshes.
 const MIN_VERTICES: usize = 20_000;
 
 /// The halves stop at this many times the target between them: the glued mesh's queue
