@@ -18,9 +18,10 @@
 //! side first (`unpinch`).
 //!
 //! Each half stops at its share of twice the target (plus its frozen vertices). A free
-//! vertex's faces all lie in its half, so its quadric and every guard of its collapses
-//! are those of the whole mesh; only the order differs, cheapest first in each half
-//! instead of over the whole. At the handover every input point lands on the nearest face
+//! vertex's faces all lie in its half, so its quadric and the guards of its collapses
+//! are those of the whole mesh (but for the fewest-faces guard on a cut vertex opposite
+//! the edge, which counts that vertex's faces in the half only); the order differs,
+//! cheapest first in each half instead of over the whole. At the handover every input point lands on the nearest face
 //! around the vertex its collapses led into or around that vertex's neighbours: a local
 //! projection, so a point of a thin part stays on its own side as carrying keeps it. The
 //! glued mesh then runs the ordinary collapse loop to the target with the halves'
