@@ -151,13 +151,8 @@ mod tests {
 
     #[test]
     fn an_answer_is_the_nearest_point_and_far_queries_get_none() {
-        let mut state = 7u64;
-        let mut next = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut seed = 7u64;
+        let mut next = || crate::testdata::uniform(&mut seed);
         // Points on a wavy sheet, spacing about 0.01.
         let points: Vec<DVec3> = (0..4000)
             .map(|_| {
