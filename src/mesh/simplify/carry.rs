@@ -72,7 +72,7 @@ pub(super) struct Landings<'a> {
 
 /// A ball holding the triangle: its centroid, and the distance to its furthest corner
 /// (a little more, for rounding).
-fn bounding_ball(t: [DVec3; 3]) -> (DVec3, f64) {
+pub(super) fn bounding_ball(t: [DVec3; 3]) -> (DVec3, f64) {
     let centre = (t[0] + t[1] + t[2]) / 3.0;
     let radius = t.iter().map(|c| c.distance(centre)).fold(0.0, f64::max);
     (centre, radius * (1.0 + 1e-12))

@@ -32,7 +32,7 @@
 //! chain's guards read both its ends), and only when the halves' topologies build:
 //! otherwise the caller simplifies in one piece.
 
-use super::carry::Landings;
+use super::carry::{bounding_ball, Landings};
 use super::crease::Creases;
 use super::quadric::initial_quadrics;
 use super::state::State;
@@ -295,7 +295,8 @@ struct Glued {
 }
 
 /// The two collapsed halves glued along their shared frozen vertices. A frozen vertex's
-/// record is the whole mesh's (a half saw only its own faces).
+/// record is the whole mesh's (a half saw only its own faces): its quadric summed over
+/// its faces alone, as the one-piece simplification sums it.
 fn glue(
     mesh: &TriMesh,
     topo: &Topology,
@@ -303,7 +304,12 @@ fn glue(
     halves: &[Half; 2],
     collapsed: &[Collapsed; 2],
 ) -> Option<Glued> {
-    let quadrics = initial_quadrics(mesh, topo, opts);
+    let frozen = |v: usize| {
+        halves
+            .iter()
+            .any(|h| h.local[v] != REMOVED && h.frozen[h.local[v] as usize])
+    };
+    let quadrics = initial_quadrics(mesh, topo, opts, frozen);
     let corners = State::corners(mesh, topo, opts.corner_turn_deg);
     let mut union_of = vec![REMOVED; mesh.positions.len()];
     let mut verts: Vec<Vertex> = Vec::new();
@@ -422,17 +428,12 @@ fn faces_near(
     beyond.dedup();
     let near = own.iter().chain(&beyond).map(|&face| {
         let corners = triangles[face as usize].map(|x| positions[x as usize]);
-        let centre = (corners[0] + corners[1] + corners[2]) / 3.0;
-        let radius = corners
-            .iter()
-            .map(|c| c.distance(centre))
-            .fold(0.0, f64::max);
+        let (centre, radius) = bounding_ball(corners);
         NearFace {
             face,
             corners,
             centre,
-            // A little more, for rounding.
-            radius: radius * (1.0 + 1e-12),
+            radius,
         }
     });
     near.collect()
@@ -459,7 +460,8 @@ fn land_on(point: DVec3, near: &[NearFace]) -> Landed {
     for candidate in near {
         let gap = point.distance(candidate.centre) - candidate.radius;
         if let Some((d2, _, _)) = best {
-            if gap > 0.0 && gap * gap > d2 {
+            // The slack covers the rounding of the distances compared (as `carry`).
+            if gap > 0.0 && gap * gap > d2 * (1.0 + 1e-9) {
                 continue;
             }
         }

@@ -88,17 +88,23 @@ impl Quadric {
     }
 }
 
-/// Every vertex's quadric: the planes of its faces, weighted by their areas, and the
-/// constraint planes of its boundary edges (perpendicular to their face through the
-/// edge), which keep a hole's rim in shape.
+/// Every `wanted` vertex's quadric (the others' stay zero): the planes of its faces,
+/// weighted by their areas, and the constraint planes of its boundary edges
+/// (perpendicular to their face through the edge), which keep a hole's rim in shape.
+/// A face none of whose corners is wanted is skipped, so a vertex's sum does not depend
+/// on which others are wanted.
 pub(super) fn initial_quadrics(
     mesh: &TriMesh,
     topo: &Topology,
     opts: &SimplifyOptions,
+    wanted: impl Fn(usize) -> bool,
 ) -> Vec<Quadric> {
     let pos = &mesh.positions;
     let mut quadric = vec![Quadric::default(); pos.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
+        if !t.iter().any(|&v| wanted(v as usize)) {
+            continue;
+        }
         let p = t.map(|v| pos[v as usize]);
         let n = triangle_area_normal(p);
         let area = 0.5 * n.length();

@@ -110,7 +110,7 @@ impl<'a> State<'a> {
         carrier: Option<Sender<Fans>>,
     ) -> Self {
         let pos = &mesh.positions;
-        let mut quadric = initial_quadrics(mesh, topo, opts);
+        let mut quadric = initial_quadrics(mesh, topo, opts, |_| true);
         creases.add_planes(pos, topo, opts.boundary_weight, &mut quadric);
         let corners = Self::corners(mesh, topo, opts.corner_turn_deg);
         let crease_corners = creases.corners(pos, topo, opts.corner_turn_deg);

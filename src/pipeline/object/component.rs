@@ -73,8 +73,9 @@ pub(super) fn largest_component(
     if let Ok(topology) = Topology::from_mesh(&ordered) {
         return Some((ordered, report, others, Some(topology)));
     }
-    for _ in 0..REPAIR_PASSES {
-        if Topology::from_mesh(&part).is_ok() {
+    for pass in 0..REPAIR_PASSES {
+        // The first pass knows the answer from the ordered copy above.
+        if pass > 0 && Topology::from_mesh(&part).is_ok() {
             break;
         }
         let kept = without_repeated_directed_edges(&part);
