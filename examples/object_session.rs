@@ -30,7 +30,9 @@
 //!
 //! Beside 3, bun_zipper's vertices are split by whether the merged data already misses
 //! them (the merge's fault) or only the surface does (the fit's). `OBJ_SESSION_MERGE_ONLY=1`
-//! runs only the merge of all scans against bun_zipper (no fit), `OBJ_SESSION_FORWARD_ONLY=1`
+//! times the merges alone (scan by scan and from scratch, best of three, with fingerprints
+//! of their bits) and compares the merge of all scans with bun_zipper (no fit),
+//! `OBJ_SESSION_FORWARD_ONLY=1`
 //! only the updates in arrival order, `OBJ_SESSION_REPLACE_ONLY=1` those and the new
 //! version of bun045, `OBJ_SESSION_REVERSE_ONLY=1` only the updates in reverse order; `OBJ_SESSION_DUMP=FILE`
 //! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
@@ -46,7 +48,7 @@ use trispline::io::registration::registration_for;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::rigid::RigidTransform;
-use trispline::pipeline::merge::merge;
+use trispline::pipeline::merge::{merge, MergeField, ScanSamples};
 use trispline::pipeline::object_session::{
     distance_stats, surface_mesh, surface_points_at_data, DistanceStats, ObjectSession,
     SessionOptions, SessionUpdate,
@@ -436,6 +438,53 @@ fn folder_changes(scans: &[Scan], session: &mut ObjectSession) {
     }
 }
 
+/// The merges of a session in arrival order (each scan added to the kept field, as an
+/// update does) and the merge of all scans from scratch, best of three each, with a
+/// fingerprint of each result so that a faster merge can be checked to give the same bits.
+fn merge_timings(
+    all: &[(&str, &TriMesh, RigidTransform)],
+    refs: &[&ScanSamples],
+    cell: f64,
+    opts: &SessionOptions,
+) {
+    const RUNS: usize = 3;
+    let mut best = vec![f64::MAX; refs.len()];
+    let mut prints = vec![0; refs.len()];
+    for _ in 0..RUNS {
+        let mut field = MergeField::new(cell);
+        for k in 0..refs.len() {
+            let t = std::time::Instant::now();
+            let merged = field.update(&refs[..=k], &refs[k..=k], &[], &opts.merge);
+            best[k] = best[k].min(t.elapsed().as_secs_f64() * 1e3);
+            prints[k] = fingerprint(&merged.mesh);
+        }
+    }
+    for (k, (id, _, _)) in all.iter().enumerate() {
+        println!(
+            "merge +{id:<8} best of {RUNS}: {:6.1} ms, fingerprint {:016x}",
+            best[k], prints[k]
+        );
+    }
+    let mut scratch = f64::MAX;
+    for _ in 0..RUNS {
+        let t = std::time::Instant::now();
+        merge(refs, cell, &opts.merge);
+        scratch = scratch.min(t.elapsed().as_secs_f64() * 1e3);
+    }
+    println!("merge of all scans from scratch, best of {RUNS}: {scratch:.1} ms");
+}
+
+/// A hash of a mesh's position bits and triangles.
+fn fingerprint(mesh: &TriMesh) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    for p in &mesh.positions {
+        p.to_array().map(f64::to_bits).hash(&mut hasher);
+    }
+    mesh.triangles.hash(&mut hasher);
+    hasher.finish()
+}
+
 /// The merge of all scans alone against bun_zipper (no fit): its coverage and time.
 fn merge_only(scans: &[Scan], opts: &SessionOptions, zipper: &TriMesh) {
     let all: Vec<_> = scans.iter().map(|(id, m, t, _)| (*id, m, *t)).collect();
@@ -450,15 +499,17 @@ fn merge_only(scans: &[Scan], opts: &SessionOptions, zipper: &TriMesh) {
         return;
     };
     let refs: Vec<_> = samples.iter().collect();
+    merge_timings(&all, &refs, cell, opts);
     let t = std::time::Instant::now();
     let merged = merge(&refs, cell, &opts.merge);
     println!(
-        "merge of all scans: cell {:.3} mm, {} vertices, {:.0} ms, {} holes closed, {}",
+        "merge of all scans: cell {:.3} mm, {} vertices, {:.0} ms, {} holes closed, {} boundary loops, fingerprint {:016x}",
         cell * 1e3,
         merged.mesh.positions.len(),
         t.elapsed().as_secs_f64() * 1e3,
         merged.closed_holes,
         trispline::mesh::stats::mesh_stats(&merged.mesh, 0).boundary_loops,
+        fingerprint(&merged.mesh),
     );
     let merged = merged.mesh;
     let to_merged = MeshDistance::new(&merged);
