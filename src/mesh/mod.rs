@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 
+pub mod bucket_grid;
 pub mod clean;
 pub mod crease;
 pub mod detect;

@@ -2,106 +2,22 @@
 //! weighted signed distance along the samples' normals (see the module docs of `merge`).
 
 use super::types::ScanSamples;
+use crate::mesh::bucket_grid::BucketGrid;
 use glam::{DVec2, DVec3};
 use nalgebra::{Matrix6, Vector6};
-use rustc_hash::FxHashMap;
 
 /// Samples of the sheet nearest a query count only if their normal is within this cosine
 /// of the nearest sample's (about 70 degrees): the far side of a thin part faces away.
 const SAME_SHEET_COS: f64 = 0.35;
 
-/// A bucket grid over the samples of several scans. Each bucket's samples are copied side
-/// by side (position, normal, weight) in one array, in scan and sample order: a query reads
-/// every sample of 27 buckets, and through (scan, sample) indices each was a jump into
-/// another scan's arrays (`Implicit::at` is the merge's largest cost; side by side, the
-/// bunny session's merges took 10-16 % less CPU).
+/// A bucket grid over the samples of several scans (`BucketGrid`). Each bucket's samples
+/// are copied side by side (position, normal, weight) in one array, in scan and sample
+/// order: a query reads every sample of 27 buckets, and through (scan, sample) indices
+/// each was a jump into another scan's arrays (`Implicit::at` is the merge's largest cost;
+/// side by side, the bunny session's merges took 10-16 % less CPU).
 pub(super) struct PointIndex {
-    cell: f64,
-    buckets: Buckets,
+    grid: Option<BucketGrid>,
     samples: Vec<IndexedSample>,
-}
-
-/// Each bucket's range in `PointIndex::samples`.
-enum Buckets {
-    /// An array over the buckets' bounding box, empty ranges where no sample is: a query's
-    /// 27 lookups are index arithmetic (hashing and probing them were 13 % of a merge's
-    /// CPU on the bunny's scans).
-    Dense {
-        low: [i64; 3],
-        size: [i64; 3],
-        ranges: Vec<(u32, u32)>,
-    },
-    /// Samples spread over a box too large for the array (far-apart pieces).
-    Sparse(FxHashMap<[i32; 3], (u32, u32)>),
-}
-
-/// The dense array may hold this many buckets per sample (and at least `MIN_DENSE`): a
-/// scan's surface fills a few of its box's buckets per sample, a box around pieces metres
-/// apart holds millions of empty ones.
-const DENSE_PER_SAMPLE: usize = 8;
-const MIN_DENSE: usize = 1 << 16;
-
-impl Buckets {
-    /// The buckets of samples sorted by key (`PointIndex::build`).
-    fn of(keyed: &[([i32; 3], u32, u32)]) -> Self {
-        let (Some(first), Some(last)) = (keyed.first(), keyed.last()) else {
-            return Buckets::Sparse(FxHashMap::default());
-        };
-        // Sorted by key, so x runs from the first to the last; y and z need a pass.
-        let mut low = [first.0[0] as i64, i64::MAX, i64::MAX];
-        let mut high = [last.0[0] as i64, i64::MIN, i64::MIN];
-        for (k, _, _) in keyed {
-            for axis in 1..3 {
-                low[axis] = low[axis].min(k[axis] as i64);
-                high[axis] = high[axis].max(k[axis] as i64);
-            }
-        }
-        let size = [0, 1, 2].map(|a| high[a] - low[a] + 1);
-        let count = size.iter().try_fold(1i64, |n, &s| n.checked_mul(s));
-        let limit = (DENSE_PER_SAMPLE * keyed.len()).max(MIN_DENSE) as i64;
-        match count {
-            Some(n) if n <= limit => {
-                let mut ranges = vec![(0, 0); n as usize];
-                // Every key lies inside the box it spans.
-                for (k, range) in key_runs(keyed) {
-                    if let Some(slot) = dense_slot(&low, &size, k) {
-                        ranges[slot] = range;
-                    }
-                }
-                Buckets::Dense { low, size, ranges }
-            }
-            _ => Buckets::Sparse(key_runs(keyed).collect()),
-        }
-    }
-
-    fn get(&self, k: [i64; 3]) -> Option<(u32, u32)> {
-        match self {
-            Buckets::Dense { low, size, ranges } => dense_slot(low, size, k).map(|s| ranges[s]),
-            Buckets::Sparse(map) => {
-                // Past the saturated keys' range no bucket is.
-                let [x, y, z] = k.map(|c| i32::try_from(c).ok());
-                map.get(&[x?, y?, z?]).copied()
-            }
-        }
-    }
-}
-
-/// Each key of samples sorted by key, with the range of its samples.
-fn key_runs(keyed: &[([i32; 3], u32, u32)]) -> impl Iterator<Item = ([i32; 3], (u32, u32))> + '_ {
-    keyed.chunk_by(|a, b| a.0 == b.0).scan(0u32, |at, run| {
-        let from = *at;
-        *at += run.len() as u32;
-        Some((run[0].0, (from, *at)))
-    })
-}
-
-/// The array slot of bucket `k` (x fastest), `None` outside the box.
-fn dense_slot(low: &[i64; 3], size: &[i64; 3], k: [impl Into<i64>; 3]) -> Option<usize> {
-    let [x, y, z] = k.map(|c| c.into());
-    let (x, y, z) = (x - low[0], y - low[1], z - low[2]);
-    let inside =
-        (0..size[0]).contains(&x) && (0..size[1]).contains(&y) && (0..size[2]).contains(&z);
-    inside.then(|| ((z * size[1] + y) * size[0] + x) as usize)
 }
 
 /// One sample as a bucket holds it.
@@ -115,49 +31,42 @@ pub(super) struct IndexedSample {
 impl PointIndex {
     /// Buckets of size `cell` (the largest query radius, so a query reads 27 buckets).
     pub(super) fn build(scans: &[&ScanSamples], cell: f64) -> Self {
-        let mut keyed: Vec<([i32; 3], u32, u32)> = scans
+        let points: Vec<DVec3> = scans
             .iter()
-            .enumerate()
-            .flat_map(|(s, scan)| {
-                scan.points
-                    .iter()
-                    .enumerate()
-                    .map(move |(i, p)| (key(*p, cell), s as u32, i as u32))
+            .flat_map(|s| s.points.iter().copied())
+            .collect();
+        let grid = BucketGrid::new(&points, cell);
+        // Where each scan's samples start in `points`.
+        let offsets: Vec<usize> = scans
+            .iter()
+            .scan(0, |at, s| {
+                let from = *at;
+                *at += s.points.len();
+                Some(from)
             })
             .collect();
-        keyed.sort_unstable();
-        let buckets = Buckets::of(&keyed);
-        let samples = keyed
+        let samples = grid
             .iter()
-            .map(|&(_, s, i)| {
-                let scan = scans[s as usize];
+            .flat_map(|g| g.members())
+            .map(|&i| {
+                let i = i as usize;
+                let s = offsets.partition_point(|&o| o <= i) - 1;
+                let (scan, k) = (scans[s], i - offsets[s]);
                 IndexedSample {
-                    point: scan.points[i as usize],
-                    normal: scan.normals[i as usize],
-                    weight: scan.weights[i as usize],
+                    point: scan.points[k],
+                    normal: scan.normals[k],
+                    weight: scan.weights[k],
                 }
             })
             .collect();
-        Self {
-            cell,
-            buckets,
-            samples,
-        }
+        Self { grid, samples }
     }
 
-    /// Calls `visit` with every sample in the 27 buckets around `x`.
+    /// Calls `visit` with every sample in the 27 buckets around `x`, bucket by bucket in
+    /// (z, y, x) order.
     fn around<'s>(&'s self, x: DVec3, mut visit: impl FnMut(&'s IndexedSample)) {
-        let [a, b, c] = key(x, self.cell).map(i64::from);
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    if let Some((from, to)) = self.buckets.get([a + dx, b + dy, c + dz]) {
-                        self.samples[from as usize..to as usize]
-                            .iter()
-                            .for_each(&mut visit);
-                    }
-                }
-            }
+        if let Some(grid) = &self.grid {
+            grid.around(x, |run| self.samples[run].iter().for_each(&mut visit));
         }
     }
 }
@@ -309,58 +218,4 @@ fn narrowest_spread(m: &Matrix6<f64>) -> f64 {
     let b = m[(1, 2)] / w - mu * mv;
     let c = m[(2, 2)] / w - mv * mv;
     0.5 * (a + c) - (0.25 * (a - c) * (a - c) + b * b).sqrt()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Keys sorted as `PointIndex::build` sorts them, each with its scan and sample.
-    fn keyed(keys: &[[i32; 3]]) -> Vec<([i32; 3], u32, u32)> {
-        let mut keyed: Vec<_> = keys
-            .iter()
-            .enumerate()
-            .map(|(i, &k)| (k, 0, i as u32))
-            .collect();
-        keyed.sort_unstable();
-        keyed
-    }
-
-    /// The array and the hash map give every bucket the same range, and nothing outside
-    /// the samples' box; a box far too large for the array keeps the map.
-    #[test]
-    fn dense_and_sparse_buckets_hold_the_same_ranges() {
-        let keys: Vec<[i32; 3]> = (0..400)
-            .map(|i: i32| [i % 7 - 3, (i * 5) % 11 - 5, (i * 3) % 4 + 100])
-            .collect();
-        let keyed = keyed(&keys);
-        let dense = Buckets::of(&keyed);
-        assert!(matches!(dense, Buckets::Dense { .. }));
-        let sparse = Buckets::Sparse(key_runs(&keyed).collect());
-        for x in -6..6i64 {
-            for y in -8..8i64 {
-                for z in 97..107i64 {
-                    let (d, s) = (dense.get([x, y, z]), sparse.get([x, y, z]));
-                    // An empty range in the array is a missing bucket in the map.
-                    assert_eq!(d.filter(|r| r.0 < r.1), s, "bucket {x} {y} {z}");
-                    // The range is where the sorted samples have that key, counted
-                    // here without the runs.
-                    let at: Vec<usize> = (0..keyed.len())
-                        .filter(|&i| keyed[i].0.map(i64::from) == [x, y, z])
-                        .collect();
-                    let want = at.first().map(|&f| (f as u32, f as u32 + at.len() as u32));
-                    assert_eq!(s, want, "bucket {x} {y} {z}");
-                }
-            }
-        }
-        let far = keyed_far();
-        assert!(matches!(Buckets::of(&far), Buckets::Sparse(_)));
-        assert_eq!(Buckets::of(&far).get([0, 0, 0]), Some((0, 1)));
-        assert_eq!(Buckets::of(&far).get([i32::MAX as i64 + 1, 0, 0]), None);
-    }
-
-    /// Two samples a billion buckets apart.
-    fn keyed_far() -> Vec<([i32; 3], u32, u32)> {
-        keyed(&[[0, 0, 0], [1_000_000_000, 1_000_000_000, 0]])
-    }
 }
