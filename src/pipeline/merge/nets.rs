@@ -7,6 +7,7 @@
 use super::implicit::Implicit;
 use super::types::CellKey;
 use glam::DVec3;
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 pub(super) fn corner_position(c: CellKey, cell: f64) -> DVec3 {
@@ -133,8 +134,23 @@ pub(super) fn cell_vertex(
 }
 
 /// Two triangles per grid edge the zero set crosses whose four cells have vertices,
-/// turned so that their normal points where the function grows.
+/// turned so that their normal points where the function grows; in the order of
+/// `corner_keys` (built in parallel chunks, joined in order).
 pub(super) fn quads(
+    corners: &FxHashMap<CellKey, f64>,
+    corner_keys: &[CellKey],
+    index: &FxHashMap<CellKey, u32>,
+    positions: &[DVec3],
+) -> Vec<[u32; 3]> {
+    let chunks: Vec<Vec<[u32; 3]>> = corner_keys
+        .par_chunks(4096)
+        .map(|chunk| quads_of(corners, chunk, index, positions))
+        .collect();
+    chunks.concat()
+}
+
+/// `quads` of some corners.
+fn quads_of(
     corners: &FxHashMap<CellKey, f64>,
     corner_keys: &[CellKey],
     index: &FxHashMap<CellKey, u32>,
