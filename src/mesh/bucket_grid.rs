@@ -3,11 +3,10 @@
 //! x fastest. Neighbour queries read the 27 buckets around a point; the three buckets of a
 //! row along x are adjacent, so such a query reads 9 runs.
 //!
-//! Hand-written: the spatial-index crates (rstar, kiddo) answer k-nearest and radius
-//! queries one point at a time through a tree; the merge's function and the warm start's
-//! nearest points read every point of a neighbourhood in a fixed order (the merge's sums
-//! must not depend on how a tree was balanced), at a cost a tree walk does not reach for
-//! points that lie on a surface at a known spacing.
+//! Hand-written: the spatial-index crates (rstar, kiddo) answer nearest and radius queries
+//! through a tree, in an order that depends on how the tree was built; the merge's
+//! function sums every sample of a neighbourhood, and its bits must not depend on the
+//! order the scans arrived in, so it reads buckets in a fixed order.
 
 use glam::DVec3;
 use std::ops::Range;
