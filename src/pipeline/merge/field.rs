@@ -12,7 +12,7 @@
 
 use super::holes::close_holes_inside_data;
 use super::implicit::{key, Implicit, PointIndex};
-use super::nets::{add, cell_vertex, corner_position, crossed, quads, CORNERS, NEIGHBOURS};
+use super::nets::{add, cell_vertex, corner_position, crossed, quads, NEIGHBOURS};
 use super::types::{CellKey, MergeOptions, Merged, ScanSamples};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -55,33 +55,46 @@ fn dilated(blocks: &FxHashSet<CellKey>) -> FxHashSet<CellKey> {
         .collect()
 }
 
-/// The cells `c + d` for every cell `c` of `sorted` and offset `d`, those `keep` keeps,
-/// sorted and without repeats. Built in parallel, each chunk deduplicated before the
-/// whole is: the region's cells are most of an object's when a view covers half of it,
-/// inserting each occupied cell's 27 neighbours into one hash set took a tenth to a sixth
-/// of the bunny session's merges, and listing them all before deduplicating would hold
-/// 27 keys per occupied cell.
-fn offsets_kept(
-    sorted: &[CellKey],
-    offsets: &[[i32; 3]],
-    keep: &(impl Fn(CellKey) -> bool + Sync),
-) -> Vec<CellKey> {
-    let mut cells: Vec<CellKey> = sorted
-        .par_chunks(4096)
-        .flat_map_iter(|chunk| {
-            let mut local: Vec<CellKey> = chunk
-                .iter()
-                .flat_map(|c| offsets.iter().map(move |d| add(*c, *d)))
-                .filter(|c| keep(*c))
-                .collect();
-            local.sort_unstable();
-            local.dedup();
-            local
-        })
-        .collect();
-    cells.par_sort_unstable();
-    cells.dedup();
+/// The cells `c + d` for every cell `c` of `sorted` (sorted, without repeats) and every
+/// `d` in `steps` along each axis in turn (`[-1, 0, 1]`: the 27 neighbours; `[0, 1]`: the
+/// 8 corners), sorted and without repeats. A constant shift along one axis keeps the
+/// order of the keys, so each axis is a merge of sorted copies: linear, with no hashing or
+/// sorting (inserting each occupied cell's 27 neighbours into a hash set took a tenth to a
+/// sixth of the bunny session's merges).
+fn dilated_cells(sorted: &[CellKey], steps: &[i32]) -> Vec<CellKey> {
+    let mut cells = sorted.to_vec();
+    for axis in 0..3 {
+        cells = merge_shifted(&cells, axis, steps);
+    }
     cells
+}
+
+/// The union of `sorted` shifted by each of `steps` along `axis`, sorted, without repeats.
+fn merge_shifted(sorted: &[CellKey], axis: usize, steps: &[i32]) -> Vec<CellKey> {
+    let shifted = |k: usize, i: usize| {
+        let mut c = sorted[i];
+        c[axis] = c[axis].saturating_add(steps[k]);
+        c
+    };
+    let mut at = vec![0usize; steps.len()];
+    let mut out: Vec<CellKey> = Vec::with_capacity(sorted.len() * 2);
+    loop {
+        let next = (0..steps.len())
+            .filter(|&k| at[k] < sorted.len())
+            .map(|k| shifted(k, at[k]))
+            .min();
+        let Some(next) = next else {
+            return out;
+        };
+        if out.last() != Some(&next) {
+            out.push(next);
+        }
+        for (k, i) in at.iter_mut().enumerate() {
+            if *i < sorted.len() && shifted(k, *i) == next {
+                *i += 1;
+            }
+        }
+    }
 }
 
 impl MergeField {
@@ -152,7 +165,8 @@ impl MergeField {
             .filter(|o| near(*o))
             .collect();
         occupied.par_sort_unstable();
-        let fresh = offsets_kept(&occupied, &NEIGHBOURS, &in_region);
+        let mut fresh = dilated_cells(&occupied, &[-1, 0, 1]);
+        fresh.retain(|c| in_region(*c));
         // The region's corners of its own candidates and of the kept ones beside it.
         let mut cells: Vec<CellKey> = self
             .candidates
@@ -162,8 +176,9 @@ impl MergeField {
             .chain(fresh.iter().copied())
             .collect();
         cells.par_sort_unstable();
-        let corner_keys = offsets_kept(&cells, &CORNERS, &in_region);
+        let mut corner_keys = dilated_cells(&cells, &[0, 1]);
         drop(cells);
+        corner_keys.retain(|c| in_region(*c));
 
         let radius = opts.radius_cells * cell;
         let index = PointIndex::build(scans, radius);
@@ -236,5 +251,40 @@ impl MergeField {
         corner_keys.par_sort_unstable();
         merged.mesh.triangles = quads(&self.corners, &corner_keys, &index, &merged.mesh.positions);
         merged
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The merged shifts hold exactly the cells a hash set of every cell's offsets holds,
+    /// in order, with saturation at the end of the key range.
+    #[test]
+    fn dilated_cells_are_every_offset_cell_once_in_order() {
+        let mut seed = 5u64;
+        let mut next = || (crate::testdata::uniform(&mut seed) * 12.0) as i32 - 6;
+        let mut cells: Vec<CellKey> = (0..300).map(|_| [next(), next(), next()]).collect();
+        cells.push([i32::MAX, 0, i32::MIN]);
+        cells.sort_unstable();
+        cells.dedup();
+        for steps in [&[-1, 0, 1][..], &[0, 1][..]] {
+            let got = dilated_cells(&cells, steps);
+            let mut want: Vec<CellKey> = cells
+                .iter()
+                .flat_map(|c| {
+                    steps.iter().flat_map(move |&a| {
+                        steps
+                            .iter()
+                            .flat_map(move |&b| steps.iter().map(move |&d| add(*c, [a, b, d])))
+                    })
+                })
+                .collect::<FxHashSet<CellKey>>()
+                .into_iter()
+                .collect();
+            want.sort_unstable();
+            assert_eq!(got, want, "steps {steps:?}");
+        }
+        assert!(dilated_cells(&[], &[-1, 0, 1]).is_empty());
     }
 }
