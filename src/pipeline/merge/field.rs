@@ -11,8 +11,8 @@
 //! merge of a set of scans is the same whether it was built at once or scan by scan.
 
 use super::holes::close_holes_inside_data;
-use super::implicit::{key, Implicit, PointIndex};
-use super::nets::{add, cell_vertex, corner_position, crossed, quads, NEIGHBOURS};
+use super::implicit::{Implicit, PointIndex};
+use super::nets::{add, cell_of, cell_vertex, corner_position, crossed, quads, NEIGHBOURS};
 use super::types::{CellKey, MergeOptions, Merged, ScanSamples};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -138,7 +138,7 @@ impl MergeField {
             .chain(added.iter().map(|s| (s, 1)))
         {
             for p in &scan.points {
-                let c = key(*p, cell);
+                let c = cell_of(*p, cell);
                 core.insert(block_of(c));
                 let count = self.occupancy.entry(c).or_default();
                 *count = (*count as i64 + step).max(0) as u32;

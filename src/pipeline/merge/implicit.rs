@@ -71,12 +71,6 @@ impl PointIndex {
     }
 }
 
-/// The bucket of `p` on a grid of size `cell` (saturating far outside the i32 range).
-pub(super) fn key(p: DVec3, cell: f64) -> [i32; 3] {
-    let q = (p / cell).floor();
-    [q.x as i32, q.y as i32, q.z as i32]
-}
-
 /// The implicit function at a point.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Sample {

@@ -10,6 +10,13 @@ use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
+/// The cell of the merge grid (of size `cell`) holding `p`, saturating far outside the
+/// i32 range.
+pub(super) fn cell_of(p: DVec3, cell: f64) -> CellKey {
+    let q = (p / cell).floor();
+    [q.x as i32, q.y as i32, q.z as i32]
+}
+
 pub(super) fn corner_position(c: CellKey, cell: f64) -> DVec3 {
     DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) * cell
 }
