@@ -21,12 +21,13 @@
 //! vertex's faces all lie in its half, so its quadric and the guards of its collapses
 //! are those of the whole mesh (but for the fewest-faces guard on a cut vertex opposite
 //! the edge, which counts that vertex's faces in the half only); the order differs,
-//! cheapest first in each half instead of over the whole. At the handover every input point lands on the nearest face
-//! around the vertex its collapses led into or around that vertex's neighbours: a local
-//! projection, so a point of a thin part stays on its own side as carrying keeps it. The
-//! glued mesh then runs the ordinary collapse loop to the target with the halves'
-//! quadrics and locks, the points carried, so the last, costliest half of the collapses
-//! is ordered by one queue over the whole mesh and the cut leaves no strip of small faces.
+//! cheapest first in each half instead of over the whole. At the handover every input
+//! point lands on the nearest face around the vertex its collapses led into or around
+//! that vertex's neighbours: a local projection, so a point of a thin part stays on its
+//! own side as carrying keeps it. The glued mesh then runs the ordinary collapse loop to
+//! the target with the halves' quadrics and locks, the points carried, so the last,
+//! costliest half of the collapses is ordered by one queue over the whole mesh and the
+//! cut leaves no strip of small faces.
 //!
 //! Taken only without creases and kept vertices (part meshes are small, and a crease
 //! chain's guards read both its ends), and only when the halves' topologies build:
