@@ -51,7 +51,7 @@ fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
     check_glb_header(bytes)?;
     let unvalidated = gltf::Gltf::from_slice_without_validation(bytes)
         .map_err(|e| version_one(bytes).unwrap_or(IoErrorKind::Gltf(e)))?;
-    let json = unvalidated.document.as_json();
+    let mut json = unvalidated.document.into_json();
     // Before the validation, which a compressed primitive fails (its accessors have no
     // buffer view) with a message that does not name the compression.
     for ext in json.extensions_required.iter().chain(&json.extensions_used) {
@@ -85,12 +85,44 @@ fn parse_validated(bytes: &[u8]) -> Result<gltf::Gltf, IoErrorKind> {
             }
         }
     }
-    let document =
-        gltf::Document::from_json(unvalidated.document.into_json()).map_err(IoErrorKind::Gltf)?;
+    supply_position_bounds(&mut json);
+    let document = gltf::Document::from_json(json).map_err(IoErrorKind::Gltf)?;
     Ok(gltf::Gltf {
         document,
         blob: unvalidated.blob,
     })
+}
+
+/// Gives every POSITION accessor without a valid `min` and `max` a placeholder pair. The
+/// specification requires both, so the `gltf` crate refuses a document without them; but
+/// they only bound the data, some exporters leave them out (assimp's test models have such
+/// files), viewers read such files, and this reader never looks at them: it takes the
+/// positions themselves (non-finite ones are refused there).
+fn supply_position_bounds(json: &mut gltf::json::Root) {
+    let positions: Vec<usize> = json
+        .meshes
+        .iter()
+        .flat_map(|m| &m.primitives)
+        .filter_map(|p| {
+            p.attributes.get(&gltf::json::validation::Checked::Valid(
+                gltf::json::mesh::Semantic::Positions,
+            ))
+        })
+        .map(|a| a.value())
+        .collect();
+    let valid = |bound: &Option<gltf::json::Value>| {
+        bound
+            .as_ref()
+            .is_some_and(|b| serde_json::from_value::<[f32; 3]>(b.clone()).is_ok())
+    };
+    for index in positions {
+        if let Some(accessor) = json.accessors.get_mut(index) {
+            if !valid(&accessor.min) || !valid(&accessor.max) {
+                accessor.min = Some(serde_json::json!([0.0, 0.0, 0.0]));
+                accessor.max = Some(serde_json::json!([0.0, 0.0, 0.0]));
+            }
+        }
+    }
 }
 
 /// Why a document the `gltf` crate cannot parse is refused, when it is glTF 1.0 (a GLB of

@@ -1,6 +1,8 @@
-//! OFF reader: OFF, COFF, NOFF, CNOFF headers, '#' comments, polygons fan-triangulated.
-//! Line-based: a vertex line's first three numbers are its position and a face line's
-//! first number its size, so colour and normal columns are skipped whatever their count.
+//! OFF reader: Geomview's three-dimensional variants (`[ST][C][N]OFF`, `nOFF` of dimension
+//! 3, or no keyword at all: "recommended but optional, as many existing files lack this
+//! keyword"), '#' comments, polygons fan-triangulated. Line-based: a vertex line's first
+//! three numbers are its position and a face line's first number its size, so texture,
+//! colour and normal columns are skipped whatever their count.
 
 use super::{IoError, IoErrorKind, LoadOptions};
 use crate::mesh::TriMesh;
@@ -17,23 +19,39 @@ pub(crate) fn read_off(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
     let (line, first) = lines
         .next()
         .ok_or_else(|| IoError::new(file, None, IoErrorKind::Empty))?;
-    let mut words = first.split_whitespace();
-    let magic = words.next().unwrap_or("");
-    if !matches!(magic, "OFF" | "COFF" | "NOFF" | "CNOFF" | "NCOFF") {
+    let keyword = keyword(first).map_err(|kind| err(line, kind))?;
+    let mut next_line = || {
+        lines
+            .next()
+            .map(|(n, l)| (n, l.split_whitespace().collect::<Vec<&str>>()))
+            .ok_or_else(|| IoError::new(file, None, IoErrorKind::bad_header("no counts line")))
+    };
+    let (mut count_line, mut counts): (usize, Vec<&str>) =
+        (line, keyword.rest.split_whitespace().collect());
+    if keyword.n_dimensional {
+        if counts.is_empty() {
+            (count_line, counts) = next_line()?;
+        }
+        let dimension = counts.remove(0);
+        if dimension != "3" {
+            return Err(err(
+                count_line,
+                IoErrorKind::unsupported(format!(
+                    "'{}' of dimension {dimension}: only three-dimensional OFF is read",
+                    keyword.word
+                )),
+            ));
+        }
+    }
+    if counts.first() == Some(&"BINARY") {
         return Err(err(
-            line,
-            IoErrorKind::bad_header(format!("'{magic}' is not an OFF header")),
+            count_line,
+            IoErrorKind::unsupported("binary OFF is not read (text OFF only)"),
         ));
     }
-    let rest: Vec<&str> = words.collect();
-    let (count_line, counts): (usize, Vec<&str>) = if rest.is_empty() {
-        let (n, l) = lines
-            .next()
-            .ok_or_else(|| IoError::new(file, None, IoErrorKind::bad_header("no counts line")))?;
-        (n, l.split_whitespace().collect())
-    } else {
-        (line, rest)
-    };
+    if counts.is_empty() {
+        (count_line, counts) = next_line()?;
+    }
     let count = |k: usize, what: &str| -> Result<usize, IoError> {
         let t = counts.get(k).ok_or_else(|| {
             err(
@@ -145,4 +163,47 @@ pub(crate) fn read_off(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
         }
     }
     Ok(TriMesh::new(positions, triangles))
+}
+
+/// An OFF file's first line: Geomview's `[ST][C][N][4][n]OFF` keyword, or none.
+struct Keyword<'a> {
+    /// The keyword ("" without one).
+    word: &'a str,
+    /// `nOFF`: the space's dimension comes next.
+    n_dimensional: bool,
+    /// The line after the keyword (the whole line without one: it holds the counts).
+    rest: &'a str,
+}
+
+/// Reads the keyword from the first line. `ST`, `C` and `N` only add columns after a
+/// vertex's position; `4` adds a fourth coordinate, which a surface in space has no use
+/// for.
+fn keyword(first: &str) -> Result<Keyword<'_>, IoErrorKind> {
+    let word = first.split_whitespace().next().unwrap_or("");
+    if word.parse::<usize>().is_ok() {
+        return Ok(Keyword {
+            word: "",
+            n_dimensional: false,
+            rest: first,
+        });
+    }
+    let columns = ["ST", "C", "N"]
+        .iter()
+        .fold(word, |w, p| w.strip_prefix(p).unwrap_or(w));
+    if columns.starts_with('4') {
+        return Err(IoErrorKind::unsupported(format!(
+            "'{word}': vertices with a fourth coordinate are not read (three-dimensional OFF only)"
+        )));
+    }
+    let n_dimensional = columns.starts_with('n');
+    if columns.strip_prefix('n').unwrap_or(columns) != "OFF" {
+        return Err(IoErrorKind::bad_header(format!(
+            "'{word}' is not an OFF header"
+        )));
+    }
+    Ok(Keyword {
+        word,
+        n_dimensional,
+        rest: first[word.len()..].trim_start(),
+    })
 }

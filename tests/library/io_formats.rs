@@ -81,6 +81,53 @@ fn off_variants_and_obj_details() {
     assert_eq!(m.triangles, vec![[0, 1, 2], [1, 3, 2]]);
 }
 
+#[test]
+fn off_keywords_as_geomview_defines_them() {
+    let triangle = "0 0 0 0.1 0.2\n1 0 0 0.3 0.4\n0 1 0 0.5 0.6\n3 0 1 2\n";
+    // The keyword is optional (Geomview: "recommended but optional, as many existing
+    // files lack this keyword"); ST, C and N only add columns after the position; nOFF
+    // names the dimension first, on its line or the next.
+    for head in [
+        "3 1 0\n",
+        "# no keyword\n3 1 0\n",
+        "STCNOFF\n3 1 0\n",
+        "STOFF 3 1 0\n",
+        "nOFF 3\n3 1 0\n",
+        "nOFF\n3 3 1 0\n",
+    ] {
+        let m = read(format!("{head}{triangle}").as_bytes(), Format::Off);
+        assert_eq!(m.triangles, vec![[0, 1, 2]], "{head:?}");
+        assert_eq!(m.positions[2], glam::DVec3::new(0.0, 1.0, 0.0), "{head:?}");
+    }
+    // Variants whose vertices are not points in space, or not text: named, not misread.
+    for (head, says) in [
+        ("4OFF\n3 1 0\n", "fourth coordinate"),
+        ("4nOFF 3\n3 1 0\n", "fourth coordinate"),
+        ("nOFF 4\n3 1 0\n", "dimension 4"),
+        ("OFF BINARY\n", "binary OFF"),
+    ] {
+        let e = read_mesh_bytes(
+            format!("{head}{triangle}").as_bytes(),
+            Format::Off,
+            "v.off",
+            &LoadOptions::default(),
+        )
+        .expect_err(head);
+        assert_eq!(e.kind(), "unsupported", "{head:?}: {e}");
+        assert!(e.to_string().contains(says), "{head:?}: {e}");
+    }
+    for head in ["NOFFX\n3 1 0\n", "nnOFF 3\n3 1 0\n", "appearance { }\n"] {
+        let e = read_mesh_bytes(
+            format!("{head}{triangle}").as_bytes(),
+            Format::Off,
+            "v.off",
+            &LoadOptions::default(),
+        )
+        .expect_err(head);
+        assert_eq!(e.kind(), "bad_header", "{head:?}: {e}");
+    }
+}
+
 /// Two facets of the unit square, as `ascii_stl_welds_shared_corners` has them.
 const SQUARE_FACETS: &str = "facet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nfacet normal 0 0 1\nouter loop\nvertex 1 0 0\nvertex 1 1 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid\n";
 
@@ -201,6 +248,21 @@ fn gltf_of_mode(mode: u32) -> String {
         "bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":36}}],
         "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}}]}}"#
     )
+}
+
+#[test]
+fn gltf_positions_without_bounds_are_read_from_the_data() {
+    // `min` and `max` are required of POSITION, but some exporters leave them out; they
+    // only bound the data, which the reader takes as it is.
+    let full = gltf_of_mode(4);
+    let without = full.replace(r#","min":[0,0,0],"max":[1,1,0]"#, "");
+    let nulls = full.replace("[0,0,0]", "[null,null,null]");
+    for doc in [&without, &nulls] {
+        assert_ne!(doc, &full);
+        let m = read(doc.as_bytes(), Format::Gltf);
+        assert_eq!(m.triangles, vec![[0, 1, 2]]);
+        assert_eq!(m.positions[1], glam::DVec3::new(1.0, 0.0, 5.0));
+    }
 }
 
 #[test]
