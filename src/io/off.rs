@@ -19,39 +19,7 @@ pub(crate) fn read_off(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
     let (line, first) = lines
         .next()
         .ok_or_else(|| IoError::new(file, None, IoErrorKind::Empty))?;
-    let keyword = keyword(first).map_err(|kind| err(line, kind))?;
-    let mut next_line = || {
-        lines
-            .next()
-            .map(|(n, l)| (n, l.split_whitespace().collect::<Vec<&str>>()))
-            .ok_or_else(|| IoError::new(file, None, IoErrorKind::bad_header("no counts line")))
-    };
-    let (mut count_line, mut counts): (usize, Vec<&str>) =
-        (line, keyword.rest.split_whitespace().collect());
-    if keyword.n_dimensional {
-        if counts.is_empty() {
-            (count_line, counts) = next_line()?;
-        }
-        let dimension = counts.remove(0);
-        if dimension != "3" {
-            return Err(err(
-                count_line,
-                IoErrorKind::unsupported(format!(
-                    "'{}' of dimension {dimension}: only three-dimensional OFF is read",
-                    keyword.word
-                )),
-            ));
-        }
-    }
-    if counts.first() == Some(&"BINARY") {
-        return Err(err(
-            count_line,
-            IoErrorKind::unsupported("binary OFF is not read (text OFF only)"),
-        ));
-    }
-    if counts.is_empty() {
-        (count_line, counts) = next_line()?;
-    }
+    let (count_line, counts) = counts_line((line, first), &mut lines, file)?;
     let count = |k: usize, what: &str| -> Result<usize, IoError> {
         let t = counts.get(k).ok_or_else(|| {
             err(
@@ -163,6 +131,50 @@ pub(crate) fn read_off(bytes: &[u8], file: &str, opts: &LoadOptions) -> Result<T
         }
     }
     Ok(TriMesh::new(positions, triangles))
+}
+
+/// The counts line's number and words, after the keyword (and `nOFF`'s dimension) on the
+/// first line `(line, first)`; refuses the variants this reader does not take.
+fn counts_line<'t>(
+    (line, first): (usize, &'t str),
+    lines: &mut impl Iterator<Item = (usize, &'t str)>,
+    file: &str,
+) -> Result<(usize, Vec<&'t str>), IoError> {
+    let err = |line: usize, kind: IoErrorKind| IoError::at(file, format!("line {line}"), kind);
+    let keyword = keyword(first).map_err(|kind| err(line, kind))?;
+    let mut next_line = || {
+        lines
+            .next()
+            .map(|(n, l)| (n, l.split_whitespace().collect::<Vec<&str>>()))
+            .ok_or_else(|| IoError::new(file, None, IoErrorKind::bad_header("no counts line")))
+    };
+    let (mut count_line, mut counts): (usize, Vec<&str>) =
+        (line, keyword.rest.split_whitespace().collect());
+    if keyword.n_dimensional {
+        if counts.is_empty() {
+            (count_line, counts) = next_line()?;
+        }
+        let dimension = counts.remove(0);
+        if dimension != "3" {
+            return Err(err(
+                count_line,
+                IoErrorKind::unsupported(format!(
+                    "'{}' of dimension {dimension}: only three-dimensional OFF is read",
+                    keyword.word
+                )),
+            ));
+        }
+    }
+    if counts.first() == Some(&"BINARY") {
+        return Err(err(
+            count_line,
+            IoErrorKind::unsupported("binary OFF is not read (text OFF only)"),
+        ));
+    }
+    if counts.is_empty() {
+        (count_line, counts) = next_line()?;
+    }
+    Ok((count_line, counts))
 }
 
 /// An OFF file's first line: Geomview's `[ST][C][N][4][n]OFF` keyword, or none.

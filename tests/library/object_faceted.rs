@@ -6,7 +6,9 @@ use glam::DVec3;
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::mesh::distance::MeshDistance;
 use trispline::mesh::simplify::baseline::decimation_baselines;
-use trispline::pipeline::object::{fit_object, is_faceted, ObjectFit, ObjectOptions};
+use trispline::pipeline::object::{
+    fit_object, fit_on_creased_control_mesh, is_faceted, ObjectFit, ObjectOptions,
+};
 use trispline::pipeline::worker::{run_patch, Domain, WorkerConfig};
 use trispline::surface::{SurfaceParam, TriSurface};
 use trispline::testdata::{faceted_prism, torus};
@@ -326,4 +328,83 @@ fn the_stray_bound_holds_by_facets_where_no_smooth_fit_can() {
     .expect("fitted");
     assert!(held.stray_budgets.iter().all(|b| !b.faceted));
     assert!(held.stray.is_some_and(|s| s > limit), "{:?}", held.stray);
+}
+
+/// A one-row strip of long triangles: every face stands on one side's boundary by an edge
+/// and touches the other side's by its third corner only.
+fn long_strip(quads: usize) -> (TriMesh, Vec<SurfaceParam>) {
+    let bottom = |i: usize| DVec3::new(10.0 * i as f64, 0.0, 0.0);
+    let top = |i: usize| DVec3::new(10.0 * i as f64 + 5.0, 1.0, 0.0);
+    let positions: Vec<DVec3> = (0..=quads)
+        .map(bottom)
+        .chain((0..=quads).map(top))
+        .collect();
+    let (b, t) = (|i: usize| i as u32, |i: usize| (quads + 1 + i) as u32);
+    let mut triangles = Vec::new();
+    for i in 0..quads {
+        triangles.push([b(i), b(i + 1), t(i)]);
+        triangles.push([t(i), b(i + 1), t(i + 1)]);
+    }
+    // Each vertex starts at a corner of a face whose boundary edge lies across from it
+    // (a top vertex on the face below it, a bottom vertex on the face above it), as a
+    // foot search on such a mesh may leave it.
+    let corner = |face: usize, k: usize| {
+        let mut w = [0.0; 3];
+        w[k] = 1.0;
+        SurfaceParam {
+            face: face as u32,
+            u: w[0],
+            v: w[1],
+        }
+    };
+    let params = (0..=quads)
+        .map(|i| {
+            if i == 0 {
+                corner(0, 0)
+            } else {
+                corner(2 * i - 1, 1)
+            }
+        })
+        .chain((0..=quads).map(|i| {
+            if i == quads {
+                corner(2 * quads - 1, 2)
+            } else {
+                corner(2 * i, 2)
+            }
+        }))
+        .collect();
+    (TriMesh::new(positions, triangles), params)
+}
+
+#[test]
+fn a_faceted_surface_through_the_data_holds_its_rim_feet_where_they_are() {
+    let (strip, params) = long_strip(12);
+    let mut creases: Vec<[u32; 2]> = strip
+        .triangles
+        .iter()
+        .flat_map(|t| [0, 1, 2].map(|k| [t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])]))
+        .collect();
+    creases.sort_unstable();
+    creases.dedup();
+    let opts = ObjectOptions {
+        rounds: 0,
+        smoothing: 0.0,
+        ..ObjectOptions::default()
+    };
+    let fit =
+        fit_on_creased_control_mesh(strip.clone(), strip.clone(), &creases, params, None, &opts)
+            .expect("the strip fits");
+    // The surface is its control mesh (every vertex a corner of its creases) ...
+    assert!(gap_to_control_mesh(&fit) < 1e-9);
+    // ... and the point fit puts it on the strip, every data point on it: feet held
+    // across their faces on the other side's boundary (the strip's height away) would
+    // have pulled the controls there.
+    let moved = fit
+        .controls
+        .iter()
+        .zip(&strip.positions)
+        .map(|(c, p)| c.distance(*p))
+        .fold(0.0, f64::max);
+    assert!(moved < 1e-9, "a control moved by {moved}");
+    assert!(fit.max < 1e-9, "max {} rms {}", fit.max, fit.rms);
 }

@@ -4,7 +4,7 @@
 //! stray repair) instead of once per fit.
 
 use super::model::{ObjectError, ObjectOptions};
-use super::solve::near_boundary_in;
+use super::rim::near_boundary_in;
 use crate::mesh::distance::MeshDistance;
 use crate::mesh::simplify::SurfaceTopology;
 use crate::mesh::topology::Topology;

@@ -4,8 +4,9 @@
 use super::data_side::DataSide;
 use super::model::{limit_surface, ObjectError, ObjectOptions};
 use super::refine::{faces_beyond, Fitted, RefineRound, MIN_FACES_BEYOND_SHARE};
+use super::rim::Rim;
 use super::shares::shares_and_curvature;
-use super::solve::{rms, two_sided_rms, DistanceRound, Feet, Rim, Samples};
+use super::solve::{rms, two_sided_rms, DistanceRound, Feet, Samples};
 use crate::fit::distance::CholeskyPattern;
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Collocation;
@@ -107,7 +108,7 @@ impl Setup {
         ));
         let n = side.mesh.positions.len();
         Ok(Self {
-            rim: Rim::new(&control_topo.twin, &side.on_rim),
+            rim: Rim::new(&control_mesh.triangles, &control_topo.twin, &side.on_rim),
             surface,
             control_topology,
             fairness,

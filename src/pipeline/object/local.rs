@@ -17,7 +17,8 @@
 
 use super::model::{limit_surface, ObjectOptions, RoundStop, MAX_REFUSALS};
 use super::refine::{new_faces, Refined};
-use super::solve::{foot, near_boundary, FeetMut, Rim, Samples};
+use super::rim::{near_boundary, FeetMut, Rim};
+use super::solve::{foot, Samples};
 use crate::fit::distance::{solve_distance_round, CholeskyPattern, DistanceProblem};
 use crate::fit::engine::umbrella_laplacian_with_creases;
 use crate::fit::Csr;
@@ -162,7 +163,7 @@ impl RimHold {
             .map(|(&r, &b)| if r { 2 } else { u8::from(b) })
             .collect();
         Some(Self {
-            rim: Rim::new(&twins, &on_rim),
+            rim: Rim::new(&control_mesh.triangles, &twins, &on_rim),
             class,
         })
     }

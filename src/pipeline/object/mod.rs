@@ -28,6 +28,7 @@ mod local;
 mod model;
 mod refine;
 mod repair;
+mod rim;
 mod seam;
 mod semi_regular;
 mod shares;
@@ -64,8 +65,9 @@ pub use model::{
 use refine::{faces_beyond, refined_mesh, Fitted, Splits, MIN_FACES_BEYOND_SHARE};
 pub use refine::{RefineOptions, RefineRound};
 pub(crate) use repair::refine_where_far;
+use rim::Rim;
 use simplification::simplify_for_control;
-use solve::{point_fit, rows_at, Feet, Rim};
+use solve::{point_fit, rows_at, Feet};
 use std::cell::Cell;
 use std::time::Instant;
 use stray::grow_budget_while_straying;
@@ -474,7 +476,7 @@ fn warm_start(
 ) -> (Vec<DVec3>, Feet) {
     let with_curvature = opts.curvature_floor.is_some();
     let mut feet = Feet::find(f.surface, &controls, f.data, (params, with_curvature));
-    f.rim.hold(&mut feet, f.surface, &controls, f.data);
+    feet.hold_rim(f.rim, f.surface, &controls, f.data);
     (controls, feet)
 }
 
@@ -488,7 +490,7 @@ fn first_fit(
     let positions = &f.control_mesh.positions;
     let params = if opts.limit_start {
         let mut start = Feet::find(f.surface, positions, f.data, (&params, false));
-        f.rim.hold(&mut start, f.surface, positions, f.data);
+        start.hold_rim(f.rim, f.surface, positions, f.data);
         start.params
     } else {
         params
@@ -510,7 +512,7 @@ fn first_fit(
         f.data,
         (&params, opts.curvature_floor.is_some()),
     );
-    f.rim.hold(&mut feet, f.surface, &controls, f.data);
+    feet.hold_rim(f.rim, f.surface, &controls, f.data);
     Ok((controls, feet))
 }
 

@@ -3,13 +3,13 @@
 //! (The scan path has its own versions of these in `pipeline::scan_solve`, private there
 //! and tied to its grid plans; these are the plain sparse forms.)
 
+use super::rim::{FeetMut, Rim};
 use crate::fit::distance::{
     solve_distance, solve_distance_round, CholeskyPattern, DistanceProblem,
 };
 use crate::fit::normal_matrix::{Fairness, ScalarMatrix};
 use crate::fit::{Collocation, Csr};
 use crate::mesh::distance::MeshDistance;
-use crate::mesh::topology::Topology;
 use crate::pipeline::geometric::{curvature_term, foot_point};
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{Derivatives, SurfaceParam, TriSurface};
@@ -158,7 +158,7 @@ impl DistanceRound<'_> {
     ) -> Option<(Feet, Vec<DVec3>, f64)> {
         let with_curvature = self.curvature.is_some();
         let mut feet = Feet::find(self.surface, &next, self.data, (start, with_curvature));
-        rim.hold(&mut feet, self.surface, &next, self.data);
+        feet.hold_rim(rim, self.surface, &next, self.data);
         let on_samples = match nearest {
             Some(nearest) => self.samples.distances_at(self.surface, &next, nearest),
             None => Vec::new(),
@@ -284,7 +284,7 @@ impl Samples {
             faces += usize::from(params.len() > before);
             // The boundary curve: each boundary edge at its first corner and midpoint
             // (every boundary vertex starts exactly one boundary edge).
-            let edges = rim.edges_of_face.get(f).copied().unwrap_or_default();
+            let edges = rim.boundary_edges_of(f);
             for k in (0..3).filter(|&k| edges[k]) {
                 for t in [1.0, 0.5] {
                     let mut w = [0.0; 3];
@@ -421,6 +421,23 @@ impl Feet {
         feet
     }
 
+    /// Holds the feet of the data's rim points on the surface's boundary
+    /// (`Rim::hold_where`, every rim point).
+    pub(super) fn hold_rim(
+        &mut self,
+        rim: &Rim,
+        surface: &LoopLimitSurface,
+        controls: &[DVec3],
+        data: &[DVec3],
+    ) {
+        let parts = FeetMut {
+            params: &mut self.params,
+            normals: &mut self.normals,
+            distances: &mut self.distances,
+        };
+        rim.hold_where(parts, surface, controls, data, None);
+    }
+
     pub(super) fn rms(&self) -> f64 {
         rms(&self.distances)
     }
@@ -440,204 +457,4 @@ pub(super) fn two_sided_rms(data: &[f64], samples: &[f64]) -> f64 {
 
 pub(super) fn rms(e: &[f64]) -> f64 {
     two_sided_rms(e, &[])
-}
-
-/// The data's rim held on the surface's rim: each data point on the data's boundary keeps
-/// its foot point on a boundary edge of its control face (where that face has one), so
-/// the limit surface's boundary curve is fitted to the data's boundary. Left free, those
-/// foot points slide inside and nothing stops the surface from running on past the rim
-/// (on bun_zipper by up to 2 % of the diagonal over the holes).
-pub(super) struct Rim {
-    /// Per control face: which of its edges k (corner k to k + 1) are on the boundary (a
-    /// face at a corner of the rim has two).
-    edges_of_face: Vec<[bool; 3]>,
-    /// The data points on the data's boundary.
-    points: Vec<usize>,
-}
-
-/// Feet held by their parts (a whole fit's `Feet`, a local refit's `LocalFeet`).
-pub(super) struct FeetMut<'a> {
-    pub params: &'a mut [SurfaceParam],
-    pub normals: &'a mut [DVec3],
-    pub distances: &'a mut [f64],
-}
-
-/// Gauss-Newton steps along a boundary edge.
-const RIM_STEPS: usize = 4;
-
-impl Rim {
-    /// `control_twins`: the control mesh's half-edge twins (`NONE` on the boundary);
-    /// `data_boundary`: per data point, whether it is on the data's boundary.
-    pub(super) fn new(control_twins: &[u32], data_boundary: &[bool]) -> Rim {
-        let edges_of_face = control_twins
-            .chunks(3)
-            .map(|t| [0, 1, 2].map(|k| t.get(k) == Some(&crate::mesh::topology::NONE)))
-            .collect();
-        let points = (0..data_boundary.len())
-            .filter(|&p| data_boundary[p])
-            .collect();
-        Rim {
-            edges_of_face,
-            points,
-        }
-    }
-
-    /// No boundary edge and no rim point, over `faces` control faces: surface samples
-    /// then take the faces' insides only. A local refit holds no rim points on the
-    /// boundary curve, and boundary samples alone pull the curve towards the nearest data
-    /// with nothing to hold it out (measured on a tube grown by 40 rings: the max error
-    /// 3.8e-3 with them, 2.6e-3 without, against 1.75e-3 from scratch).
-    pub(super) fn without_boundary(faces: usize) -> Rim {
-        Rim {
-            edges_of_face: vec![[false; 3]; faces],
-            points: Vec::new(),
-        }
-    }
-
-    /// Moves each rim point's foot parameter onto the nearest boundary edge of its face
-    /// (the nearest point of the edge's limit curve, by Gauss-Newton along it) and updates
-    /// its normal and distance.
-    pub(super) fn hold(
-        &self,
-        feet: &mut Feet,
-        surface: &LoopLimitSurface,
-        controls: &[DVec3],
-        data: &[DVec3],
-    ) {
-        let feet = FeetMut {
-            params: &mut feet.params,
-            normals: &mut feet.normals,
-            distances: &mut feet.distances,
-        };
-        self.hold_where(feet, surface, controls, data, None);
-    }
-
-    /// [`Rim::hold`] over the feet given, for the rim points `only` marks (all without).
-    pub(super) fn hold_where(
-        &self,
-        feet: FeetMut,
-        surface: &LoopLimitSurface,
-        controls: &[DVec3],
-        data: &[DVec3],
-        only: Option<&[bool]>,
-    ) {
-        let evaluate = surface.evaluator(controls);
-        let points: Vec<usize> = self
-            .points
-            .iter()
-            .copied()
-            .filter(|&p| only.is_none_or(|o| o.get(p) == Some(&true)))
-            .collect();
-        let held: Vec<Option<(SurfaceParam, DVec3, f64)>> = points
-            .par_iter()
-            .map(|&p| {
-                let param = feet.params[p];
-                let edges = self.edges_of_face.get(param.face as usize)?;
-                (0..3)
-                    .filter(|&k| edges[k])
-                    .filter_map(|k| {
-                        let held = hold_on_edge(&*evaluate, param, k, data[p])?;
-                        // A rim point whose own face's edge lies far off (a control face
-                        // between two small holes of a broken scan) is left free: the hold
-                        // pulls a rim along its data, never across to another.
-                        let t3 = surface.faces().get(param.face as usize)?;
-                        let (a, b) = (t3[k] as usize, t3[(k + 1) % 3] as usize);
-                        let edge = controls.get(a)?.distance(*controls.get(b)?);
-                        (held.2 <= feet.distances[p] + 0.5 * edge).then_some(held)
-                    })
-                    .min_by(|x, y| x.2.total_cmp(&y.2))
-                    .map(|(at, n, d)| (at, n.unwrap_or(feet.normals[p]), d))
-            })
-            .collect();
-        for (&p, h) in points.iter().zip(held) {
-            if let Some((param, n, dist)) = h {
-                feet.params[p] = param;
-                feet.normals[p] = n;
-                feet.distances[p] = dist;
-            }
-        }
-    }
-
-    /// Whether data point `p` is on the rim (for its share of the point-to-point term).
-    pub(super) fn marks(&self, count: usize) -> Vec<bool> {
-        let mut m = vec![false; count];
-        for &p in &self.points {
-            m[p] = true;
-        }
-        m
-    }
-}
-
-/// The point of edge k (corner k to k + 1) of `param`'s face nearest to `q`, by
-/// Gauss-Newton along the edge from the projection of `param` onto it: the parameter, the
-/// unit normal there (if the tangents span a plane) and the distance. `None` when the
-/// tangent along the edge vanishes at the start.
-fn hold_on_edge(
-    evaluate: &(dyn Fn(SurfaceParam) -> crate::surface::Derivatives + Sync),
-    param: SurfaceParam,
-    k: usize,
-    q: DVec3,
-) -> Option<(SurfaceParam, Option<DVec3>, f64)> {
-    let w = [param.u, param.v, 1.0 - param.u - param.v];
-    let sum = w[k] + w[(k + 1) % 3];
-    let mut t = if sum > 0.0 { w[k] / sum } else { 0.5 };
-    let at = |t: f64| {
-        let mut w = [0.0; 3];
-        w[k] = t;
-        w[(k + 1) % 3] = 1.0 - t;
-        SurfaceParam {
-            face: param.face,
-            u: w[0],
-            v: w[1],
-        }
-    };
-    let mut d = evaluate(at(t));
-    for step in 0..RIM_STEPS {
-        // d/dt of the position along the edge in (u, v) terms.
-        let along = match k {
-            0 => d.du - d.dv,
-            1 => d.dv,
-            _ => -d.du,
-        };
-        let len2 = along.length_squared();
-        if len2 <= 0.0 {
-            if step == 0 {
-                return None;
-            }
-            break;
-        }
-        t = (t - (d.position - q).dot(along) / len2).clamp(0.0, 1.0);
-        d = evaluate(at(t));
-    }
-    let n = d.du.cross(d.dv).try_normalize();
-    Some((at(t), n, (d.position - q).length()))
-}
-
-/// Per vertex: whether it lies within `rings` rings of the mesh's boundary.
-pub(super) fn near_boundary(mesh: &TriMesh, rings: usize) -> Vec<bool> {
-    let Ok(topo) = Topology::from_mesh(mesh) else {
-        return vec![false; mesh.positions.len()];
-    };
-    near_boundary_in(&topo, rings)
-}
-
-/// [`near_boundary`] on the mesh's half-edge topology, built already.
-pub(super) fn near_boundary_in(topo: &Topology, rings: usize) -> Vec<bool> {
-    let mut near = topo.boundary.clone();
-    let mut front: Vec<u32> = (0..near.len() as u32)
-        .filter(|&v| near[v as usize])
-        .collect();
-    for _ in 0..rings {
-        let mut next = Vec::new();
-        for &v in &front {
-            for &x in topo.ring(v) {
-                if !near[x as usize] {
-                    near[x as usize] = true;
-                    next.push(x);
-                }
-            }
-        }
-        front = next;
-    }
-    near
 }
