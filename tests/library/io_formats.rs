@@ -99,6 +99,15 @@ fn off_keywords_as_geomview_defines_them() {
         assert_eq!(m.triangles, vec![[0, 1, 2]], "{head:?}");
         assert_eq!(m.positions[2], glam::DVec3::new(0.0, 1.0, 0.0), "{head:?}");
     }
+    let refused = |head: &str| {
+        read_mesh_bytes(
+            format!("{head}{triangle}").as_bytes(),
+            Format::Off,
+            "v.off",
+            &LoadOptions::default(),
+        )
+        .expect_err(head)
+    };
     // Variants whose vertices are not points in space, or not text: named, not misread.
     for (head, says) in [
         ("4OFF\n3 1 0\n", "fourth coordinate"),
@@ -106,24 +115,12 @@ fn off_keywords_as_geomview_defines_them() {
         ("nOFF 4\n3 1 0\n", "dimension 4"),
         ("OFF BINARY\n", "binary OFF"),
     ] {
-        let e = read_mesh_bytes(
-            format!("{head}{triangle}").as_bytes(),
-            Format::Off,
-            "v.off",
-            &LoadOptions::default(),
-        )
-        .expect_err(head);
+        let e = refused(head);
         assert_eq!(e.kind(), "unsupported", "{head:?}: {e}");
         assert!(e.to_string().contains(says), "{head:?}: {e}");
     }
     for head in ["NOFFX\n3 1 0\n", "nnOFF 3\n3 1 0\n", "appearance { }\n"] {
-        let e = read_mesh_bytes(
-            format!("{head}{triangle}").as_bytes(),
-            Format::Off,
-            "v.off",
-            &LoadOptions::default(),
-        )
-        .expect_err(head);
+        let e = refused(head);
         assert_eq!(e.kind(), "bad_header", "{head:?}: {e}");
     }
 }

@@ -142,7 +142,7 @@ impl Rim {
     /// hold pulls a rim along its data, never across to another.
     fn edges_near(&self, param: SurfaceParam) -> impl Iterator<Item = (SurfaceParam, usize)> + '_ {
         let face = param.face as usize;
-        let own = self.edges_of_face.get(face).copied().unwrap_or_default();
+        let own = self.boundary_edges_of(face);
         let own_edges = (0..3).filter(move |&k| own[k]).map(move |k| (param, k));
         let weights = [param.u, param.v, 1.0 - param.u - param.v];
         let near = (0..3).find(|&c| weights[c] >= 0.5);
