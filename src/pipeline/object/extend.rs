@@ -249,7 +249,7 @@ pub fn extend_over_new_ground(
         feet,
         changed.len(),
         &free,
-        &LocalOptions::of(opts),
+        &LocalOptions::version_of(opts),
     );
     let rounds_ms = ms_since(t);
     let t = Instant::now();

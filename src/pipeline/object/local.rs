@@ -36,8 +36,19 @@ pub(crate) struct LocalOptions {
     pub rounds: usize,
     /// The rounds stop once one lowers the RMS of the moving points by less than this.
     pub min_gain: f64,
-    /// Share of the point-to-point term beside the point-to-plane one.
+    /// Share of the point-to-point term beside the point-to-plane one in the first round.
     pub tangential: f64,
+    /// The share each taken round halves down to (the whole fit's `tangential_floor`).
+    pub share_floor: f64,
+    /// Start the rounds at `share_floor` rather than `tangential`: for the refits of a new
+    /// version (over changed data, its local refinement, an extension over new ground),
+    /// whose previous fit's rounds ended at the floor. Starting above it, the first round
+    /// pulls the feet back from where they had slid and the refit falls behind the fit it
+    /// updates (a dented torus refitted: 1.50x the RMS of its fit from scratch, 1.44x
+    /// from the floor). Off for the stray repair's refits, which hold the surface where it
+    /// left the data: from the floor, decimated-max's repair no longer brought it within
+    /// the bound.
+    pub start_at_floor: bool,
     /// The whole fit's `curvature_floor`: away from the rim band, the share and the
     /// curvature's term of the squared distance in place of `tangential`.
     pub curvature_floor: Option<f64>,
@@ -64,6 +75,8 @@ impl LocalOptions {
             rounds: opts.rounds.max(1),
             min_gain: opts.min_gain,
             tangential: opts.tangential,
+            share_floor: opts.share_floor(),
+            start_at_floor: false,
             curvature_floor: opts.curvature_floor,
             smoothing: opts.smoothing,
             stop: opts.stop.clone(),
@@ -73,12 +86,22 @@ impl LocalOptions {
         }
     }
 
+    /// [`LocalOptions::of`] for a new version of converged data (`start_at_floor`).
+    pub(crate) fn version_of(opts: &ObjectOptions) -> Self {
+        Self {
+            start_at_floor: true,
+            ..Self::of(opts)
+        }
+    }
+
     /// One point-to-point round (tangential share 1, no curvature term), as a whole
     /// fit's first fit, with `opts`' fairness and stop.
     pub(crate) fn point_to_point(opts: &ObjectOptions) -> Self {
         Self {
             rounds: 1,
             tangential: 1.0,
+            share_floor: 1.0,
+            start_at_floor: false,
             curvature_floor: None,
             ..Self::of(opts)
         }
@@ -332,8 +355,13 @@ pub(crate) fn refit_around(
     let mut pattern = CholeskyPattern::default();
     // Levenberg-Marquardt on the tangential share, as in a whole fit (`fit_from`): a
     // round that does not lower the RMS is taken again with four times the share, one
-    // that does halves it again down to `opts.tangential`.
-    let mut share = opts.tangential;
+    // that does halves it down to the floor.
+    let floor = opts.share_floor.min(opts.tangential);
+    let mut share = if opts.start_at_floor {
+        floor
+    } else {
+        opts.tangential
+    };
     let (mut taken, mut refusals, mut tried) = (0, 0, 0);
     while taken < opts.rounds && refusals < MAX_REFUSALS {
         // The first round is the changed region's first fit, which a whole fit always
@@ -388,7 +416,7 @@ pub(crate) fn refit_around(
         feet = trial;
         rounds.push((after, max));
         taken += 1;
-        share = (share * 0.5).max(opts.tangential);
+        share = (share * 0.5).max(floor);
         if before - after < opts.min_gain * before {
             break;
         }

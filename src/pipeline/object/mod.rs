@@ -70,8 +70,8 @@ use simplification::simplify_for_control;
 use solve::{point_fit, rows_at, Feet};
 use std::cell::Cell;
 use std::time::Instant;
-use stray::grow_budget_while_straying;
 pub use stray::{farthest_from, farthest_from_data};
+use stray::{grow_budget_while_straying, steady_share_while_straying};
 pub use version::refit_where_changed;
 
 /// The component of `mesh` [`fit_object`] fits: its cleaned largest component, repaired
@@ -117,6 +117,9 @@ pub fn fit_object_input(
     });
     let topo = data_topo.as_ref();
     let fit = fit_at_target(&side, topo, &sharp, asked, opts)?;
+    let (fit, opts) =
+        steady_share_while_straying(fit, opts, |o| fit_at_target(&side, topo, &sharp, asked, o));
+    let opts = &opts;
     let fit = grow_budget_while_straying(fit, asked, opts, &side, topo, |target| {
         fit_at_target(&side, topo, &sharp, target, opts)
     });
@@ -359,7 +362,7 @@ fn fit_from(
     }];
     // Levenberg-Marquardt on the tangential share: a round that does not lower the
     // (two-sided) RMS is taken again with four times the share (the surface slides less
-    // per round), a round that does halves it again down to `opts.tangential`. Controls
+    // per round), a round that does halves it down to `opts.tangential_floor`. Controls
     // far from their final parameterization need long slides that a fixed small share
     // makes unstable and a fixed large share makes slow.
     let mut share = opts.tangential;
@@ -413,7 +416,7 @@ fn fit_from(
             rms: feet.rms(),
             max: feet.max(),
         });
-        share = (share * 0.5).max(opts.tangential);
+        share = (share * 0.5).max(opts.share_floor());
         if before - after < opts.min_gain * before {
             break;
         }

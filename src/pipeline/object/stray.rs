@@ -357,6 +357,45 @@ pub(super) fn grow_budget_while_straying(
     kept
 }
 
+/// A fit whose rounds halved their tangential share below `opts.tangential` and left the
+/// surface straying past the bound, fitted again (`fit_with`, the same budget) with the
+/// share held at `opts.tangential`. The small share lets a surface slide along its data,
+/// which converges further where the data holds it and bulges where the data is too
+/// sparse to (a decimation's long triangles): the steady fit may keep the bound without
+/// more controls. The less straying fit is kept with the options it was made with, which
+/// the budget's growth goes on with; the time of the one dropped is added to the kept
+/// fit's `times.stray_budget_ms`.
+pub(super) fn steady_share_while_straying(
+    fit: ObjectFit,
+    opts: &ObjectOptions,
+    fit_with: impl Fn(&ObjectOptions) -> Result<ObjectFit, ObjectError>,
+) -> (ObjectFit, ObjectOptions) {
+    let straying = match opts.stray_limit(&fit.component) {
+        Some(limit) => fit.stray.unwrap_or(f64::INFINITY) > limit,
+        None => false,
+    };
+    let late = opts.stop.deadline.is_some_and(|d| Instant::now() >= d);
+    if !straying || late || opts.share_floor() >= opts.tangential {
+        return (fit, opts.clone());
+    }
+    let steady_opts = ObjectOptions {
+        tangential_floor: opts.tangential,
+        ..opts.clone()
+    };
+    let Ok(mut steady) = fit_with(&steady_opts) else {
+        return (fit, opts.clone());
+    };
+    let stray_of = |f: &ObjectFit| f.stray.unwrap_or(f64::INFINITY);
+    if stray_of(&steady) < stray_of(&fit) {
+        steady.times.stray_budget_ms += fit.times.total_ms;
+        (steady, steady_opts)
+    } else {
+        let mut fit = fit;
+        fit.times.stray_budget_ms += steady.times.total_ms;
+        (fit, opts.clone())
+    }
+}
+
 /// Whether a fit straying past the bound is worth another step of the escalation: where
 /// a step has brought the surface closer already (`brought_closer`), more controls are
 /// seen to mend it; before that, only where a decimation to its count strays too

@@ -107,7 +107,7 @@ pub fn refit_where_changed(
         feet,
         changed.len(),
         &free,
-        &LocalOptions::of(opts),
+        &LocalOptions::version_of(opts),
     );
     let mut state = Refitted::new(
         surface,
@@ -287,7 +287,7 @@ impl Refitted {
             return;
         };
         let cap = control_target(component.positions.len(), opts);
-        let local_opts = LocalOptions::of(opts);
+        let local_opts = LocalOptions::version_of(opts);
         let data = &component.positions;
         let mut is_changed = vec![false; data.len()];
         for &i in changed {

@@ -526,6 +526,8 @@ impl ObjectSession {
             rounds: worker.fit.correction.rounds.max(1),
             min_gain: defaults.min_gain,
             tangential: defaults.tangential,
+            share_floor: defaults.share_floor(),
+            start_at_floor: true,
             curvature_floor: worker.fit.correction.curvature_floor(),
             smoothing: worker.fit.scan.smoothing,
             stop: RoundStop::of_budget(&budget, t),
