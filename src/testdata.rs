@@ -117,32 +117,6 @@ pub fn icosahedron() -> (Vec<DVec3>, Vec<[u32; 3]>) {
     (vertices.to_vec(), faces)
 }
 
-/// The unit geodesic sphere: the icosahedron on the sphere, its faces split 1-to-4
-/// `levels` times at the midpoints of their edges' arcs (each new vertex an edge's
-/// midpoint pushed out onto the sphere; CGAL's 162-vertex `sphere.off` is split so, twice,
-/// at radius 0.5).
-pub fn geodesic_sphere(levels: usize) -> TriMesh {
-    let (positions, mut faces) = icosahedron();
-    let mut positions: Vec<DVec3> = positions.iter().map(|p| p.normalize()).collect();
-    for _ in 0..levels {
-        let mut middle = std::collections::HashMap::new();
-        let mut split = Vec::with_capacity(4 * faces.len());
-        for [a, b, c] in faces {
-            let mut mid = |p: u32, q: u32| {
-                *middle.entry((p.min(q), p.max(q))).or_insert_with(|| {
-                    let middle = positions[p as usize] + positions[q as usize];
-                    positions.push(middle.normalize());
-                    positions.len() as u32 - 1
-                })
-            };
-            let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
-            split.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-        }
-        faces = split;
-    }
-    TriMesh::new(positions, faces)
-}
-
 /// The unit square as a height field: `n` x `n` cells, vertex (i, j) at (x, y) = (i/n, j/n)
 /// lifted to `height(x, y)`, row by row, two triangles per cell split along the diagonal
 /// from (i, j) to (i+1, j+1), counter-clockwise seen from above.

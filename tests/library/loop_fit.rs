@@ -11,9 +11,7 @@ use trispline::mesh::loop_subdiv::subdivide;
 use trispline::mesh::topology::Topology;
 use trispline::pipeline::output::tessellate;
 use trispline::pipeline::subdivided::fit_subdivided;
-use trispline::pipeline::worker::{
-    fit_patch, outputs_of, run_patch, Domain, FitConfig, WorkerConfig,
-};
+use trispline::pipeline::worker::{fit_patch, outputs_of, run_patch, FitConfig, WorkerConfig};
 use trispline::pipeline::{FitOptions, SurfaceKind};
 use trispline::surface::loop_limit::LoopLimitSurface;
 use trispline::surface::{SurfaceParam, TriSurface};
@@ -182,71 +180,55 @@ fn the_exact_path_writes_the_control_faces_and_warm_starts() {
     assert!(steps(&second.report) <= steps(&first.report));
 }
 
-/// A sphere sampled as CGAL's `sphere.off` is (an icosahedron split twice at its edges'
-/// midpoints, 162 vertices on the sphere). Its exact subdivision surface (kept under `fit.domain =
-/// "grid"`) follows the sphere, and the data's facets sag below it: report.json says how
-/// far it strays, the figure of the tessellation the GLB shows, past the bound. Under
-/// `auto` the object path's surface takes its place, within the bound and closer to the
-/// data both ways.
+/// A sphere sampled as coarsely as CGAL's `sphere.off` (an icosahedron split twice, 162
+/// vertices on the sphere) keeps the exact path, and report.json says how far its surface
+/// strays from the data's facets, which sag below the sphere the surface follows: the
+/// figure of the tessellation the GLB shows.
 #[test]
-fn an_exact_surface_straying_past_the_bound_gives_way_to_the_object_path() {
-    let data = trispline::testdata::geodesic_sphere(2);
-    let cfg = |domain| WorkerConfig {
+fn the_exact_path_reports_how_far_its_surface_strays() {
+    let (positions, triangles) = trispline::testdata::icosahedron();
+    let fine = subdivide(&TriMesh::new(positions, triangles), 2).expect("subdivides");
+    let data = TriMesh::new(
+        fine.positions.iter().map(|p| p.normalize()).collect(),
+        fine.triangles,
+    );
+    let cfg = WorkerConfig {
         fit: FitConfig {
             surface: SurfaceKind::Loop,
-            domain,
             ..FitConfig::default()
         },
         ..WorkerConfig::default()
     };
-    let nearest = MeshDistance::new(&data);
-    // Independently: every vertex of the whole tessellation the GLB shows, to the data's
-    // facets.
-    let farthest_shown = |fit: &trispline::pipeline::PatchFit| {
-        tessellate(fit, WorkerConfig::default().tessellation, None)
-            .positions
-            .iter()
-            .map(|&p| nearest.distance(p).expect("a finite vertex"))
-            .fold(0.0, f64::max)
-    };
-    let exact = fit_patch(&data, None, &cfg(Domain::Grid)).expect("fits");
+    let fitted = fit_patch(&data, None, &cfg).expect("fits");
     assert!(
-        exact.scan.is_none() && exact.object.is_none(),
+        fitted.scan.is_none() && fitted.object.is_none(),
         "the exact path"
     );
-    let exact_stray = farthest_shown(&exact.fit);
-    let (exact_max, exact_controls) = (exact.fit.geometric_max(), exact.fit.controls.len());
-    let outputs = outputs_of(exact, &cfg(Domain::Grid), std::time::Instant::now());
+    // Independently: every vertex of the whole tessellation the GLB shows, to the data's
+    // facets.
+    let shown = tessellate(&fitted.fit, cfg.tessellation, None);
+    let nearest = MeshDistance::new(&data);
+    let farthest = shown
+        .positions
+        .iter()
+        .map(|&p| nearest.distance(p).expect("a finite vertex"))
+        .fold(0.0, f64::max);
+    let outputs = outputs_of(fitted, &cfg, std::time::Instant::now());
     let stray = &outputs.report["stray"];
     let max = stray["max"].as_f64().expect("stray.max in report.json");
     assert!(
-        (max - exact_stray).abs() <= 1e-12,
-        "report.json {max:.6e}, the GLB's vertices {exact_stray:.6e}"
+        (max - farthest).abs() <= 1e-12,
+        "report.json {max:.6e}, the GLB's vertices {farthest:.6e}"
     );
-    let diagonal = data.bounds_diagonal();
-    let share = max / diagonal;
+    let share = max / data.bounds_diagonal();
     assert!(
         (stray["share_of_diagonal"].as_f64().unwrap_or(f64::NAN) - share).abs() < 1e-12,
         "{stray}"
     );
-    assert!(share > 0.005, "{share:.4}");
-    assert_eq!(stray["within"], false, "{stray}");
-
-    let fitted = fit_patch(&data, None, &cfg(Domain::Auto)).expect("fits");
-    let object = fitted.object.as_ref().expect("the object path");
-    assert!(
-        object.reason.contains("exact subdivision surface strays"),
-        "{}",
-        object.reason
-    );
-    let object_stray = farthest_shown(&fitted.fit);
-    let object_max = fitted.fit.geometric_max();
-    eprintln!(
-        "exact: {exact_controls} controls, stray {exact_stray:.4e}, max {exact_max:.4e}; object: {} controls, stray {object_stray:.4e}, max {object_max:.4e} (diagonal {diagonal:.4})",
-        fitted.fit.controls.len()
-    );
-    assert!(object_stray <= 0.005 * diagonal, "{object_stray:.4e}");
-    assert!(object_stray.max(object_max) < exact_stray.max(exact_max));
+    // The facets sag about half a percent of the diagonal below the sphere: the surface
+    // stands near the bound, on whichever side the report says.
+    assert!((0.002..0.01).contains(&share), "{share:.4}");
+    assert_eq!(stray["within"], share <= 0.005, "{stray}");
 }
 
 /// The semi-regular elephant (subd2 = two exact 1-to-4 splits of subd0): fitted on its own

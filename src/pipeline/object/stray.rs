@@ -408,7 +408,29 @@ fn more_controls_may_mend(brought_closer: bool, budget_cannot_hold: impl FnOnce(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testdata::geodesic_sphere;
+    use crate::testdata::icosahedron;
+
+    /// The unit sphere: the icosahedron's faces split 1-to-4 `levels` times, every vertex
+    /// pushed out onto the sphere.
+    fn sphere(levels: usize) -> TriMesh {
+        let (mut positions, mut faces) = icosahedron();
+        for _ in 0..levels {
+            let mut middle = std::collections::HashMap::new();
+            let mut split = Vec::with_capacity(4 * faces.len());
+            for [a, b, c] in faces {
+                let mut mid = |p: u32, q: u32| {
+                    *middle.entry((p.min(q), p.max(q))).or_insert_with(|| {
+                        positions.push((positions[p as usize] + positions[q as usize]) * 0.5);
+                        positions.len() as u32 - 1
+                    })
+                };
+                let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+                split.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+            }
+            faces = split;
+        }
+        TriMesh::new(positions.iter().map(|p| p.normalize()).collect(), faces)
+    }
 
     #[test]
     fn a_step_that_brought_the_surface_closer_is_followed_whatever_a_decimation_does() {
@@ -432,7 +454,7 @@ mod tests {
 
     #[test]
     fn a_decimation_strays_only_where_its_budget_cannot_hold_the_shape() {
-        let mesh = geodesic_sphere(3);
+        let mesh = sphere(3);
         let data = MeshDistance::new(&mesh);
         let n = mesh.positions.len();
         // Every vertex kept: the lattice lies on the data's own triangles.

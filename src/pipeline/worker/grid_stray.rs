@@ -9,15 +9,14 @@
 //! everywhere (its RMS over the budget's tolerance and `GROSS_MISS_SHARE` of the
 //! diagonal), when the object surface fits better without straying farther. The shown
 //! surface's overhang past the rim is held to the bound by the coverage itself
-//! (`Coverage::of`). An exact subdivision surface past the bound is fitted on the object
-//! path too, and the closer kept alike (`exact_held_to_the_stray_bound`).
+//! (`Coverage::of`).
 
 use super::config::WorkerConfig;
 use super::fitted::FittedPatch;
 use super::object::object_input;
 use super::shown::{ShownStray, ShownSurface};
 use crate::pipeline::object::ObjectInput;
-use crate::pipeline::PatchFit;
+use crate::pipeline::scan::ScanFit;
 use crate::TriMesh;
 
 /// A grid surface within the stray bound is fitted on the object path too only when its
@@ -27,10 +26,10 @@ use crate::TriMesh;
 /// every scan twice; the Stanford scans' grid surfaces stay at a quarter of it.
 const GROSS_MISS_SHARE: f64 = 1e-3;
 
-/// Why a grid or exact subdivision surface is fitted on the object path too.
+/// Why a grid surface is fitted on the object path too.
 enum Doubt {
-    /// Its shown tessellation strays past the bound (the surface's name for the reason).
-    Strays(ShownStray, &'static str),
+    /// Its shown tessellation strays past the bound.
+    Strays(ShownStray),
     /// It is within the bound, but its RMS distance from the data exceeds the budget's
     /// tolerance (a largest error) and `GROSS_MISS_SHARE` of the diagonal: it misses the
     /// data everywhere, not only at rim junk.
@@ -46,7 +45,7 @@ impl Doubt {
     /// Why the object path was tried, for report.json's `object.path_reason`.
     fn reason(&self) -> String {
         match self {
-            Self::Strays(stray, surface) => stray.reason(surface),
+            Self::Strays(stray) => stray.reason(),
             Self::MissesBudget { rms, bound } => format!(
                 "the grid surface misses the data by RMS {rms:.3e}, over the tolerance and \
                  {GROSS_MISS_SHARE} of the bounding-box diagonal ({bound:.3e})"
@@ -75,7 +74,7 @@ pub(super) fn held_to_the_stray_bound(
         .tolerance
         .max(GROSS_MISS_SHARE * mesh.bounds_diagonal());
     let doubt = if !stray.within() {
-        Some(Doubt::Strays(stray, "grid"))
+        Some(Doubt::Strays(stray))
     } else if rms > bound {
         Some(Doubt::MissesBudget { rms, bound })
     } else {
@@ -83,7 +82,7 @@ pub(super) fn held_to_the_stray_bound(
     };
     let mut object_tried = None;
     let closer = doubt.and_then(|doubt| {
-        let object = closer_as_object(mesh, cfg, &scan.fit, &stray, &doubt, fit_as_object);
+        let object = closer_as_object(mesh, cfg, scan, &stray, &doubt, fit_as_object);
         if object.is_none() {
             tracing::warn!(
                 "{}; the object path's surface lies no closer to the data, so the grid \
@@ -99,32 +98,6 @@ pub(super) fn held_to_the_stray_bound(
     closer
 }
 
-/// The exact subdivision surface's counterpart of `held_to_the_stray_bound`: where the
-/// tessellation `shown` of `fit` (the inverse subdivision of `mesh`'s own connectivity)
-/// strays past the bound, the object path's fit when it lies closer to the data both
-/// ways. CGAL's 162-vertex spheres: their facets sag 0.49 % of the diagonal below the
-/// sphere, and the exact surface of their 42 controls bulges past that to 0.68-0.83 %;
-/// the object path, whose surface samples pull the faces to the data, holds 43 controls
-/// within 0.33 %. The bound is the user's, as on the other paths.
-pub(super) fn exact_held_to_the_stray_bound(
-    mesh: &TriMesh,
-    fit: &PatchFit,
-    shown: &mut ShownSurface,
-    cfg: &WorkerConfig,
-    fit_as_object: impl FnOnce(&WorkerConfig, ObjectInput, String) -> Option<FittedPatch>,
-) -> Option<FittedPatch> {
-    let stray = shown.stray;
-    if stray.within() {
-        return None;
-    }
-    let doubt = Doubt::Strays(stray, "exact subdivision");
-    let object = closer_as_object(mesh, cfg, fit, &stray, &doubt, fit_as_object);
-    if object.is_none() {
-        shown.object_tried = Some(doubt.reason());
-    }
-    object
-}
-
 /// The object path's fit of a disk-like `mesh` whose grid surface (`grid`'s, straying
 /// `stray` from the data) is in `doubt`, if it lies closer to the data: its two-sided
 /// (Hausdorff) distance, the larger of its farthest point from the data and the data's
@@ -138,7 +111,7 @@ pub(super) fn exact_held_to_the_stray_bound(
 fn closer_as_object(
     mesh: &TriMesh,
     cfg: &WorkerConfig,
-    grid: &PatchFit,
+    grid: &ScanFit,
     stray: &ShownStray,
     doubt: &Doubt,
     fit_as_object: impl FnOnce(&WorkerConfig, ObjectInput, String) -> Option<FittedPatch>,
@@ -147,14 +120,14 @@ fn closer_as_object(
     let points = input.mesh.positions.len().max(1);
     let mut cfg = cfg.clone();
     let pct = &mut cfg.fit.scan.target_controls_pct;
-    *pct = pct.max((100.0 * grid.controls.len() as f64 / points as f64).min(100.0));
+    *pct = pct.max((100.0 * grid.fit.controls.len() as f64 / points as f64).min(100.0));
     let fitted = fit_as_object(&cfg, input, doubt.reason())?;
     let object_stray = fitted.object.as_ref()?.stray?;
     let (object_within, object_stray) = (object_stray.within, object_stray.max);
     let object_distance = object_stray.max(fitted.fit.geometric_max());
-    let grid_distance = stray.max.max(grid.geometric_max());
+    let grid_distance = stray.max.max(grid.fit.geometric_max());
     let closer = match doubt {
-        Doubt::Strays(..) => object_distance < grid_distance,
+        Doubt::Strays(_) => object_distance < grid_distance,
         Doubt::MissesBudget { rms, .. } => {
             let keeps_the_bound = object_within || object_stray <= stray.max;
             keeps_the_bound && object_distance <= grid_distance && fitted.fit.geometric_rms() < *rms

@@ -104,11 +104,10 @@ impl ShownStray {
         })
     }
 
-    /// Why the object path was tried, for report.json's `object.path_reason`: `surface`
-    /// (the grid or the exact subdivision surface) strays past the bound.
-    pub(super) fn reason(&self, surface: &str) -> String {
+    /// Why the object path was tried, for report.json's `object.path_reason`.
+    pub(super) fn reason(&self) -> String {
         format!(
-            "the {surface} surface strays {:.2} % of the bounding-box diagonal from the data \
+            "the grid surface strays {:.2} % of the bounding-box diagonal from the data \
              (over {:.2} %)",
             100.0 * self.share_of_diagonal,
             100.0 * MAX_STRAY_SHARE
