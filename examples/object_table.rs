@@ -141,6 +141,9 @@ fn main() {
         if let Some(t) = env("OBJ_TANGENTIAL") {
             opts.tangential = t;
         }
+        if let Some(t) = env("OBJ_TANGENTIAL_FLOOR") {
+            opts.tangential_floor = t;
+        }
         if let Some(t) = env("OBJ_REFINE_TOLERANCE") {
             opts.refine.tolerance = Some(t);
         }
