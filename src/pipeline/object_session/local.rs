@@ -365,13 +365,15 @@ fn rms_of_every_point(errors: &[f64]) -> f64 {
     (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
 }
 
-/// Why a local refit whose errors have RMS `after` (`rms_of_every_point`) is not kept, if it is not: it fits
-/// the new data over `MAX_LOCAL_RMS_RISE` times worse than the previous fit (RMS `before`)
-/// fitted its own. An update over the same ground (a scan replaced, its
-/// registration corrected) fits about as well from scratch, so a refit left well above it
-/// did not follow the change (the bunny's bun045 moved 30 um, merged with a trial
-/// weighting of the triangle fill that kept the topology: 40.8 um locally, 35.0 um from
-/// scratch, 35.2 um before), and the whole fit runs.
+/// Why a local refit is not kept, if it is not: it fits the new data (RMS `after` over
+/// every point, `rms_of_every_point`) over `MAX_LOCAL_RMS_RISE` times worse than the
+/// previous fit fitted its own (RMS `before`). An update over the same ground (a scan
+/// replaced, its registration corrected) fits about as well from scratch, so a refit left
+/// well above it did not follow the change, and the whole fit runs. The moving points'
+/// RMS was compared before: it caught the bunny's bun045 moved 30 um (40.8 um locally
+/// against 35.2 um before, 35.0 um from scratch), and it refused refits that did follow
+/// their change (a sphere's bumped cap) once the whole fits converged further; the
+/// largest-error and stray guards still judge the refit's region alone.
 fn fits_worse(before: f64, after: f64) -> Option<String> {
     // Written so that a NaN refuses the refit.
     let as_well = after <= MAX_LOCAL_RMS_RISE * before;
