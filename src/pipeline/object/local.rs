@@ -101,7 +101,6 @@ impl LocalOptions {
             rounds: 1,
             tangential: 1.0,
             share_floor: 1.0,
-            start_at_floor: false,
             curvature_floor: None,
             ..Self::of(opts)
         }

@@ -295,7 +295,6 @@ pub(super) fn grow_budget_while_straying(
         return fit;
     };
     let points = fit.data.len();
-    let stray_of = |f: &ObjectFit| f.stray.unwrap_or(f64::INFINITY);
     let mut tried = vec![StrayBudget::of(asked, &fit)];
     let start = Instant::now();
     // The last fit that strayed less than the one before (the least straying), and where
@@ -370,10 +369,9 @@ pub(super) fn steady_share_while_straying(
     opts: &ObjectOptions,
     fit_with: impl Fn(&ObjectOptions) -> Result<ObjectFit, ObjectError>,
 ) -> (ObjectFit, ObjectOptions) {
-    let straying = match opts.stray_limit(&fit.component) {
-        Some(limit) => fit.stray.unwrap_or(f64::INFINITY) > limit,
-        None => false,
-    };
+    let straying = opts
+        .stray_limit(&fit.component)
+        .is_some_and(|limit| stray_of(&fit) > limit);
     let late = opts.stop.deadline.is_some_and(|d| Instant::now() >= d);
     if !straying || late || opts.share_floor() >= opts.tangential {
         return (fit, opts.clone());
@@ -385,7 +383,6 @@ pub(super) fn steady_share_while_straying(
     let Ok(mut steady) = fit_with(&steady_opts) else {
         return (fit, opts.clone());
     };
-    let stray_of = |f: &ObjectFit| f.stray.unwrap_or(f64::INFINITY);
     if stray_of(&steady) < stray_of(&fit) {
         steady.times.stray_budget_ms += fit.times.total_ms;
         (steady, steady_opts)
@@ -394,6 +391,11 @@ pub(super) fn steady_share_while_straying(
         fit.times.stray_budget_ms += steady.times.total_ms;
         (fit, opts.clone())
     }
+}
+
+/// How far a fit's surface strays from its data; infinite where it was not measured.
+fn stray_of(fit: &ObjectFit) -> f64 {
+    fit.stray.unwrap_or(f64::INFINITY)
 }
 
 /// Whether a fit straying past the bound is worth another step of the escalation: where

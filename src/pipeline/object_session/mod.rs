@@ -519,21 +519,15 @@ impl ObjectSession {
         let crate::pipeline::SurfaceModel::Mesh(surface) = &last.fit.model else {
             return cold();
         };
-        let defaults = ObjectOptions::default();
         let budget = worker.fit.budget.resolve(&merged.mesh);
         // As the worker's object fit: no round once the budget holds or its time is up.
         let opts = LocalOptions {
             rounds: worker.fit.correction.rounds.max(1),
-            min_gain: defaults.min_gain,
-            tangential: defaults.tangential,
-            share_floor: defaults.share_floor(),
-            start_at_floor: true,
             curvature_floor: worker.fit.correction.curvature_floor(),
             smoothing: worker.fit.scan.smoothing,
             stop: RoundStop::of_budget(&budget, t),
             hold_rim: true,
-            tangential_edge: defaults.tangential_edge,
-            edge_rings: defaults.edge_rings,
+            ..LocalOptions::version_of(&ObjectOptions::default())
         };
         let previous = Previous {
             surface,
