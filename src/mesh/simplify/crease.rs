@@ -44,6 +44,17 @@ impl Creases {
         self.nbrs[v as usize].len()
     }
 
+    /// The crease edges, each once, their ends renumbered by `to` (`halves`: an input
+    /// vertex's vertex in a half).
+    pub(super) fn edges_among<'s>(&'s self, to: &'s [u32]) -> impl Iterator<Item = [u32; 2]> + 's {
+        let nbrs = if self.none { &[][..] } else { &self.nbrs[..] };
+        nbrs.iter().enumerate().flat_map(move |(a, n)| {
+            n.iter()
+                .filter(move |&&b| (a as u32) < b)
+                .map(move |&b| [to[a], to[b as usize]])
+        })
+    }
+
     pub(super) fn is_crease(&self, a: u32, b: u32) -> bool {
         !self.none && self.nbrs[a as usize].contains(&b)
     }

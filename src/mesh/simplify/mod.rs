@@ -150,8 +150,8 @@ fn simplify_centred(
     if let Some(vertex) = topo.face_valence.iter().position(|&n| n == 0) {
         return Err(SimplifyError::IsolatedVertex { vertex });
     }
-    if halves::worth_halving(mesh, opts, crease_edges, keep) {
-        if let Some(simplified) = halves::simplify_in_halves(mesh, topo, opts) {
+    if halves::worth_halving(mesh, opts, keep) {
+        if let Some(simplified) = halves::simplify_in_halves(mesh, topo, opts, crease_edges) {
             return Ok(simplified);
         }
     }
