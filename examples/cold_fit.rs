@@ -3,9 +3,12 @@
 //! 40k-vertex range scan.
 //!
 //!     cargo build --release --bin trispline
-//!     cargo run --release --example cold_fit [-- FILE [RUNS [IDLE_S [SURFACE]]]]
+//!     cargo run --release --example cold_fit [-- FILE [RUNS [IDLE_S [SURFACE [DOMAIN]]]]]
 //!
-//! Defaults: `../shared/data/range_scans/bun000_tri.ply`, 8 runs, no idle, `loop`. With
+//! Defaults: `../shared/data/range_scans/bun000_tri.ply`, 8 runs, no idle, `loop`, the
+//! domain `fit` picks (`mesh` passes `--domain mesh`: the whole-object path for a mesh the
+//! dispatch would fit on its exact subdivision connectivity, such as bun_zipper
+//! subdivided once by `trispline subdivide`, the 135k-vertex scan). With
 //! IDLE_S > 0 every run waits that long first: on a VM that hands free memory back to its
 //! host, a fit after idle pays for its fresh pages again (see `allocator::small_pages_only`),
 //! so back-to-back runs alone flatter the figures.
@@ -27,7 +30,7 @@ use common::{binary, Res};
 
 const COLUMNS: [&str; 7] = ["surface", "exit", "read", "prepare", "fit", "shown", "rest"];
 
-fn run_once(bin: &Path, input: &Path, surface: &str) -> Res<[f64; 7]> {
+fn run_once(bin: &Path, input: &Path, surface: &str, domain: Option<&str>) -> Res<[f64; 7]> {
     let out = tempfile::tempdir()?;
     let target = out.path().join("surface.json");
     // Into a file, not a pipe: a pipe nobody reads while the fit runs could fill and stall it.
@@ -35,7 +38,9 @@ fn run_once(bin: &Path, input: &Path, surface: &str) -> Res<[f64; 7]> {
     let log = std::fs::File::create(&log_path)?;
     let start = Instant::now();
     let mut child = Command::new(bin)
-        .args(["fit", "--surface", surface, "--out"])
+        .args(["fit", "--surface", surface])
+        .args(domain.map(|d| ["--domain", d]).into_iter().flatten())
+        .arg("--out")
         .arg(out.path())
         .arg(input)
         .stdout(Stdio::null())
@@ -89,13 +94,16 @@ fn main() -> Res<()> {
     let runs: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(8).max(1);
     let idle: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(0.0);
     let surface = args.next().unwrap_or_else(|| "loop".into());
+    let domain = args.next();
     if !input.exists() {
         return Err(format!("{} missing (pass a mesh file)", input.display()).into());
     }
     let bin = binary()?;
+    let domain_arg = domain.as_ref().map(|d| format!(" --domain {d}"));
     println!(
-        "{}: {runs} cold `trispline fit --surface {surface}` processes, {idle} s idle before each (ms)",
-        input.display()
+        "{}: {runs} cold `trispline fit --surface {surface}{}` processes, {idle} s idle before each (ms)",
+        input.display(),
+        domain_arg.unwrap_or_default()
     );
     println!("{}", COLUMNS.map(|c| format!("{c:>8}")).join(""));
     let mut rows = Vec::with_capacity(runs);
@@ -103,7 +111,7 @@ fn main() -> Res<()> {
         if idle > 0.0 {
             std::thread::sleep(Duration::from_secs_f64(idle));
         }
-        let row = run_once(&bin, &input, &surface)?;
+        let row = run_once(&bin, &input, &surface, domain.as_deref())?;
         println!("{}", row.map(|v| format!("{v:8.1}")).join(""));
         rows.push(row);
     }
