@@ -38,7 +38,7 @@
 //! survivors (a crease edge along the cut is a boundary edge of both halves, kept by
 //! neither). Measured on CGAL's CAD parts Loop-subdivided to 21-154k vertices (fandisk,
 //! fandisk_large, turbine, blade, anchor, anchor_dense, rotor, rotor_small, couplingdown;
-//! `trispline fit --domain mesh`): the simplification took 0.41-0.60 of its time in one
+//! `trispline fit --domain mesh`): the simplification took 0.46-0.64 of its time in one
 //! piece, the fits' RMS 0.83-1.10 times theirs (geometric mean 1.00).
 //!
 //! The halves run as one `rayon::join`: a caller may itself run on rayon's threads (the
@@ -306,7 +306,8 @@ struct Glued {
     mesh: TriMesh,
     verts: Vec<Vertex>,
     union_of: Vec<u32>,
-    /// The halves' surviving crease edges, in the glued numbering.
+    /// Its crease edges: the halves' surviving ones and the input's between two
+    /// survivors.
     crease_edges: Vec<[u32; 2]>,
 }
 
