@@ -67,6 +67,11 @@ impl Creases {
         weight: f64,
         quadric: &mut [Quadric],
     ) {
+        // Without creases, listing the mesh's edges (every large mesh's halves glue asks
+        // for its frozen vertices' planes) would be the whole cost.
+        if self.none {
+            return;
+        }
         for (a, b, h) in topo.edges() {
             let t = topo.twin[h as usize];
             if t == NONE || !self.is_crease(a, b) {
