@@ -31,14 +31,20 @@ fn errors(input: &TriMesh, out: &Simplified) -> (f64, f64, f64) {
     (rms, max, (landed / n).sqrt())
 }
 
-#[test]
-fn halves_glue_into_one_torus_as_close_as_one_piece() {
-    // A bumpy torus, so that the quadrics have somewhere to put the vertices.
-    let mut mesh = torus(160, 128);
+/// A bumpy torus of `n x m` quads, so that the quadrics have somewhere to put the
+/// vertices.
+fn bumpy_torus(n: usize, m: usize) -> TriMesh {
+    let mut mesh = torus(n, m);
     for p in &mut mesh.positions {
         let bump = 0.02 * (7.0 * p.x).sin() * (5.0 * p.y).cos() * (9.0 * p.z).sin();
         *p *= 1.0 + bump;
     }
+    mesh
+}
+
+#[test]
+fn halves_glue_into_one_torus_as_close_as_one_piece() {
+    let mesh = bumpy_torus(160, 128);
     let opts = SimplifyOptions {
         target_vertices: 600,
         ..Default::default()
@@ -82,11 +88,7 @@ fn halves_glue_into_one_torus_as_close_as_one_piece() {
 /// equator and two meridians (at 45 and 90 degrees), and its crease edges.
 fn creased_torus() -> (TriMesh, Vec<[u32; 2]>) {
     let (n, m) = (160, 128);
-    let mut mesh = torus(n, m);
-    for p in &mut mesh.positions {
-        let bump = 0.02 * (7.0 * p.x).sin() * (5.0 * p.y).cos() * (9.0 * p.z).sin();
-        *p *= 1.0 + bump;
-    }
+    let mesh = bumpy_torus(n, m);
     let at = |i: usize, j: usize| ((i % n) * m + j % m) as u32;
     let equator = (0..n).map(|i| [at(i, 0), at(i + 1, 0)]);
     let meridians = [20, 40]
