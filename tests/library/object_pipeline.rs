@@ -641,6 +641,37 @@ fn an_object_that_grows_is_extended_over_its_new_ground() {
     );
 }
 
+/// New ground beside old ground that moved everywhere (a new view averaged into the whole
+/// object): the extension would free most of the previous controls, so the object is
+/// fitted whole, the same fit as from scratch, and the report says why.
+#[test]
+fn new_ground_beside_old_ground_that_moved_everywhere_is_fitted_whole() {
+    let full = torus(240, 80);
+    let cfg = config(Domain::Mesh, 5.0);
+    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
+    let mut grown = torus_section(&full, 80, 190);
+    // Every old ring pushed out by 0.2 % of the diagonal: far past the previous RMS, well
+    // within a local change's 1 %.
+    let push = 0.002 * grown.bounds_diagonal();
+    for p in &mut grown.positions[..150 * 80] {
+        *p += DVec3::new(p.x, p.y, 0.0).normalize_or_zero() * push;
+    }
+    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits");
+    let warm = &second.report["object"]["warm"];
+    assert_eq!(warm["used"], false, "{warm}");
+    let why = warm["cold_because"].as_str().unwrap_or_default();
+    assert!(
+        why.contains("previous controls") && why.contains("not a local change"),
+        "{why}"
+    );
+    let cold = run_patch(&grown, None, &cfg).expect("fits cold");
+    assert_eq!(
+        geometric_error(&second.report, "rms"),
+        geometric_error(&cold.report, "rms")
+    );
+    assert_eq!(second.warm.controls, cold.warm.controls);
+}
+
 #[test]
 fn new_ground_with_old_ground_far_off_its_surface_is_fitted_whole() {
     let full = torus(240, 80);

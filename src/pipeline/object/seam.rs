@@ -258,9 +258,26 @@ impl<'a> Rims<'a> {
             }
             last + 1
         };
-        Ok(Run {
-            vertices: (0..count).map(|i| ring[back(i)]).collect(),
-        })
+        let mut vertices: Vec<u32> = (0..count).map(|i| ring[back(i)]).collect();
+        if vertices.len() == 1 {
+            // A strip of one rim vertex would hang its fan off that vertex alone, a pinch
+            // of the joined mesh: the run takes the rim edge on the side nearer the seam,
+            // before its start or after its end.
+            let (first_at, last_at) = (at[seam.vertices[0] as usize], {
+                let v = seam.vertices[seam.vertices.len() - 1];
+                at[v as usize]
+            });
+            let before = ring[(first + 1) % len];
+            let after = ring[back(1)];
+            if self.limit[before as usize].distance(first_at)
+                < self.limit[after as usize].distance(last_at)
+            {
+                vertices.insert(0, before);
+            } else {
+                vertices.push(after);
+            }
+        }
+        Ok(Run { vertices })
     }
 }
 
@@ -316,4 +333,67 @@ fn arc_params(at: &[DVec3]) -> Vec<f64> {
         }
     }
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grid of `w` x `h` vertices at (i, j, 0), faces counter-clockwise seen from +z.
+    fn grid(w: u32, h: u32) -> TriMesh {
+        let positions = (0..h)
+            .flat_map(|j| (0..w).map(move |i| DVec3::new(i as f64, j as f64, 0.0)))
+            .collect();
+        let mut faces = Vec::new();
+        for j in 0..h - 1 {
+            for i in 0..w - 1 {
+                let v = j * w + i;
+                faces.push([v, v + 1, v + w + 1]);
+                faces.push([v, v + w + 1, v + w]);
+            }
+        }
+        TriMesh::new(positions, faces)
+    }
+
+    /// A seam of one edge whose two ends are nearest to the same rim vertex: the run takes
+    /// a rim edge, so that the joined mesh (previous faces, the region, the strip) is a
+    /// manifold. A run of that one vertex hung the strip off it by a vertex alone (the
+    /// bunny's fourth view: "vertex 491 is a pinch vertex").
+    #[test]
+    fn a_seam_of_one_edge_joins_along_a_rim_edge() {
+        let old = grid(4, 3);
+        let topo = Topology::from_mesh(&old).expect("manifold");
+        let rims = Rims::new(&topo, &old.positions);
+        // The region: one triangle below the rim vertex (1, 0), its upper edge the seam,
+        // run as its face runs it (towards -x).
+        let at = [
+            DVec3::new(1.3, -0.4, 0.0),
+            DVec3::new(0.9, -0.4, 0.0),
+            DVec3::new(1.1, -1.2, 0.0),
+        ];
+        let seam = Seam {
+            vertices: vec![0, 1],
+            closed: false,
+        };
+        let run = rims.run_along(&seam, &at).expect("a rim run");
+        // The rim edge on the seam's side: from (2, 0) to (1, 0), the seam's direction.
+        assert_eq!(run.vertices, vec![2, 1]);
+        let m = old.positions.len() as u32;
+        let mut faces = old.triangles.clone();
+        faces.push([m + 2, m, m + 1]);
+        let p_at: Vec<DVec3> = run
+            .vertices
+            .iter()
+            .map(|&v| old.positions[v as usize])
+            .collect();
+        faces.extend(strip(&run.vertices, &p_at, &[m, m + 1], &at[..2], false));
+        let mut positions = old.positions.clone();
+        positions.extend(at);
+        let joined = TriMesh::new(positions, faces);
+        let joined_topo = Topology::from_mesh(&joined).expect("the joined mesh is a manifold");
+        // Still a disk: one rim loop, through the region's outer corner.
+        let loops = boundary_loops(&joined_topo);
+        assert_eq!(loops.len(), 1);
+        assert!(loops[0].contains(&(m + 2)));
+    }
 }

@@ -36,7 +36,7 @@ const ROUNDING_SHARE: f64 = 1e-3;
 /// A change freeing more than this share of the controls goes to the whole fit: its
 /// rounds cost about what the local ones would, and they also hold the rim and sample the
 /// surface where no data point sees it.
-const MAX_FREE_SHARE: f64 = 0.5;
+pub(super) const MAX_FREE_SHARE: f64 = 0.5;
 
 /// A new version of a fitted object refitted where it changed from `previous` (its
 /// control mesh at the fitted positions, crease edges and RMS), `params` each point's
