@@ -664,6 +664,8 @@ fn new_ground_beside_old_ground_that_moved_everywhere_is_fitted_whole() {
         why.contains("previous controls") && why.contains("not a local change"),
         "{why}"
     );
+    // What the refused attempt cost is reported beside the fit's own stages.
+    assert!(warm["tried_ms"].as_f64().is_some_and(|t| t > 0.0), "{warm}");
     let cold = run_patch(&grown, None, &cfg).expect("fits cold");
     assert_eq!(
         geometric_error(&second.report, "rms"),

@@ -206,8 +206,15 @@ pub enum WarmDecision {
     None,
     /// Started from the previous control mesh and foot points.
     Used,
-    /// Started cold: why the previous fit did not fit.
-    Refused(String),
+    /// Started cold: why the previous fit did not fit, and the milliseconds the refused
+    /// attempt took before the fit from scratch (an extension is judged after its feet on
+    /// the previous surface are found; a refit after it ran).
+    Refused {
+        /// Why.
+        why: String,
+        /// What finding it out cost.
+        tried_ms: f64,
+    },
 }
 
 fn options(cfg: &WorkerConfig) -> ObjectOptions {
@@ -251,15 +258,19 @@ pub(super) fn fit_as_object(
     };
     let dropped = Dropped::of(&input.left_out, input.cleaned_vertices);
     dropped.warn(input.left_out.len() + 1, input.cleaned_vertices);
+    let tried = Instant::now();
     let (fit, warm) = match previous {
         Some(w) => match from_previous(input.mesh.clone(), w, previous_controls, &opts)
             .and_then(|fit| stays_on_data(fit, &w.faces, &w.crease_edges, previous_controls))
         {
             Ok(fit) => (fit.map_err(object)?, WarmDecision::Used),
-            Err(why) => (
-                fit_object_input(input, &opts).map_err(object)?,
-                WarmDecision::Refused(why),
-            ),
+            Err(why) => {
+                let tried_ms = tried.elapsed().as_secs_f64() * 1e3;
+                (
+                    fit_object_input(input, &opts).map_err(object)?,
+                    WarmDecision::Refused { why, tried_ms },
+                )
+            }
         },
         None => (
             fit_object_input(input, &opts).map_err(object)?,
@@ -688,7 +699,9 @@ pub(super) fn object_report(fit: &PatchFit, info: &ObjectInfo) -> serde_json::Va
     let warm = match &info.warm {
         WarmDecision::None => serde_json::json!({"used": false}),
         WarmDecision::Used => serde_json::json!({"used": true}),
-        WarmDecision::Refused(why) => serde_json::json!({"used": false, "cold_because": why}),
+        WarmDecision::Refused { why, tried_ms } => {
+            serde_json::json!({"used": false, "cold_because": why, "tried_ms": tried_ms})
+        }
     };
     serde_json::json!({
         "path_reason": info.reason,
