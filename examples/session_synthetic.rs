@@ -131,6 +131,10 @@ fn main() {
     let Some(cell) = session.cell() else {
         return;
     };
+    println!(
+        "merge cell {cell:.3e} ({:.3} % of the diagonal)",
+        100.0 * cell / diagonal
+    );
     let all: Vec<_> = session.scans().values().map(|s| &s.samples).collect();
     let merged = merge(&all, cell, &opts.merge);
     // The part the fit takes: the merge's cleaned largest component.
