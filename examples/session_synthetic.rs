@@ -15,7 +15,9 @@
 //! 0.2 m diagonal: 1e-4 to 3e-4).
 //!
 //! Per update: wall time, path, controls, merged points, the fit's RMS to the merged data,
-//! and against the model: the RMS and 95th percentile of the model's vertices that some
+//! the merged pieces left out of the surface (report.json's `dropped`: an early view of a
+//! shape with handles falls into pieces, and the session fits the largest), and against
+//! the model: the RMS and 95th percentile of the model's vertices that some
 //! scan so far sees (a scan point within two pixels) to the surface, and the share within
 //! 1e-3 of the diagonal. At the end the same for a quadric decimation of the merged mesh
 //! to as many vertices as the surface has controls (the user's "fewer numbers, same shape"
@@ -106,6 +108,10 @@ fn main() {
             covered.len(),
             against.row()
         );
+        let dropped = &update.outputs.report["dropped"];
+        if dropped.as_object().is_some_and(|d| !d.is_empty()) || dropped.is_array() {
+            println!("        dropped: {dropped}");
+        }
         last = Some((update, covered));
     }
     let Some((update, covered)) = last else {
