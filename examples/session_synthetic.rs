@@ -22,7 +22,9 @@
 //! 1e-3 of the diagonal. At the end the same for a quadric decimation of the merged mesh
 //! to as many vertices as the surface has controls (the user's "fewer numbers, same shape"
 //! alternative), and how far the surface strays from the model (its tessellation's
-//! vertices to the model, 95th percentile and max).
+//! vertices to the model, 95th percentile and max). `SYNTH_CELL_EDGES=E` sets the merge
+//! cell to E median scan edges (`[object.merge] cell_edges`); `SYNTH_WORST=1` lists the
+//! 20 covered model vertices farthest from the surface.
 
 use glam::DMat3;
 use std::time::Instant;
@@ -75,10 +77,17 @@ fn main() {
         .map(|k| scan_view(&model, k, views, [noise, misregistration], &mut seed))
         .collect();
     let truth = MeshDistance::new(&model);
-    let opts = SessionOptions {
+    let mut opts = SessionOptions {
         measure_scans: false,
         ..Default::default()
     };
+    // The merge cell in median scan edges (`[object.merge] cell_edges`), for comparisons.
+    if let Some(edges) = std::env::var("SYNTH_CELL_EDGES")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+    {
+        opts.merge.cell_edges = edges;
+    }
     let mut session = ObjectSession::new(opts.clone());
     let mut seen: Vec<DVec3> = Vec::new();
     let mut last = None;
