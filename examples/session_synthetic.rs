@@ -330,8 +330,12 @@ fn depth_buffer(model: &TriMesh, [e1, e2, toward]: [DVec3; 3]) -> DepthBuffer {
         let i1 = (pa.0.max(pb.0).max(pc.0).floor() as i64).min(GRID as i64 - 1);
         let j0 = pa.1.min(pb.1).min(pc.1).ceil().max(0.0) as usize;
         let j1 = (pa.1.max(pb.1).max(pc.1).floor() as i64).min(GRID as i64 - 1);
-        for j in j0..=j1.max(-1) as usize {
-            for i in i0..=i1.max(-1) as usize {
+        // The margin keeps every face on the grid; a face off it has nothing to draw.
+        let (Ok(i1), Ok(j1)) = (usize::try_from(i1), usize::try_from(j1)) else {
+            continue;
+        };
+        for j in j0..=j1 {
+            for i in i0..=i1 {
                 let (x, y) = (i as f64, j as f64);
                 let wa = ((pb.0 - x) * (pc.1 - y) - (pc.0 - x) * (pb.1 - y)) / area;
                 let wb = ((pc.0 - x) * (pa.1 - y) - (pa.0 - x) * (pc.1 - y)) / area;
