@@ -10,7 +10,9 @@ use std::f64::consts::{PI, TAU};
 use trispline::io::surface_json::{parse_surface_json, SurfaceDescription};
 use trispline::mesh::distance::MeshDistance;
 use trispline::pipeline::output::tessellate_mesh_faces;
-use trispline::pipeline::worker::{fit_patch, run_patch, Domain, FittedPatch, WorkerConfig};
+use trispline::pipeline::worker::{
+    fit_patch, run_patch, Domain, FittedPatch, PatchOutputs, WorkerConfig,
+};
 use trispline::pipeline::PipelineError;
 use trispline::remesh::planar::MapMethod;
 use trispline::testdata::torus;
@@ -641,22 +643,33 @@ fn an_object_that_grows_is_extended_over_its_new_ground() {
     );
 }
 
+/// A torus section of 150 of 240 rings fitted, then the section grown to 190 rings with
+/// the old rings `pushed` moved out from the axis by `share` of its diagonal, fitted from
+/// the first fit: the grown section, that fit, and the configuration of both.
+fn grown_after_a_push(
+    pushed: std::ops::Range<usize>,
+    share: f64,
+) -> (TriMesh, PatchOutputs, WorkerConfig) {
+    let full = torus(240, 80);
+    let cfg = config(Domain::Mesh, 5.0);
+    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
+    let mut grown = torus_section(&full, 80, 190);
+    let push = share * grown.bounds_diagonal();
+    for p in &mut grown.positions[pushed.start * 80..pushed.end * 80] {
+        *p += DVec3::new(p.x, p.y, 0.0).normalize_or_zero() * push;
+    }
+    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits");
+    (grown, second, cfg)
+}
+
 /// New ground beside old ground that moved everywhere (a new view averaged into the whole
 /// object): the extension would free most of the previous controls, so the object is
 /// fitted whole, the same fit as from scratch, and the report says why.
 #[test]
 fn new_ground_beside_old_ground_that_moved_everywhere_is_fitted_whole() {
-    let full = torus(240, 80);
-    let cfg = config(Domain::Mesh, 5.0);
-    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
-    let mut grown = torus_section(&full, 80, 190);
     // Every old ring pushed out by 0.2 % of the diagonal: far past the previous RMS, well
     // within a local change's 1 %.
-    let push = 0.002 * grown.bounds_diagonal();
-    for p in &mut grown.positions[..150 * 80] {
-        *p += DVec3::new(p.x, p.y, 0.0).normalize_or_zero() * push;
-    }
-    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits");
+    let (grown, second, cfg) = grown_after_a_push(0..150, 0.002);
     let warm = &second.report["object"]["warm"];
     assert_eq!(warm["used"], false, "{warm}");
     let why = warm["cold_because"].as_str().unwrap_or_default();
@@ -676,17 +689,9 @@ fn new_ground_beside_old_ground_that_moved_everywhere_is_fitted_whole() {
 
 #[test]
 fn new_ground_with_old_ground_far_off_its_surface_is_fitted_whole() {
-    let full = torus(240, 80);
-    let cfg = config(Domain::Mesh, 5.0);
-    let first = run_patch(&torus_section(&full, 80, 150), None, &cfg).expect("fits");
-    // The grown section, and old ground far from either rim pushed out by 3 % of the
-    // diagonal: more than a local change.
-    let mut grown = torus_section(&full, 80, 190);
-    let push = 0.03 * grown.bounds_diagonal();
-    for p in &mut grown.positions[100 * 80..110 * 80] {
-        *p += DVec3::new(p.x, p.y, 0.0).normalize_or_zero() * push;
-    }
-    let second = run_patch(&grown, Some(&first.warm), &cfg).expect("fits");
+    // Old ground far from either rim pushed out by 3 % of the diagonal: more than a local
+    // change.
+    let (_, second, _) = grown_after_a_push(100..110, 0.03);
     let warm = &second.report["object"]["warm"];
     assert_eq!(warm["used"], false, "{warm}");
     let why = warm["cold_because"].as_str().unwrap_or_default();

@@ -339,29 +339,17 @@ fn arc_params(at: &[DVec3]) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    /// A grid of `w` x `h` vertices at (i, j, 0), faces counter-clockwise seen from +z.
-    fn grid(w: u32, h: u32) -> TriMesh {
-        let positions = (0..h)
-            .flat_map(|j| (0..w).map(move |i| DVec3::new(i as f64, j as f64, 0.0)))
-            .collect();
-        let mut faces = Vec::new();
-        for j in 0..h - 1 {
-            for i in 0..w - 1 {
-                let v = j * w + i;
-                faces.push([v, v + 1, v + w + 1]);
-                faces.push([v, v + w + 1, v + w]);
-            }
-        }
-        TriMesh::new(positions, faces)
-    }
-
     /// A seam of one edge whose two ends are nearest to the same rim vertex: the run takes
     /// a rim edge, so that the joined mesh (previous faces, the region, the strip) is a
     /// manifold. A run of that one vertex hung the strip off it by a vertex alone (the
     /// bunny's fourth view: "vertex 491 is a pinch vertex").
     #[test]
     fn a_seam_of_one_edge_joins_along_a_rim_edge() {
-        let old = grid(4, 3);
+        // Vertices at (i, j, 0) for i, j in 0..=3, faces counter-clockwise seen from +z.
+        let mut old = crate::testdata::height_grid(3, |_, _| 0.0);
+        for p in &mut old.positions {
+            *p *= 3.0;
+        }
         let topo = Topology::from_mesh(&old).expect("manifold");
         let rims = Rims::new(&topo, &old.positions);
         // The region: one triangle below the rim vertex (1, 0), its upper edge the seam,
