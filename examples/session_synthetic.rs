@@ -31,6 +31,7 @@ use std::time::Instant;
 use trispline::io::{read_mesh_file, LoadOptions};
 use trispline::mesh::clean::CleanOptions;
 use trispline::mesh::distance::MeshDistance;
+use trispline::mesh::point_grid::PointGrid;
 use trispline::mesh::rigid::RigidTransform;
 use trispline::mesh::simplify::baseline::decimation_baselines;
 use trispline::pipeline::merge::merge;
@@ -387,29 +388,18 @@ fn grid_triangles(index: &[u32], depth: &[Option<f64>], jump: f64) -> Vec<[u32; 
 
 /// The model's vertices with a scan point within `radius`.
 fn covered_vertices(model: &TriMesh, seen: &[DVec3], radius: f64) -> Vec<DVec3> {
-    let key = |p: DVec3| {
-        let q = (p / radius).floor();
-        (q.x as i64, q.y as i64, q.z as i64)
+    // Buckets of side `radius`: a scan point within it is among the 27 around a vertex,
+    // and the grid proves it the nearest.
+    let Some(grid) = PointGrid::new(seen, radius) else {
+        return Vec::new();
     };
-    let mut buckets: std::collections::HashMap<(i64, i64, i64), Vec<DVec3>> = Default::default();
-    for p in seen {
-        buckets.entry(key(*p)).or_default().push(*p);
-    }
     model
         .positions
         .iter()
         .copied()
         .filter(|p| {
-            let (a, b, c) = key(*p);
-            (-1..=1).any(|dx| {
-                (-1..=1).any(|dy| {
-                    (-1..=1).any(|dz| {
-                        buckets
-                            .get(&(a + dx, b + dy, c + dz))
-                            .is_some_and(|v| v.iter().any(|q| q.distance(*p) <= radius))
-                    })
-                })
-            })
+            grid.nearest(*p)
+                .is_some_and(|i| seen[i].distance(*p) <= radius)
         })
         .collect()
 }
