@@ -23,7 +23,8 @@
 //! to as many vertices as the surface has controls (the user's "fewer numbers, same shape"
 //! alternative), and how far the surface strays from the model (its tessellation's
 //! vertices to the model, 95th percentile and max). `SYNTH_CELL_EDGES=E` sets the merge
-//! cell to E median scan edges (`[object.merge] cell_edges`); `SYNTH_WORST=1` lists the
+//! cell to E median scan edges (`[object.merge] cell_edges`); `SYNTH_OVERHANG_CELLS=C` keeps
+//! merged vertices up to C cells past the data's rim (`rim_overhang_cells`); `SYNTH_WORST=1` lists the
 //! 20 covered model vertices farthest from the surface.
 
 use glam::DMat3;
@@ -88,6 +89,14 @@ fn main() {
         .and_then(|s| s.parse::<f64>().ok())
     {
         opts.merge.cell_edges = edges;
+    }
+    // How far past the data's rim a merged vertex is kept, in cells
+    // (`[object.merge] rim_overhang_cells`), for comparisons.
+    if let Some(cells) = std::env::var("SYNTH_OVERHANG_CELLS")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+    {
+        opts.merge.rim_overhang_cells = cells;
     }
     let mut session = ObjectSession::new(opts.clone());
     let mut seen: Vec<DVec3> = Vec::new();

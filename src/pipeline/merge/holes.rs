@@ -99,7 +99,7 @@ fn fill(
 ) -> Option<Vec<[u32; 3]>> {
     let centre = ring.iter().map(|&v| positions[v as usize]).sum::<DVec3>() / ring.len() as f64;
     let normal = implicit.at(centre)?.normal;
-    if implicit.overhang(centre, normal)? > 0.0 {
+    if implicit.overhang(centre, normal)? != DVec3::ZERO {
         return None;
     }
     // Faces run the loop clockwise about their normal (the hole on the right), so the

@@ -163,19 +163,21 @@ impl Implicit<'_> {
         c[0].is_finite().then(|| x + c[0] * normal)
     }
 
-    /// How far `x` stands beyond the data in the tangent plane of `normal`: the distance
-    /// from `x` to the convex hull of the projections of the same-sheet samples within the
-    /// radius (0 inside the data, and on its rim). Unlike their weighted centroid, it does
-    /// not move with the weights (a scan's rim ramp) or with the samples' spacing (sparse
-    /// at grazing angles). `None` with fewer than three samples off one line.
-    pub(super) fn overhang(&self, x: DVec3, normal: DVec3) -> Option<f64> {
+    /// The point of the data's rim nearest to `x` in the tangent plane of `normal`, as an
+    /// offset from `x` in that plane: the nearest point of the convex hull of the
+    /// projections of the same-sheet samples within the radius (zero inside the data, and
+    /// on its rim). Unlike their weighted centroid, the hull does not move with the
+    /// weights (a scan's rim ramp) or with the samples' spacing (sparse at grazing
+    /// angles). `None` with fewer than three samples off one line.
+    pub(super) fn overhang(&self, x: DVec3, normal: DVec3) -> Option<DVec3> {
         let e1 = normal.any_orthonormal_vector();
         let e2 = normal.cross(e1);
         let mut projected: Vec<DVec2> = Vec::with_capacity(64);
         self.same_sheet_around(x, normal, |d, _| {
             projected.push(DVec2::new(d.dot(e1), d.dot(e2)));
         });
-        super::support::distance_to_hull(&mut projected)
+        let nearest = super::support::nearest_on_hull(&mut projected)?;
+        Some(nearest.x * e1 + nearest.y * e2)
     }
 
     /// Calls `visit` with the offset from `x` and the weight of every sample within the

@@ -134,8 +134,25 @@ pub(super) fn cell_vertex(
     // of micrometres at a scan's spacing): it is dropped, the surface stops there.
     x = implicit.refine(x, last.normal)?;
     last = implicit.at(x)?;
-    if implicit.overhang(x, last.normal)? > overhang {
+    let back = implicit.overhang(x, last.normal)?;
+    if back.length() > overhang {
         return None;
+    }
+    if back != DVec3::ZERO {
+        // Beyond the rim by less than `overhang`: the vertex goes onto the tangent plane
+        // of the quadric at the rim point nearest to it, where it stands across the rim.
+        // Dropped, the surface would stop up to a cell short of the rim, and a crease
+        // whose far side the sheet rule leaves out would lose its vertices. Kept on the
+        // quadric, it would extrapolate it past the data (on a grazing view of a 5 cm
+        // sphere, 340 um inside it half a cell out; the plane stands off it by the square
+        // of the gap times the curvature / 2, 9 um there). Moved onto the rim point
+        // itself, neighbouring vertices would fall together there (degenerate triangles
+        // that cleaning opens into small holes).
+        let rim = implicit.refine(x + back, last.normal)?;
+        let normal = implicit.at(rim)?.normal;
+        let across = -back;
+        x = rim + (across - across.dot(normal) * normal);
+        last = implicit.at(x)?;
     }
     (last.nearest <= keep && x.is_finite()).then_some((x, last.normal))
 }
