@@ -145,9 +145,9 @@ pub(super) fn cell_vertex(
         // whose far side the sheet rule leaves out would lose its vertices. Kept on the
         // quadric, it would extrapolate it past the data (on a grazing view of a 5 cm
         // sphere, 340 um inside it half a cell out; the plane stands off it by the square
-        // of the gap times the curvature / 2, 9 um there). Moved onto the rim point
-        // itself, neighbouring vertices would fall together there (degenerate triangles
-        // that cleaning opens into small holes).
+        // of the gap times the curvature / 2, about 9 um there). Moved onto the rim point
+        // itself, the vertices across a stretch of rim would crowd onto it; on the plane
+        // each keeps its place (the two measured alike on two synthetic sessions).
         let rim = implicit.refine(x + back, last.normal)?;
         let normal = implicit.at(rim)?.normal;
         let across = -back;

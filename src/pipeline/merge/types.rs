@@ -44,8 +44,9 @@ pub struct MergeOptions {
     /// data: beyond the convex hull of the samples around it, in their tangent plane. At 0
     /// the surface reaches each view's rim and stops there. Above 0, a vertex up to that
     /// far beyond is kept on the tangent plane of the local quadric at the rim point
-    /// nearest to it (first-order past the data: on a 5 cm sphere a half-cell gap stands
-    /// 9 um off; the quadric itself, extrapolated, stood 340 um off at a grazing rim).
+    /// nearest to it (first-order past the data: on a 5 cm sphere in 1.9 mm cells a
+    /// half-cell gap stands about 9 um off; the quadric itself, extrapolated, stood 340 um
+    /// off at a grazing rim).
     /// (A rule on the samples' weighted centroid instead moved with the weights' ramp at a
     /// scan's rim and with the samples' spacing: it either stopped two vertex rings short
     /// of the bunny's rims or extrapolated on a sphere's steep ones.)
