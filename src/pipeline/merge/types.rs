@@ -42,12 +42,14 @@ pub struct MergeOptions {
     pub keep_cells: f64,
     /// A merged vertex is dropped where it stands further than this many cells beyond the
     /// data: beyond the convex hull of the samples around it, in their tangent plane. At 0
-    /// the surface reaches each view's rim and stops there. Above 0, a vertex up to that
-    /// far beyond is kept on the tangent plane of the local quadric at the rim point
-    /// nearest to it (first-order past the data: on a 5 cm sphere in 1.9 mm cells a
-    /// half-cell gap stands about 9 um off; the quadric itself, extrapolated, stood 340 um
-    /// off at a grazing rim).
-    /// (A rule on the samples' weighted centroid instead moved with the weights' ramp at a
+    /// the surface stops up to a cell short of each view's rim, and where the sheet rule
+    /// leaves out a crease's or a thin part's far side, vertices go there too (measured at
+    /// 0.5 against 0 on six synthetic views of fertility: the model's RMS distance to the
+    /// session's surface 0.121 -> 0.090; of CGAL's elephant 8.2e-4 -> 7.2e-4). Above 0, a
+    /// vertex up to that far beyond is kept on the tangent plane of the local quadric at
+    /// the rim point nearest to it (first-order past the data: on a 5 cm sphere in 1.9 mm
+    /// cells a half-cell gap stands about 9 um off; the quadric itself, extrapolated,
+    /// stood 340 um off at a grazing rim). (A rule on the samples' weighted centroid instead moved with the weights' ramp at a
     /// scan's rim and with the samples' spacing: it either stopped two vertex rings short
     /// of the bunny's rims or extrapolated on a sphere's steep ones.)
     pub rim_overhang_cells: f64,
@@ -68,7 +70,7 @@ impl Default for MergeOptions {
             fill_spacing_edges: 2.0,
             projections: 2,
             keep_cells: 0.75,
-            rim_overhang_cells: 0.0,
+            rim_overhang_cells: 0.5,
             close_holes: true,
         }
     }

@@ -16,6 +16,7 @@
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
 use crate::mesh::clean::CleanOptions;
 use crate::mesh::simplify::SurfaceTopology;
+use crate::mesh::topology::Topology;
 use crate::pipeline::merge::{CellKey, Merged};
 use crate::pipeline::object::{
     fitted_component, free_controls, refit_around, LayoutReport, LocalFeet, LocalFit, LocalOptions,
@@ -25,6 +26,7 @@ use crate::pipeline::worker::{
     stray_refusal, FittedPatch, ObjectInfo, WarmDecision, MAX_STRAY_GROWTH, MAX_STRAY_SHARE,
 };
 use crate::pipeline::{PatchFit, SurfaceModel};
+use crate::remesh::boundary_loops;
 use crate::surface::loop_limit::LoopLimitSurface;
 use crate::surface::{SurfaceParam, TriSurface};
 use crate::TriMesh;
@@ -41,8 +43,10 @@ pub(super) struct Previous<'a> {
     pub errors: &'a [f64],
     /// Each previous data point's merge cell.
     pub cells: &'a [CellKey],
-    /// The topology of the data the control mesh was built or last refitted for.
+    /// The topology of the data the control mesh was built or last refitted for ...
     pub topology: &'a SurfaceTopology,
+    /// ... and its holes (`holes_of`).
+    pub holes: usize,
 }
 
 /// The new data matched to the previous fit by cell.
@@ -100,20 +104,38 @@ pub(super) struct LocalData {
     pub cells: Vec<CellKey>,
     pub mesh: TriMesh,
     pub topology: SurfaceTopology,
+    /// Its boundary loops of at least `HOLE_EDGES` edges.
+    pub holes: usize,
 }
 
 impl LocalData {
     /// `None` when cleaning leaves nothing, or no manifold surface.
     pub(super) fn of(merged: &Merged) -> Option<LocalData> {
         let mesh = fitted_component(&merged.mesh, &CleanOptions::default())?;
-        let topology = SurfaceTopology::of(&mesh).ok()?;
+        let topo = Topology::from_mesh(&mesh).ok()?;
+        let topology = SurfaceTopology::of_built(&mesh, &topo);
         let cells = cells_of(&mesh.positions, merged)?;
         Some(LocalData {
             cells,
             mesh,
             topology,
+            holes: holes_of(&topo),
         })
     }
+}
+
+/// A boundary loop of fewer edges than this is a gap between a few merge cells, not a hole
+/// a local refit must keep open: at a grazing rim such gaps open and close with a 30 um
+/// shift of one view, and a whole fit keeps at least `MIN_BOUNDARY_LOOP` (6) controls on
+/// any hole it keeps. A control mesh spanning one is bounded by the stray guard.
+const HOLE_EDGES: usize = 6;
+
+/// The boundary loops of `topo` of at least `HOLE_EDGES` edges.
+fn holes_of(topo: &Topology) -> usize {
+    boundary_loops(topo)
+        .iter()
+        .filter(|l| l.len() >= HOLE_EDGES)
+        .count()
 }
 
 /// Each position's merge cell, read off the merge by position (cleaning keeps the
@@ -133,17 +155,22 @@ fn cells_of(positions: &[DVec3], merged: &Merged) -> Option<Vec<CellKey>> {
         .collect()
 }
 
-/// Why the data's topology now (`now`) rules out a local refit of the control mesh built
-/// for `before`, if it does: a handle made or lost, or a hole opened, which the kept
-/// control mesh would span. A hole the data closed is no reason by itself (the
-/// bunny's small holes at grazing rims close and open with a 30 um shift of one view):
-/// where the kept control mesh still has it, the data there lies off the surface, and the
-/// refit's largest error says so (`largest_error_refusal`).
-fn topology_refusal(before: &SurfaceTopology, now: &SurfaceTopology) -> Option<String> {
-    (now.genus != before.genus || now.boundary_loops > before.boundary_loops).then(|| {
+/// Why the data's topology now (`now`, with `holes` loops of `HOLE_EDGES` edges or more)
+/// rules out a local refit of the control mesh built for `before`, if it does: a handle
+/// made or lost, or a hole opened, which the kept control mesh would span. A hole the data
+/// closed is no reason by itself (the bunny's small holes at grazing rims close and open
+/// with a 30 um shift of one view): where the kept control mesh still has it, the data
+/// there lies off the surface, and the refit's largest error says so
+/// (`largest_error_refusal`). Nor is a gap of fewer edges opening (`HOLE_EDGES`).
+fn topology_refusal(
+    (before, holes_before): (&SurfaceTopology, usize),
+    (now, holes): (&SurfaceTopology, usize),
+) -> Option<String> {
+    (now.genus != before.genus || holes > holes_before).then(|| {
         format!(
-            "topology changed: genus {}, {} boundary loops (were {}, {})",
-            now.genus, now.boundary_loops, before.genus, before.boundary_loops
+            "topology changed: genus {}, {} holes of {HOLE_EDGES} edges or more among {} \
+             boundary loops (were {}, {holes_before} among {})",
+            now.genus, holes, now.boundary_loops, before.genus, before.boundary_loops
         )
     })
 }
@@ -157,7 +184,10 @@ pub(super) fn refit(
     data: &LocalData,
     opts: &LocalOptions,
 ) -> Result<(Vec<DVec3>, LocalFit), String> {
-    if let Some(why) = topology_refusal(previous.topology, &data.topology) {
+    if let Some(why) = topology_refusal(
+        (previous.topology, previous.holes),
+        (&data.topology, data.holes),
+    ) {
         return Err(why);
     }
     let matched = match_data(previous, &data.cells, &data.mesh.positions);
@@ -204,6 +234,8 @@ pub(super) struct LastFit {
     /// Each data point's merge cell.
     pub cells: Vec<CellKey>,
     pub data_topology: SurfaceTopology,
+    /// The data's holes (`holes_of`).
+    pub holes: usize,
     pub control_topology: SurfaceTopology,
 }
 
@@ -216,6 +248,9 @@ impl LastFit {
             return None;
         };
         let cells = cells_of(&fitted.fit.data, merged)?;
+        // Unknown where the merge's part is no manifold: none, so that any hole the next
+        // data has rules its local refit out.
+        let holes = LocalData::of(merged).map_or(0, |d| d.holes);
         // The same surface built afresh: a fitted one holds every quadtree leaf its fit and
         // tessellation evaluated (the bunny's: about 180 MB against 5 MB, rebuilt in 35
         // ms), and a kept session holds this until its next update.
@@ -232,6 +267,7 @@ impl LastFit {
             },
             cells,
             data_topology: info.data_topology,
+            holes,
             control_topology: info.control_topology,
         })
     }
@@ -454,15 +490,18 @@ mod tests {
 
     #[test]
     fn a_local_refit_is_ruled_out_by_a_new_hole_or_handle_not_by_a_closed_hole() {
-        let before = topology(32, 0);
+        let before = (&topology(32, 0), 20);
         // Small holes at grazing rims closed (the bunny's re-registered bun045: 32 -> 29).
-        assert_eq!(topology_refusal(&before, &topology(29, 0)), None);
-        assert_eq!(topology_refusal(&before, &before), None);
+        assert_eq!(topology_refusal(before, (&topology(29, 0), 18)), None);
+        assert_eq!(topology_refusal(before, before), None);
+        // A gap of a few edges opened: no hole to keep.
+        assert_eq!(topology_refusal(before, (&topology(33, 0), 20)), None);
         // A hole opened: the kept control mesh would span it.
-        assert!(topology_refusal(&before, &topology(33, 0)).is_some());
+        let why = topology_refusal(before, (&topology(33, 0), 21)).expect("refused");
+        assert!(why.contains("21 holes"), "{why}");
         // A handle made or lost.
-        assert!(topology_refusal(&before, &topology(32, 1)).is_some());
-        assert!(topology_refusal(&topology(2, 1), &topology(2, 0)).is_some());
+        assert!(topology_refusal(before, (&topology(32, 1), 20)).is_some());
+        assert!(topology_refusal((&topology(2, 1), 0), (&topology(2, 0), 0)).is_some());
     }
 
     /// A grid of `n` x `n` vertices in the plane z = 0 with spacing 1, its cells (x, y, 0).

@@ -537,6 +537,7 @@ impl ObjectSession {
             errors: &last.fit.geometric_errors,
             cells: &last.cells,
             topology: &last.data_topology,
+            holes: last.holes,
         };
         let Some(data) = LocalData::of(merged) else {
             let why = "the merged data's largest part is not a manifold surface";
