@@ -9,9 +9,9 @@
 //! point of the refit.
 //!
 //! A local refit keeps the control mesh, so it is judged before it is kept: the data's
-//! topology (no handle made or lost, no hole opened), every point on the previous fit's
-//! ground, and the result (RMS, largest error and stray from the data against the
-//! previous fit); otherwise the whole fit runs.
+//! topology (no handle made or lost, no hole of `HOLE_EDGES` edges or more opened), every
+//! point on the previous fit's ground, and the result (RMS, largest error and stray from
+//! the data against the previous fit); otherwise the whole fit runs.
 
 use crate::fit::{Budget, FitOutcome, FitStatus, StepStats};
 use crate::mesh::clean::CleanOptions;
