@@ -66,7 +66,27 @@ pub(crate) struct LocalOptions {
     pub tangential_edge: f64,
     /// Width of that band in vertex rings.
     pub edge_rings: usize,
+    /// Weight, per data point a control stands for, of each free control's squared
+    /// distance from where it was before the refit (0: off). The point-to-plane rounds
+    /// leave a control free to slide along the surface; with its neighbours fixed, a slide
+    /// folds the faces between them off the data where no point sees it (see
+    /// [`SESSION_ANCHOR`]).
+    pub anchor: f64,
 }
+
+/// [`LocalOptions::anchor`] of an object session's refits. A point's point-to-point term
+/// weighs each control of its row by the term's share times the squared basis weight, and
+/// the squared Loop basis weights of a row sum to 0.27 on average (regular torus, uniform
+/// parameters): per point a control stands for, 0.27 x the share. At the default share
+/// of 0.005 (`[fit.correction] tangential`) that is 1.35e-3; an anchor of 1e-3 holds a
+/// free control about as firmly, so it drifts along the surface no more freely than a
+/// foot point does, and the data still move it.
+/// Measured on the bunny's five scans at 3 % controls with bun045 re-registered 30 um
+/// (the process test `daemon_objects`, at `rim_overhang_cells` 0.5): without it a free
+/// control slid 3.4 mm and folded a face 2.9 mm off the data (the guard then fitted the
+/// whole object again); with it the farthest face stood 0.68 mm off and the refit was
+/// kept, at 4.99e-5 RMS against the whole fit's 5.03e-5.
+pub(crate) const SESSION_ANCHOR: f64 = 1e-3;
 
 impl LocalOptions {
     /// The rounds, gain, tangential share and fairness of a whole-object fit.
@@ -83,6 +103,7 @@ impl LocalOptions {
             hold_rim: false,
             tangential_edge: opts.tangential_edge,
             edge_rings: opts.edge_rings,
+            anchor: 0.0,
         }
     }
 
@@ -342,6 +363,7 @@ pub(crate) fn refit_around(
             .collect()
     };
     let free_ids: Vec<u32> = (0..m as u32).filter(|&c| free[c as usize]).collect();
+    let anchor_at = controls.clone();
     let laplacian = umbrella_laplacian_with_creases(m, surface.faces(), surface.crease_edges());
     let system = System {
         surface,
@@ -349,6 +371,10 @@ pub(crate) fn refit_around(
         free_count: free_ids.len(),
         laplacian: &laplacian,
         fairness_scale: (opts.smoothing * n as f64 / m.max(1) as f64).sqrt(),
+        anchor: (
+            &anchor_at,
+            (opts.anchor * n as f64 / m.max(1) as f64).sqrt(),
+        ),
     };
     // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
     let mut pattern = CholeskyPattern::default();
@@ -562,6 +588,9 @@ struct System<'a> {
     laplacian: &'a Csr,
     /// sqrt of the fairness weight: the umbrella rows are scaled by it.
     fairness_scale: f64,
+    /// The controls before the refit and the scale of the rows holding each free
+    /// control near its place there.
+    anchor: (&'a [DVec3], f64),
 }
 
 impl System<'_> {
@@ -642,6 +671,20 @@ impl System<'_> {
                 ));
                 normals.push(axis);
                 tangential.push(0.0);
+            }
+        }
+        let (anchor, anchor_scale) = self.anchor;
+        if anchor_scale > 0.0 {
+            for (c, at) in anchor.iter().enumerate() {
+                if self.column[c].is_none() {
+                    continue;
+                }
+                for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
+                    let mut entries = std::iter::once((c as u32, 1.0));
+                    targets.push(push_row(&mut entries, *at, anchor_scale, &mut basis));
+                    normals.push(axis);
+                    tangential.push(0.0);
+                }
             }
         }
         let problem = DistanceProblem {

@@ -30,7 +30,7 @@ pub use crate::pipeline::measure::{
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{MergeChange, MergeField, MergeOptions, Merged, ScanSamples};
-use crate::pipeline::object::{refine_where_far, LocalOptions};
+use crate::pipeline::object::{refine_where_far, LocalOptions, SESSION_ANCHOR};
 use crate::pipeline::object::{ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
@@ -527,6 +527,7 @@ impl ObjectSession {
             smoothing: worker.fit.scan.smoothing,
             stop: RoundStop::of_budget(&budget, t),
             hold_rim: true,
+            anchor: SESSION_ANCHOR,
             ..LocalOptions::version_of(&ObjectOptions::default())
         };
         let previous = Previous {
