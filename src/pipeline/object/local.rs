@@ -69,24 +69,10 @@ pub(crate) struct LocalOptions {
     /// Weight, per data point a control stands for, of each free control's squared
     /// distance from where it was before the refit (0: off). The point-to-plane rounds
     /// leave a control free to slide along the surface; with its neighbours fixed, a slide
-    /// folds the faces between them off the data where no point sees it (see
-    /// [`SESSION_ANCHOR`]).
+    /// folds the faces between them off the data where no point sees it (an object
+    /// session's `SESSION_ANCHOR` says how strong).
     pub anchor: f64,
 }
-
-/// [`LocalOptions::anchor`] of an object session's refits. A point's point-to-point term
-/// weighs each control of its row by the term's share times the squared basis weight, and
-/// the squared Loop basis weights of a row sum to 0.27 on average (regular torus, uniform
-/// parameters): per point a control stands for, 0.27 x the share. At the default share
-/// of 0.005 (`[fit.correction] tangential`) that is 1.35e-3; an anchor of 1e-3 holds a
-/// free control about as firmly, so it drifts along the surface no more freely than a
-/// foot point does, and the data still move it.
-/// Measured on the bunny's five scans at 3 % controls with bun045 re-registered 30 um
-/// (the process test `daemon_objects`, at `rim_overhang_cells` 0.5): without it a free
-/// control slid 3.4 mm and folded a face 2.9 mm off the data (the guard then fitted the
-/// whole object again); with it the farthest face stood 0.68 mm off and the refit was
-/// kept, at 4.99e-5 RMS against the whole fit's 5.03e-5.
-pub(crate) const SESSION_ANCHOR: f64 = 1e-3;
 
 impl LocalOptions {
     /// The rounds, gain, tangential share and fairness of a whole-object fit.

@@ -55,9 +55,7 @@ use fit_parts::{declined, FitStart, GoOn, RoundContext, Setup};
 use glam::DVec3;
 use layout::improve_layout;
 pub use layout::{LayoutOptions, LayoutReport};
-pub(crate) use local::{
-    free_controls, refit_around, LocalFeet, LocalFit, LocalOptions, SESSION_ANCHOR,
-};
+pub(crate) use local::{free_controls, refit_around, LocalFeet, LocalFit, LocalOptions};
 use model::{control_target, landing_params, ms_since, MAX_REFUSALS};
 pub use model::{
     FacetedChoice, LocalUpdate, ObjectError, ObjectFit, ObjectOptions, ObjectTimes, PreviousFit,

@@ -30,7 +30,7 @@ pub use crate::pipeline::measure::{
 
 use crate::mesh::rigid::RigidTransform;
 use crate::pipeline::merge::{MergeChange, MergeField, MergeOptions, Merged, ScanSamples};
-use crate::pipeline::object::{refine_where_far, LocalOptions, SESSION_ANCHOR};
+use crate::pipeline::object::{refine_where_far, LocalOptions};
 use crate::pipeline::object::{ObjectOptions, RoundStop};
 use crate::pipeline::worker::{
     fit_patch, outputs_of, Domain, FittedPatch, PatchOutputs, WarmStart, WorkerConfig,
@@ -38,7 +38,7 @@ use crate::pipeline::worker::{
 use crate::pipeline::{PatchFit, PipelineError};
 use crate::remesh::points::PointCloudError;
 use crate::TriMesh;
-use local::{LastFit, LocalData, Previous};
+use local::{LastFit, LocalData, Previous, SESSION_ANCHOR};
 use serde_json::json;
 use std::collections::BTreeMap;
 use std::time::Instant;
