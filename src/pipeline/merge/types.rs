@@ -49,9 +49,10 @@ pub struct MergeOptions {
     /// vertex up to that far beyond is kept on the tangent plane of the local quadric at
     /// the rim point nearest to it (first-order past the data: on a 5 cm sphere in 1.9 mm
     /// cells a half-cell gap stands about 9 um off; the quadric itself, extrapolated,
-    /// stood 340 um off at a grazing rim). (A rule on the samples' weighted centroid instead moved with the weights' ramp at a
-    /// scan's rim and with the samples' spacing: it either stopped two vertex rings short
-    /// of the bunny's rims or extrapolated on a sphere's steep ones.)
+    /// stood 340 um off at a grazing rim). (A rule on the samples' weighted centroid
+    /// instead moved with the weights' ramp at a scan's rim and with the samples' spacing:
+    /// it either stopped two vertex rings short of the bunny's rims or extrapolated on a
+    /// sphere's steep ones.)
     pub rim_overhang_cells: f64,
     /// Close the holes the meshing leaves inside the data (holes whose centre lies within
     /// the samples' hull; wider ones, where no scan saw the object, stay open).

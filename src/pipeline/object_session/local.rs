@@ -5,8 +5,8 @@
 //! The data points are the vertices of the merge's cleaned largest part (`LocalData`), one
 //! per grid cell, so the previous fit's points are matched to the new merge by cell: a
 //! kept cell keeps its point's foot point as the start, a cell that appeared starts from a
-//! neighbouring cell's foot point, a cell that went loses its point. A point whose position changed or appeared is a changed
-//! point of the refit.
+//! neighbouring cell's foot point, a cell that went loses its point. A point whose
+//! position changed or appeared is a changed point of the refit.
 //!
 //! A local refit keeps the control mesh, so it is judged before it is kept: the data's
 //! topology (no handle made or lost, no hole of `HOLE_EDGES` edges or more opened), every
