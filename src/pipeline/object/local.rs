@@ -306,6 +306,8 @@ pub(crate) fn refit_around(
 ) -> LocalFit {
     let n = data.len();
     let m = surface.control_count();
+    // Where the controls stood before the refit: what `LocalOptions::anchor` holds to.
+    let anchor_at = controls;
     let mut controls = controls.to_vec();
     let moving_face = moving_faces(surface, free);
     let sampling = data_mesh.map(|mesh| {
@@ -349,7 +351,6 @@ pub(crate) fn refit_around(
             .collect()
     };
     let free_ids: Vec<u32> = (0..m as u32).filter(|&c| free[c as usize]).collect();
-    let anchor_at = controls.clone();
     let laplacian = umbrella_laplacian_with_creases(m, surface.faces(), surface.crease_edges());
     let system = System {
         surface,
@@ -357,10 +358,7 @@ pub(crate) fn refit_around(
         free_count: free_ids.len(),
         laplacian: &laplacian,
         fairness_scale: (opts.smoothing * n as f64 / m.max(1) as f64).sqrt(),
-        anchor: (
-            &anchor_at,
-            (opts.anchor * n as f64 / m.max(1) as f64).sqrt(),
-        ),
+        anchor: (anchor_at, (opts.anchor * n as f64 / m.max(1) as f64).sqrt()),
     };
     // One symbolic analysis (and warm starts) across the rounds, as in a whole fit.
     let mut pattern = CholeskyPattern::default();

@@ -255,16 +255,14 @@ pub(super) struct LastFit {
 
 impl LastFit {
     /// The object fit of an update with its points' cells, read off the merge the fit's
-    /// data came from; `None` for a fit of another model or a point not from the merge.
-    pub(super) fn of(fitted: &FittedPatch, merged: &Merged) -> Option<LastFit> {
+    /// data came from, and `holes` (`holes_of`) of that data; `None` for a fit of another
+    /// model or a point not from the merge.
+    pub(super) fn of(fitted: &FittedPatch, merged: &Merged, holes: usize) -> Option<LastFit> {
         let info = fitted.object.as_ref()?;
         let SurfaceModel::Mesh(surface) = &fitted.fit.model else {
             return None;
         };
         let cells = cells_of(&fitted.fit.data, merged)?;
-        // Unknown where the merge's part is no manifold: none, so that any hole the next
-        // data has rules its local refit out.
-        let holes = LocalData::of(merged).map_or(0, |d| d.holes);
         // The same surface built afresh: a fitted one holds every quadtree leaf its fit and
         // tessellation evaluated (the bunny's: about 180 MB against 5 MB, rebuilt in 35
         // ms), and a kept session holds this until its next update.

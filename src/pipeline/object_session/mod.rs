@@ -401,9 +401,12 @@ impl ObjectSession {
             worker.fit.domain = Domain::Mesh;
         }
         let t = Instant::now();
+        // The merge's cleaned largest part, built once: a local refit fits it, and the
+        // next update's topology test reads its holes (`LastFit`).
+        let data = (!self.opts.cold).then(|| LocalData::of(&merged)).flatten();
         let mut cold_because = self.why_cold(before.is_some(), coverage_change);
         let tried = match cold_because {
-            None => self.refit_locally(&merged, &worker)?,
+            None => self.refit_locally(&merged, data.as_ref(), &worker)?,
             Some(_) => Err(None),
         };
         let (fitted, local) = match tried {
@@ -418,7 +421,8 @@ impl ObjectSession {
         self.last = if self.opts.cold {
             None
         } else {
-            LastFit::of(&fitted, &merged)
+            // No manifold part: no holes known, so that any hole next rules a refit out.
+            LastFit::of(&fitted, &merged, data.map_or(0, |d| d.holes))
         };
         let fit = fitted.fit.clone();
         let t = Instant::now();
@@ -508,6 +512,7 @@ impl ObjectSession {
     fn refit_locally(
         &self,
         merged: &Merged,
+        data: Option<&LocalData>,
         worker: &WorkerConfig,
     ) -> Result<LocalOutcome, SessionError> {
         let t = Instant::now();
@@ -540,11 +545,11 @@ impl ObjectSession {
             topology: &last.data_topology,
             holes: last.holes,
         };
-        let Some(data) = LocalData::of(merged) else {
+        let Some(data) = data else {
             let why = "the merged data's largest part is not a manifold surface";
             return Ok(Err(Some(why.into())));
         };
-        let (points, mut local_fit) = match local::refit(&previous, &data, &opts) {
+        let (points, mut local_fit) = match local::refit(&previous, data, &opts) {
             Ok(fitted) => fitted,
             Err(why) => return Ok(Err(Some(why))),
         };
