@@ -9,6 +9,7 @@ mod config;
 mod fitted;
 mod grid_stray;
 mod object;
+mod object_version;
 mod report;
 mod shown;
 mod stray_guard;
@@ -18,7 +19,8 @@ pub use config::{
     DEFAULT_CREASE_RELATIVE_RATIO, DEFAULT_TESSELLATION,
 };
 pub use fitted::FittedPatch;
-pub use object::{ObjectInfo, ObjectWarm, WarmDecision};
+pub use object::{ObjectInfo, WarmDecision};
+pub use object_version::ObjectWarm;
 pub use report::{PartWarm, Refinement, WarmStart};
 pub use shown::TessellationCheck;
 pub use stray_guard::StrayReport;

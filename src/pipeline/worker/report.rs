@@ -58,7 +58,7 @@ pub struct WarmStart {
     /// Whole objects: the control mesh's faces and the data's final parameters on it (the
     /// control positions are `controls`).
     #[serde(default)]
-    pub object: Option<super::object::ObjectWarm>,
+    pub object: Option<super::object_version::ObjectWarm>,
     /// B-patch and DMS fits: the domain, knots and controls (the plane frame, warp and data
     /// feet are in the fields above).
     #[serde(default)]
