@@ -24,6 +24,7 @@ mod mesh_roundtrip;
 mod object_crease;
 mod object_faceted;
 mod object_fit;
+mod object_growth;
 mod object_pipeline;
 mod object_session;
 mod object_session_local;
