@@ -35,7 +35,9 @@
 //! `OBJ_SESSION_FORWARD_ONLY=1`
 //! only the updates in arrival order, `OBJ_SESSION_REPLACE_ONLY=1` those and the new
 //! version of bun045, `OBJ_SESSION_REVERSE_ONLY=1` only the updates in reverse order; `OBJ_SESSION_DUMP=FILE`
-//! writes the missed vertices, `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
+//! writes the bun_zipper vertices over 0.5 mm from both the merged data and the surface
+//! (x y z, then those two distances), and `FILE.inside` the misses inside the scans' rim
+//! the same way; `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
 //! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls), `OBJ_SESSION_ROUNDS` (correction rounds); `OBJ_SESSION_MEASURE=1` measures every scan against the

@@ -21,6 +21,8 @@
 //! adds mesh files by path. `OBJ_REFINE_TOLERANCE=T` caps each refinement round at the
 //! faces holding a point farther than T, as `trispline fit` and the daemon do with their
 //! error budget's tolerance (the library default has no cap: each round spends its share).
+//! `OBJ_TANGENTIAL_EDGE=S` and `OBJ_EDGE_RINGS=R` set the point-to-point share in the band
+//! of R rings along the data's rim (`ObjectOptions::tangential_edge`, `edge_rings`).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -125,6 +127,12 @@ fn main() {
         }
         if let Some(f) = env("OBJ_FACETED") {
             opts.faceted_candidate = f != 0.0;
+        }
+        if let Some(t) = env("OBJ_TANGENTIAL_EDGE") {
+            opts.tangential_edge = t;
+        }
+        if let Some(r) = env("OBJ_EDGE_RINGS") {
+            opts.edge_rings = r as usize;
         }
         if let Some(s) = env("OBJ_SAMPLES") {
             opts.surface_samples = s != 0.0;

@@ -162,6 +162,18 @@ pub fn merged_coverage(
         .collect();
     merge_gaps.sort_by(f64::total_cmp);
     let merge_misses = merge_gaps.len();
+    if let Ok(path) = std::env::var("OBJ_SESSION_DUMP") {
+        // The misses inside the rim with their distances to the merged data and the surface.
+        let rows: String = missed_inside
+            .iter()
+            .map(|p| {
+                let dm = to_merged.distance(*p).unwrap_or(f64::INFINITY);
+                let ds = to_surface.distance(*p).unwrap_or(f64::INFINITY);
+                format!("{} {} {} {dm} {ds}\n", p.x, p.y, p.z)
+            })
+            .collect();
+        let _ = std::fs::write(format!("{path}.inside"), rows);
+    }
     println!(
         "  of the misses inside the rim, {merge_misses} are over 0.5 mm from the merged data \
          as well (the merge's; median {:.2} mm, max {:.2} mm from it), {} only from the \
