@@ -13,7 +13,9 @@
 //!    (a scan point within 1 mm), and of that, inside the scans' rim (scan points all
 //!    around it); the misses inside the rim split by whether some scan's own triangles
 //!    pass within 0.5 mm of them (else no view of the five has data there) and whether
-//!    the merged data does (else the merge, not the fit, left them).
+//!    the merged data does (else the merge, not the fit, left them); and the same share
+//!    over the vertices some scan's own triangles pass within 0.5 mm of (the strictest
+//!    reading of coverage: a view measured the surface there).
 //! 4. A new version of bun045 (its registration corrected by 30 um): the local update
 //!    (merge around the scan, refit of the controls around it) beside the same update
 //!    from scratch (`SessionOptions::cold`), their times and RMS and the two surfaces'
