@@ -2,7 +2,7 @@
 //! over its new ground from the previous control mesh, and the versions that are fitted
 //! whole instead (old ground moved under most controls, or far off the previous surface).
 
-use crate::object_pipeline::{config, geometric_error};
+use crate::object_pipeline::{config, controls_kept, geometric_error};
 use glam::DVec3;
 use trispline::pipeline::worker::{run_patch, Domain, PatchOutputs, WorkerConfig};
 use trispline::testdata::torus;
@@ -40,13 +40,7 @@ fn an_object_that_grows_is_extended_over_its_new_ground() {
         "{local}: {m} -> {n}"
     );
     // The previous controls far from the new ground kept their positions exactly.
-    let kept = first
-        .warm
-        .controls
-        .iter()
-        .zip(&second.warm.controls)
-        .filter(|(a, b)| a == b)
-        .count();
+    let kept = controls_kept(&first.warm.controls, &second.warm.controls);
     assert!(2 * kept > m, "{kept} of {m} previous controls kept");
     let [[warm_rms, warm_max], [cold_rms, cold_max]] =
         [r, &cold.report].map(|o| ["rms", "max"].map(|k| geometric_error(o, k)));

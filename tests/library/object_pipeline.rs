@@ -518,13 +518,7 @@ fn a_version_changed_in_one_place_is_refitted_there_only() {
         "{local} of {m} controls"
     );
     // Every previous control but the freed ones kept its position exactly.
-    let kept = first
-        .warm
-        .controls
-        .iter()
-        .zip(&second.warm.controls)
-        .filter(|(a, b)| a == b)
-        .count();
+    let kept = controls_kept(&first.warm.controls, &second.warm.controls);
     assert_eq!(kept, m - (free - added));
     let [[warm_rms, warm_max], [cold_rms, cold_max]] =
         [r, &cold.report].map(|o| ["rms", "max"].map(|k| geometric_error(o, k)));
@@ -583,4 +577,10 @@ pub(crate) fn geometric_error(report: &serde_json::Value, which: &str) -> f64 {
     report["final"][format!("geometric_{which}_error")]
         .as_f64()
         .unwrap_or(f64::NAN)
+}
+
+/// How many controls stand exactly where they stood before (`before` and `after` of two
+/// versions' fits, index for index).
+pub(crate) fn controls_kept(before: &[DVec3], after: &[DVec3]) -> usize {
+    before.iter().zip(after).filter(|(a, b)| a == b).count()
 }
