@@ -38,12 +38,15 @@
 //! only the updates in arrival order, `OBJ_SESSION_REPLACE_ONLY=1` those and the new
 //! version of bun045, `OBJ_SESSION_REVERSE_ONLY=1` only the updates in reverse order; `OBJ_SESSION_DUMP=FILE`
 //! writes the bun_zipper vertices over 0.5 mm from both the merged data and the surface
-//! (x y z, then those two distances), and `FILE.inside` the misses inside the scans' rim
-//! the same way; `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
+//! (x y z, then those two distances), `FILE.inside` the misses inside the scans' rim
+//! the same way, and `FILE.strict` the misses on a scan's own surface (x y z, then the
+//! distances to the surface and to the nearest scan's triangles);
+//! `OBJ_SESSION_DUMP_SCAN=ID` one scan's points with their
 //! distances and rim ring to /tmp/scan_dump.txt. Variants: `OBJ_MERGE_KEEP_CELLS`,
 //! `OBJ_MERGE_CELL_EDGES`, `OBJ_MERGE_RIM_WEIGHT`, `OBJ_MERGE_OVERHANG`,
 //! `OBJ_MERGE_RADIUS_CELLS` (the `[object.merge]` options), `OBJ_SESSION_PCT` (controls), `OBJ_SESSION_ROUNDS` (correction rounds); `OBJ_SESSION_MEASURE=1` measures every scan against the
-//! surface in each update, as the daemon does; `OBJ_SESSION_SAVE_MERGED=DIR` writes each
+//! surface in each update, as the daemon does; `OBJ_SESSION_SAVE_SURFACE=FILE` writes the
+//! final surface's tessellation (arrival order); `OBJ_SESSION_SAVE_MERGED=DIR` writes each
 //! update's merged mesh (from scratch) to `DIR/merged_<vertices>.ply`, so that its fit can
 //! be studied alone (`object_table` with `OBJ_FILES`).
 
@@ -197,6 +200,11 @@ fn main() {
     }
     for ((id, ..), (m, p)) in scans.iter().zip(&ratios) {
         println!("{id:7} ratio to VRIP: median {m:.2}x  p95 {p:.2}x");
+    }
+    if let Ok(file) = std::env::var("OBJ_SESSION_SAVE_SURFACE") {
+        if let Err(e) = trispline::io::write_mesh_file(Path::new(&file), &surface) {
+            eprintln!("could not write {file}: {e}");
+        }
     }
     let missed_inside = session_coverage::coverage_check(&scans, &surface, &zipper);
     session_coverage::merged_coverage(&session, &opts, &surface, &zipper, &missed_inside);

@@ -109,6 +109,7 @@ fn on_scan_surfaces(scans: &[Scan], surface: &MeshDistance, zipper: &TriMesh) {
     let moved = registered_scans(scans);
     let registered: Vec<MeshDistance> = moved.iter().map(MeshDistance::new).collect();
     let (mut on, mut within, mut worst) = (0usize, 0usize, 0.0f64);
+    let mut misses = String::new();
     for p in &zipper.positions {
         let nearest = registered
             .iter()
@@ -123,6 +124,15 @@ fn on_scan_surfaces(scans: &[Scan], surface: &MeshDistance, zipper: &TriMesh) {
         on += 1;
         within += usize::from(d <= 5e-4);
         worst = worst.max(d);
+        if d > 5e-4 {
+            misses.push_str(&format!("{} {} {} {d} {nearest}\n", p.x, p.y, p.z));
+        }
+    }
+    if let Ok(file) = std::env::var("OBJ_SESSION_DUMP") {
+        let file = format!("{file}.strict");
+        if let Err(e) = std::fs::write(&file, misses) {
+            eprintln!("could not write {file}: {e}");
+        }
     }
     println!(
         "  on a scan's own surface (its triangles within 0.5 mm; {on} vertices): {:.2} % within \

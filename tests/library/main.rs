@@ -31,6 +31,7 @@ mod object_session_local;
 mod planar_product;
 mod planar_subdivided;
 mod point_clouds;
+mod scan_dispatch;
 mod scan_pipeline;
 mod shown_surface;
 mod step_export;
